@@ -1,0 +1,346 @@
+//! Drive configuration in SI units, its validation, and its compilation into the fixed-point
+//! constants the current loop uses ([`Gains`]).
+//!
+//! Compilation uses only IEEE-754 `+ − × ÷` on `f32`, which are correctly rounded on every
+//! platform, so the board and the host derive the same bits from the same configuration.
+
+use core::f32::consts::{PI, TAU};
+
+use crate::encoder::EncoderGains;
+use crate::fx::{q, Angle, Gain, Q};
+use crate::laws::LawKind;
+use crate::pi::PiGains;
+
+/// The drive's configuration (SI units). Defaults describe the reference device (Kollmorgen
+/// AKM42E on a 16 mm-lead ballscrew, see `shared/reference/transducer.md`) on the reference
+/// board scalings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    /// Phase resistance, line-to-neutral, Ω.
+    pub r_phase_ohm: f32,
+    /// Phase inductance, line-to-neutral, H. The datasheet value was lost from our copy; 6 mH
+    /// (half of a line-to-line value of about 12 mH, the order of the AKM4x family) is assumed.
+    pub l_phase_h: f32,
+    /// Back-emf constant, per-phase peak, V·s/rad (mechanical): `e_q = K_e·ω_m`,
+    /// `T = 3/2·K_e·i_q`. Default 0.77·2/3: the paper's "0.77 N·m/A" read as the torque per
+    /// ampere of q-axis (peak phase) current.
+    pub ke_v_s_per_rad: f32,
+    /// Pole pairs.
+    pub pole_pairs: u8,
+    /// Screw lead, m/rad (16 mm/rev = 2.546e-3).
+    pub lead_m_per_rad: f32,
+    /// Encoder counts per revolution (after ×4 decoding).
+    pub encoder_cpr: u32,
+    /// Electrical angle of the d axis at encoder count 0 within a turn, rad.
+    pub encoder_offset_rad: f32,
+    /// Phase-current scaling, A per ADC count.
+    pub amps_per_count: f32,
+    /// ADC code of zero current.
+    pub adc_zero_code: u16,
+    /// Bus-voltage scaling, V per ADC count.
+    pub volts_per_count: f32,
+    /// PWM (and current-loop) frequency, Hz.
+    pub pwm_hz: f32,
+    /// Current-loop bandwidth, Hz (`Kp = L·ωc`, `Ki = R·ωc`).
+    pub current_bw_hz: f32,
+    /// Bandwidth of the speed-tracking loop, Hz.
+    pub speed_bw_hz: f32,
+    /// Back-emf feed-forward on the q axis.
+    pub ff_emf: bool,
+    /// d/q cross-coupling feed-forward (`∓ω_e·L·i`).
+    pub ff_decouple: bool,
+    /// Advance the output angle by 1.5 periods of rotation (sample-to-PWM delay).
+    pub delay_comp: bool,
+    /// Fraction of the linear-modulation circle `V_bus/√3` the controller may use.
+    pub m_max: f32,
+    /// Current-reference limit (magnitude of the dq vector), A.
+    pub i_max_a: f32,
+    /// Instantaneous phase over-current trip, A.
+    pub i_trip_a: f32,
+    /// Bus over-voltage trip, V.
+    pub v_bus_ov: f32,
+    /// Bus under-voltage trip while running, V.
+    pub v_bus_uv: f32,
+    /// Brake chopper closes above this bus voltage, V.
+    pub brake_on_v: f32,
+    /// Brake chopper opens below this bus voltage, V.
+    pub brake_off_v: f32,
+    /// Command law.
+    pub law: LawKind,
+    /// Emulated load resistance per phase, Ω (`f32::INFINITY` = open circuit).
+    pub r_load_ohm: f32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            r_phase_ohm: 2.41,
+            l_phase_h: 6.0e-3,
+            ke_v_s_per_rad: 0.77 * 2.0 / 3.0,
+            pole_pairs: 5,
+            lead_m_per_rad: 0.016 / TAU,
+            encoder_cpr: 10_000,
+            encoder_offset_rad: 0.0,
+            amps_per_count: 50.0 / 4096.0,
+            adc_zero_code: 2048,
+            volts_per_count: 120.0 / 4096.0,
+            pwm_hz: 20_000.0,
+            current_bw_hz: 1_000.0,
+            speed_bw_hz: 100.0,
+            ff_emf: true,
+            ff_decouple: true,
+            delay_comp: true,
+            m_max: 0.95,
+            i_max_a: 10.0,
+            i_trip_a: 20.0,
+            v_bus_ov: 95.0,
+            v_bus_uv: 20.0,
+            brake_on_v: 85.0,
+            brake_off_v: 82.0,
+            law: LawKind::Resistor,
+            r_load_ohm: 306.0,
+        }
+    }
+}
+
+/// Why a configuration was refused: the field and what is wrong with it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConfigError {
+    pub field: &'static str,
+    pub reason: &'static str,
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}: {}", self.field, self.reason)
+    }
+}
+
+fn check(ok: bool, field: &'static str, reason: &'static str) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError { field, reason })
+    }
+}
+
+fn in_range(v: f32, lo: f32, hi: f32, field: &'static str) -> Result<(), ConfigError> {
+    check(v.is_finite(), field, "not a finite number")?;
+    check(v >= lo && v <= hi, field, "out of range")
+}
+
+impl Config {
+    /// Check every field and the relations between them.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        in_range(self.r_phase_ohm, 1e-3, 100.0, "r_phase_ohm")?;
+        in_range(self.l_phase_h, 1e-6, 1.0, "l_phase_h")?;
+        in_range(self.ke_v_s_per_rad, 1e-4, 20.0, "ke_v_s_per_rad")?;
+        check(
+            self.pole_pairs >= 1 && self.pole_pairs <= 50,
+            "pole_pairs",
+            "out of range",
+        )?;
+        in_range(self.lead_m_per_rad, 1e-5, 1.0, "lead_m_per_rad")?;
+        check(
+            self.encoder_cpr >= 16 && self.encoder_cpr <= 16_384,
+            "encoder_cpr",
+            "out of range",
+        )?;
+        in_range(self.encoder_offset_rad, -TAU, TAU, "encoder_offset_rad")?;
+        in_range(self.amps_per_count, 1e-5, 1.0, "amps_per_count")?;
+        check(self.adc_zero_code < 4096, "adc_zero_code", "out of range")?;
+        in_range(self.volts_per_count, 1e-4, 1.0, "volts_per_count")?;
+        in_range(self.pwm_hz, 5_000.0, 100_000.0, "pwm_hz")?;
+        in_range(self.current_bw_hz, 10.0, 5_000.0, "current_bw_hz")?;
+        // A discrete PI with one period of delay loses its margin as ωc·Ts approaches 1.
+        check(
+            self.current_bw_hz * TAU / self.pwm_hz <= 0.6,
+            "current_bw_hz",
+            "too high for pwm_hz (ωc·Ts > 0.6)",
+        )?;
+        in_range(self.speed_bw_hz, 1.0, 2_000.0, "speed_bw_hz")?;
+        check(
+            self.speed_bw_hz * TAU / self.pwm_hz <= 0.3,
+            "speed_bw_hz",
+            "too high for pwm_hz",
+        )?;
+        in_range(self.m_max, 0.1, 1.0, "m_max")?;
+        in_range(self.i_max_a, 0.0, 1_000.0, "i_max_a")?;
+        in_range(self.i_trip_a, 0.1, 2_000.0, "i_trip_a")?;
+        check(
+            self.i_trip_a > self.i_max_a,
+            "i_trip_a",
+            "must exceed i_max_a",
+        )?;
+        in_range(self.v_bus_ov, 1.0, 2_000.0, "v_bus_ov")?;
+        in_range(self.v_bus_uv, 0.0, 2_000.0, "v_bus_uv")?;
+        check(
+            self.v_bus_uv < self.v_bus_ov,
+            "v_bus_uv",
+            "must be below v_bus_ov",
+        )?;
+        in_range(self.brake_on_v, 1.0, 2_000.0, "brake_on_v")?;
+        in_range(self.brake_off_v, 0.0, 2_000.0, "brake_off_v")?;
+        check(
+            self.brake_off_v < self.brake_on_v,
+            "brake_off_v",
+            "must be below brake_on_v",
+        )?;
+        check(
+            self.brake_on_v < self.v_bus_ov,
+            "brake_on_v",
+            "must be below v_bus_ov",
+        )?;
+        check(
+            !self.r_load_ohm.is_nan() && self.r_load_ohm >= 0.0,
+            "r_load_ohm",
+            "must be ≥ 0 (inf = open)",
+        )?;
+        // Full-scale of the ADC must be representable in Q16.16 amperes and volts.
+        check(
+            self.amps_per_count * 4096.0 < 30_000.0,
+            "amps_per_count",
+            "full scale too large",
+        )?;
+        check(
+            self.volts_per_count * 4096.0 < 30_000.0,
+            "volts_per_count",
+            "full scale too large",
+        )?;
+        Ok(())
+    }
+
+    /// Sampling period, s.
+    pub fn ts(&self) -> f32 {
+        1.0 / self.pwm_hz
+    }
+}
+
+/// The fixed-point constants of the current loop, compiled from a valid [`Config`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Gains {
+    pub amps_per_count: Gain,
+    pub adc_zero: i32,
+    pub volts_per_count: Gain,
+    pub pi: PiGains,
+    pub enc: EncoderGains,
+    /// K_e, V·s/rad.
+    pub ke: Gain,
+    /// L, H (for decoupling).
+    pub l: Gain,
+    pub pole_pairs: i32,
+    /// Output-angle advance per rad/s of electrical speed (1.5 Ts), in angle LSB·2^-16.
+    pub advance: Gain,
+    /// `m_max/√3`: the voltage limit per volt of bus.
+    pub v_lim_per_bus: Gain,
+    pub i_max: Q,
+    pub i_trip: Q,
+    pub v_ov: Q,
+    pub v_uv: Q,
+    pub brake_on: Q,
+    pub brake_off: Q,
+    pub ff_emf: bool,
+    pub ff_decouple: bool,
+}
+
+impl Gains {
+    /// Validate and compile.
+    pub fn new(c: &Config) -> Result<Gains, ConfigError> {
+        c.validate()?;
+        let ts = c.ts();
+        let wc = TAU * c.current_bw_hz;
+        let wb = TAU * c.speed_bw_hz * ts;
+        let advance = if c.delay_comp {
+            // Δθ (LSB) = ω_e·1.5·Ts·2^32/2π; applied to ω_e in Q16.16 → divide by 2^16.
+            1.5 * ts * 65_536.0 / (2.0 * PI)
+        } else {
+            0.0
+        };
+        Ok(Gains {
+            amps_per_count: Gain::from_f32(c.amps_per_count),
+            adc_zero: c.adc_zero_code as i32,
+            volts_per_count: Gain::from_f32(c.volts_per_count),
+            pi: PiGains {
+                kp: Gain::from_f32(c.l_phase_h * wc),
+                ki_ts: Gain::from_f32(c.r_phase_ohm * wc * ts),
+            },
+            enc: EncoderGains {
+                cpr: c.encoder_cpr,
+                turn_per_count: (4_294_967_296u64 / c.encoder_cpr as u64) as u32,
+                pole_pairs: c.pole_pairs as u32,
+                offset: Angle::from_radians(c.encoder_offset_rad as f64),
+                kp: Gain::from_f32(2.0 * wb),
+                ki: Gain::from_f32(wb * wb),
+                rad_s_per_count_step: Gain::from_f32(TAU * c.pwm_hz / c.encoder_cpr as f32),
+                m_per_count: Gain::from_f32(c.lead_m_per_rad * TAU / c.encoder_cpr as f32),
+                // Four times the count change at 20,000 rpm would still be implausible.
+                max_step_counts: ((20_000.0 / 60.0 * c.encoder_cpr as f32 / c.pwm_hz) as i32 + 1)
+                    .min(16_000),
+            },
+            ke: Gain::from_f32(c.ke_v_s_per_rad),
+            l: Gain::from_f32(c.l_phase_h),
+            pole_pairs: c.pole_pairs as i32,
+            advance: Gain::from_f32(advance),
+            v_lim_per_bus: Gain::from_f32(c.m_max * INV_SQRT3),
+            i_max: q(c.i_max_a),
+            i_trip: q(c.i_trip_a),
+            v_ov: q(c.v_bus_ov),
+            v_uv: q(c.v_bus_uv),
+            brake_on: q(c.brake_on_v),
+            brake_off: q(c.brake_off_v),
+            ff_emf: c.ff_emf,
+            ff_decouple: c.ff_decouple,
+        })
+    }
+}
+
+/// 1/√3, correctly rounded to `f32` (`f32::sqrt` is not in `core`).
+const INV_SQRT3: f32 = 0.577_350_26;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        Gains::new(&Config::default()).unwrap();
+    }
+
+    #[test]
+    fn bad_values_are_refused_by_name() {
+        let mut c = Config {
+            r_phase_ohm: f32::NAN,
+            ..Config::default()
+        };
+        assert_eq!(Gains::new(&c).unwrap_err().field, "r_phase_ohm");
+        c = Config {
+            current_bw_hz: 4_000.0,
+            ..Config::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "current_bw_hz");
+        c = Config {
+            r_load_ohm: -1.0,
+            ..Config::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "r_load_ohm");
+        c = Config {
+            brake_on_v: 200.0,
+            ..Config::default()
+        };
+        assert_eq!(c.validate().unwrap_err().field, "brake_on_v");
+        c = Config {
+            r_load_ohm: f32::INFINITY,
+            ..Config::default()
+        };
+        assert!(c.validate().is_ok());
+    }
+
+    #[test]
+    fn pi_gains_follow_bandwidth_design() {
+        let c = Config::default();
+        let g = Gains::new(&c).unwrap();
+        let wc = TAU * c.current_bw_hz;
+        assert!((g.pi.kp.to_f32() - c.l_phase_h * wc).abs() < 1e-6 * c.l_phase_h * wc);
+        assert!((g.pi.ki_ts.to_f32() - c.r_phase_ohm * wc / c.pwm_hz).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,154 @@
+//! Clarke and Park transforms, amplitude-invariant, and their inverses.
+//!
+//! * Clarke: `α = (2a − b − c)/3`, `β = (b − c)/√3`. The three-current form rejects a common
+//!   offset on all three sensors; for a balanced set (`a+b+c = 0`) it equals `α = a`,
+//!   `β = (a + 2b)/√3`.
+//! * Park with the d-axis at angle θ: `d = α·cosθ + β·sinθ`, `q = −α·sinθ + β·cosθ`.
+//! * A balanced set of peak `I` at angle φ (`a = I·cos φ`, …) gives `|(α, β)| = I`.
+
+use crate::fx::{mul, sat_i32, Q};
+
+/// Stationary-frame vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct AlphaBeta {
+    pub alpha: Q,
+    pub beta: Q,
+}
+
+/// Rotor-frame vector.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Dq {
+    pub d: Q,
+    pub q: Q,
+}
+
+// Constants with 30 fractional bits (relative error < 1e-9).
+const ONE_THIRD: i64 = 357_913_941; // 1/3
+const INV_SQRT3: i64 = 619_925_131; // 1/√3
+const SQRT3_2: i64 = 929_887_697; // √3/2
+
+/// `x·k/2^30`, saturated.
+#[inline(always)]
+fn mulk(x: i64, k: i64) -> Q {
+    Q::from_bits(sat_i32((x * k) >> 30))
+}
+
+/// Amplitude-invariant Clarke transform of three phase quantities.
+#[inline(always)]
+pub fn clarke(a: Q, b: Q, c: Q) -> AlphaBeta {
+    let (a, b, c) = (a.to_bits() as i64, b.to_bits() as i64, c.to_bits() as i64);
+    AlphaBeta {
+        alpha: mulk(2 * a - b - c, ONE_THIRD),
+        beta: mulk(b - c, INV_SQRT3),
+    }
+}
+
+/// Inverse Clarke: phase quantities (a, b, c) with zero sum.
+#[inline(always)]
+pub fn inverse_clarke(v: AlphaBeta) -> [Q; 3] {
+    let half_a = v.alpha / 2;
+    let sb = mulk(v.beta.to_bits() as i64, SQRT3_2);
+    [
+        v.alpha,
+        sb.saturating_sub(half_a),
+        (-half_a).saturating_sub(sb),
+    ]
+}
+
+/// Park transform with (sin θ, cos θ).
+#[inline(always)]
+pub fn park(v: AlphaBeta, sin: Q, cos: Q) -> Dq {
+    Dq {
+        d: mul(v.alpha, cos).saturating_add(mul(v.beta, sin)),
+        q: mul(v.beta, cos).saturating_sub(mul(v.alpha, sin)),
+    }
+}
+
+/// Inverse Park transform with (sin θ, cos θ).
+#[inline(always)]
+pub fn inverse_park(v: Dq, sin: Q, cos: Q) -> AlphaBeta {
+    AlphaBeta {
+        alpha: mul(v.d, cos).saturating_sub(mul(v.q, sin)),
+        beta: mul(v.d, sin).saturating_add(mul(v.q, cos)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fx::{q, Angle};
+    use proptest::prelude::*;
+
+    fn f(x: Q) -> f64 {
+        x.to_num()
+    }
+
+    proptest! {
+        #[test]
+        fn balanced_set_has_invariant_amplitude(amp in 0.0f64..500.0, phi in 0.0f64..core::f64::consts::TAU) {
+            use core::f64::consts::TAU;
+            let a = amp * phi.cos();
+            let b = amp * (phi - TAU / 3.0).cos();
+            let c = amp * (phi + TAU / 3.0).cos();
+            let ab = clarke(q(a as f32), q(b as f32), q(c as f32));
+            let mag = (f(ab.alpha).powi(2) + f(ab.beta).powi(2)).sqrt();
+            // f32 input rounding (6e-8 relative) plus three Q16.16 roundings (≤ 4e-5 A).
+            prop_assert!((mag - amp).abs() < 1e-4 + amp * 1e-6, "{mag} vs {amp}");
+            // Angle of the vector is φ.
+            if amp > 1.0 {
+                let ang = f(ab.beta).atan2(f(ab.alpha));
+                let d = (ang - phi + 3.0 * core::f64::consts::PI).rem_euclid(TAU) - core::f64::consts::PI;
+                prop_assert!(d.abs() < 1e-3 / amp + 1e-6);
+            }
+        }
+
+        #[test]
+        fn park_round_trip(al in -1000.0f32..1000.0, be in -1000.0f32..1000.0, th in any::<u32>()) {
+            let (s, c) = Angle(th).sin_cos();
+            let v = AlphaBeta { alpha: q(al), beta: q(be) };
+            let back = inverse_park(park(v, s, c), s, c);
+            // sin²+cos² of the table is 1 within 4e-5, times |v| ≤ 1415, plus roundings.
+            let tol = 1415.0 * 8e-5 + 1e-3;
+            prop_assert!((f(back.alpha) - al as f64).abs() < tol);
+            prop_assert!((f(back.beta) - be as f64).abs() < tol);
+        }
+
+        #[test]
+        fn clarke_round_trip(al in -1000.0f32..1000.0, be in -1000.0f32..1000.0) {
+            let v = AlphaBeta { alpha: q(al), beta: q(be) };
+            let [a, b, c] = inverse_clarke(v);
+            let back = clarke(a, b, c);
+            prop_assert!((f(back.alpha) - al as f64).abs() < 1e-3);
+            prop_assert!((f(back.beta) - be as f64).abs() < 1e-3);
+            prop_assert!((f(a) + f(b) + f(c)).abs() < 1e-3);
+        }
+
+        #[test]
+        fn extreme_inputs_saturate(a in any::<i32>(), b in any::<i32>(), c in any::<i32>(), th in any::<u32>()) {
+            // Must not panic (overflow checks are on in tests) for any bits at all.
+            let ab = clarke(Q::from_bits(a), Q::from_bits(b), Q::from_bits(c));
+            let (s, co) = Angle(th).sin_cos();
+            let dq = park(ab, s, co);
+            let _ = inverse_clarke(inverse_park(dq, s, co));
+        }
+    }
+
+    #[test]
+    fn rotor_frame_of_a_balanced_set_is_constant() {
+        // Currents rotating with the d axis at θ, amplitude 10 A on q only.
+        for k in 0..64u32 {
+            let th = Angle(k.wrapping_mul(67_108_864));
+            let r = th.radians();
+            let i = |shift: f64| q((-10.0 * (r - shift).sin()) as f32);
+            let ab = clarke(
+                i(0.0),
+                i(core::f64::consts::TAU / 3.0),
+                i(-core::f64::consts::TAU / 3.0),
+            );
+            let (s, c) = th.sin_cos();
+            let dq = park(ab, s, c);
+            assert!(f(dq.d).abs() < 2e-3, "d = {}", f(dq.d));
+            assert!((f(dq.q) - 10.0).abs() < 2e-3, "q = {}", f(dq.q));
+        }
+    }
+}

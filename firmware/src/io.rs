@@ -1,0 +1,58 @@
+//! The hardware boundary. The board implements [`DriveIo`] over its ADC, timers and GPIO; the
+//! simulator (`hal-sim`) implements it over the simulated plant. The control code
+//! ([`crate::control::Controller`]) sees only these types.
+
+use crate::fx::Duty;
+
+/// One synchronous sample of the measurements the current loop needs, as raw converter codes.
+/// Scaling and offsets are the controller's parameters, so that the same bits give the same
+/// result on the board and in simulation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct RawSample {
+    /// Phase-current ADC codes (12-bit, right-aligned; mid-scale is zero current).
+    pub i_abc: [u16; 3],
+    /// Bus-voltage ADC code (12-bit).
+    pub v_bus: u16,
+    /// Quadrature-encoder hardware counter (wraps at 2^16).
+    pub encoder: u16,
+}
+
+/// What the current loop sets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Actuation {
+    /// High-side conduction fraction of each phase, centre-aligned PWM.
+    pub duties: [Duty; 3],
+    /// Gate drivers enabled. When false every switch is off (phases open; the body diodes
+    /// still conduct if the back-emf exceeds the bus).
+    pub enable: bool,
+    /// Brake-resistor chopper switch closed.
+    pub brake: bool,
+}
+
+impl Actuation {
+    /// All switches off, brake open.
+    pub const OFF: Actuation = Actuation {
+        duties: crate::svpwm::CENTRED,
+        enable: false,
+        brake: false,
+    };
+}
+
+/// Hardware (or simulated hardware) seen by the current loop.
+pub trait DriveIo {
+    /// The sample taken at the centre of the current PWM period.
+    fn sample(&mut self) -> RawSample;
+    /// Set duties (taking effect at the next PWM period), gate enable and brake chopper.
+    fn apply(&mut self, out: &Actuation);
+    /// Monotonic time, microseconds.
+    fn now_us(&self) -> u64;
+}
+
+/// One current-loop period against any [`DriveIo`]: sample, compute, apply.
+#[inline(always)]
+pub fn run_period<IO: DriveIo>(ctl: &mut crate::control::Controller, io: &mut IO) -> Actuation {
+    let s = io.sample();
+    let a = ctl.step(&s);
+    io.apply(&a);
+    a
+}

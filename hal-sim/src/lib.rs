@@ -1,0 +1,1 @@
+//! Host-side simulator of the regenerative transducer and the tools around it.
