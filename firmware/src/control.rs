@@ -132,10 +132,7 @@ impl Controller {
     /// state is rebuilt only when a law parameter changed.
     pub fn set_config(&mut self, cfg: &Config) -> Result<(), ConfigError> {
         let g = Gains::new(cfg)?;
-        if cfg.law != self.cfg.law
-            || cfg.r_load_ohm != self.cfg.r_load_ohm
-            || cfg.r_phase_ohm != self.cfg.r_phase_ohm
-        {
+        if Law::params_changed(&self.cfg, cfg) {
             self.law = Law::from_config(cfg);
         }
         self.cfg = *cfg;
