@@ -1,1 +1,4 @@
 //! Host-side simulator of the regenerative transducer and the tools around it.
+
+pub mod lqg;
+pub mod study;

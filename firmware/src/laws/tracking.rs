@@ -9,7 +9,7 @@
 //! `p = −3/2·(e_q·i_q + R·(i_d² + i_q²))`
 //!
 //! (power leaving the machine's terminals, i.e. into the drive; the machine's own copper loss
-//! excluded) is averaged over the rest. Synchronous demodulation of the square dither gives the
+//! excluded) is averaged over the rest with a triangular window. Synchronous demodulation of the square dither gives the
 //! relative gradient `g = d ln P / d ln R_L ≈ (P₊ − P₋) / (a·(P₊ + P₋))`, and the integrator
 //! moves `ln R̂ ← ln R̂ + clamp(γ·g, ±Δ_max)` (`γ` = `trk_gain`, `Δ_max` = `trk_step_max`),
 //! bounded to `[trk_r_min_ohm, trk_r_max_ohm]`. Near the optimum
@@ -62,8 +62,8 @@ pub struct Tracking {
     theta: Q,
     plus: bool,
     count: u32,
-    acc: i64,
-    n_acc: u32,
+    acc: i128,
+    w_acc: i128,
     p_plus: i64,
     g: Coef,
     cycles: u32,
@@ -131,7 +131,7 @@ impl Tracking {
             plus: true,
             count: 0,
             acc: 0,
-            n_acc: 0,
+            w_acc: 0,
             p_plus: 0,
             g: Coef(0),
             cycles: 0,
@@ -163,8 +163,8 @@ impl Tracking {
     }
 
     fn end_half(&mut self) {
-        let mean = if self.n_acc > 0 {
-            self.acc / self.n_acc as i64
+        let mean = if self.w_acc > 0 {
+            (self.acc / self.w_acc) as i64
         } else {
             0
         };
@@ -190,7 +190,7 @@ impl Tracking {
         }
         self.plus = !self.plus;
         self.acc = 0;
-        self.n_acc = 0;
+        self.w_acc = 0;
         self.count = 0;
         self.set_conductance();
     }
@@ -205,8 +205,13 @@ impl CommandLaw for Tracking {
         let s = ei.saturating_add(self.r_gain.mul_wide(i2));
         let p = -(s + s / 2);
         if self.count >= self.settle_len {
-            self.acc = self.acc.saturating_add(p);
-            self.n_acc += 1;
+            // Triangular window over the averaging span: the power ripple at twice the
+            // excitation frequency leaks into the mean as 1/(f·T)² instead of 1/(f·T).
+            let n = (self.count - self.settle_len) as i128;
+            let span = (self.half_len - self.settle_len) as i128;
+            let w = n.min(span - n) + 1;
+            self.acc += p as i128 * w;
+            self.w_acc += w;
         }
         self.count += 1;
         if self.count >= self.half_len {
