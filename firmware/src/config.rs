@@ -129,7 +129,7 @@ impl Default for Config {
             l_load_h: 0.0,
             c_load_f: 0.0,
             trk_dither: 0.15,
-            trk_period_s: 8.0,
+            trk_period_s: 16.0,
             trk_gain: 1.0,
             trk_step_max: 0.3,
             trk_r_min_ohm: 1.0,

@@ -87,8 +87,11 @@ pub struct Ledger {
     pub e_drive: f64,
     pub stored_start: f64,
     pub stored_end: f64,
-    /// Most negative instantaneous terminal power seen, W.
+    /// Most negative terminal power averaged over one loop period, W.
     pub p_terminal_min: f64,
+    /// Most negative terminal power at the sampling instants (the state the law saw, the
+    /// current it commanded), W.
+    pub p_terminal_sampled_min: f64,
 }
 
 impl Ledger {
@@ -203,6 +206,13 @@ impl Sim {
         });
         let i = (cmd.q.to_num::<f64>()).clamp(-self.i_max, self.i_max);
         self.i_q = i;
+        if self.t == 0.0 && self.ledger == Ledger::default() {
+            self.ledger.stored_start = self.stored();
+            self.ledger.p_terminal_min = f64::INFINITY;
+            self.ledger.p_terminal_sampled_min = f64::INFINITY;
+        }
+        let p_sampled = -1.5 * self.model.ke * omega * i - 1.5 * self.model.r * i * i;
+        self.ledger.p_terminal_sampled_min = self.ledger.p_terminal_sampled_min.min(p_sampled);
         let (amp, f) = self.sine_now();
         let w = match self.exc {
             Excitation::KanaiTajimi { .. } => gauss(&mut self.rng) * (m.q_w / self.dt).sqrt(),
@@ -271,10 +281,6 @@ impl Sim {
         for j in 0..9 {
             yn[j] = y[j] + h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
         }
-        if self.t == 0.0 && self.ledger == Ledger::default() {
-            self.ledger.stored_start = self.stored();
-            self.ledger.p_terminal_min = f64::INFINITY;
-        }
         self.s.copy_from_slice(&yn[..4]);
         let lg = &mut self.ledger;
         lg.e_in += yn[4];
@@ -326,6 +332,17 @@ pub fn sine_power_fixed(model: LinModel, r_load: f64, amp: f64, f_hz: f64) -> f6
     let mut sim = Sim::new(model, &cfg, Excitation::Sine(vec![(0.0, amp, f_hz)])).unwrap();
     sim.run((20.0 / f_hz).max(30.0));
     sim.run(10.0 / f_hz)
+}
+
+/// Mean load power of a fixed resistor on a sine in the linear model (steady state,
+/// analytic): velocity amplitude `V = m·a·ω/|k − m̄ω² + jω(c + c_e)|`, `P = ½·c_e·V²·R_L/(R+R_L)`.
+pub fn sine_power_analytic(m: &LinModel, r_load: f64, amp: f64, f_hz: f64) -> f64 {
+    let w = TAU * f_hz;
+    let ce = 1.5 * m.ke * m.ke / (m.lead * m.lead * (m.r + r_load));
+    let re = m.k - m.m_bar() * w * w;
+    let im = w * (m.c + ce);
+    let v = m.m * amp * w / (re * re + im * im).sqrt();
+    0.5 * ce * v * v * r_load / (m.r + r_load)
 }
 
 /// Best fixed resistor on a sine, by a simulated sweep: 25 log-spaced loads over 1 Ω … 10 kΩ,
