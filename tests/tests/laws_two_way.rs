@@ -2,7 +2,7 @@
 //! two-way optimal law beats the best fixed resistor; the one-way law sits in between or near
 //! the resistor. Compact model (`hal_sim::study`), firmware laws in fixed point.
 
-use hal_sim::lqg::{self, LinModel, LqgSpec};
+use hal_sim::lqg::{self, LqgSpec};
 use hal_sim::study::{broadband_run, study_config, LossModel};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
