@@ -305,6 +305,56 @@ mod tests {
         }
     }
 
+    /// Invariants under arbitrary (here adversarial, pseudo-random) power readings: R̂ stays in
+    /// its bounds and moves by at most `step_max` (ln units) per cycle, plus the Q16.16
+    /// rounding of the log2 step (2^-16·ln 2 ≈ 1e-5).
+    #[test]
+    fn steps_are_bounded_and_r_stays_in_range() {
+        let p = TrackingParams {
+            r_min: 5.0,
+            r_max: 500.0,
+            gain: 50.0,
+            r_start: 50.0,
+            ..params()
+        };
+        let mut t = Tracking::new(&p);
+        let mut seed = 12345u32;
+        let mut last = (t.r_hat() as f64).ln();
+        let mut last_cycles = 0;
+        let mut moved = 0;
+        for _ in 0..100_000 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            // Harvesting-signed current of random size: random positive power readings.
+            let e = ((seed >> 3) & 0xFFF) as f32 / 4096.0 * 200.0 - 100.0;
+            let i = -e / (5.0 + (seed >> 16) as f32 / 65536.0 * 200.0);
+            t.command(&LawInput {
+                e_q: q(e),
+                i_dq: Dq {
+                    d: Q::ZERO,
+                    q: q(i),
+                },
+                ..Default::default()
+            });
+            if t.cycles() != last_cycles {
+                last_cycles = t.cycles();
+                let now = (t.r_hat() as f64).ln();
+                assert!(
+                    (now - last).abs() <= p.step_max as f64 + 2e-5,
+                    "{last} → {now}"
+                );
+                assert!(now >= (5.0f64).ln() - 2e-5 && now <= (500.0f64).ln() + 2e-5);
+                if (now - last).abs() > 1e-3 {
+                    moved += 1;
+                }
+                last = now;
+            }
+        }
+        assert!(
+            moved > 50,
+            "the random readings should have moved R̂ ({moved})"
+        );
+    }
+
     impl Tracking {
         fn current_r(&self) -> f32 {
             1.0 / self.g.to_f64() as f32 - 2.41
