@@ -8,7 +8,7 @@ use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
 use crate::fx::{q, Angle, Gain, Q};
-use crate::laws::{lti::decimation, LawKind, LtiParams};
+use crate::laws::{LawKind, LtiParams};
 use crate::pi::PiGains;
 
 /// The drive's configuration (SI units). Defaults describe the reference device (Kollmorgen
@@ -268,7 +268,6 @@ impl Config {
             "opt",
             "coefficient not finite or beyond ±8e6",
         )?;
-        let _ = decimation;
         // Full-scale of the ADC must be representable in Q16.16 amperes and volts.
         check(
             self.amps_per_count * 4096.0 < 30_000.0,

@@ -17,7 +17,7 @@
 //! into the drive (`−3/2·(e_q·i_q + R·i_q²)` integrated); the drive's own losses
 //! ([`LossModel`]) are charged against it afterwards.
 
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::TAU;
 use std::path::PathBuf;
 
 use rayon::prelude::*;
@@ -779,7 +779,6 @@ pub fn size_one(s: &Structure, mac: &Machine, scr: &Screw, lead_mm: f64) -> Sizi
             best = (rl, p);
         }
     }
-    let _ = PI;
     SizingRow {
         machine: mac.name.clone(),
         screw: scr.name.clone(),
@@ -1015,6 +1014,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     /// The reference candidate (AKM42E on the 32 mm screw, 16 mm lead; rotor + screw inertia
     /// 1.5e-4 kg·m² as worked back in transducer.md §4) reproduces the published force and

@@ -21,7 +21,7 @@
 //! Discretisation: trapezoidal (Tustin) state-space equivalent at the law rate
 //! (`Config::law_rate_hz`, decimated from the loop), computed in `f64` with `+ − × ÷` only.
 
-use super::lti::{decimation, Coef, Lti, LtiParams, M, N};
+use super::lti::{decimation, Lti, LtiParams, M, N};
 use super::{CommandLaw, LawInput};
 use crate::frames::Dq;
 use crate::fx::Q;
@@ -61,12 +61,7 @@ fn continuous(rt: f64, l: f64, c: f64) -> ([[f64; 2]; 2], [f64; 2], [f64; 2], f6
 /// Tustin equivalent of the branch at period `ts`, as filter parameters (input 0 = `e_q`).
 #[allow(clippy::needless_range_loop)]
 pub fn discretise(r: f32, r_load: f32, l_load: f32, c_load: f32, ts: f32) -> LtiParams {
-    let (a, b, c, d) = continuous(
-        r as f64 + r_load as f64,
-        l_load as f64,
-        c_load as f64,
-        // (arguments above)
-    );
+    let (a, b, c, d) = continuous(r as f64 + r_load as f64, l_load as f64, c_load as f64);
     let h = ts as f64 / 2.0;
     // M = (I − h·A)⁻¹ (2×2).
     let (m00, m01, m10, m11) = (
@@ -114,7 +109,6 @@ impl Impedance {
         let decim = decimation(pwm_hz, law_rate_hz);
         let ts = decim as f32 / pwm_hz;
         let p = discretise(r, r_load, l_load, c_load, ts);
-        let _ = Coef::default();
         Impedance {
             filt: Lti::new(&p),
             decim,
