@@ -328,8 +328,14 @@ pub fn study_config(law: LawKind, r_load: f32) -> Config {
 /// Mean terminal power of a fixed resistor on a sine excitation (settle, then average over
 /// whole excitation periods), W.
 pub fn sine_power_fixed(model: LinModel, r_load: f64, amp: f64, f_hz: f64) -> f64 {
+    sine_power_fixed_fc(model, 0.0, r_load, amp, f_hz)
+}
+
+/// As [`sine_power_fixed`], with Coulomb friction `f_c` (N).
+pub fn sine_power_fixed_fc(model: LinModel, f_c: f64, r_load: f64, amp: f64, f_hz: f64) -> f64 {
     let cfg = study_config(LawKind::Resistor, r_load as f32);
     let mut sim = Sim::new(model, &cfg, Excitation::Sine(vec![(0.0, amp, f_hz)])).unwrap();
+    sim.f_c = f_c;
     sim.run((20.0 / f_hz).max(30.0));
     sim.run(10.0 / f_hz)
 }
@@ -349,10 +355,15 @@ pub fn sine_power_analytic(m: &LinModel, r_load: f64, amp: f64, f_hz: f64) -> f6
 /// then a golden-section refinement between the neighbours of the best (12 more runs).
 /// Returns `(R_L, P)`.
 pub fn sine_best_fixed(model: LinModel, amp: f64, f_hz: f64) -> (f64, f64) {
+    sine_best_fixed_fc(model, 0.0, amp, f_hz)
+}
+
+/// As [`sine_best_fixed`], with Coulomb friction `f_c` (N).
+pub fn sine_best_fixed_fc(model: LinModel, f_c: f64, amp: f64, f_hz: f64) -> (f64, f64) {
     let grid: Vec<f64> = (0..25).map(|k| 10f64.powf(k as f64 / 6.0)).collect();
     let p: Vec<f64> = grid
         .par_iter()
-        .map(|&r| sine_power_fixed(model, r, amp, f_hz))
+        .map(|&r| sine_power_fixed_fc(model, f_c, r, amp, f_hz))
         .collect();
     let (kb, _) = p
         .iter()
@@ -363,7 +374,7 @@ pub fn sine_best_fixed(model: LinModel, amp: f64, f_hz: f64) -> (f64, f64) {
         grid[(kb + 1).min(grid.len() - 1)].ln(),
     );
     let gr = (5f64.sqrt() - 1.0) / 2.0;
-    let f = |lr: f64| sine_power_fixed(model, lr.exp(), amp, f_hz);
+    let f = |lr: f64| sine_power_fixed_fc(model, f_c, lr.exp(), amp, f_hz);
     for _ in 0..12 {
         let c = b - gr * (b - a);
         let d = a + gr * (b - a);
