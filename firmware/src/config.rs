@@ -22,8 +22,11 @@ pub struct Config {
     /// (half of a line-to-line value of about 12 mH, the order of the AKM4x family) is assumed.
     pub l_phase_h: f32,
     /// Back-emf constant, per-phase peak, V·s/rad (mechanical): `e_q = K_e·ω_m`,
-    /// `T = 3/2·K_e·i_q`. Default 0.77·2/3: the paper's "0.77 N·m/A" read as the torque per
-    /// ampere of q-axis (peak phase) current.
+    /// `T = 3/2·K_e·i_q`. Default 0.77·√(3/2) = 0.943: the reading of the paper's "K_e = 0.77"
+    /// under which its own formulas (`c_e = 9/4·K²/(l²(R+R_L))`) are physically right in our
+    /// convention, and the one its measurements support: the measured TMD power maximum at
+    /// 300 Ω (predicted 306 Ω) fixes `c_e·(R+R_L)`; reading 0.77 as torque per peak ampere
+    /// (0.513) would put that maximum near 90 Ω. See docs/simulator.md (K_e convention).
     pub ke_v_s_per_rad: f32,
     /// Pole pairs.
     pub pole_pairs: u8,
@@ -54,6 +57,8 @@ pub struct Config {
     /// Fraction of the linear-modulation circle `V_bus/√3` the controller may use.
     pub m_max: f32,
     /// Current-reference limit (magnitude of the dq vector), A.
+    /// Default: the AKM42E's rated torque, 2.74 N·m = 3/2·K_e·i_q → 1.94 A, i.e. the device's
+    /// force rating f_rat = 1,076 N (the bench drive clipped there, §6 of the reference).
     pub i_max_a: f32,
     /// Instantaneous phase over-current trip, A.
     pub i_trip_a: f32,
@@ -102,7 +107,7 @@ impl Default for Config {
         Config {
             r_phase_ohm: 2.41,
             l_phase_h: 6.0e-3,
-            ke_v_s_per_rad: 0.77 * 2.0 / 3.0,
+            ke_v_s_per_rad: 0.943_063,
             pole_pairs: 5,
             lead_m_per_rad: 0.016 / TAU,
             encoder_cpr: 10_000,
@@ -117,7 +122,7 @@ impl Default for Config {
             ff_decouple: true,
             delay_comp: true,
             m_max: 0.95,
-            i_max_a: 10.0,
+            i_max_a: 1.937,
             i_trip_a: 20.0,
             v_bus_ov: 95.0,
             v_bus_uv: 20.0,

@@ -96,6 +96,8 @@ fn laws_switch_at_run_time() {
     let xdot = 0.1;
     let base = Config {
         r_load_ohm: 50.0,
+        i_max_a: 15.0,
+        i_trip_a: 30.0,
         ..Config::default()
     };
     let mut ctl = Controller::new(&base).unwrap();
@@ -145,9 +147,12 @@ fn one_way_clip_holds_in_the_current_loop() {
     let mut opt = LtiParams::default();
     opt.d[1] = 0.05;
     let xdot = 0.1; // ω_m = 39 rad/s → 2 A asked
+    // Current limit raised: the one-way clip is under test, not the rating.
     let two = Config {
         law: LawKind::TwoWay,
         opt,
+        i_max_a: 15.0,
+        i_trip_a: 30.0,
         ..Config::default()
     };
     let mut ctl = Controller::new(&two).unwrap();
