@@ -146,7 +146,9 @@ fn one_way_clip_holds_in_the_current_loop() {
     // (same sign as e_q, so power would flow from the bus into the machine).
     let mut opt = LtiParams::default();
     opt.d[1] = 0.05;
-    let xdot = 0.1; // ω_m = 39 rad/s → 2 A asked
+    // ω_m = 19.6 rad/s → 0.98 A asked; e_q = 18.5 V + R·i stays inside the 39 V voltage
+    // circle of a 72 V bus.
+    let xdot = 0.05;
     // Current limit raised: the one-way clip is under test, not the rating.
     let two = Config {
         law: LawKind::TwoWay,
@@ -166,7 +168,7 @@ fn one_way_clip_holds_in_the_current_loop() {
     .unwrap();
     ctl1.set_mode(Mode::Run).unwrap();
     let p_one = run(&mut ctl1, &mut plant(), xdot, 0.2);
-    // Two-way motors: −3/2·(e·i + R·i²) with e = 20 V, i = 1.96 A ≈ −73 W.
+    // Two-way motors: −3/2·(e·i + R·i²) with e = 18.5 V, i = 0.98 A ≈ −31 W.
     let e = two.ke_v_s_per_rad as f64 * xdot / two.lead_m_per_rad as f64;
     let i = 0.05 * xdot / two.lead_m_per_rad as f64;
     let want_two = -1.5 * (e * i + two.r_phase_ohm as f64 * i * i);
@@ -175,6 +177,6 @@ fn one_way_clip_holds_in_the_current_loop() {
         "{p_two} vs {want_two}"
     );
     // One-way: the command is clipped to zero; what remains is the current loop's ripple
-    // around zero (a few mA): |P| < 3/2·e·(half an ADC LSB, 6 mA) ≈ 0.18 W.
-    assert!(p_one > -0.18, "one-way drew {p_one} W");
+    // around zero (a few mA): |P| < 3/2·e·(half an ADC LSB, 6 mA) ≈ 0.17 W.
+    assert!(p_one > -0.17, "one-way drew {p_one} W");
 }
