@@ -57,7 +57,7 @@ impl LinModel {
             c: 655.0,
             j: 1.5e-4,
             lead: 0.016 / std::f64::consts::TAU,
-            ke: 0.77 * 2.0 / 3.0,
+            ke: regen_fw::Config::default().ke_v_s_per_rad as f64,
             r: 2.41,
             omega_g: std::f64::consts::PI,
             zeta_g: 0.6,
