@@ -35,6 +35,7 @@ pub mod fx;
 pub mod io;
 pub mod laws;
 pub mod pi;
+pub mod selftest;
 pub mod svpwm;
 
 pub use config::{Config, ConfigError, Gains};
