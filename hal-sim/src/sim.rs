@@ -631,6 +631,12 @@ impl Sim {
     }
 }
 
+/// Make the controller's current loop proportional-only (integral gain zero), like the
+/// reference bench's analog drive. Call again after every `set_config`.
+pub fn p_only(ctl: &mut Controller) {
+    ctl.gains_mut().pi.ki_ts = regen_fw::fx::Gain::ZERO;
+}
+
 /// The plant side of the hardware boundary.
 struct PlantIo<'a>(&'a mut Sim);
 
