@@ -107,7 +107,7 @@ impl Default for Config {
         Config {
             r_phase_ohm: 2.41,
             l_phase_h: 6.0e-3,
-            ke_v_s_per_rad: 0.943_063,
+            ke_v_s_per_rad: 0.943_054,
             pole_pairs: 5,
             lead_m_per_rad: 0.016 / TAU,
             encoder_cpr: 10_000,

@@ -150,6 +150,13 @@ impl Controller {
         &self.g
     }
 
+    /// The compiled constants, for experiments outside the configuration's design rules
+    /// (the simulator's P-only current loop, like the reference bench drive's). The next
+    /// [`Controller::set_config`] recompiles them.
+    pub fn gains_mut(&mut self) -> &mut Gains {
+        &mut self.g
+    }
+
     /// Request a mode. Refused (returns the fault) while a fault is latched, except for the
     /// fault's own safe mode and Idle.
     pub fn set_mode(&mut self, m: Mode) -> Result<(), Fault> {
