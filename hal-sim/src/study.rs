@@ -436,6 +436,7 @@ pub fn regime_study(
     q_ws: &[f64],
     secs: f64,
     seed: u64,
+    i_max: f32,
 ) -> Result<Vec<RegimeRow>, String> {
     let spec = LqgSpec {
         model: base,
@@ -453,16 +454,21 @@ pub fn regime_study(
         .map(|&q_w| {
             let model = LinModel { q_w, ..base };
             let mut out = [(0.0, 0.0); 3];
+            let lim = |c: Config| Config {
+                i_max_a: i_max,
+                i_trip_a: i_max * 1.2 + 1.0,
+                ..c
+            };
             let cfgs = [
-                study_config(LawKind::Resistor, r_best as f32),
-                Config {
+                lim(study_config(LawKind::Resistor, r_best as f32)),
+                lim(Config {
                     opt: d.params,
                     ..study_config(LawKind::OneWay, 0.0)
-                },
-                Config {
+                }),
+                lim(Config {
                     opt: d.params,
                     ..study_config(LawKind::TwoWay, 0.0)
-                },
+                }),
             ];
             for (o, cfg) in out.iter_mut().zip(cfgs.iter()) {
                 let (p, l, _) = broadband_run(model, cfg, no_logic, seed, 30.0, secs);
@@ -870,6 +876,10 @@ pub enum StudyKind {
         extra_max: f64,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Current limit, A (default: high enough that no law is clipped; the device's rated
+        /// 1.94 A clips the strongest excitations).
+        #[arg(long, default_value_t = 50.0)]
+        i_max: f32,
     },
     /// Device sizing: indices and predicted power for every machine × screw × lead.
     Sizing {
@@ -907,7 +917,11 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
             r_on,
             extra_max,
             seed,
+            i_max,
         } => {
+            if !(*i_max > 0.0 && *i_max <= 500.0) {
+                return Err("i_max must be in (0, 500] A".into());
+            }
             if *points < 2 || !(q_min > &0.0 && q_max > q_min) || !(*secs > 0.0) {
                 return Err("need points ≥ 2, 0 < q_min < q_max, secs > 0".into());
             }
@@ -919,7 +933,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
             let qs: Vec<f64> = (0..*points)
                 .map(|k| q_min * (q_max / q_min).powf(k as f64 / (*points - 1) as f64))
                 .collect();
-            let rows = regime_study(LinModel::reference(), loss, &qs, *secs, *seed)?;
+            let rows = regime_study(LinModel::reference(), loss, &qs, *secs, *seed, *i_max)?;
             write_regime(&rows, *extra_max, dir).map_err(|e| e.to_string())?;
             let _ = writeln!(
                 out,
