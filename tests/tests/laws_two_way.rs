@@ -62,7 +62,7 @@ fn two_way_beats_best_fixed_resistor_on_broadband() {
         d.p_lqg
     );
     // The regression check proper. Same noise sequence for both, so the sampling error of the
-    // ratio is much smaller than that of each mean; the analytic advantage is +26 %, the test
-    // asks for half of it.
+    // ratio is much smaller than that of each mean; the analytic advantage is +45 % with the
+    // default K_e = 0.943 (+26 % with the 0.513 reading), the test asks for 13 %.
     assert!(p[1] > 1.13 * p[0], "two-way {} vs resistor {}", p[1], p[0]);
 }
