@@ -96,9 +96,13 @@ impl Screw {
     /// Friction force f_d(x, ẋ) of eq. 13 (regularised sign near zero speed).
     pub fn friction(&self, x: f64, v: f64) -> f64 {
         let sgn = (v / self.stick_velocity).clamp(-1.0, 1.0);
-        let ripple = 1.0
-            + self.p3 * (x / self.lead_m_per_rad + self.p4).sin()
-            + self.p5 * (TAU / self.ball_m * x + self.p6).sin();
+        let mut ripple = 1.0;
+        if self.p3 != 0.0 {
+            ripple += self.p3 * (x / self.lead_m_per_rad + self.p4).sin();
+        }
+        if self.p5 != 0.0 {
+            ripple += self.p5 * (TAU / self.ball_m * x + self.p6).sin();
+        }
         self.coulomb_n * ripple * sgn + self.viscous_n_s_per_m * v
     }
     /// h(f·ẋ): 1/η when power flows into the device, η otherwise.

@@ -224,6 +224,8 @@ pub struct Sim {
     exc: ExcitationState,
     noise: u64,
     decay: f64,
+    /// exp(−G·T/C) of the bus with the brake open and closed (G = total conductance).
+    bus_decay: [f64; 2],
     energy: Energy,
     steps: u64,
     rec: Option<Recorder>,
@@ -244,8 +246,12 @@ impl Sim {
         if !(rig.screw.efficiency > 0.0 && rig.screw.efficiency <= 1.0) {
             return Err("screw.efficiency must lie in (0, 1]".into());
         }
-        if rig.bus.capacitance_f <= 0.0 {
-            return Err("bus.capacitance_f must be positive".into());
+        let b = &rig.bus;
+        if !(b.capacitance_f > 0.0 && b.source_r_ohm > 0.0 && b.brake_r_ohm > 0.0) {
+            return Err("bus: capacitance_f, source_r_ohm and brake_r_ohm must be positive".into());
+        }
+        if !(b.initial_v.is_finite() && b.initial_v >= 0.0) {
+            return Err("bus.initial_v must be a finite voltage ≥ 0".into());
         }
         let (x0, v0) = match &rig.drive {
             Drive::Imposed { motion } => {
@@ -262,7 +268,18 @@ impl Sim {
             }
             .state(),
         };
+        let b = &rig.bus;
+        let gs = if b.source_v.is_some() {
+            1.0 / b.source_r_ohm
+        } else {
+            0.0
+        };
+        let bus_decay = [
+            (-gs * ts / b.capacitance_f).exp(),
+            (-(gs + 1.0 / b.brake_r_ohm) * ts / b.capacitance_f).exp(),
+        ];
         let mut sim = Sim {
+            bus_decay,
             decay: (-m.r_ohm / m.l_h * ts).exp(),
             noise: rig.sensors.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
             s: State {
@@ -534,10 +551,10 @@ impl Sim {
         };
         let gt = gs + gb;
         let c = bus.capacitance_f;
+        let k = self.bus_decay[act.brake as usize];
         let solve = |i_inj: f64| -> (f64, f64, f64) {
             if gt > 0.0 {
                 let vinf = (i_inj + is) / gt;
-                let k = (-gt * ts / c).exp();
                 let d0 = vb0 - vinf;
                 let tc = c / gt;
                 let v1 = vinf + d0 * k;
