@@ -105,3 +105,25 @@ fn tmd_power_matches_harmonic_balance() {
         assert!(resid.abs() < 5e-3);
     }
 }
+
+#[test]
+fn shipped_scenarios_parse_and_run() {
+    // Every example in hal-sim/scenarios builds; a short piece of each runs with the
+    // energy balanced (0.5 %) and no fault.
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
+    let mut n = 0;
+    for f in std::fs::read_dir(&dir).unwrap() {
+        let p = f.unwrap().path();
+        if p.extension().and_then(|e| e.to_str()) != Some("toml") {
+            continue;
+        }
+        let sc = Scenario::from_file(&p).unwrap_or_else(|e| panic!("{e}"));
+        let mut sim = sc.build().unwrap();
+        sim.run_for(sc.duration_s.min(0.5));
+        check_balance(&sim.energy(), &sc.name);
+        assert!(sim.controller().fault().is_none(), "{}", sc.name);
+        assert!(!sim.recorder().unwrap().rows.is_empty());
+        n += 1;
+    }
+    assert!(n >= 3, "{n} scenarios in {}", dir.display());
+}
