@@ -315,6 +315,28 @@ impl Default for Bus {
     }
 }
 
+/// The inverter model.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Inverter {
+    /// Resolve the centre-aligned PWM pattern within each period (seven constant-voltage
+    /// segments, each solved exactly) instead of the per-period average.
+    pub switched: bool,
+    /// Dead time per edge, s: during it the leg's diode conducts, so a phase whose current
+    /// flows out of the leg (i > 0) loses `dead_time` of high time per period, one whose
+    /// current flows in gains it (current sign at the start of the period).
+    pub dead_time_s: f64,
+}
+
+impl Default for Inverter {
+    fn default() -> Self {
+        Inverter {
+            switched: false,
+            dead_time_s: 0.0,
+        }
+    }
+}
+
 /// Drive losses: switching `k_sw·f_pwm·V_bus·Σ|i_k|`, conduction `R_on·Σi_k²`, logic supply.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]

@@ -21,7 +21,7 @@
 //! every = 20
 //! ```
 
-use crate::plant::{Bus, Drive, Losses, Machine, Screw, Sensors};
+use crate::plant::{Bus, Drive, Inverter, Losses, Machine, Screw, Sensors};
 use crate::sim::{Channel, Rig, Sim};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
@@ -157,6 +157,8 @@ pub struct Scenario {
     #[serde(default)]
     pub bus: Bus,
     #[serde(default)]
+    pub inverter: Inverter,
+    #[serde(default)]
     pub losses: Losses,
     #[serde(default)]
     pub sensors: Sensors,
@@ -207,6 +209,7 @@ impl Scenario {
                 },
             },
             bus: Bus::default(),
+            inverter: Inverter::default(),
             losses: Losses::default(),
             sensors: Sensors::default(),
             firmware: FirmwareSpec::default(),
@@ -303,6 +306,7 @@ impl Scenario {
             screw: self.screw,
             drive: self.drive.clone(),
             bus: self.bus,
+            inverter: self.inverter,
             losses: self.losses,
             sensors: self.sensors,
         };

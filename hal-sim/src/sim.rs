@@ -14,7 +14,9 @@
 //! amplitude-invariant Clarke, so one period costs two exponentials' worth of arithmetic
 //! (the factor `exp(−RT/L)` is computed once).
 
-use crate::plant::{Bus, Drive, Excitation, ExcitationState, Losses, Machine, Screw, Sensors};
+use crate::plant::{
+    Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
+};
 use regen_fw::io::{Actuation, DriveIo, RawSample};
 use regen_fw::{Config, Controller, Mode};
 use std::f64::consts::TAU;
@@ -195,6 +197,7 @@ pub struct Rig {
     pub screw: Screw,
     pub drive: Drive,
     pub bus: Bus,
+    pub inverter: Inverter,
     pub losses: Losses,
     pub sensors: Sensors,
 }
@@ -482,28 +485,72 @@ impl Sim {
 
         // Electrical period.
         let vb0 = self.s.v_bus;
+        let i_ph = self.currents();
         let e_ = &mut self.energy;
         let mut i_avg = [0.0; 2];
         let mut p_inv = 0.0; // bus → machine, W (average)
         let mut i2_avg = 0.0; // mean of i_α² + i_β²
         if act.enable {
-            let d: [f64; 3] = core::array::from_fn(|k| act.duties[k].to_num::<f64>() * vb0);
-            let v = [
-                (2.0 * d[0] - d[1] - d[2]) / 3.0,
-                (d[1] - d[2]) / (2.0 * SQRT3_2),
-            ];
-            let a = self.decay;
-            let tau = m.l_h / m.r_ohm;
-            let g = (1.0 - a) * tau / ts;
-            let g2 = (1.0 - a * a) * tau / (2.0 * ts);
-            for k in 0..2 {
-                let u = (v[k] - e[k]) / m.r_ohm;
-                let i0 = self.s.i_ab[k];
-                let dlt = i0 - u;
-                self.s.i_ab[k] = u + dlt * a;
-                i_avg[k] = u + dlt * g;
-                i2_avg += u * u + 2.0 * u * dlt * g + dlt * dlt * g2;
-                p_inv += 1.5 * v[k] * i_avg[k];
+            let inv = self.rig.inverter;
+            let d: [f64; 3] = core::array::from_fn(|k| {
+                let d = act.duties[k].to_num::<f64>();
+                let dt = inv.dead_time_s / ts;
+                let d = if dt > 0.0 && i_ph[k] != 0.0 {
+                    d - dt * i_ph[k].signum()
+                } else {
+                    d
+                };
+                d.clamp(0.0, 1.0)
+            });
+            let clarke = |p: [f64; 3]| {
+                [
+                    (2.0 * p[0] - p[1] - p[2]) / 3.0,
+                    (p[1] - p[2]) / (2.0 * SQRT3_2),
+                ]
+            };
+            let r = m.r_ohm;
+            let tau = m.l_h / r;
+            let mut segment = |v: [f64; 2], dt: f64, a: f64, i_ab: &mut [f64; 2]| {
+                let g = (1.0 - a) * tau;
+                let g2 = (1.0 - a * a) * tau / 2.0;
+                for k in 0..2 {
+                    let u = (v[k] - e[k]) / r;
+                    let dlt = i_ab[k] - u;
+                    i_ab[k] = u + dlt * a;
+                    let int_i = u * dt + dlt * g;
+                    i_avg[k] += int_i / ts;
+                    i2_avg += (u * u * dt + 2.0 * u * dlt * g + dlt * dlt * g2) / ts;
+                    p_inv += 1.5 * v[k] * int_i / ts;
+                }
+            };
+            if inv.switched {
+                // Centre-aligned: phase k high over [T/2·(1 − d_k), T/2·(1 + d_k)].
+                let mut edges = [0.0; 8];
+                for k in 0..3 {
+                    edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
+                    edges[2 + 2 * k] = 0.5 * ts * (1.0 + d[k]);
+                }
+                edges[7] = ts;
+                edges.sort_by(|a, b| a.total_cmp(b));
+                for w in edges.windows(2) {
+                    let dt = w[1] - w[0];
+                    if dt <= 0.0 {
+                        continue;
+                    }
+                    let tm = 0.5 * (w[0] + w[1]);
+                    let ph: [f64; 3] = core::array::from_fn(|k| {
+                        if (tm - 0.5 * ts).abs() < 0.5 * ts * d[k] {
+                            vb0
+                        } else {
+                            0.0
+                        }
+                    });
+                    let a = (-dt / tau).exp();
+                    segment(clarke(ph), dt, a, &mut self.s.i_ab);
+                }
+            } else {
+                let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
+                segment(v, ts, self.decay, &mut self.s.i_ab);
             }
         } else {
             // Gates off: the current collapses through the body diodes within the period
