@@ -187,6 +187,52 @@ pub enum Excitation {
     },
     /// Recorded ground acceleration, linearly interpolated (zero outside).
     Recorded { t_s: Vec<f64>, a_m_s2: Vec<f64> },
+    /// Recorded ground acceleration from a CSV file of `t_s,a_m_s2` rows (an optional header
+    /// line; `#` comments), read when the scenario is built (see [`read_series_csv`]).
+    RecordedCsv { path: String },
+}
+
+/// Read a two-column CSV time series (`t, value`): optional header, `#` comments, times
+/// strictly increasing, every value finite. Errors name the file and line.
+pub fn read_series_csv(path: &std::path::Path) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let (mut t, mut v) = (Vec::new(), Vec::new());
+    for (n, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let cols: Vec<&str> = l.split(',').map(str::trim).collect();
+        let parsed: Option<Vec<f64>> = cols.iter().map(|c| c.parse::<f64>().ok()).collect();
+        let Some(p) = parsed else {
+            if t.is_empty() && n == 0 {
+                continue; // header
+            }
+            return Err(format!(
+                "{}:{}: not two numbers: `{l}`",
+                path.display(),
+                n + 1
+            ));
+        };
+        if p.len() != 2 || !p.iter().all(|x| x.is_finite()) {
+            return Err(format!(
+                "{}:{}: expected two finite numbers `t,value`, got `{l}`",
+                path.display(),
+                n + 1
+            ));
+        }
+        if let Some(&last) = t.last() {
+            if p[0] <= last {
+                return Err(format!("{}:{}: time not increasing", path.display(), n + 1));
+            }
+        }
+        t.push(p[0]);
+        v.push(p[1]);
+    }
+    if t.len() < 2 {
+        return Err(format!("{}: fewer than two samples", path.display()));
+    }
+    Ok((t, v))
 }
 
 /// State of a noise excitation (filter and generator).
@@ -238,6 +284,8 @@ impl Excitation {
                 st.xg += st.vg * dt;
                 -(2.0 * zeta_g * omega_g * st.vg + omega_g * omega_g * st.xg)
             }
+            // Replaced by `Recorded` when the scenario is built.
+            Excitation::RecordedCsv { .. } => 0.0,
             Excitation::Recorded { t_s, a_m_s2 } => {
                 let n = t_s.len().min(a_m_s2.len());
                 let tm = t + dt / 2.0;
