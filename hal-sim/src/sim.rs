@@ -445,14 +445,16 @@ impl Sim {
             if sn.current_noise_a > 0.0 {
                 ik += sn.current_noise_a * Sensors::noise(&mut self.noise);
             }
-            let c = (ik / cfg.amps_per_count as f64).round() + cfg.adc_zero_code as f64;
+            // Round to nearest in the positive code domain (the cast truncates; below 0 it
+            // clamps anyway): avoids a libm call per channel.
+            let c = ik / cfg.amps_per_count as f64 + cfg.adc_zero_code as f64 + 0.5;
             codes[k] = c.clamp(0.0, 4095.0) as u16;
         }
         let mut vb = self.s.v_bus + sn.vbus_offset_v;
         if sn.vbus_noise_v > 0.0 {
             vb += sn.vbus_noise_v * Sensors::noise(&mut self.noise);
         }
-        let vcode = (vb / cfg.volts_per_count as f64).round().clamp(0.0, 4095.0) as u16;
+        let vcode = (vb / cfg.volts_per_count as f64 + 0.5).clamp(0.0, 4095.0) as u16;
         let turns = self.s.x / self.rig.screw.lead_m_per_rad / TAU;
         let count = (turns * cfg.encoder_cpr as f64).floor() as i64;
         RawSample {
