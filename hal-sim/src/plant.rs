@@ -97,9 +97,13 @@ impl Screw {
     /// Friction force f_d(x, ẋ) of eq. 13 (regularised sign near zero speed).
     pub fn friction(&self, x: f64, v: f64) -> f64 {
         let sgn = (v / self.stick_velocity).clamp(-1.0, 1.0);
-        let ripple = 1.0
-            + self.p3 * (x / self.lead_m_per_rad + self.p4).sin()
-            + self.p5 * (TAU / self.ball_m * x + self.p6).sin();
+        let mut ripple = 1.0;
+        if self.p3 != 0.0 {
+            ripple += self.p3 * (x / self.lead_m_per_rad + self.p4).sin();
+        }
+        if self.p5 != 0.0 {
+            ripple += self.p5 * (TAU / self.ball_m * x + self.p6).sin();
+        }
         self.coulomb_n * ripple * sgn + self.viscous_n_s_per_m * v
     }
     /// h(f·ẋ): 1/η when power flows into the device, η otherwise.
@@ -184,6 +188,52 @@ pub enum Excitation {
     },
     /// Recorded ground acceleration, linearly interpolated (zero outside).
     Recorded { t_s: Vec<f64>, a_m_s2: Vec<f64> },
+    /// Recorded ground acceleration from a CSV file of `t_s,a_m_s2` rows (an optional header
+    /// line; `#` comments), read when the scenario is built (see [`read_series_csv`]).
+    RecordedCsv { path: String },
+}
+
+/// Read a two-column CSV time series (`t, value`): optional header, `#` comments, times
+/// strictly increasing, every value finite. Errors name the file and line.
+pub fn read_series_csv(path: &std::path::Path) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let (mut t, mut v) = (Vec::new(), Vec::new());
+    for (n, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let cols: Vec<&str> = l.split(',').map(str::trim).collect();
+        let parsed: Option<Vec<f64>> = cols.iter().map(|c| c.parse::<f64>().ok()).collect();
+        let Some(p) = parsed else {
+            if t.is_empty() && n == 0 {
+                continue; // header
+            }
+            return Err(format!(
+                "{}:{}: not two numbers: `{l}`",
+                path.display(),
+                n + 1
+            ));
+        };
+        if p.len() != 2 || !p.iter().all(|x| x.is_finite()) {
+            return Err(format!(
+                "{}:{}: expected two finite numbers `t,value`, got `{l}`",
+                path.display(),
+                n + 1
+            ));
+        }
+        if let Some(&last) = t.last() {
+            if p[0] <= last {
+                return Err(format!("{}:{}: time not increasing", path.display(), n + 1));
+            }
+        }
+        t.push(p[0]);
+        v.push(p[1]);
+    }
+    if t.len() < 2 {
+        return Err(format!("{}: fewer than two samples", path.display()));
+    }
+    Ok((t, v))
 }
 
 /// State of a noise excitation (filter and generator).
@@ -235,6 +285,8 @@ impl Excitation {
                 st.xg += st.vg * dt;
                 -(2.0 * zeta_g * omega_g * st.vg + omega_g * omega_g * st.xg)
             }
+            // Replaced by `Recorded` when the scenario is built.
+            Excitation::RecordedCsv { .. } => 0.0,
             Excitation::Recorded { t_s, a_m_s2 } => {
                 let n = t_s.len().min(a_m_s2.len());
                 let tm = t + dt / 2.0;
@@ -308,6 +360,28 @@ impl Default for Bus {
             source_v: Some(320.0),
             source_r_ohm: 0.1,
             brake_r_ohm: 50.0,
+        }
+    }
+}
+
+/// The inverter model.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Inverter {
+    /// Resolve the centre-aligned PWM pattern within each period (seven constant-voltage
+    /// segments, each solved exactly) instead of the per-period average.
+    pub switched: bool,
+    /// Dead time per edge, s: during it the leg's diode conducts, so a phase whose current
+    /// flows out of the leg (i > 0) loses `dead_time` of high time per period, one whose
+    /// current flows in gains it (current sign at the start of the period).
+    pub dead_time_s: f64,
+}
+
+impl Default for Inverter {
+    fn default() -> Self {
+        Inverter {
+            switched: false,
+            dead_time_s: 0.0,
         }
     }
 }

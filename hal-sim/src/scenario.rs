@@ -21,7 +21,7 @@
 //! every = 20
 //! ```
 
-use crate::plant::{Bus, Drive, Losses, Machine, Screw, Sensors};
+use crate::plant::{Bus, Drive, Excitation, Inverter, Losses, Machine, Screw, Sensors};
 use crate::sim::{Channel, Rig, Sim};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
@@ -157,6 +157,8 @@ pub struct Scenario {
     #[serde(default)]
     pub bus: Bus,
     #[serde(default)]
+    pub inverter: Inverter,
+    #[serde(default)]
     pub losses: Losses,
     #[serde(default)]
     pub sensors: Sensors,
@@ -207,6 +209,7 @@ impl Scenario {
                 },
             },
             bus: Bus::default(),
+            inverter: Inverter::default(),
             losses: Losses::default(),
             sensors: Sensors::default(),
             firmware: FirmwareSpec::default(),
@@ -296,13 +299,28 @@ impl Scenario {
         Ok(c)
     }
 
+    /// The drive with recorded files loaded.
+    fn loaded_drive(&self) -> Result<Drive, String> {
+        let mut d = self.drive.clone();
+        if let Drive::Structure { excitation, .. } = &mut d {
+            if let Excitation::RecordedCsv { path } = excitation {
+                let (t_s, a_m_s2) =
+                    crate::plant::read_series_csv(std::path::Path::new(path.as_str()))
+                        .map_err(|e| format!("drive.excitation.path: {e}"))?;
+                *excitation = Excitation::Recorded { t_s, a_m_s2 };
+            }
+        }
+        Ok(d)
+    }
+
     /// The simulation, recording the chosen channels.
     pub fn build(&self) -> Result<Sim, String> {
         let rig = Rig {
             machine: self.machine,
             screw: self.screw,
-            drive: self.drive.clone(),
+            drive: self.loaded_drive()?,
             bus: self.bus,
+            inverter: self.inverter,
             losses: self.losses,
             sensors: self.sensors,
         };

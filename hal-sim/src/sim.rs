@@ -14,7 +14,9 @@
 //! amplitude-invariant Clarke, so one period costs two exponentials' worth of arithmetic
 //! (the factor `exp(−RT/L)` is computed once).
 
-use crate::plant::{Bus, Drive, Excitation, ExcitationState, Losses, Machine, Screw, Sensors};
+use crate::plant::{
+    Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
+};
 use regen_fw::io::{Actuation, DriveIo, RawSample};
 use regen_fw::{Config, Controller, Mode};
 use std::f64::consts::TAU;
@@ -195,6 +197,7 @@ pub struct Rig {
     pub screw: Screw,
     pub drive: Drive,
     pub bus: Bus,
+    pub inverter: Inverter,
     pub losses: Losses,
     pub sensors: Sensors,
 }
@@ -224,6 +227,8 @@ pub struct Sim {
     exc: ExcitationState,
     noise: u64,
     decay: f64,
+    /// exp(−G·T/C) of the bus with the brake open and closed (G = total conductance).
+    bus_decay: [f64; 2],
     energy: Energy,
     steps: u64,
     rec: Option<Recorder>,
@@ -244,8 +249,12 @@ impl Sim {
         if !(rig.screw.efficiency > 0.0 && rig.screw.efficiency <= 1.0) {
             return Err("screw.efficiency must lie in (0, 1]".into());
         }
-        if rig.bus.capacitance_f <= 0.0 {
-            return Err("bus.capacitance_f must be positive".into());
+        let b = &rig.bus;
+        if !(b.capacitance_f > 0.0 && b.source_r_ohm > 0.0 && b.brake_r_ohm > 0.0) {
+            return Err("bus: capacitance_f, source_r_ohm and brake_r_ohm must be positive".into());
+        }
+        if !(b.initial_v.is_finite() && b.initial_v >= 0.0) {
+            return Err("bus.initial_v must be a finite voltage ≥ 0".into());
         }
         let (x0, v0) = match &rig.drive {
             Drive::Imposed { motion } => {
@@ -262,7 +271,18 @@ impl Sim {
             }
             .state(),
         };
+        let b = &rig.bus;
+        let gs = if b.source_v.is_some() {
+            1.0 / b.source_r_ohm
+        } else {
+            0.0
+        };
+        let bus_decay = [
+            (-gs * ts / b.capacitance_f).exp(),
+            (-(gs + 1.0 / b.brake_r_ohm) * ts / b.capacitance_f).exp(),
+        ];
         let mut sim = Sim {
+            bus_decay,
             decay: (-m.r_ohm / m.l_h * ts).exp(),
             noise: rig.sensors.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
             s: State {
@@ -425,14 +445,16 @@ impl Sim {
             if sn.current_noise_a > 0.0 {
                 ik += sn.current_noise_a * Sensors::noise(&mut self.noise);
             }
-            let c = (ik / cfg.amps_per_count as f64).round() + cfg.adc_zero_code as f64;
+            // Round to nearest in the positive code domain (the cast truncates; below 0 it
+            // clamps anyway): avoids a libm call per channel.
+            let c = ik / cfg.amps_per_count as f64 + cfg.adc_zero_code as f64 + 0.5;
             codes[k] = c.clamp(0.0, 4095.0) as u16;
         }
         let mut vb = self.s.v_bus + sn.vbus_offset_v;
         if sn.vbus_noise_v > 0.0 {
             vb += sn.vbus_noise_v * Sensors::noise(&mut self.noise);
         }
-        let vcode = (vb / cfg.volts_per_count as f64).round().clamp(0.0, 4095.0) as u16;
+        let vcode = (vb / cfg.volts_per_count as f64 + 0.5).clamp(0.0, 4095.0) as u16;
         let turns = self.s.x / self.rig.screw.lead_m_per_rad / TAU;
         let count = (turns * cfg.encoder_cpr as f64).floor() as i64;
         RawSample {
@@ -465,28 +487,72 @@ impl Sim {
 
         // Electrical period.
         let vb0 = self.s.v_bus;
+        let i_ph = self.currents();
         let e_ = &mut self.energy;
         let mut i_avg = [0.0; 2];
         let mut p_inv = 0.0; // bus → machine, W (average)
         let mut i2_avg = 0.0; // mean of i_α² + i_β²
         if act.enable {
-            let d: [f64; 3] = core::array::from_fn(|k| act.duties[k].to_num::<f64>() * vb0);
-            let v = [
-                (2.0 * d[0] - d[1] - d[2]) / 3.0,
-                (d[1] - d[2]) / (2.0 * SQRT3_2),
-            ];
-            let a = self.decay;
-            let tau = m.l_h / m.r_ohm;
-            let g = (1.0 - a) * tau / ts;
-            let g2 = (1.0 - a * a) * tau / (2.0 * ts);
-            for k in 0..2 {
-                let u = (v[k] - e[k]) / m.r_ohm;
-                let i0 = self.s.i_ab[k];
-                let dlt = i0 - u;
-                self.s.i_ab[k] = u + dlt * a;
-                i_avg[k] = u + dlt * g;
-                i2_avg += u * u + 2.0 * u * dlt * g + dlt * dlt * g2;
-                p_inv += 1.5 * v[k] * i_avg[k];
+            let inv = self.rig.inverter;
+            let d: [f64; 3] = core::array::from_fn(|k| {
+                let d = act.duties[k].to_num::<f64>();
+                let dt = inv.dead_time_s / ts;
+                let d = if dt > 0.0 && i_ph[k] != 0.0 {
+                    d - dt * i_ph[k].signum()
+                } else {
+                    d
+                };
+                d.clamp(0.0, 1.0)
+            });
+            let clarke = |p: [f64; 3]| {
+                [
+                    (2.0 * p[0] - p[1] - p[2]) / 3.0,
+                    (p[1] - p[2]) / (2.0 * SQRT3_2),
+                ]
+            };
+            let r = m.r_ohm;
+            let tau = m.l_h / r;
+            let mut segment = |v: [f64; 2], dt: f64, a: f64, i_ab: &mut [f64; 2]| {
+                let g = (1.0 - a) * tau;
+                let g2 = (1.0 - a * a) * tau / 2.0;
+                for k in 0..2 {
+                    let u = (v[k] - e[k]) / r;
+                    let dlt = i_ab[k] - u;
+                    i_ab[k] = u + dlt * a;
+                    let int_i = u * dt + dlt * g;
+                    i_avg[k] += int_i / ts;
+                    i2_avg += (u * u * dt + 2.0 * u * dlt * g + dlt * dlt * g2) / ts;
+                    p_inv += 1.5 * v[k] * int_i / ts;
+                }
+            };
+            if inv.switched {
+                // Centre-aligned: phase k high over [T/2·(1 − d_k), T/2·(1 + d_k)].
+                let mut edges = [0.0; 8];
+                for k in 0..3 {
+                    edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
+                    edges[2 + 2 * k] = 0.5 * ts * (1.0 + d[k]);
+                }
+                edges[7] = ts;
+                edges.sort_by(|a, b| a.total_cmp(b));
+                for w in edges.windows(2) {
+                    let dt = w[1] - w[0];
+                    if dt <= 0.0 {
+                        continue;
+                    }
+                    let tm = 0.5 * (w[0] + w[1]);
+                    let ph: [f64; 3] = core::array::from_fn(|k| {
+                        if (tm - 0.5 * ts).abs() < 0.5 * ts * d[k] {
+                            vb0
+                        } else {
+                            0.0
+                        }
+                    });
+                    let a = (-dt / tau).exp();
+                    segment(clarke(ph), dt, a, &mut self.s.i_ab);
+                }
+            } else {
+                let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
+                segment(v, ts, self.decay, &mut self.s.i_ab);
             }
         } else {
             // Gates off: the current collapses through the body diodes within the period
@@ -534,10 +600,10 @@ impl Sim {
         };
         let gt = gs + gb;
         let c = bus.capacitance_f;
+        let k = self.bus_decay[act.brake as usize];
         let solve = |i_inj: f64| -> (f64, f64, f64) {
             if gt > 0.0 {
                 let vinf = (i_inj + is) / gt;
-                let k = (-gt * ts / c).exp();
                 let d0 = vb0 - vinf;
                 let tc = c / gt;
                 let v1 = vinf + d0 * k;
