@@ -1,0 +1,1 @@
+//! Persistent parameter store (see below).
