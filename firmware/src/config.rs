@@ -8,7 +8,7 @@ use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
 use crate::fx::{q, Angle, Gain, Q};
-use crate::laws::LawKind;
+use crate::laws::{LawKind, LtiParams};
 use crate::pi::PiGains;
 
 /// The drive's configuration (SI units). Defaults describe the reference device (Kollmorgen
@@ -22,8 +22,11 @@ pub struct Config {
     /// (half of a line-to-line value of about 12 mH, the order of the AKM4x family) is assumed.
     pub l_phase_h: f32,
     /// Back-emf constant, per-phase peak, V·s/rad (mechanical): `e_q = K_e·ω_m`,
-    /// `T = 3/2·K_e·i_q`. Default 0.77·2/3: the paper's "0.77 N·m/A" read as the torque per
-    /// ampere of q-axis (peak phase) current.
+    /// `T = 3/2·K_e·i_q`. Default 0.77·√(3/2) = 0.943: the reading of the paper's "K_e = 0.77"
+    /// under which its own formulas (`c_e = 9/4·K²/(l²(R+R_L))`) are physically right in our
+    /// convention, and the one its measurements support: the measured TMD power maximum at
+    /// 300 Ω (predicted 306 Ω) fixes `c_e·(R+R_L)`; reading 0.77 as torque per peak ampere
+    /// (0.513) would put that maximum near 90 Ω. See docs/simulator.md (K_e convention).
     pub ke_v_s_per_rad: f32,
     /// Pole pairs.
     pub pole_pairs: u8,
@@ -54,6 +57,8 @@ pub struct Config {
     /// Fraction of the linear-modulation circle `V_bus/√3` the controller may use.
     pub m_max: f32,
     /// Current-reference limit (magnitude of the dq vector), A.
+    /// Default: the AKM42E's rated torque, 2.74 N·m = 3/2·K_e·i_q → 1.94 A, i.e. the device's
+    /// force rating f_rat = 1,076 N (the bench drive clipped there, §6 of the reference).
     pub i_max_a: f32,
     /// Instantaneous phase over-current trip, A.
     pub i_trip_a: f32,
@@ -67,8 +72,34 @@ pub struct Config {
     pub brake_off_v: f32,
     /// Command law.
     pub law: LawKind,
-    /// Emulated load resistance per phase, Ω (`f32::INFINITY` = open circuit).
+    /// Emulated load resistance per phase, Ω (`f32::INFINITY` = open circuit). The tracking
+    /// law starts from it.
     pub r_load_ohm: f32,
+    /// Rate of the dynamic laws (impedance, two-way, one-way), Hz: they update every
+    /// `round(pwm_hz/law_rate_hz)` loop periods and hold their command in between.
+    pub law_rate_hz: f32,
+    /// Impedance law: emulated series inductance, H (0 = none).
+    pub l_load_h: f32,
+    /// Impedance law: emulated series capacitance, F (0 = none, i.e. shorted).
+    pub c_load_f: f32,
+    /// Tracking law: dither amplitude on `ln R_L` (0.15 = ×e^±0.15).
+    pub trk_dither: f32,
+    /// Tracking law: dither period (one gradient estimate), s.
+    pub trk_period_s: f32,
+    /// Tracking law: integrator gain (ln R_L per unit of relative gradient per cycle).
+    pub trk_gain: f32,
+    /// Tracking law: largest step of `ln R_L` per cycle.
+    pub trk_step_max: f32,
+    /// Tracking law: lower bound of R_L, Ω.
+    pub trk_r_min_ohm: f32,
+    /// Tracking law: upper bound of R_L, Ω.
+    pub trk_r_max_ohm: f32,
+    /// Tracking law: below this mean power, W, R_L is held.
+    pub trk_p_min_w: f32,
+    /// Two-way / one-way law: host-designed discrete controller at `law_rate_hz` (inputs
+    /// `[x m, ω_m rad/s, applied i_q A]`, output `i_q*` A). Default all zero: commands no
+    /// current until a design is loaded (`regen study design`).
+    pub opt: LtiParams,
 }
 
 impl Default for Config {
@@ -76,7 +107,7 @@ impl Default for Config {
         Config {
             r_phase_ohm: 2.41,
             l_phase_h: 6.0e-3,
-            ke_v_s_per_rad: 0.77 * 2.0 / 3.0,
+            ke_v_s_per_rad: 0.943_054,
             pole_pairs: 5,
             lead_m_per_rad: 0.016 / TAU,
             encoder_cpr: 10_000,
@@ -91,7 +122,7 @@ impl Default for Config {
             ff_decouple: true,
             delay_comp: true,
             m_max: 0.95,
-            i_max_a: 10.0,
+            i_max_a: 1.937,
             i_trip_a: 20.0,
             v_bus_ov: 95.0,
             v_bus_uv: 20.0,
@@ -99,6 +130,17 @@ impl Default for Config {
             brake_off_v: 82.0,
             law: LawKind::Resistor,
             r_load_ohm: 306.0,
+            law_rate_hz: 1_000.0,
+            l_load_h: 0.0,
+            c_load_f: 0.0,
+            trk_dither: 0.15,
+            trk_period_s: 16.0,
+            trk_gain: 1.0,
+            trk_step_max: 0.3,
+            trk_r_min_ohm: 1.0,
+            trk_r_max_ohm: 10_000.0,
+            trk_p_min_w: 0.5,
+            opt: LtiParams::default(),
         }
     }
 }
@@ -195,6 +237,41 @@ impl Config {
             !self.r_load_ohm.is_nan() && self.r_load_ohm >= 0.0,
             "r_load_ohm",
             "must be ≥ 0 (inf = open)",
+        )?;
+        in_range(self.law_rate_hz, 50.0, 100_000.0, "law_rate_hz")?;
+        check(
+            self.law_rate_hz <= self.pwm_hz,
+            "law_rate_hz",
+            "must not exceed pwm_hz",
+        )?;
+        in_range(self.l_load_h, 0.0, 10_000.0, "l_load_h")?;
+        in_range(self.c_load_f, 0.0, 100.0, "c_load_f")?;
+        check(
+            self.law != LawKind::Impedance || self.r_load_ohm.is_finite(),
+            "r_load_ohm",
+            "must be finite for the impedance law",
+        )?;
+        in_range(self.trk_dither, 0.01, 1.0, "trk_dither")?;
+        in_range(self.trk_period_s, 0.05, 3_600.0, "trk_period_s")?;
+        check(
+            self.trk_period_s * self.pwm_hz >= 8.0,
+            "trk_period_s",
+            "shorter than 8 loop periods",
+        )?;
+        in_range(self.trk_gain, 0.0, 100.0, "trk_gain")?;
+        in_range(self.trk_step_max, 0.0, 5.0, "trk_step_max")?;
+        in_range(self.trk_r_min_ohm, 0.01, 1.0e6, "trk_r_min_ohm")?;
+        in_range(self.trk_r_max_ohm, 0.01, 1.0e6, "trk_r_max_ohm")?;
+        check(
+            self.trk_r_min_ohm < self.trk_r_max_ohm,
+            "trk_r_min_ohm",
+            "must be below trk_r_max_ohm",
+        )?;
+        in_range(self.trk_p_min_w, 0.0, 1.0e6, "trk_p_min_w")?;
+        check(
+            self.opt.is_valid(),
+            "opt",
+            "coefficient not finite or beyond ±8e6",
         )?;
         // Full-scale of the ADC must be representable in Q16.16 amperes and volts.
         check(

@@ -132,10 +132,7 @@ impl Controller {
     /// state is rebuilt only when a law parameter changed.
     pub fn set_config(&mut self, cfg: &Config) -> Result<(), ConfigError> {
         let g = Gains::new(cfg)?;
-        if cfg.law != self.cfg.law
-            || cfg.r_load_ohm != self.cfg.r_load_ohm
-            || cfg.r_phase_ohm != self.cfg.r_phase_ohm
-        {
+        if Law::params_changed(&self.cfg, cfg) {
             self.law = Law::from_config(cfg);
         }
         self.cfg = *cfg;
@@ -151,6 +148,13 @@ impl Controller {
     /// Compiled constants in force.
     pub fn gains(&self) -> &Gains {
         &self.g
+    }
+
+    /// The compiled constants, for experiments outside the configuration's design rules
+    /// (the simulator's P-only current loop, like the reference bench drive's). The next
+    /// [`Controller::set_config`] recompiles them.
+    pub fn gains_mut(&mut self) -> &mut Gains {
+        &mut self.g
     }
 
     /// Request a mode. Refused (returns the fault) while a fault is latched, except for the

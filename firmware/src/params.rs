@@ -129,7 +129,7 @@ pub static PARAMS: &[Param] = &[
         min: 0.0,
         max: 255.0,
         runtime: false,
-        desc: "command law code (0 = resistor)",
+        desc: "command law code (0 resistor, 1 impedance, 2 tracking, 3 two-way, 4 one-way)",
         get: |c| c.law as u8 as f32,
         set: |c, v| {
             if let Some(k) = LawKind::from_code(v as u8) {
@@ -137,6 +137,79 @@ pub static PARAMS: &[Param] = &[
             }
         },
     },
+    real!(
+        law_rate_hz,
+        "Hz",
+        50.0,
+        100_000.0,
+        false,
+        "command-law update rate (<= pwm_hz)"
+    ),
+    real!(
+        l_load_h,
+        "H",
+        0.0,
+        10_000.0,
+        true,
+        "impedance law: series load inductance (0 = none)"
+    ),
+    real!(
+        c_load_f,
+        "F",
+        0.0,
+        100.0,
+        true,
+        "impedance law: series load capacitance (0 = none)"
+    ),
+    real!(
+        trk_dither,
+        "1",
+        0.01,
+        1.0,
+        true,
+        "tracking law: relative R_L dither"
+    ),
+    real!(
+        trk_period_s,
+        "s",
+        0.05,
+        3_600.0,
+        true,
+        "tracking law: dither period"
+    ),
+    real!(trk_gain, "1", 0.0, 100.0, true, "tracking law: gain"),
+    real!(
+        trk_step_max,
+        "1",
+        0.0,
+        5.0,
+        true,
+        "tracking law: max relative step"
+    ),
+    real!(
+        trk_r_min_ohm,
+        "ohm",
+        0.01,
+        1.0e6,
+        true,
+        "tracking law: min R_L"
+    ),
+    real!(
+        trk_r_max_ohm,
+        "ohm",
+        0.01,
+        1.0e6,
+        true,
+        "tracking law: max R_L"
+    ),
+    real!(
+        trk_p_min_w,
+        "W",
+        0.0,
+        1.0e6,
+        true,
+        "tracking law: min power to adapt"
+    ),
     real!(
         current_bw_hz,
         "Hz",

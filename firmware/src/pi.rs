@@ -93,8 +93,13 @@ fn limit_slow(d: i64, q: i64, r: i64) -> Option<Dq> {
     let sh = (64 - m.leading_zeros()).saturating_sub(15);
     let (ds, qs) = ((d >> sh) as i32, (q >> sh) as i32);
     let mag = isqrt((ds * ds + qs * qs) as u32).max(1); // ≥ 2^14 when sh > 0
-                                                        // r/|v| in Q.30 (≤ 1): r (< 2^31) in the same units times 2^30, one 64-bit division.
-    let k = ((((r << 30) >> sh) as u64 / mag as u64).min(1 << 30)) as i64;
+                                                        // r/|v| in Q.30 (≤ 1) by two 32-bit divisions (no 64-bit division on a Cortex-M4):
+                                                        // r ≤ |v| so r in these units times 2^15 stays below 2^31, and so does the remainder
+                                                        // (< mag < 2^16) times 2^15.
+    let num = (((r << 15) >> sh).min(i32::MAX as i64)) as u32;
+    let q1 = num / mag;
+    let q2 = ((num % mag) << 15) / mag;
+    let k = ((q1 << 15) + q2).min(1 << 30) as i64;
     Some(Dq {
         d: Q::from_bits(sat_i32((d * k) >> 30)),
         q: Q::from_bits(sat_i32((q * k) >> 30)),

@@ -6,9 +6,17 @@
 //! To add a law: write a type implementing [`CommandLaw`], add a [`Law`] variant and a
 //! [`LawKind`], and build it in [`Law::from_config`].
 
+mod impedance;
+pub mod lti;
+mod optimal;
 mod resistor;
+mod tracking;
 
+pub use impedance::{discretise as impedance_discretise, Impedance};
+pub use lti::LtiParams;
+pub use optimal::{clip_one_way, Optimal};
 pub use resistor::Resistor;
+pub use tracking::{Tracking, TrackingParams};
 
 use crate::config::Config;
 use crate::frames::Dq;
@@ -42,11 +50,25 @@ pub enum LawKind {
     /// Emulated resistor R_L across each phase.
     #[default]
     Resistor = 0,
+    /// Emulated series R_L–L_L–C_L branch (resonant load).
+    Impedance = 1,
+    /// Emulated resistor with R_L tracked online for maximum harvested power.
+    Tracking = 2,
+    /// Host-designed optimal (LQG/H2) controller, two-way power flow.
+    TwoWay = 3,
+    /// The same controller clipped to regenerative-only (one-way) power flow.
+    OneWay = 4,
 }
 
 impl LawKind {
     /// All kinds, in parameter-code order.
-    pub const ALL: &'static [LawKind] = &[LawKind::Resistor];
+    pub const ALL: &'static [LawKind] = &[
+        LawKind::Resistor,
+        LawKind::Impedance,
+        LawKind::Tracking,
+        LawKind::TwoWay,
+        LawKind::OneWay,
+    ];
 
     /// Kind from its numeric code.
     pub fn from_code(c: u8) -> Option<LawKind> {
@@ -57,7 +79,16 @@ impl LawKind {
     pub fn name(self) -> &'static str {
         match self {
             LawKind::Resistor => "resistor",
+            LawKind::Impedance => "impedance",
+            LawKind::Tracking => "tracking",
+            LawKind::TwoWay => "two_way",
+            LawKind::OneWay => "one_way",
         }
+    }
+
+    /// Kind from its console name.
+    pub fn from_name(n: &str) -> Option<LawKind> {
+        Self::ALL.iter().copied().find(|k| k.name() == n)
     }
 }
 
@@ -65,6 +96,10 @@ impl LawKind {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Law {
     Resistor(Resistor),
+    Impedance(Impedance),
+    Tracking(Tracking),
+    /// Two-way or one-way optimal controller ([`Optimal::is_one_way`]).
+    Optimal(Optimal),
 }
 
 impl Law {
@@ -72,7 +107,54 @@ impl Law {
     pub fn from_config(cfg: &Config) -> Law {
         match cfg.law {
             LawKind::Resistor => Law::Resistor(Resistor::new(cfg.r_phase_ohm, cfg.r_load_ohm)),
+            LawKind::Impedance => Law::Impedance(Impedance::new(
+                cfg.r_phase_ohm,
+                cfg.r_load_ohm,
+                cfg.l_load_h,
+                cfg.c_load_f,
+                cfg.pwm_hz,
+                cfg.law_rate_hz,
+            )),
+            LawKind::Tracking => Law::Tracking(Tracking::new(&TrackingParams {
+                r_phase: cfg.r_phase_ohm,
+                r_start: cfg.r_load_ohm,
+                dither: cfg.trk_dither,
+                period_s: cfg.trk_period_s,
+                gain: cfg.trk_gain,
+                step_max: cfg.trk_step_max,
+                r_min: cfg.trk_r_min_ohm,
+                r_max: cfg.trk_r_max_ohm,
+                p_min_w: cfg.trk_p_min_w,
+                pwm_hz: cfg.pwm_hz,
+            })),
+            LawKind::TwoWay | LawKind::OneWay => Law::Optimal(Optimal::new(
+                &cfg.opt,
+                cfg.law == LawKind::OneWay,
+                cfg.r_phase_ohm,
+                cfg.pwm_hz,
+                cfg.law_rate_hz,
+            )),
         }
+    }
+
+    /// Does going from `a` to `b` change the law (so its state must be rebuilt)?
+    pub fn params_changed(a: &Config, b: &Config) -> bool {
+        a.law != b.law
+            || a.r_load_ohm != b.r_load_ohm
+            || a.r_phase_ohm != b.r_phase_ohm
+            || (b.law != LawKind::Resistor
+                && (a.pwm_hz != b.pwm_hz
+                    || a.law_rate_hz != b.law_rate_hz
+                    || a.l_load_h != b.l_load_h
+                    || a.c_load_f != b.c_load_f
+                    || a.trk_dither != b.trk_dither
+                    || a.trk_period_s != b.trk_period_s
+                    || a.trk_gain != b.trk_gain
+                    || a.trk_step_max != b.trk_step_max
+                    || a.trk_r_min_ohm != b.trk_r_min_ohm
+                    || a.trk_r_max_ohm != b.trk_r_max_ohm
+                    || a.trk_p_min_w != b.trk_p_min_w
+                    || a.opt != b.opt))
     }
 }
 
@@ -81,6 +163,9 @@ impl CommandLaw for Law {
     fn command(&mut self, inp: &LawInput) -> Dq {
         match self {
             Law::Resistor(l) => l.command(inp),
+            Law::Impedance(l) => l.command(inp),
+            Law::Tracking(l) => l.command(inp),
+            Law::Optimal(l) => l.command(inp),
         }
     }
 }

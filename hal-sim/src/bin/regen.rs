@@ -1,1 +1,53 @@
-fn main() {}
+//! `regen`: the simulator's command line. One `Command` variant per subcommand, each
+//! implemented in `hal_sim::cli::<name>`. With no arguments: the reference TMD power sweep.
+
+use clap::{Parser, Subcommand};
+use hal_sim::cli;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "regen",
+    version,
+    about = "Regenerative transducer simulator and tools"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Device sizing indices (eq. 6–12).
+    Sizing(cli::sizing::SizingArgs),
+    /// One closed-loop scenario run → CSV, plots, energy ledger.
+    Run(cli::run::RunArgs),
+    /// Sweep a parameter over closed-loop runs in parallel (default: the TMD power sweep).
+    Sweep(cli::sweep::SweepArgs),
+    /// Studies of the command laws (regimes of two-way flow, device sizing, LQG design).
+    Study(hal_sim::study::StudyArgs),
+}
+
+fn main() {
+    let c = Cli::parse();
+    let r = match c.command {
+        Some(Command::Sizing(a)) => cli::sizing::run(&a),
+        Some(Command::Run(a)) => cli::run::run(&a),
+        Some(Command::Sweep(a)) => cli::sweep::run(&a),
+        Some(Command::Study(a)) => hal_sim::study::run(&a).map(|text| print!("{text}")),
+        None => {
+            println!(
+                "regen: no subcommand, reproducing the reference TMD power sweep (see --help)"
+            );
+            cli::sweep::run(&cli::sweep::SweepArgs {
+                scenario: None,
+                param: "r_load_ohm".into(),
+                values: Vec::new(),
+                out: "regen-out".into(),
+            })
+        }
+    };
+    if let Err(e) = r {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# The control step on an emulated Cortex-M4 (QEMU mps2-an386):
+#  1. bit identity: the host and the Cortex-M4 replay the same recorded 12,000-step input
+#     sequence (vectors.bin) and must print the same digest of every output;
+#  2. instructions per current-loop step (../../shared/tools/qemu-insn), printed;
+#  3. flash and static RAM of the release board image, printed (when it has been built).
+# Needs qemu-system-arm and gcc (Debian packages). Fails only on a digest mismatch or a
+# broken build; the speed and size figures are printed against their targets.
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+bin="$(rustc --print sysroot)/lib/rustlib/x86_64-unknown-linux-gnu/bin"
+export PATH="$bin:$PATH"
+
+host=$(cd "$root" && cargo run -q --release -p regen-fw --example digest -- "$here/vectors.bin")
+(cd "$here" && cargo build -q --release)
+elf="$here/target/thumbv7em-none-eabihf/release/regen-m4check"
+m4=$(timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+  -semihosting-config enable=on,target=native -kernel "$elf" | tr -d '\r' | grep '^digest=')
+echo "host:      $host"
+echo "cortex-m4: $m4"
+if [ "$host" != "$m4" ]; then
+  echo "FAIL: the Cortex-M4 outputs differ from the host's" >&2
+  exit 1
+fi
+echo "bit identity: OK"
+
+tools="$root/../shared/tools/qemu-insn"
+if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
+  line=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step 2>&1 | grep insnwin | tail -n1)
+  echo "$line"
+  max=$(echo "$line" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
+  min=$(echo "$line" | sed -n 's/.*min=\([0-9]*\).*/\1/p')
+  echo "instructions per current-loop step: min $min, max $max (target: at most 400)"
+else
+  echo "instruction count skipped: $tools not found"
+fi
+
+board="$root/firmware/board/target/thumbv7em-none-eabihf/release"
+img=$(ls "$board"/regen-board 2>/dev/null || true)
+if [ -n "$img" ]; then
+  llvm-size -A "$img" | awk '
+    $1 ~ /^\.(vector_table|text|rodata)$/ {flash += $2}
+    $1 == ".data" {flash += $2; ram += $2}
+    $1 ~ /^\.(bss|uninit)$/ {ram += $2}
+    END {printf "board image: flash %d bytes (%.1f KiB, target <= 64 KiB), static RAM %d bytes (%.1f KiB, target <= 16 KiB)\n", flash, flash/1024, ram, ram/1024}'
+else
+  echo "board image size skipped: no release board image built"
+fi

@@ -1,0 +1,413 @@
+//! The plant: machine, screw (inertia, viscosity, efficiency, friction), what drives the screw
+//! (imposed motion or a structure with base excitation), the DC bus with its source/sink and
+//! brake resistor, the drive's losses and the sensors.
+//!
+//! Every part is a plain parameter struct (serde, so scenario files can name every field) plus
+//! the few pure functions the simulation step needs. Units are SI throughout.
+
+use serde::{Deserialize, Serialize};
+use std::f64::consts::{PI, TAU};
+
+/// Electrical machine and ballscrew of the device.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Machine {
+    /// Phase resistance, line-to-neutral, Ω.
+    pub r_ohm: f64,
+    /// Phase inductance, line-to-neutral, H.
+    pub l_h: f64,
+    /// Back-emf constant, per-phase PEAK, V·s/rad mechanical (`e_q = K_e·ω_m`,
+    /// `T = 3/2·K_e·i_q`). Default: the firmware's, 0.77·√(3/2) = 0.943 (see the doc of
+    /// `regen_fw::Config::ke_v_s_per_rad` and `docs/simulator.md` §K_e).
+    pub ke_v_s_per_rad: f64,
+    /// Pole pairs.
+    pub pole_pairs: u32,
+    /// Electrical angle of the d axis at mechanical angle 0 (rad).
+    pub angle_offset_rad: f64,
+}
+
+impl Default for Machine {
+    fn default() -> Self {
+        Machine {
+            r_ohm: 2.41,
+            l_h: 6.0e-3,
+            ke_v_s_per_rad: regen_fw::Config::default().ke_v_s_per_rad as f64,
+            pole_pairs: 5,
+            angle_offset_rad: 0.0,
+        }
+    }
+}
+
+/// Ballscrew and shaft (eq. 1–3 and 13 of the reference).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Screw {
+    /// Lead, m/rad.
+    pub lead_m_per_rad: f64,
+    /// Rotary inertia of motor shaft + screw, kg·m².
+    pub j_kg_m2: f64,
+    /// Rotary viscosity, N·m·s/rad.
+    pub b_nms: f64,
+    /// Conversion efficiency η ∈ (0, 1]; 1 disables the quadrant-dependent h(f·ẋ).
+    pub efficiency: f64,
+    /// Coulomb friction p1, N.
+    pub coulomb_n: f64,
+    /// Linear viscous friction p2, N·s/m.
+    pub viscous_n_s_per_m: f64,
+    /// Ripple amplitudes p3 (one per screw revolution) and p5 (one per ball diameter), and
+    /// phases p4, p6 (rad).
+    pub p3: f64,
+    pub p4: f64,
+    pub p5: f64,
+    pub p6: f64,
+    /// Ball diameter r, m (λ2 = 2π/r).
+    pub ball_m: f64,
+    /// Velocity below which the Coulomb term is linearised (regularised sign), m/s.
+    pub stick_velocity: f64,
+}
+
+impl Default for Screw {
+    fn default() -> Self {
+        Screw {
+            lead_m_per_rad: 0.016 / TAU,
+            j_kg_m2: 1.50e-4,
+            b_nms: 0.0,
+            efficiency: 1.0,
+            coulomb_n: 40.0,
+            viscous_n_s_per_m: 655.0,
+            p3: 0.0,
+            p4: 0.0,
+            p5: 0.0,
+            p6: 0.0,
+            ball_m: 1.7e-3,
+            stick_velocity: 1e-4,
+        }
+    }
+}
+
+impl Screw {
+    /// Reflected mass J/l², kg.
+    pub fn reflected_mass(&self) -> f64 {
+        self.j_kg_m2 / (self.lead_m_per_rad * self.lead_m_per_rad)
+    }
+    /// Reflected viscosity B/l², N·s/m.
+    pub fn reflected_viscosity(&self) -> f64 {
+        self.b_nms / (self.lead_m_per_rad * self.lead_m_per_rad)
+    }
+    /// Friction force f_d(x, ẋ) of eq. 13 (regularised sign near zero speed).
+    pub fn friction(&self, x: f64, v: f64) -> f64 {
+        let sgn = (v / self.stick_velocity).clamp(-1.0, 1.0);
+        let ripple = 1.0
+            + self.p3 * (x / self.lead_m_per_rad + self.p4).sin()
+            + self.p5 * (TAU / self.ball_m * x + self.p6).sin();
+        self.coulomb_n * ripple * sgn + self.viscous_n_s_per_m * v
+    }
+    /// h(f·ẋ): 1/η when power flows into the device, η otherwise.
+    pub fn h(&self, power_in: bool) -> f64 {
+        if power_in {
+            1.0 / self.efficiency
+        } else {
+            self.efficiency
+        }
+    }
+}
+
+/// An imposed motion of the screw (the bench's hydraulic actuator).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Motion {
+    /// x = A·sin(2π f t).
+    Sine { amplitude_m: f64, freq_hz: f64 },
+    /// Symmetric triangle of amplitude A (constant speed 4·A·f), starting at 0 going up.
+    Triangle { amplitude_m: f64, freq_hz: f64 },
+    /// Recorded trajectory: times (s) and positions (m), linearly interpolated.
+    Recorded { t_s: Vec<f64>, x_m: Vec<f64> },
+}
+
+impl Motion {
+    /// (x, ẋ, ẍ) at time t.
+    pub fn at(&self, t: f64) -> (f64, f64, f64) {
+        match self {
+            Motion::Sine {
+                amplitude_m: a,
+                freq_hz: f,
+            } => {
+                let w = TAU * f;
+                let (s, c) = (w * t).sin_cos();
+                (a * s, a * w * c, -a * w * w * s)
+            }
+            Motion::Triangle {
+                amplitude_m: a,
+                freq_hz: f,
+            } => {
+                let ph = (t * f + 0.25).rem_euclid(1.0); // 0.25 → x = 0 rising at t = 0
+                let v = 4.0 * a * f;
+                if ph < 0.5 {
+                    (a * (4.0 * ph - 1.0), v, 0.0)
+                } else {
+                    (a * (3.0 - 4.0 * ph), -v, 0.0)
+                }
+            }
+            Motion::Recorded { t_s, x_m } => {
+                let n = t_s.len().min(x_m.len());
+                if n < 2 {
+                    return (x_m.first().copied().unwrap_or(0.0), 0.0, 0.0);
+                }
+                let k = match t_s[..n].binary_search_by(|p| p.total_cmp(&t)) {
+                    Ok(k) => k.min(n - 2),
+                    Err(k) => k.saturating_sub(1).min(n - 2),
+                };
+                let dt = t_s[k + 1] - t_s[k];
+                let v = (x_m[k + 1] - x_m[k]) / dt;
+                let tt = (t - t_s[k]).clamp(0.0, dt);
+                (x_m[k] + v * tt, if t > t_s[n - 1] { 0.0 } else { v }, 0.0)
+            }
+        }
+    }
+}
+
+/// Base (ground) acceleration driving a structure.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Excitation {
+    /// a(t) = a0·sin(2π f t).
+    Sine { a0_m_s2: f64, freq_hz: f64 },
+    /// Symmetric triangle wave of peak a0.
+    Triangle { a0_m_s2: f64, freq_hz: f64 },
+    /// Kanai–Tajimi filtered white noise: ground acceleration of a soil layer (ω_g, ζ_g)
+    /// excited by seeded white noise of one-sided spectral density `s0` ((m/s²)²/(rad/s)).
+    KanaiTajimi {
+        s0: f64,
+        omega_g: f64,
+        zeta_g: f64,
+        seed: u64,
+    },
+    /// Recorded ground acceleration, linearly interpolated (zero outside).
+    Recorded { t_s: Vec<f64>, a_m_s2: Vec<f64> },
+}
+
+/// State of a noise excitation (filter and generator).
+#[derive(Clone, Debug, Default)]
+pub struct ExcitationState {
+    rng: u64,
+    xg: f64,
+    vg: f64,
+}
+
+impl Excitation {
+    pub fn state(&self) -> ExcitationState {
+        let seed = match self {
+            Excitation::KanaiTajimi { seed, .. } => *seed,
+            _ => 0,
+        };
+        ExcitationState {
+            rng: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
+            xg: 0.0,
+            vg: 0.0,
+        }
+    }
+
+    /// Ground acceleration over the step [t, t+dt] (held constant over the step).
+    pub fn next(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
+        match self {
+            Excitation::Sine { a0_m_s2, freq_hz } => {
+                a0_m_s2 * (TAU * freq_hz * (t + dt / 2.0)).sin()
+            }
+            Excitation::Triangle { a0_m_s2, freq_hz } => {
+                let ph = ((t + dt / 2.0) * freq_hz + 0.25).rem_euclid(1.0);
+                if ph < 0.5 {
+                    a0_m_s2 * (4.0 * ph - 1.0)
+                } else {
+                    a0_m_s2 * (3.0 - 4.0 * ph)
+                }
+            }
+            Excitation::KanaiTajimi {
+                s0,
+                omega_g,
+                zeta_g,
+                ..
+            } => {
+                // White noise w of two-sided density s0/2 per rad/s held over dt: variance
+                // π·s0/dt. Filter: ẍg + 2ζω ẋg + ω² xg = −w; a = −(2ζω ẋg + ω² xg).
+                let g = gauss(&mut st.rng) * (PI * s0 / dt).sqrt();
+                let acc = -g - 2.0 * zeta_g * omega_g * st.vg - omega_g * omega_g * st.xg;
+                st.vg += acc * dt;
+                st.xg += st.vg * dt;
+                -(2.0 * zeta_g * omega_g * st.vg + omega_g * omega_g * st.xg)
+            }
+            Excitation::Recorded { t_s, a_m_s2 } => {
+                let n = t_s.len().min(a_m_s2.len());
+                let tm = t + dt / 2.0;
+                if n < 2 || tm < t_s[0] || tm > t_s[n - 1] {
+                    return 0.0;
+                }
+                let k = t_s[..n]
+                    .partition_point(|p| *p <= tm)
+                    .saturating_sub(1)
+                    .min(n - 2);
+                let f = (tm - t_s[k]) / (t_s[k + 1] - t_s[k]);
+                a_m_s2[k] + f * (a_m_s2[k + 1] - a_m_s2[k])
+            }
+        }
+    }
+}
+
+/// A standard normal deviate (xorshift64* + Box–Muller).
+fn gauss(s: &mut u64) -> f64 {
+    let mut u = || {
+        *s ^= *s >> 12;
+        *s ^= *s << 25;
+        *s ^= *s >> 27;
+        ((s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let (a, b) = (u(), u());
+    (-2.0 * a.ln()).sqrt() * (TAU * b).cos()
+}
+
+/// A single-degree-of-freedom structure (or TMD) with the device between mass and base:
+/// `m·ẍ + c·ẋ + k·x + f_device = m·a_g(t)` (x relative to the base).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Structure {
+    pub mass_kg: f64,
+    pub stiffness_n_per_m: f64,
+    /// Structural damping besides the device, N·s/m.
+    pub damping_n_s_per_m: f64,
+}
+
+impl Default for Structure {
+    /// The reference TMD: 400 kg, natural period 2 s (k = m·π²), no damping of its own.
+    fn default() -> Self {
+        Structure {
+            mass_kg: 400.0,
+            stiffness_n_per_m: 400.0 * PI * PI,
+            damping_n_s_per_m: 0.0,
+        }
+    }
+}
+
+/// DC bus: capacitor, a stiff source/sink (battery or supply through a resistance; `None`
+/// = none), a brake resistor switched by the firmware's chopper output.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Bus {
+    pub capacitance_f: f64,
+    pub initial_v: f64,
+    /// Source/sink EMF, V, and its internal resistance, Ω (absorbs regenerated power).
+    pub source_v: Option<f64>,
+    pub source_r_ohm: f64,
+    /// Brake resistor, Ω.
+    pub brake_r_ohm: f64,
+}
+
+impl Default for Bus {
+    fn default() -> Self {
+        Bus {
+            capacitance_f: 1.0e-3,
+            initial_v: 320.0,
+            source_v: Some(320.0),
+            source_r_ohm: 0.1,
+            brake_r_ohm: 50.0,
+        }
+    }
+}
+
+/// Drive losses: switching `k_sw·f_pwm·V_bus·Σ|i_k|`, conduction `R_on·Σi_k²`, logic supply.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Losses {
+    /// Switching energy per (volt·ampere) per PWM period, s ((t_rise + t_fall)/2).
+    pub k_sw_s: f64,
+    /// On-resistance of one switch, Ω.
+    pub r_on_ohm: f64,
+    /// Logic supply, W (taken from the bus while the gates are enabled or not).
+    pub logic_w: f64,
+}
+
+impl Default for Losses {
+    fn default() -> Self {
+        Losses {
+            k_sw_s: 50e-9,
+            r_on_ohm: 0.02,
+            logic_w: 2.0,
+        }
+    }
+}
+
+/// Sensor imperfections.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sensors {
+    /// Current-sensor offset, A, per phase.
+    pub current_offset_a: [f64; 3],
+    /// RMS current noise, A.
+    pub current_noise_a: f64,
+    /// Bus-voltage offset, V, and RMS noise, V.
+    pub vbus_offset_v: f64,
+    pub vbus_noise_v: f64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+impl Default for Sensors {
+    fn default() -> Self {
+        Sensors {
+            current_offset_a: [0.0; 3],
+            current_noise_a: 0.0,
+            vbus_offset_v: 0.0,
+            vbus_noise_v: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+impl Sensors {
+    /// A normal deviate from the sensors' generator.
+    pub fn noise(state: &mut u64) -> f64 {
+        gauss(state)
+    }
+}
+
+/// What moves the screw.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Drive {
+    /// The screw follows a motion (the bench's actuator).
+    Imposed { motion: Motion },
+    /// The device sits in a structure under base excitation.
+    Structure {
+        #[serde(default)]
+        structure: Structure,
+        excitation: Excitation,
+    },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn triangle_and_sine_are_consistent() {
+        let m = Motion::Triangle {
+            amplitude_m: 0.05,
+            freq_hz: 0.25,
+        };
+        assert!(m.at(0.0).0.abs() < 1e-12);
+        assert!((m.at(1.0).0 - 0.05).abs() < 1e-12); // quarter period
+        assert!((m.at(3.0).0 + 0.05).abs() < 1e-12);
+        assert!((m.at(0.5).1 - 0.05).abs() < 1e-12);
+        let s = Motion::Sine {
+            amplitude_m: 0.075,
+            freq_hz: 0.1,
+        };
+        let (x, v, _) = s.at(0.0);
+        assert!(x.abs() < 1e-12 && (v - 0.075 * TAU * 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn friction_is_odd_in_speed_without_ripple() {
+        let s = Screw::default();
+        assert!((s.friction(0.0, 0.1) + s.friction(0.0, -0.1)).abs() < 1e-9);
+        assert!((s.friction(0.0, 0.1) - (40.0 + 65.5)).abs() < 1e-9);
+    }
+}
