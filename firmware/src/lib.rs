@@ -28,14 +28,17 @@
 extern crate std;
 
 pub mod config;
+pub mod console;
 pub mod control;
 pub mod encoder;
 pub mod frames;
 pub mod fx;
 pub mod io;
 pub mod laws;
+pub mod params;
 pub mod pi;
 pub mod selftest;
+pub mod store;
 pub mod svpwm;
 
 pub use config::{Config, ConfigError, Gains};
