@@ -253,7 +253,7 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             let k = steps.len() / 2;
             let med = *steps.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
             let lmin = (stroke / 400.0).max(8.0 * med).min(stroke / 4.0);
-            let mut g: Vec<Effect> = logspace(lmin, stroke / 1.5, 60)
+            let mut g: Vec<Effect> = logspace(lmin, stroke / 1.5, 40)
                 .into_iter()
                 .map(mk)
                 .collect();

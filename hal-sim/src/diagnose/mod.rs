@@ -32,7 +32,7 @@ impl Default for Options {
         Options {
             min_holdout_gain: 0.02,
             max_effects: 6,
-            screen_samples: 200_000,
+            screen_samples: 10_000,
         }
     }
 }
@@ -400,7 +400,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 }
             }
             if cand.kind.scanned() {
-                for width in [0.12, 0.02] {
+                for width in [0.15, 0.03] {
                     let centre = cb.as_ref().unwrap().2.clone();
                     for eff in effects::refine(&ctx, &centre, width) {
                         let (rh, db) = eval(&eff);

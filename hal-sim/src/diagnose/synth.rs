@@ -147,7 +147,7 @@ pub fn generate_csv(s: &SynthSpec) -> String {
     let mut rng = Rng::new(s.seed);
     let n = s.samples;
     let dt = 1.0 / s.fs;
-    // random multi-sine, 6 components 0.1-2 Hz, peak stroke about ±50 mm
+    // random multi-sine, 6 components 0.2-2 Hz, peak stroke about ±50 mm
     let comps: Vec<(f64, f64, f64)> = (0..6)
         .map(|_| {
             (
