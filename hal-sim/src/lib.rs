@@ -16,6 +16,7 @@
 
 pub mod analytic;
 pub mod cli;
+pub mod diagnose;
 pub mod lqg;
 pub mod plant;
 pub mod scenario;

@@ -25,6 +25,8 @@ enum Command {
     Sweep(cli::sweep::SweepArgs),
     /// Studies of the command laws (regimes of two-way flow, device sizing, LQG design).
     Study(hal_sim::study::StudyArgs),
+    /// Diagnose a measured record: what the model gets wrong, the physical cause, the gain.
+    Diagnose(hal_sim::diagnose::cli::DiagnoseArgs),
 }
 
 fn main() {
@@ -34,6 +36,9 @@ fn main() {
         Some(Command::Run(a)) => cli::run::run(&a),
         Some(Command::Sweep(a)) => cli::sweep::run(&a),
         Some(Command::Study(a)) => hal_sim::study::run(&a).map(|text| print!("{text}")),
+        Some(Command::Diagnose(a)) => {
+            hal_sim::diagnose::cli::cli_main(a).map_err(|e| e.to_string())
+        }
         None => {
             println!(
                 "regen: no subcommand, reproducing the reference TMD power sweep (see --help)"

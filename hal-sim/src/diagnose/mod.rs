@@ -1,0 +1,526 @@
+//! Model diagnosis: fit the baseline device model to a measured record, show what it gets
+//! wrong, name the cause from a catalogue of physical effects, extend the model and measure
+//! the gain on held-out data. See docs/diagnose.md.
+
+// Numerical kernels index several arrays in step; iterator rewrites would obscure them.
+#![allow(clippy::needless_range_loop)]
+
+pub mod cli;
+pub mod effects;
+pub mod record;
+pub mod report;
+pub mod synth;
+
+pub use effects::{Effect, EffectKind};
+pub use record::{parse_csv, read_csv, Record, RecordError};
+
+/// Options of a diagnosis run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Held-out relative rss improvement a candidate must bring to be kept (fraction, e.g. 0.02
+    /// = the held-out residual sum of squares falls by at least 2 %), on top of a BIC decrease.
+    pub min_holdout_gain: f64,
+    /// Maximum number of effects added.
+    pub max_effects: usize,
+    /// Samples used for screening candidates (strided subsample of the record); the final
+    /// refit uses every sample.
+    pub screen_samples: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            min_holdout_gain: 0.02,
+            max_effects: 6,
+            screen_samples: 10_000,
+        }
+    }
+}
+
+/// Training / held-out split: the record is cut into 10 consecutive blocks and every third
+/// block (indices 2, 5, 8) is held out, so both parts span the whole trajectory.
+pub fn holdout_mask(n: usize) -> Vec<bool> {
+    (0..n).map(|i| (i * 10 / n) % 3 == 2).collect()
+}
+
+/// Accumulated normal equations of a column set against the force on one part of the record.
+#[derive(Debug, Clone)]
+pub struct Normal {
+    pub m: usize,
+    pub g: Vec<f64>,
+    pub b: Vec<f64>,
+    pub ff: f64,
+    pub n: usize,
+}
+
+impl Normal {
+    fn new(m: usize) -> Self {
+        Normal {
+            m,
+            g: vec![0.0; m * m],
+            b: vec![0.0; m],
+            ff: 0.0,
+            n: 0,
+        }
+    }
+    /// Least squares solution (columns scaled to unit diagonal, Cholesky, tiny ridge against
+    /// exact collinearity).
+    pub fn solve(&self) -> Vec<f64> {
+        solve_sym(&self.g, &self.b, self.m)
+    }
+    /// Normal equations of the union of two parts.
+    pub fn plus(&self, o: &Normal) -> Normal {
+        Normal {
+            m: self.m,
+            g: self.g.iter().zip(&o.g).map(|(a, b)| a + b).collect(),
+            b: self.b.iter().zip(&o.b).map(|(a, b)| a + b).collect(),
+            ff: self.ff + o.ff,
+            n: self.n + o.n,
+        }
+    }
+    /// Residual sum of squares of coefficients `th` on this part.
+    pub fn rss(&self, th: &[f64]) -> f64 {
+        let m = self.m;
+        let mut r = self.ff;
+        for i in 0..m {
+            r -= 2.0 * th[i] * self.b[i];
+            for j in 0..m {
+                r += th[i] * self.g[i * m + j] * th[j];
+            }
+        }
+        r.max(0.0)
+    }
+}
+
+/// Solve G th = b for symmetric positive semi-definite G (m x m).
+pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> Vec<f64> {
+    let d: Vec<f64> = (0..m)
+        .map(|i| {
+            let v = g[i * m + i];
+            if v > 0.0 {
+                1.0 / v.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut a = vec![0.0; m * m];
+    for i in 0..m {
+        for j in 0..m {
+            a[i * m + j] = g[i * m + j] * d[i] * d[j];
+        }
+        a[i * m + i] += 1e-10;
+    }
+    // Cholesky
+    let mut l = vec![0.0; m * m];
+    for i in 0..m {
+        for j in 0..=i {
+            let mut s = a[i * m + j];
+            for k in 0..j {
+                s -= l[i * m + k] * l[j * m + k];
+            }
+            if i == j {
+                l[i * m + i] = if s > 1e-14 { s.sqrt() } else { 1e30 };
+            } else {
+                l[i * m + j] = s / l[j * m + j];
+            }
+        }
+    }
+    let mut y = vec![0.0; m];
+    for i in 0..m {
+        let mut s = b[i] * d[i];
+        for k in 0..i {
+            s -= l[i * m + k] * y[k];
+        }
+        y[i] = s / l[i * m + i];
+    }
+    let mut x = vec![0.0; m];
+    for i in (0..m).rev() {
+        let mut s = y[i];
+        for k in i + 1..m {
+            s -= l[k * m + i] * x[k];
+        }
+        x[i] = s / l[i * m + i];
+    }
+    (0..m).map(|i| x[i] * d[i]).collect()
+}
+
+/// Normal equations of `cols` against `f` on the training (mask false) and held-out (mask
+/// true) samples, visiting every `stride`-th sample.
+pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Normal, Normal) {
+    let m = cols.len();
+    let mut tr = Normal::new(m);
+    let mut ho = Normal::new(m);
+    let mut row = vec![0.0; m];
+    let n = f.len();
+    let mut i = 0;
+    while i < n {
+        for (k, c) in cols.iter().enumerate() {
+            row[k] = c[i];
+        }
+        let nm = if hold[i] { &mut ho } else { &mut tr };
+        for p in 0..m {
+            let rp = row[p];
+            nm.b[p] += rp * f[i];
+            for q in p..m {
+                nm.g[p * m + q] += rp * row[q];
+            }
+        }
+        nm.ff += f[i] * f[i];
+        nm.n += 1;
+        i += stride;
+    }
+    for nm in [&mut tr, &mut ho] {
+        for p in 0..m {
+            for q in 0..p {
+                nm.g[p * m + q] = nm.g[q * m + p];
+            }
+        }
+    }
+    (tr, ho)
+}
+
+/// Extend normal equations of base columns (already accumulated) with extra columns `z`:
+/// only the cross terms are computed (O(N·k·(p+k))).
+pub fn extend_normals(
+    base: &(Normal, Normal),
+    bcols: &[&[f64]],
+    z: &[&[f64]],
+    f: &[f64],
+    hold: &[bool],
+    stride: usize,
+) -> (Normal, Normal) {
+    let p = bcols.len();
+    let k = z.len();
+    let m = p + k;
+    let mut out = (Normal::new(m), Normal::new(m));
+    for (dst, src) in [(&mut out.0, &base.0), (&mut out.1, &base.1)] {
+        for i in 0..p {
+            for j in 0..p {
+                dst.g[i * m + j] = src.g[i * p + j];
+            }
+            dst.b[i] = src.b[i];
+        }
+        dst.ff = src.ff;
+        dst.n = src.n;
+    }
+    let n = f.len();
+    let mut i = 0;
+    let mut zr = vec![0.0; k];
+    while i < n {
+        for (c, col) in z.iter().enumerate() {
+            zr[c] = col[i];
+        }
+        let nm = if hold[i] { &mut out.1 } else { &mut out.0 };
+        for c in 0..k {
+            let zc = zr[c];
+            let row = (p + c) * m;
+            for (j, bc) in bcols.iter().enumerate() {
+                nm.g[row + j] += zc * bc[i];
+            }
+            for d in c..k {
+                nm.g[row + p + d] += zc * zr[d];
+            }
+            nm.b[p + c] += zc * f[i];
+        }
+        i += stride;
+    }
+    for nm in [&mut out.0, &mut out.1] {
+        for c in 0..k {
+            for j in 0..p + c {
+                let v = if j < p {
+                    nm.g[(p + c) * m + j]
+                } else {
+                    nm.g[j * m + p + c]
+                };
+                nm.g[(p + c) * m + j] = v;
+                nm.g[j * m + p + c] = v;
+            }
+        }
+    }
+    out
+}
+
+/// Relative error ‖f − f̂‖₂/‖f‖₂ from rss and ‖f‖².
+pub fn rel(rss: f64, ff: f64) -> f64 {
+    if ff > 0.0 {
+        (rss / ff).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Bayesian information criterion of a least-squares fit (Gaussian residual).
+pub fn bic(rss: f64, n: usize, k: usize) -> f64 {
+    let n = n.max(1) as f64;
+    n * (rss / n).max(1e-300).ln() + k as f64 * n.ln()
+}
+
+/// One kept finding.
+#[derive(Debug, Clone)]
+pub struct Finding {
+    /// Catalogue name or `unexplained`.
+    pub effect: String,
+    /// Named fitted parameters.
+    pub parameters: Vec<(String, f64)>,
+    /// Held-out rss fraction removed, BIC change, and free text.
+    pub holdout_rss_drop: f64,
+    pub delta_bic: f64,
+    pub note: String,
+    pub holdout_rel_error_after: f64,
+}
+
+/// A baseline term with its significance (held-out error when it is dropped).
+#[derive(Debug, Clone)]
+pub struct BaselineTerm {
+    pub effect: String,
+    pub value: f64,
+    pub unit: String,
+    pub holdout_rel_error_without: f64,
+    pub significant: bool,
+}
+
+/// Everything the diagnosis produced.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    pub n: usize,
+    pub derivative_method: String,
+    pub baseline_terms: Vec<BaselineTerm>,
+    pub baseline_holdout_rel_error: f64,
+    pub baseline_train_rel_error: f64,
+    /// Baseline refitted on the whole record, error on the whole record (comparable with
+    /// published figures that fit and evaluate on the same record).
+    pub baseline_full_rel_error: f64,
+    pub findings: Vec<Finding>,
+    pub final_holdout_rel_error: f64,
+    pub final_full_rel_error: f64,
+    /// Final model: column names and coefficients (fitted on the whole record).
+    pub model: Vec<(String, f64)>,
+    pub effects: Vec<Effect>,
+    pub residual: Vec<f64>,
+    pub prediction: Vec<f64>,
+    pub whiteness: report::Whiteness,
+    pub spectrum_peaks: Vec<report::Peak>,
+    /// Error of the final model on a second record (cross-test), when given.
+    pub cross: Option<CrossCheck>,
+}
+
+#[derive(Debug, Clone)]
+pub struct CrossCheck {
+    pub baseline_rel_error: f64,
+    pub final_rel_error: f64,
+    /// Per finding: relative error on the second record with effects up to this one.
+    pub after_each: Vec<(String, f64)>,
+}
+
+/// Run the diagnosis on a record.
+pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
+    let n = rec.len();
+    let hold = holdout_mask(n);
+    let ctx = effects::Context::new(rec);
+    let stride = n.div_ceil(opt.screen_samples).max(1);
+    let mut chosen: Vec<Effect> = Vec::new();
+    let mut cols = effects::build_columns(&ctx, &chosen);
+    let mut full = normals(&refs(&cols), &rec.f, &hold, 1);
+    let base_full = full.clone();
+    let (tr, ho) = full.clone();
+    let th = tr.solve();
+    // screening subsample (every `stride`-th sample)
+    let idx: Vec<usize> = (0..n).step_by(stride).collect();
+    let sub_f: Vec<f64> = idx.iter().map(|&i| rec.f[i]).collect();
+    let sub_hold: Vec<bool> = idx.iter().map(|&i| hold[i]).collect();
+    let sub = |c: &[(String, Vec<f64>)]| -> Vec<Vec<f64>> {
+        c.iter()
+            .map(|(_, v)| idx.iter().map(|&i| v[i]).collect())
+            .collect()
+    };
+    let baseline_holdout = rel(ho.rss(&th), ho.ff);
+    let baseline_train = rel(tr.rss(&th), tr.ff);
+    // Baseline term significance: drop each in turn.
+    let mut baseline_terms = Vec::new();
+    let units = ["kg", "N·s/m", "N", "N"];
+    let names = [
+        "inertia",
+        "viscous_friction",
+        "coulomb_friction",
+        "force_offset",
+    ];
+    for drop in 0..cols.len() {
+        let keep: Vec<&[f64]> = cols
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != drop)
+            .map(|(_, c)| c.1.as_slice())
+            .collect();
+        let (t2, h2) = normals(&keep, &rec.f, &hold, stride);
+        let th2 = t2.solve();
+        let without = rel(h2.rss(&th2), h2.ff);
+        baseline_terms.push(BaselineTerm {
+            effect: names[drop].to_string(),
+            value: th[drop],
+            unit: units[drop].to_string(),
+            holdout_rel_error_without: without,
+            // kept when dropping it makes the held-out rss grow by the same margin an
+            // extension must bring
+            significant: without * without
+                > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
+        });
+    }
+    let mut ho_rel = baseline_holdout;
+    let mut findings = Vec::new();
+    let catalogue = effects::catalogue(&ctx);
+    while chosen.len() < opt.max_effects {
+        let sub_cols = sub(&cols);
+        let base_refs: Vec<&[f64]> = sub_cols.iter().map(|v| v.as_slice()).collect();
+        let base = normals(&base_refs, &sub_f, &sub_hold, 1);
+        let th_b = base.0.solve();
+        let rss_h0 = base.1.rss(&th_b);
+        let rss_t0 = base.0.rss(&th_b);
+        let mut best: Option<(f64, f64, Effect)> = None;
+        for cand in &catalogue {
+            if chosen.iter().any(|c| c.kind == cand.kind) {
+                continue;
+            }
+            let eval = |eff: &Effect| -> (f64, f64) {
+                let z = effects::effect_columns(&ctx, eff, Some(&idx));
+                let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
+                let nn = extend_normals(&base, &base_refs, &zr, &sub_f, &sub_hold, 1);
+                let t = nn.0.solve();
+                let rt = nn.0.rss(&t);
+                let k_extra = z.len() + eff.kind.scanned() as usize;
+                let dbic = bic(rt, nn.0.n, base_refs.len() + k_extra)
+                    - bic(rss_t0, nn.0.n, base_refs.len());
+                (nn.1.rss(&t), dbic)
+            };
+            let mut cb: Option<(f64, f64, Effect)> = None;
+            for eff in effects::grid(&ctx, cand) {
+                let (rh, db) = eval(&eff);
+                if cb.as_ref().is_none_or(|b| rh < b.0) {
+                    cb = Some((rh, db, eff));
+                }
+            }
+            if cand.kind.scanned() {
+                for width in [0.15, 0.03] {
+                    let centre = cb.as_ref().unwrap().2.clone();
+                    for eff in effects::refine(&ctx, &centre, width) {
+                        let (rh, db) = eval(&eff);
+                        if rh < cb.as_ref().unwrap().0 {
+                            cb = Some((rh, db, eff));
+                        }
+                    }
+                }
+            }
+            if let Some(c) = cb {
+                if best.as_ref().is_none_or(|b| c.0 < b.0) {
+                    best = Some(c);
+                }
+            }
+        }
+        let Some((rh, dbic, eff)) = best else { break };
+        let drop = 1.0 - rh / rss_h0.max(1e-300);
+        if drop < opt.min_holdout_gain || dbic >= 0.0 {
+            break;
+        }
+        chosen.push(eff.clone());
+        let z = effects::effect_columns(&ctx, &eff, None);
+        {
+            let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
+            full = extend_normals(&full, &refs(&cols), &zr, &rec.f, &hold, 1);
+        }
+        cols.extend(z);
+        let th_cur = full.0.solve();
+        let after = rel(full.1.rss(&th_cur), full.1.ff);
+        let params = effects::parameters(&ctx, &chosen, &cols, &th_cur, chosen.len() - 1);
+        findings.push(Finding {
+            effect: eff.kind.name().to_string(),
+            parameters: params,
+            holdout_rss_drop: drop,
+            delta_bic: dbic,
+            note: effects::describe(&ctx, &eff),
+            holdout_rel_error_after: after,
+        });
+        ho_rel = after;
+    }
+    // Final model refitted on the whole record.
+    let tf = full.0.plus(&full.1);
+    let th_full = tf.solve();
+    let pred = effects::predict(&cols, &th_full);
+    let residual: Vec<f64> = rec.f.iter().zip(&pred).map(|(a, b)| a - b).collect();
+    let final_full = rel(tf.rss(&th_full), tf.ff);
+    let tb = base_full.0.plus(&base_full.1);
+    let baseline_full = rel(tb.rss(&tb.solve()), tb.ff);
+    let whiteness = report::whiteness(&residual);
+    let spectrum_peaks = report::spectral_peaks(&residual, rec.dt());
+    for pk in spectrum_peaks.iter().filter(|p| p.unexplained) {
+        findings.push(Finding {
+            effect: "unexplained".into(),
+            parameters: vec![("frequency_Hz".into(), pk.freq_hz), ("amplitude_N".into(), pk.amplitude)],
+            holdout_rss_drop: 0.0,
+            delta_bic: 0.0,
+            note: format!(
+                "residual spectral peak at {:.3} Hz ({:.1}x the median spectral level) that no catalogue effect explains",
+                pk.freq_hz, pk.ratio
+            ),
+            holdout_rel_error_after: ho_rel,
+        });
+    }
+    Diagnosis {
+        n,
+        derivative_method: rec.derivative_method.clone(),
+        baseline_terms,
+        baseline_holdout_rel_error: baseline_holdout,
+        baseline_train_rel_error: baseline_train,
+        baseline_full_rel_error: baseline_full,
+        findings,
+        final_holdout_rel_error: ho_rel,
+        final_full_rel_error: final_full,
+        model: cols.iter().map(|c| c.0.clone()).zip(th_full).collect(),
+        effects: chosen,
+        residual,
+        prediction: pred,
+        whiteness,
+        spectrum_peaks,
+        cross: None,
+    }
+}
+
+/// Evaluate the diagnosed model on a second record: refit nothing, use the coefficients of
+/// the whole-record fit, effects in order of discovery.
+pub fn cross_check(d: &mut Diagnosis, other: &Record) {
+    let ctx = effects::Context::new(other);
+    let ffo: f64 = other.f.iter().map(|v| v * v).sum();
+    let err_of = |k: usize| -> f64 {
+        // baseline + first k effects, coefficients refitted on the first record is what we
+        // have only for the full model; for the intermediate models evaluate the full-model
+        // coefficients of the retained columns.
+        let cols = effects::build_columns(&ctx, &d.effects[..k]);
+        let mut pred = vec![0.0; other.len()];
+        for (name, c) in &cols {
+            if let Some((_, th)) = d.model.iter().find(|(n, _)| n == name) {
+                for (p, v) in pred.iter_mut().zip(c) {
+                    *p += th * v;
+                }
+            }
+        }
+        let rss: f64 = other
+            .f
+            .iter()
+            .zip(&pred)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum();
+        rel(rss, ffo)
+    };
+    let base = err_of(0);
+    let after_each = (1..=d.effects.len())
+        .map(|k| (d.effects[k - 1].kind.name().to_string(), err_of(k)))
+        .collect();
+    d.cross = Some(CrossCheck {
+        baseline_rel_error: base,
+        final_rel_error: err_of(d.effects.len()),
+        after_each,
+    });
+}
+
+fn refs(c: &[(String, Vec<f64>)]) -> Vec<&[f64]> {
+    c.iter().map(|(_, v)| v.as_slice()).collect()
+}

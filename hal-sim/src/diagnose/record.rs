@@ -1,0 +1,286 @@
+//! Measured-record reader: CSV with a header row, `#` comments carrying `# key = value`
+//! metadata, required columns `t_s`, `x_m`, `f_N`; velocity and acceleration derived with a
+//! zero-phase method when absent (forward-backward 2nd-order Butterworth low-pass of the
+//! position, then central differences — the EMPS benchmark's own method).
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// A parse or validation error, naming the line (1-based) where it was found when there is one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordError {
+    pub line: Option<usize>,
+    pub msg: String,
+}
+
+impl fmt::Display for RecordError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.line {
+            Some(l) => write!(f, "line {l}: {}", self.msg),
+            None => write!(f, "{}", self.msg),
+        }
+    }
+}
+impl std::error::Error for RecordError {}
+
+fn err(line: Option<usize>, msg: impl Into<String>) -> RecordError {
+    RecordError {
+        line,
+        msg: msg.into(),
+    }
+}
+
+/// One measured record, all SI.
+#[derive(Debug, Clone, Default)]
+pub struct Record {
+    pub t: Vec<f64>,
+    pub x: Vec<f64>,
+    pub f: Vec<f64>,
+    pub v: Vec<f64>,
+    pub a: Vec<f64>,
+    /// Metadata from `# key = value` comment lines whose value is a number.
+    pub meta: BTreeMap<String, f64>,
+    /// Optional columns kept by name (e.g. `x_ref_m`, `i_q_A`).
+    pub extra: BTreeMap<String, Vec<f64>>,
+    /// How v and a were obtained (for the report).
+    pub derivative_method: String,
+}
+
+impl Record {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+    /// Mean sampling period.
+    pub fn dt(&self) -> f64 {
+        (self.t[self.len() - 1] - self.t[0]) / (self.len() - 1) as f64
+    }
+}
+
+/// Parse a record from CSV text. `cutoff_hz`: low-pass cutoff for derived v and a
+/// (None = fs/20).
+pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
+    let mut meta = BTreeMap::new();
+    let mut header: Option<Vec<String>> = None;
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut header_line = 0;
+    let mut first_data_line = Vec::new();
+    for (ln0, raw) in text.lines().enumerate() {
+        let ln = ln0 + 1;
+        let line = raw.trim();
+        if line.is_empty() {
+            continue;
+        }
+        if let Some(c) = line.strip_prefix('#') {
+            if let Some((k, v)) = c.split_once('=') {
+                if let Ok(val) = v.trim().parse::<f64>() {
+                    meta.insert(k.trim().to_string(), val);
+                }
+            }
+            continue;
+        }
+        match &header {
+            None => {
+                let h: Vec<String> = line.split(',').map(|s| s.trim().to_string()).collect();
+                for req in ["t_s", "x_m", "f_N"] {
+                    if !h.iter().any(|c| c == req) {
+                        return Err(err(
+                            Some(ln),
+                            format!(
+                                "header lacks required column `{req}` (found: {})",
+                                h.join(",")
+                            ),
+                        ));
+                    }
+                }
+                cols = vec![Vec::new(); h.len()];
+                header = Some(h);
+                header_line = ln;
+            }
+            Some(h) => {
+                let fields: Vec<&str> = line.split(',').collect();
+                if fields.len() != h.len() {
+                    return Err(err(
+                        Some(ln),
+                        format!("{} fields, header has {}", fields.len(), h.len()),
+                    ));
+                }
+                for (j, fld) in fields.iter().enumerate() {
+                    let val: f64 = fld.trim().parse().map_err(|_| {
+                        err(
+                            Some(ln),
+                            format!("column `{}`: `{}` is not a number", h[j], fld.trim()),
+                        )
+                    })?;
+                    if !val.is_finite() {
+                        return Err(err(
+                            Some(ln),
+                            format!("column `{}` is not finite ({val})", h[j]),
+                        ));
+                    }
+                    cols[j].push(val);
+                }
+                first_data_line.push(ln);
+            }
+        }
+    }
+    let h = header.ok_or_else(|| err(None, "no header row (expected t_s,x_m,f_N,...)"))?;
+    let n = cols[0].len();
+    if n < 3 {
+        return Err(err(
+            Some(header_line),
+            format!("{n} data row(s): at least 3 samples are needed"),
+        ));
+    }
+    let idx = |name: &str| h.iter().position(|c| c == name);
+    let t = cols[idx("t_s").unwrap()].clone();
+    let x = cols[idx("x_m").unwrap()].clone();
+    let f = cols[idx("f_N").unwrap()].clone();
+    for i in 1..n {
+        if t[i] <= t[i - 1] {
+            return Err(err(
+                Some(first_data_line[i]),
+                format!("time not increasing ({} after {})", t[i], t[i - 1]),
+            ));
+        }
+    }
+    let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
+    if !(1e-7..=1.0).contains(&dt) {
+        return Err(err(
+            None,
+            format!("mean sample period {dt} s: t_s must be in seconds (1e-7..1 s)"),
+        ));
+    }
+    for i in 0..n {
+        if (t[i] - t[i.saturating_sub(1)]) > 20.0 * dt && i > 0 {
+            return Err(err(
+                Some(first_data_line[i]),
+                format!("time gap of {} s (mean period {dt} s)", t[i] - t[i - 1]),
+            ));
+        }
+        if x[i].abs() > 10.0 {
+            return Err(err(
+                Some(first_data_line[i]),
+                format!(
+                    "x_m = {} m: displacement over 10 m, units probably not metres",
+                    x[i]
+                ),
+            ));
+        }
+        if f[i].abs() > 1e7 {
+            return Err(err(
+                Some(first_data_line[i]),
+                format!("f_N = {} N: implausible force, check units", f[i]),
+            ));
+        }
+    }
+    let xr =
+        x.iter().cloned().fold(f64::MIN, f64::max) - x.iter().cloned().fold(f64::MAX, f64::min);
+    if xr == 0.0 {
+        return Err(err(None, "x_m never changes: no motion to diagnose"));
+    }
+    let fs = 1.0 / dt;
+    let fc = cutoff_hz.unwrap_or(fs / 20.0);
+    let (v, a, method) = match (idx("v_m_s"), idx("a_m_s2")) {
+        (Some(iv), Some(ia)) => (
+            cols[iv].clone(),
+            cols[ia].clone(),
+            "measured v_m_s and a_m_s2".to_string(),
+        ),
+        (Some(iv), None) => {
+            let vf = filtfilt(&cols[iv], fc, fs);
+            let a = central_diff(&vf, dt);
+            (cols[iv].clone(), a, format!("measured v_m_s; a = central difference of zero-phase Butterworth-2 ({fc:.3} Hz, forward-backward) v"))
+        }
+        _ => {
+            let xf = filtfilt(&x, fc, fs);
+            let v = central_diff(&xf, dt);
+            let a = central_diff(&v, dt);
+            (v, a, format!("zero-phase Butterworth-2 low-pass of x_m at {fc:.3} Hz (forward-backward), then central differences"))
+        }
+    };
+    let mut extra = BTreeMap::new();
+    for (j, name) in h.iter().enumerate() {
+        if !["t_s", "x_m", "f_N", "v_m_s", "a_m_s2"].contains(&name.as_str()) {
+            extra.insert(name.clone(), cols[j].clone());
+        }
+    }
+    Ok(Record {
+        t,
+        x,
+        f,
+        v,
+        a,
+        meta,
+        extra,
+        derivative_method: method,
+    })
+}
+
+/// Read and parse a file.
+pub fn read_csv(path: &std::path::Path, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| err(None, format!("{}: {e}", path.display())))?;
+    parse_csv(&text, cutoff_hz).map_err(|e| RecordError {
+        line: e.line,
+        msg: format!("{}: {}", path.display(), e.msg),
+    })
+}
+
+/// Forward-backward (zero-phase) 2nd-order Butterworth low-pass, bilinear transform with
+/// prewarping; the state starts at the first (resp. last) sample so there is no start-up step.
+pub fn filtfilt(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
+    let fc = fc.min(0.45 * fs);
+    let k = (std::f64::consts::PI * fc / fs).tan();
+    let s2 = std::f64::consts::SQRT_2;
+    let norm = 1.0 / (1.0 + s2 * k + k * k);
+    let b0 = k * k * norm;
+    let b1 = 2.0 * b0;
+    let b2 = b0;
+    let a1 = 2.0 * (k * k - 1.0) * norm;
+    let a2 = (1.0 - s2 * k + k * k) * norm;
+    let run = |inp: &mut Vec<f64>| {
+        let x0 = inp[0];
+        let (mut x1, mut x2, mut y1, mut y2) = (x0, x0, x0, x0);
+        for s in inp.iter_mut() {
+            let xin = *s;
+            let y = b0 * xin + b1 * x1 + b2 * x2 - a1 * y1 - a2 * y2;
+            x2 = x1;
+            x1 = xin;
+            y2 = y1;
+            y1 = y;
+            *s = y;
+        }
+    };
+    // odd reflection padding at both ends (as scipy's filtfilt), so the edges carry no
+    // start-up transient: pad = 3 time constants of the filter, at most n-1 samples
+    let n = x.len();
+    let pad = ((3.0 * fs / fc).ceil() as usize).min(n - 1);
+    let mut y = Vec::with_capacity(n + 2 * pad);
+    for i in (1..=pad).rev() {
+        y.push(2.0 * x[0] - x[i]);
+    }
+    y.extend_from_slice(x);
+    for i in 1..=pad {
+        y.push(2.0 * x[n - 1] - x[n - 1 - i]);
+    }
+    run(&mut y);
+    y.reverse();
+    run(&mut y);
+    y.reverse();
+    y[pad..pad + n].to_vec()
+}
+
+/// Central differences (one-sided at the ends).
+pub fn central_diff(x: &[f64], dt: f64) -> Vec<f64> {
+    let n = x.len();
+    let mut d = vec![0.0; n];
+    for i in 1..n - 1 {
+        d[i] = (x[i + 1] - x[i - 1]) / (2.0 * dt);
+    }
+    d[0] = (x[1] - x[0]) / dt;
+    d[n - 1] = (x[n - 1] - x[n - 2]) / dt;
+    d
+}

@@ -1,0 +1,456 @@
+//! Residual analysis (whiteness, spectrum, breakdowns), plots (hand-written SVG, no font
+//! dependencies), the text report, the JSON report and the TOML model file.
+
+use super::{Diagnosis, Record};
+use std::fmt::Write as _;
+
+/// Ljung-Box whiteness test on the residual (decimated so that lags cover 1 % of the record).
+#[derive(Debug, Clone, Default)]
+pub struct Whiteness {
+    pub lags: usize,
+    pub q: f64,
+    /// Chi-square 99 % point for `lags` degrees of freedom (Wilson-Hilferty approximation).
+    pub q_crit: f64,
+    pub lag1_autocorr: f64,
+    pub white: bool,
+}
+
+pub fn whiteness(r: &[f64]) -> Whiteness {
+    let n = r.len();
+    let lags = 20usize.min(n / 4).max(1);
+    let mean = r.iter().sum::<f64>() / n as f64;
+    let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
+    let mut q = 0.0;
+    let mut lag1 = 0.0;
+    for k in 1..=lags {
+        let mut c = 0.0;
+        for i in k..n {
+            c += (r[i] - mean) * (r[i - k] - mean);
+        }
+        let rho = if var > 0.0 { c / var } else { 0.0 };
+        if k == 1 {
+            lag1 = rho;
+        }
+        q += rho * rho / (n - k) as f64;
+    }
+    q *= n as f64 * (n as f64 + 2.0);
+    let h = lags as f64;
+    let z = 2.326;
+    let q_crit = h * (1.0 - 2.0 / (9.0 * h) + z * (2.0 / (9.0 * h)).sqrt()).powi(3);
+    Whiteness {
+        lags,
+        q,
+        q_crit,
+        lag1_autocorr: lag1,
+        white: q < q_crit,
+    }
+}
+
+/// A spectral peak of the residual.
+#[derive(Debug, Clone)]
+pub struct Peak {
+    pub freq_hz: f64,
+    pub amplitude: f64,
+    /// Power over the median power of the spectrum.
+    pub ratio: f64,
+    pub unexplained: bool,
+}
+
+/// In-place radix-2 complex FFT.
+pub fn fft(re: &mut [f64], im: &mut [f64]) {
+    let n = re.len();
+    let mut j = 0;
+    for i in 1..n {
+        let mut bit = n >> 1;
+        while j & bit != 0 {
+            j ^= bit;
+            bit >>= 1;
+        }
+        j |= bit;
+        if i < j {
+            re.swap(i, j);
+            im.swap(i, j);
+        }
+    }
+    let mut len = 2;
+    while len <= n {
+        let ang = -2.0 * std::f64::consts::PI / len as f64;
+        for s in (0..n).step_by(len) {
+            for k in 0..len / 2 {
+                let (wi, wr) = (ang * k as f64).sin_cos();
+                let (a, b) = (s + k, s + k + len / 2);
+                let tr = re[b] * wr - im[b] * wi;
+                let ti = re[b] * wi + im[b] * wr;
+                re[b] = re[a] - tr;
+                im[b] = im[a] - ti;
+                re[a] += tr;
+                im[a] += ti;
+            }
+        }
+        len <<= 1;
+    }
+}
+
+/// Welch power spectrum (Hann, 50 % overlap, segments of up to 4096 samples). Returns
+/// (frequency Hz, amplitude N of a sinusoid at that bin).
+pub fn welch(r: &[f64], dt: f64) -> Vec<(f64, f64)> {
+    let mut seg = 4096usize;
+    while seg > r.len() && seg > 16 {
+        seg /= 2;
+    }
+    let win: Vec<f64> = (0..seg)
+        .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / seg as f64).cos())
+        .collect();
+    let wsum: f64 = win.iter().sum();
+    let mut p = vec![0.0; seg / 2];
+    let mut count = 0;
+    let mut s = 0;
+    while s + seg <= r.len() {
+        let mut re: Vec<f64> = (0..seg).map(|i| r[s + i] * win[i]).collect();
+        let mut im = vec![0.0; seg];
+        fft(&mut re, &mut im);
+        for k in 0..seg / 2 {
+            p[k] += re[k] * re[k] + im[k] * im[k];
+        }
+        count += 1;
+        s += seg / 2;
+    }
+    (0..seg / 2)
+        .map(|k| {
+            (
+                k as f64 / (seg as f64 * dt),
+                2.0 * (p[k] / count.max(1) as f64).sqrt() / wsum,
+            )
+        })
+        .collect()
+}
+
+/// Local maxima of the residual spectrum standing 30x above its median power (white noise
+/// averaged over Welch segments stays far below: its maximum over 2048 bins is about
+/// ln(2048) ≈ 8 times the mean for a single segment, less when averaged). A peak is
+/// `unexplained` when its amplitude is also at least 0.5 % of the force rms... applied by the
+/// caller through `rms_f`.
+pub fn spectral_peaks(r: &[f64], dt: f64) -> Vec<Peak> {
+    let sp = welch(r, dt);
+    if sp.len() < 8 {
+        return vec![];
+    }
+    let mut pw: Vec<f64> = sp.iter().skip(1).map(|s| s.1 * s.1).collect();
+    let k = pw.len() / 2;
+    let med = *pw.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let rms = (r.iter().map(|x| x * x).sum::<f64>() / r.len() as f64).sqrt();
+    let mut peaks = Vec::new();
+    for i in 2..sp.len() - 1 {
+        let p = sp[i].1 * sp[i].1;
+        if p > sp[i - 1].1.powi(2) && p >= sp[i + 1].1.powi(2) && p > 30.0 * med {
+            peaks.push(Peak {
+                freq_hz: sp[i].0,
+                amplitude: sp[i].1,
+                ratio: p / med.max(1e-300),
+                unexplained: sp[i].1 > 0.2 * rms,
+            });
+        }
+    }
+    peaks.sort_by(|a, b| b.ratio.total_cmp(&a.ratio));
+    peaks.truncate(8);
+    peaks
+}
+
+/// Residual rms by direction of motion and power quadrant.
+pub fn breakdown(rec: &Record, r: &[f64]) -> Vec<(String, f64, usize)> {
+    let mut acc = [(0.0, 0usize); 4];
+    let labels = [
+        "v>0, f·v>0 (driven)",
+        "v>0, f·v<0 (driving)",
+        "v<0, f·v>0 (driven)",
+        "v<0, f·v<0 (driving)",
+    ];
+    for i in 0..rec.len() {
+        let d =
+            if rec.v[i] >= 0.0 { 0 } else { 2 } + if rec.f[i] * rec.v[i] >= 0.0 { 0 } else { 1 };
+        acc[d].0 += r[i] * r[i];
+        acc[d].1 += 1;
+    }
+    labels
+        .iter()
+        .zip(acc)
+        .map(|(l, (s, c))| (l.to_string(), (s / c.max(1) as f64).sqrt(), c))
+        .collect()
+}
+
+/// Write a scatter plot (decimated to ~3000 points) as SVG.
+pub fn svg_scatter(
+    path: &std::path::Path,
+    title: &str,
+    xl: &str,
+    xs: &[f64],
+    ys: &[f64],
+) -> std::io::Result<()> {
+    let n = xs.len();
+    let step = (n / 3000).max(1);
+    let (w, h, m) = (800.0, 400.0, 50.0);
+    let fmin = |v: &[f64]| v.iter().cloned().fold(f64::MAX, f64::min);
+    let fmax = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max);
+    let (x0, x1, y0, y1) = (fmin(xs), fmax(xs), fmin(ys), fmax(ys));
+    let sx = |x: f64| m + (x - x0) / (x1 - x0).max(1e-300) * (w - 2.0 * m);
+    let sy = |y: f64| h - m - (y - y0) / (y1 - y0).max(1e-300) * (h - 2.0 * m);
+    let mut s = String::new();
+    let _ = write!(s, "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}'><rect width='100%' height='100%' fill='white'/>");
+    let _ = write!(s, "<text x='{m}' y='20' font-size='14'>{title}</text><text x='{}' y='{}' font-size='12'>{xl} [{x0:.4e} .. {x1:.4e}]; y [{y0:.3e} .. {y1:.3e}]</text>", m, h - 10.0);
+    let _ = write!(
+        s,
+        "<line x1='{m}' x2='{}' y1='{}' y2='{}' stroke='gray'/>",
+        w - m,
+        sy(0.0),
+        sy(0.0)
+    );
+    for i in (0..n).step_by(step) {
+        let _ = write!(
+            s,
+            "<circle cx='{:.1}' cy='{:.1}' r='1' fill='steelblue'/>",
+            sx(xs[i]),
+            sy(ys[i])
+        );
+    }
+    s.push_str("</svg>\n");
+    std::fs::write(path, s)
+}
+
+/// Write residual plots into `dir`: against time, position, velocity, and its spectrum.
+pub fn write_plots(
+    dir: &std::path::Path,
+    rec: &Record,
+    d: &Diagnosis,
+) -> std::io::Result<Vec<String>> {
+    std::fs::create_dir_all(dir)?;
+    let mut out = Vec::new();
+    for (name, xl, xs) in [
+        ("residual_vs_time.svg", "t [s]", &rec.t),
+        ("residual_vs_position.svg", "x [m]", &rec.x),
+        ("residual_vs_velocity.svg", "v [m/s]", &rec.v),
+    ] {
+        let p = dir.join(name);
+        svg_scatter(
+            &p,
+            &format!("final-model residual [N] ({name})"),
+            xl,
+            xs,
+            &d.residual,
+        )?;
+        out.push(p.display().to_string());
+    }
+    let sp = welch(&d.residual, rec.dt());
+    let (f, a): (Vec<f64>, Vec<f64>) = sp.into_iter().skip(1).unzip();
+    let p = dir.join("residual_spectrum.svg");
+    svg_scatter(&p, "residual amplitude spectrum [N]", "f [Hz]", &f, &a)?;
+    out.push(p.display().to_string());
+    Ok(out)
+}
+
+/// Human-readable report.
+pub fn text(rec: &Record, d: &Diagnosis) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Model diagnosis: {} samples, dt = {:.3e} s",
+        d.n,
+        rec.dt()
+    );
+    let _ = writeln!(s, "  derivatives: {}", d.derivative_method);
+    let _ = writeln!(s, "  split: 10 blocks, blocks 2,5,8 held out (30 %)");
+    let _ = writeln!(s, "Baseline f = M·a + Fv·v + Fc·sgn(v) + offset:");
+    for b in &d.baseline_terms {
+        let _ = writeln!(
+            s,
+            "  {:<18} {:>12.5} {:<6} held-out error without it {:6.2} % {}",
+            b.effect,
+            b.value,
+            b.unit,
+            100.0 * b.holdout_rel_error_without,
+            if b.significant {
+                "(significant)"
+            } else {
+                "(not significant)"
+            }
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  relative error: train {:.2} %, held-out {:.2} %, whole record (fit on all) {:.2} %",
+        100.0 * d.baseline_train_rel_error,
+        100.0 * d.baseline_holdout_rel_error,
+        100.0 * d.baseline_full_rel_error
+    );
+    let _ = writeln!(s, "Findings (forward selection: held-out rss drop >= 2 % and BIC decrease), in order of importance:");
+    if d.findings.is_empty() {
+        let _ = writeln!(s, "  none: the baseline explains the record");
+    }
+    for f in &d.findings {
+        let _ = write!(
+            s,
+            "  {:<30} held-out error after {:6.3} %  rss drop {:5.1} %  dBIC {:9.1}",
+            f.effect,
+            100.0 * f.holdout_rel_error_after,
+            100.0 * f.holdout_rss_drop,
+            f.delta_bic
+        );
+        let _ = writeln!(s, "  {}", f.note);
+        for (k, v) in &f.parameters {
+            let _ = writeln!(s, "      {k} = {v:.6}");
+        }
+    }
+    let _ = writeln!(
+        s,
+        "Final: held-out {:.3} % (baseline {:.3} %), whole record {:.3} % (baseline {:.3} %)",
+        100.0 * d.final_holdout_rel_error,
+        100.0 * d.baseline_holdout_rel_error,
+        100.0 * d.final_full_rel_error,
+        100.0 * d.baseline_full_rel_error
+    );
+    let _ = writeln!(
+        s,
+        "Residual by direction / power quadrant (rms N, samples):"
+    );
+    for (l, r, c) in breakdown(rec, &d.residual) {
+        let _ = writeln!(s, "  {l:<24} {r:10.4} {c}");
+    }
+    let w = &d.whiteness;
+    let _ = writeln!(s, "Whiteness (Ljung-Box, {} lags): Q = {:.1}, 99 % bound {:.1}, lag-1 autocorrelation {:.3}: {}", w.lags, w.q, w.q_crit, w.lag1_autocorr, if w.white { "white" } else { "coloured" });
+    for p in &d.spectrum_peaks {
+        let _ = writeln!(
+            s,
+            "  spectral peak {:.3} Hz amplitude {:.4} N ({:.0}x median){}",
+            p.freq_hz,
+            p.amplitude,
+            p.ratio,
+            if p.unexplained { " UNEXPLAINED" } else { "" }
+        );
+    }
+    if let Some(c) = &d.cross {
+        let _ = writeln!(
+            s,
+            "Cross-check on second record: baseline {:.3} %, final {:.3} %",
+            100.0 * c.baseline_rel_error,
+            100.0 * c.final_rel_error
+        );
+        for (e, v) in &c.after_each {
+            let _ = writeln!(s, "  after {e:<30} {:.3} %", 100.0 * v);
+        }
+    }
+    s
+}
+
+fn jnum(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:e}")
+    } else {
+        "null".into()
+    }
+}
+
+fn jstr(s: &str) -> String {
+    let mut o = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
+/// Machine-readable report.
+pub fn json(d: &Diagnosis) -> String {
+    let mut s = String::from("{\n");
+    let _ = writeln!(s, "  \"samples\": {},", d.n);
+    let _ = writeln!(
+        s,
+        "  \"baseline_holdout_rel_error\": {},",
+        jnum(d.baseline_holdout_rel_error)
+    );
+    let _ = writeln!(
+        s,
+        "  \"final_holdout_rel_error\": {},",
+        jnum(d.final_holdout_rel_error)
+    );
+    let _ = writeln!(
+        s,
+        "  \"baseline_full_rel_error\": {},",
+        jnum(d.baseline_full_rel_error)
+    );
+    let _ = writeln!(
+        s,
+        "  \"final_full_rel_error\": {},",
+        jnum(d.final_full_rel_error)
+    );
+    s.push_str("  \"baseline_terms\": [");
+    for (i, b) in d.baseline_terms.iter().enumerate() {
+        let _ = write!(s, "{}\n    {{\"effect\": {}, \"value\": {}, \"unit\": {}, \"holdout_rel_error_without\": {}, \"significant\": {}}}", if i > 0 { "," } else { "" }, jstr(&b.effect), jnum(b.value), jstr(&b.unit), jnum(b.holdout_rel_error_without), b.significant);
+    }
+    s.push_str("\n  ],\n  \"findings\": [");
+    for (i, f) in d.findings.iter().enumerate() {
+        let params: Vec<String> = f
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{}: {}", jstr(k), jnum(*v)))
+            .collect();
+        let _ = write!(
+            s,
+            "{}\n    {{\"effect\": {}, \"parameters\": {{{}}}, \"evidence\": {{\"holdout_rss_drop\": {}, \"delta_bic\": {}, \"note\": {}}}, \"holdout_rel_error_after\": {}}}",
+            if i > 0 { "," } else { "" },
+            jstr(&f.effect),
+            params.join(", "),
+            jnum(f.holdout_rss_drop),
+            jnum(f.delta_bic),
+            jstr(&f.note),
+            jnum(f.holdout_rel_error_after)
+        );
+    }
+    s.push_str("\n  ],\n");
+    let w = &d.whiteness;
+    let _ = writeln!(
+        s,
+        "  \"whiteness\": {{\"ljung_box_q\": {}, \"q_crit_99\": {}, \"lags\": {}, \"white\": {}}},",
+        jnum(w.q),
+        jnum(w.q_crit),
+        w.lags,
+        w.white
+    );
+    match &d.cross {
+        Some(c) => {
+            let _ = writeln!(
+                s,
+                "  \"cross_check\": {{\"baseline_rel_error\": {}, \"final_rel_error\": {}}}",
+                jnum(c.baseline_rel_error),
+                jnum(c.final_rel_error)
+            );
+        }
+        None => s.push_str("  \"cross_check\": null\n"),
+    }
+    s.push_str("}\n");
+    s
+}
+
+/// Extended model as TOML (format documented in docs/diagnose.md).
+pub fn model_toml(d: &Diagnosis) -> String {
+    let mut s = String::from("# device force model from `regen diagnose` (docs/diagnose.md)\n# f = sum(coefficient * column), columns defined in hal_sim::diagnose::effects\n[baseline]\n");
+    for (name, v) in d.model.iter().take(4) {
+        let _ = writeln!(s, "{name} = {}", jnum(*v));
+    }
+    for e in &d.effects {
+        let _ = writeln!(
+            s,
+            "\n[[effect]]\nname = {}\nparam = {}",
+            jstr(e.kind.name()),
+            jnum(e.param)
+        );
+        let prefix = format!("{}.", e.kind.name());
+        for (name, v) in d.model.iter().filter(|(n, _)| n.starts_with(&prefix)) {
+            let _ = writeln!(s, "{} = {}", &name[prefix.len()..], jnum(*v));
+        }
+    }
+    s
+}
