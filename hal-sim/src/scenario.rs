@@ -36,6 +36,50 @@ pub struct LawSpec {
     /// Emulated load resistance per phase, Ω (omit or `inf` for open circuit).
     #[serde(default = "inf")]
     pub r_load_ohm: f64,
+    /// Any other firmware parameter by its console name (`regen_fw::params`), e.g.
+    /// `[law.set] trk_period_s = 8.0`: checked against the registry's range like a console
+    /// `set`.
+    #[serde(default)]
+    pub set: std::collections::BTreeMap<String, f64>,
+    /// Host-designed controller of the two-way / one-way laws (`regen study design` prints
+    /// it): `a` (N×N), `b` (N×M), `c` (N), `d` (M), row-major.
+    #[serde(default)]
+    pub opt: Option<OptSpec>,
+}
+
+/// The `[law.opt]` table.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct OptSpec {
+    pub a: Vec<f32>,
+    pub b: Vec<f32>,
+    pub c: Vec<f32>,
+    pub d: Vec<f32>,
+}
+
+impl OptSpec {
+    fn params(&self) -> Result<regen_fw::laws::lti::LtiParams, String> {
+        let mut p = regen_fw::laws::lti::LtiParams::default();
+        let put = |dst: &mut [f32], src: &[f32], what: &str| -> Result<(), String> {
+            if src.len() != dst.len() {
+                return Err(format!(
+                    "law.opt.{what}: {} numbers expected, {} given",
+                    dst.len(),
+                    src.len()
+                ));
+            }
+            dst.copy_from_slice(src);
+            Ok(())
+        };
+        put(&mut p.a, &self.a, "a")?;
+        put(&mut p.b, &self.b, "b")?;
+        put(&mut p.c, &self.c, "c")?;
+        put(&mut p.d, &self.d, "d")?;
+        if !p.is_valid() {
+            return Err("law.opt: a coefficient is not finite or out of range".into());
+        }
+        Ok(p)
+    }
 }
 
 fn inf() -> f64 {
@@ -47,6 +91,8 @@ impl Default for LawSpec {
         LawSpec {
             kind: "resistor".into(),
             r_load_ohm: 306.0,
+            set: Default::default(),
+            opt: None,
         }
     }
 }
@@ -214,8 +260,8 @@ impl Scenario {
             sensors: Sensors::default(),
             firmware: FirmwareSpec::default(),
             law: LawSpec {
-                kind: "resistor".into(),
                 r_load_ohm,
+                ..LawSpec::default()
             },
             record: RecordSpec::default(),
         }
@@ -229,8 +275,8 @@ impl Scenario {
             settle_s: 0.0,
             drive: Drive::Imposed { motion },
             law: LawSpec {
-                kind: "resistor".into(),
                 r_load_ohm,
+                ..LawSpec::default()
             },
             ..Scenario::tmd(0.0)
         }
@@ -269,7 +315,7 @@ impl Scenario {
     pub fn config(&self) -> Result<Config, String> {
         let f = &self.firmware;
         let m = &self.machine;
-        let c = Config {
+        let mut c = Config {
             r_phase_ohm: f.r_phase_ohm.unwrap_or(m.r_ohm as f32),
             l_phase_h: f.l_phase_h.unwrap_or(m.l_h as f32),
             ke_v_s_per_rad: f.ke_v_s_per_rad.unwrap_or(m.ke_v_s_per_rad as f32),
@@ -296,6 +342,15 @@ impl Scenario {
             ..Config::default()
         };
         c.validate().map_err(|e| format!("firmware.{e}"))?;
+        if let Some(o) = &self.law.opt {
+            c.opt = o.params()?;
+        }
+        for (name, v) in &self.law.set {
+            let p = regen_fw::params::find(name)
+                .ok_or_else(|| format!("law.set.{name}: unknown parameter"))?;
+            p.apply(&mut c, *v as f32, false)
+                .map_err(|e| format!("law.set.{name} = {v}: {e}"))?;
+        }
         Ok(c)
     }
 
@@ -341,6 +396,37 @@ impl Scenario {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn law_parameters_by_registry_name() {
+        let base = "duration_s = 1.0\n[drive]\nkind = \"structure\"\n[drive.excitation]\nkind = \"sine\"\na0_m_s2 = 1.0\nfreq_hz = 0.5\n";
+        let ok = Scenario::from_toml(&format!(
+            "{base}[law]\nkind = \"tracking\"\nr_load_ohm = 10.0\n[law.set]\ntrk_period_s = 8.0\n"
+        ))
+        .unwrap();
+        let c = ok.config().unwrap();
+        assert_eq!(c.trk_period_s, 8.0);
+        assert_eq!(c.law, LawKind::Tracking);
+        let bad = Scenario::from_toml(&format!(
+            "{base}[law]\nkind = \"tracking\"\n[law.set]\ntrk_period_z = 8.0\n"
+        ));
+        let e = bad.and_then(|s| s.config()).unwrap_err();
+        assert!(e.contains("trk_period_z"), "{e}");
+        let range = Scenario::from_toml(&format!(
+            "{base}[law]\nkind = \"resistor\"\n[law.set]\ncurrent_bw_hz = 1.0e9\n"
+        ));
+        assert!(range
+            .and_then(|s| s.config())
+            .unwrap_err()
+            .contains("current_bw_hz"));
+        let opt = Scenario::from_toml(&format!(
+            "{base}[law]\nkind = \"two_way\"\n[law.opt]\na = [1.0]\nb = []\nc = []\nd = []\n"
+        ));
+        assert!(opt
+            .and_then(|s| s.config())
+            .unwrap_err()
+            .contains("law.opt.a"));
+    }
 
     #[test]
     fn bad_files_name_the_key() {
