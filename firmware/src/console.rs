@@ -172,6 +172,7 @@ impl Console {
                 for ch in CHANNELS {
                     let _ = write!(out, " {}[{}]", ch.0, ch.1);
                 }
+                let _ = out.write_str("\r\n");
                 ok!("")
             }
             "list" if want(0) => {
@@ -409,8 +410,8 @@ mod tests {
         let (r, s) = run(&mut con, &mut ctl, "list");
         assert!(r.is_ok());
         assert_eq!(s.lines().count(), PARAMS.len() + 1);
-        let (r, _) = run(&mut con, &mut ctl, "help");
-        assert!(r.is_ok());
+        let (r, s) = run(&mut con, &mut ctl, "help");
+        assert!(r.is_ok() && s.ends_with("\r\nok\r\n"), "{s}");
         for l in [
             "status",
             "faults",

@@ -27,6 +27,13 @@ enum Command {
     Study(hal_sim::study::StudyArgs),
     /// Diagnose a measured record: what the model gets wrong, the physical cause, the gain.
     Diagnose(hal_sim::diagnose::cli::DiagnoseArgs),
+    /// Run a scenario in real time (or --speed X) with the firmware's console on a
+    /// pseudo-terminal (connect with picocom, screen, minicom or `regen client`).
+    #[cfg(unix)]
+    Serve(cli::serve::ServeArgs),
+    /// Send console commands (arguments or --script) to a serial port or `regen serve`'s
+    /// pseudo-terminal and print the replies; exit status 1 on an error reply or a timeout.
+    Client(cli::client::ClientArgs),
 }
 
 fn main() {
@@ -36,6 +43,9 @@ fn main() {
         Some(Command::Run(a)) => cli::run::run(&a),
         Some(Command::Sweep(a)) => cli::sweep::run(&a),
         Some(Command::Study(a)) => hal_sim::study::run(&a).map(|text| print!("{text}")),
+        #[cfg(unix)]
+        Some(Command::Serve(a)) => cli::serve::run(&a),
+        Some(Command::Client(a)) => cli::client::run(&a),
         Some(Command::Diagnose(a)) => {
             hal_sim::diagnose::cli::cli_main(a).map_err(|e| e.to_string())
         }

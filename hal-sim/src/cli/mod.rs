@@ -1,7 +1,10 @@
 //! The `regen` command line: one module per subcommand (add yours as a file here and a
 //! variant of `Command` in `src/bin/regen.rs`).
 
+pub mod client;
 pub mod output;
 pub mod run;
+#[cfg(unix)]
+pub mod serve;
 pub mod sizing;
 pub mod sweep;

@@ -1,0 +1,368 @@
+//! `regen serve [SCENARIO] [--speed X]`: a simulated drive on a pseudo-terminal.
+//!
+//! The scenario's closed loop runs in real time (or `--speed X` times faster, `max` = as fast
+//! as the machine can) and the firmware's console ([`crate::drive::SimDrive`]: the unchanged
+//! executor, the controller of the simulation and a simulated flash store) answers on a
+//! pseudo-terminal whose path is printed, so `picocom`, `screen`, `minicom` or `regen client`
+//! connect to it as to a board's serial port.
+//!
+//! Loop: read what arrived (non-blocking) and execute each complete line between two control
+//! periods, run a chunk of periods (0.5 ms of wall time at the requested speed, at most 2000
+//! periods), queue the telemetry lines they produced, write what the pty takes, then sleep
+//! until wall time catches up with `simulated time / speed`. A simulation that cannot keep up
+//! runs as fast as it can (`sim` and the final summary show the real factor).
+//!
+//! Output policy, as a UART with a bounded transmit queue: command replies are always queued;
+//! a telemetry line is dropped (and counted) when the queue holds more than
+//! [`QUEUE_LIMIT`] bytes, i.e. when the reader does not keep up; while no one has the pty open
+//! the output is discarded (no stale backlog for the next reader).
+//!
+//! PTY choice: `serialport::TTYPort::pair()` (posix_openpt, grantpt, unlockpt, ptsname and raw
+//! mode on the slave, without unsafe code, on Linux, macOS and the BSDs; the same crate as
+//! the client). The slave end is closed at once, so the pty's buffer only fills when someone
+//! reads it. The master is then read and written with non-blocking `read`/`write` (nix)
+//! rather than through the `TTYPort` I/O, which polls with a timeout and reports a hang-up
+//! even when input is still pending.
+
+use crate::drive::SimDrive;
+use crate::Scenario;
+use nix::errno::Errno;
+use serialport::SerialPort;
+use std::os::unix::io::{AsRawFd, RawFd};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Longest accepted console line (the board's receive buffer), bytes.
+pub const MAX_LINE: usize = 128;
+/// Output queue size beyond which telemetry lines are dropped, bytes.
+pub const QUEUE_LIMIT: usize = 256 * 1024;
+/// Most control periods between two looks at the pty.
+const MAX_CHUNK: u64 = 2000;
+
+#[derive(clap::Args, Debug)]
+pub struct ServeArgs {
+    /// Scenario file (TOML). Default: the reference TMD at 306 Ω (as
+    /// hal-sim/scenarios/tmd-306.toml). Its duration is ignored: see --duration.
+    pub scenario: Option<PathBuf>,
+    /// Simulated seconds per wall-clock second: 1 = real time, 20 = twenty times faster,
+    /// `max` = as fast as the machine can.
+    #[arg(long, default_value = "1", value_parser = parse_speed)]
+    pub speed: f64,
+    /// Stop after this many simulated seconds (default: run until Ctrl-C).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Echo received characters and handle backspace (for a terminal without local echo;
+    /// `regen client` does not want it).
+    #[arg(long)]
+    pub echo: bool,
+    /// Also create a symbolic link to the pseudo-terminal at this path (a stable name for
+    /// scripts), removed on exit.
+    #[arg(long)]
+    pub link: Option<PathBuf>,
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    if s == "max" {
+        return Ok(f64::INFINITY);
+    }
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("'{s}': a positive number or `max`")),
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Copy, Debug)]
+pub struct Summary {
+    pub sim_s: f64,
+    pub wall_s: f64,
+    pub lines: u64,
+    pub dropped_tel_lines: u64,
+}
+
+/// A simulated drive served on a pseudo-terminal.
+pub struct Server {
+    drive: SimDrive,
+    /// Owns the master end (closed on drop).
+    _master: serialport::TTYPort,
+    fd: RawFd,
+    path: String,
+    speed: f64,
+    echo: bool,
+    line: Vec<u8>,
+    overlong: bool,
+    last_cr: bool,
+    out: Vec<u8>,
+    out_pos: usize,
+    lines: u64,
+    dropped: u64,
+}
+
+impl Server {
+    /// Open a pseudo-terminal for `drive`, run at `speed` (simulated s per wall s; infinite =
+    /// as fast as possible).
+    pub fn open(drive: SimDrive, speed: f64, echo: bool) -> Result<Server, String> {
+        if !(speed > 0.0) {
+            return Err("speed must be positive".into());
+        }
+        let (master, slave) =
+            serialport::TTYPort::pair().map_err(|e| format!("pseudo-terminal: {e}"))?;
+        let path = slave
+            .name()
+            .ok_or("pseudo-terminal: the slave has no name")?;
+        drop(slave);
+        let fd = master.as_raw_fd();
+        nix::fcntl::fcntl(
+            fd,
+            nix::fcntl::FcntlArg::F_SETFL(nix::fcntl::OFlag::O_NONBLOCK),
+        )
+        .map_err(|e| format!("pseudo-terminal: {e}"))?;
+        Ok(Server {
+            drive,
+            _master: master,
+            fd,
+            path,
+            speed,
+            echo,
+            line: Vec::with_capacity(MAX_LINE),
+            overlong: false,
+            last_cr: false,
+            out: Vec::new(),
+            out_pos: 0,
+            lines: 0,
+            dropped: 0,
+        })
+    }
+
+    /// The pseudo-terminal to connect to.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    pub fn drive(&self) -> &SimDrive {
+        &self.drive
+    }
+
+    /// Serve until `stop` is set or `duration` simulated seconds have passed.
+    pub fn run(&mut self, stop: &AtomicBool, duration: Option<f64>) -> Summary {
+        let ts = self.drive.sim().period();
+        let chunk = if self.speed.is_finite() {
+            ((self.speed * 0.5e-3 / ts).ceil() as u64).clamp(1, MAX_CHUNK)
+        } else {
+            MAX_CHUNK
+        };
+        let n_max = duration.map(|d| (d / ts).round().max(0.0) as u64);
+        let wall0 = Instant::now();
+        let mut n: u64 = 0;
+        let mut tel = String::new();
+        while !stop.load(Ordering::Relaxed) && n_max.is_none_or(|m| n < m) {
+            self.poll_input();
+            let k = n_max.map_or(chunk, |m| chunk.min(m - n));
+            tel.clear();
+            for _ in 0..k {
+                self.drive.step(&mut tel);
+            }
+            n += k;
+            self.queue_telemetry(&tel);
+            self.flush();
+            if self.speed.is_finite() {
+                let target = n as f64 * ts / self.speed;
+                let ahead = target - wall0.elapsed().as_secs_f64();
+                if ahead > 0.0 {
+                    std::thread::sleep(Duration::from_secs_f64(ahead.min(2e-3)));
+                }
+            }
+        }
+        // Last replies out (a reader may still be waiting for one).
+        let t_end = Instant::now() + Duration::from_millis(200);
+        while self.out_pos < self.out.len() && Instant::now() < t_end {
+            self.flush();
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        Summary {
+            sim_s: n as f64 * ts,
+            wall_s: wall0.elapsed().as_secs_f64(),
+            lines: self.lines,
+            dropped_tel_lines: self.dropped,
+        }
+    }
+
+    fn poll_input(&mut self) {
+        let mut buf = [0u8; 512];
+        loop {
+            match nix::unistd::read(self.fd, &mut buf) {
+                Ok(0) => return,
+                Ok(k) => {
+                    for &b in &buf[..k] {
+                        self.byte(b);
+                    }
+                }
+                // EAGAIN: nothing pending; EIO: no one has the slave open.
+                Err(Errno::EINTR) => continue,
+                Err(_) => return,
+            }
+        }
+    }
+
+    /// One received byte: line assembly (CR, LF or CRLF end a line), backspace, echo.
+    fn byte(&mut self, b: u8) {
+        let cr_lf = self.last_cr && b == b'\n';
+        self.last_cr = b == b'\r';
+        match b {
+            b'\r' | b'\n' => {
+                if cr_lf {
+                    return; // the LF of a CRLF
+                }
+                if self.echo {
+                    self.out.extend_from_slice(b"\r\n");
+                }
+                let line = std::mem::take(&mut self.line);
+                if std::mem::take(&mut self.overlong) {
+                    let msg = format!("error: line too long (max {MAX_LINE} characters)\r\n");
+                    self.out.extend_from_slice(msg.as_bytes());
+                    self.lines += 1;
+                } else if !line.is_empty() {
+                    let text = String::from_utf8_lossy(&line);
+                    let mut reply = String::new();
+                    let _ = self.drive.execute(&text, &mut reply);
+                    self.out.extend_from_slice(reply.as_bytes());
+                    self.lines += 1;
+                }
+                self.line = line;
+                self.line.clear();
+            }
+            0x08 | 0x7f => {
+                if self.line.pop().is_some() && self.echo {
+                    self.out.extend_from_slice(b"\x08 \x08");
+                }
+            }
+            _ => {
+                if self.line.len() >= MAX_LINE {
+                    self.overlong = true;
+                } else {
+                    self.line.push(b);
+                    if self.echo {
+                        self.out.push(b);
+                    }
+                }
+            }
+        }
+    }
+
+    fn queue_telemetry(&mut self, tel: &str) {
+        for l in tel.split_inclusive('\n') {
+            if self.out.len() - self.out_pos + l.len() > QUEUE_LIMIT {
+                self.dropped += 1;
+            } else {
+                self.out.extend_from_slice(l.as_bytes());
+            }
+        }
+    }
+
+    fn flush(&mut self) {
+        while self.out_pos < self.out.len() {
+            match nix::unistd::write(self.fd, &self.out[self.out_pos..]) {
+                Ok(k) => self.out_pos += k,
+                Err(Errno::EINTR) => continue,
+                Err(Errno::EAGAIN) => break,
+                // EIO: no one has the slave open: the bytes go nowhere, as on an unplugged UART.
+                Err(_) => {
+                    self.out_pos = self.out.len();
+                }
+            }
+        }
+        if self.out_pos == self.out.len() {
+            self.out.clear();
+            self.out_pos = 0;
+        } else if self.out_pos > QUEUE_LIMIT {
+            self.out.drain(..self.out_pos);
+            self.out_pos = 0;
+        }
+    }
+}
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: nix::libc::c_int) {
+    STOP.store(true, Ordering::Relaxed);
+}
+
+/// Ctrl-C (SIGINT) and SIGTERM set [`STOP`] instead of killing the process, so the run ends
+/// with its summary and the link is removed.
+fn catch_signals() -> Result<(), String> {
+    use nix::sys::signal::{sigaction, SaFlags, SigAction, SigHandler, SigSet, Signal};
+    let act = SigAction::new(
+        SigHandler::Handler(on_signal),
+        SaFlags::SA_RESTART,
+        SigSet::empty(),
+    );
+    for s in [Signal::SIGINT, Signal::SIGTERM] {
+        // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+        unsafe { sigaction(s, &act) }.map_err(|e| format!("signal handler: {e}"))?;
+    }
+    Ok(())
+}
+
+pub fn run(a: &ServeArgs) -> Result<(), String> {
+    let sc = match &a.scenario {
+        Some(p) => Scenario::from_file(p)?,
+        None => {
+            let mut s = Scenario::tmd(306.0);
+            s.name = "tmd-306".into();
+            s
+        }
+    };
+    if let Some(d) = a.duration {
+        if !(d.is_finite() && d > 0.0) {
+            return Err("--duration: a positive number of simulated seconds".into());
+        }
+    }
+    let drive = SimDrive::from_scenario(&sc)?;
+    let mut srv = Server::open(drive, a.speed, a.echo)?;
+    catch_signals()?;
+    if let Some(l) = &a.link {
+        let _ = std::fs::remove_file(l);
+        std::os::unix::fs::symlink(srv.path(), l)
+            .map_err(|e| format!("--link {}: {e}", l.display()))?;
+    }
+    let speed = if a.speed.is_finite() {
+        format!("{}× real time", a.speed)
+    } else {
+        "as fast as possible".into()
+    };
+    println!(
+        "regen serve: scenario {} at {speed}, console on {}",
+        sc.name,
+        srv.path()
+    );
+    println!(
+        "connect with: picocom {} (or screen, minicom, regen client); Ctrl-C stops",
+        a.link.as_deref().map_or(srv.path().into(), |l| l.display().to_string())
+    );
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    let s = srv.run(&STOP, a.duration);
+    if let Some(l) = &a.link {
+        let _ = std::fs::remove_file(l);
+    }
+    let e = srv.drive().sim().energy();
+    println!(
+        "stopped: {:.3} s simulated in {:.3} s ({:.1}× real time), {} lines executed, {} telemetry lines dropped",
+        s.sim_s,
+        s.wall_s,
+        s.sim_s / s.wall_s.max(1e-9),
+        s.lines,
+        s.dropped_tel_lines
+    );
+    println!(
+        "plant: {:.3} J into the load, energy residual {:.3e} ({:.4} % of the largest flow)",
+        e.to_inverter,
+        e.residual(),
+        100.0 * e.relative_residual()
+    );
+    if let Some(f) = srv.drive().sim().controller().fault() {
+        println!("firmware fault latched: {}", f.name());
+    }
+    Ok(())
+}

@@ -1,0 +1,124 @@
+//! A simulated drive as its serial console sees it: the closed-loop [`Sim`] (the firmware's
+//! `Controller` against the plant), the firmware's console executor
+//! ([`regen_fw::console::Console`], unchanged) and a simulated two-sector NOR flash behind the
+//! firmware's parameter store ([`regen_fw::store::FlashStore`]).
+//!
+//! As on the board, a console line is executed *between* two control periods (the board runs
+//! the console outside the current-loop interrupt), and [`Console::tick`] runs after every
+//! [`Sim::step`] (energy integration, telemetry decimation).
+//!
+//! Two things differ from the board, both because the simulated hardware is fixed when the
+//! simulation is built:
+//! * `pwm_hz` is the plant's period too. A command that would change it (`set pwm_hz`,
+//!   `load`/`defaults` of a different rate) is refused with one `error:` line and changes
+//!   nothing: it is executed on a copy of the controller and console first, and committed only
+//!   if the rate is unchanged.
+//! * The sensor scalings the plant uses (`amps_per_count`, `volts_per_count`, `adc_zero_code`,
+//!   `encoder_cpr`) are the scenario's hardware: changing them on the console changes the
+//!   firmware's *belief*, as it would on a board, not the simulated sensors.
+//!
+//! One host-only command is added in front of the console: `sim` (simulated time, the plant's
+//! own ledger of harvested energy and the energy balance residual), answered with `ok …`.
+
+use crate::sim::Sim;
+use crate::Scenario;
+use regen_fw::console::{CmdResult, Console, Refused};
+use regen_fw::store::{FlashStore, SimFlash};
+use std::fmt::Write;
+
+/// Words per flash sector: a 2 KiB page of the STM32G474.
+pub const SECTOR_WORDS: usize = 512;
+
+/// The simulated drive.
+pub struct SimDrive {
+    sim: Sim,
+    console: Console,
+    store: FlashStore<SimFlash<SECTOR_WORDS>>,
+    /// Plant energy into the inverter at the last `sim` command (for its interval average).
+    mark: (f64, f64),
+}
+
+impl SimDrive {
+    /// Wrap a built simulation (its controller keeps its mode: `Sim::new` starts in `run`).
+    pub fn new(sim: Sim) -> SimDrive {
+        SimDrive {
+            sim,
+            console: Console::new(),
+            store: FlashStore(SimFlash::default()),
+            mark: (0.0, 0.0),
+        }
+    }
+
+    /// Build a scenario's simulation (without its recorder: a served drive runs for ever).
+    pub fn from_scenario(sc: &Scenario) -> Result<SimDrive, String> {
+        let mut sc = sc.clone();
+        sc.record.channels.clear();
+        Ok(SimDrive::new(sc.build()?))
+    }
+
+    pub fn sim(&self) -> &Sim {
+        &self.sim
+    }
+
+    pub fn console(&self) -> &Console {
+        &self.console
+    }
+
+    /// One control period; telemetry lines due are appended to `out`.
+    pub fn step<W: Write>(&mut self, out: &mut W) {
+        self.sim.step();
+        self.console.tick(self.sim.controller(), out);
+    }
+
+    /// Execute one console line (between two periods). Writes the reply, whose last line is
+    /// `ok …` or `error: …`, to `out`.
+    pub fn execute(&mut self, line: &str, out: &mut String) -> CmdResult {
+        let mut words = line.split_ascii_whitespace();
+        if words.next() == Some("sim") {
+            if words.next().is_some() {
+                out.push_str("error: wrong arguments for 'sim' (no arguments)\r\n");
+                return Err(Refused);
+            }
+            self.sim_status(out);
+            return Ok(());
+        }
+        let pwm = self.sim.controller().config().pwm_hz;
+        // Transaction: run the command on copies; commit unless it changed the PWM rate.
+        let mut ctl = self.sim.controller().clone();
+        let mut con = self.console.clone();
+        let mut reply = String::new();
+        let r = con.execute(line, &mut ctl, &mut self.store, &mut reply);
+        if ctl.config().pwm_hz != pwm {
+            let _ = write!(
+                out,
+                "error: pwm_hz is the simulated hardware's period, fixed at {pwm} Hz by the scenario\r\n"
+            );
+            return Err(Refused);
+        }
+        *self.sim.controller_mut() = ctl;
+        self.console = con;
+        out.push_str(&reply);
+        r
+    }
+
+    /// `sim`: simulated time, the plant's harvested energy (into the inverter, the emulated
+    /// load's energy) since start and its average since the previous `sim`, and the relative
+    /// energy-balance residual.
+    fn sim_status(&mut self, out: &mut String) {
+        let e = self.sim.energy();
+        let t = self.sim.time();
+        let (t0, e0) = self.mark;
+        let p = if t > t0 {
+            (e.to_inverter - e0) / (t - t0)
+        } else {
+            0.0
+        };
+        self.mark = (t, e.to_inverter);
+        let _ = write!(
+            out,
+            "ok t={t:.6}s e_load={:.6}J p_load_avg={p:.6}W since t={t0:.6}s residual={:.3e}\r\n",
+            e.to_inverter,
+            e.relative_residual()
+        );
+    }
+}
