@@ -153,7 +153,14 @@ impl Client {
                 line.escape_debug()
             )));
         }
-        let mut bytes = line.as_bytes().to_vec();
+        self.send_raw(line.as_bytes())
+    }
+
+    /// Send `bytes` followed by LF as one line, unchecked (a test's malformed input), and
+    /// collect the reply like [`Client::command`].
+    pub fn send_raw(&mut self, bytes: &[u8]) -> Result<Reply, ClientError> {
+        let line = String::from_utf8_lossy(bytes).into_owned();
+        let mut bytes = bytes.to_vec();
         bytes.push(b'\n');
         self.port
             .write_all(&bytes)
@@ -169,7 +176,7 @@ impl Client {
             }
         }
         Err(ClientError::Timeout {
-            command: line.to_string(),
+            command: line,
             partial: reply,
         })
     }
@@ -253,7 +260,10 @@ mod tests {
         assert_eq!(verdict("ok"), Some(true));
         assert_eq!(verdict("ok r_load_ohm = 306 ohm"), Some(true));
         assert_eq!(verdict("okay"), None);
-        assert_eq!(verdict("error: unknown command 'x' (see help)"), Some(false));
+        assert_eq!(
+            verdict("error: unknown command 'x' (see help)"),
+            Some(false)
+        );
         assert_eq!(verdict("r_load_ohm = 306 ohm [0 .. inf] …"), None);
     }
 }

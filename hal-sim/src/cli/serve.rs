@@ -103,7 +103,7 @@ impl Server {
     /// Open a pseudo-terminal for `drive`, run at `speed` (simulated s per wall s; infinite =
     /// as fast as possible).
     pub fn open(drive: SimDrive, speed: f64, echo: bool) -> Result<Server, String> {
-        if !(speed > 0.0) {
+        if speed.is_nan() || speed <= 0.0 {
             return Err("speed must be positive".into());
         }
         let (master, slave) =
@@ -260,7 +260,25 @@ impl Server {
         }
     }
 
+    /// Whether no one has the slave end open (the master reports a hang-up).
+    fn hung_up(&self) -> bool {
+        use nix::poll::{poll, PollFd, PollFlags};
+        let mut p = [PollFd::new(self.fd, PollFlags::POLLOUT)];
+        matches!(poll(&mut p, 0), Ok(n) if n > 0)
+            && p[0]
+                .revents()
+                .is_some_and(|r| r.contains(PollFlags::POLLHUP))
+    }
+
     fn flush(&mut self) {
+        if self.out_pos < self.out.len() && self.hung_up() {
+            // No reader: the output goes nowhere, as on an unplugged UART, and what the pty
+            // still holds for the slave is dropped so the next reader gets no stale backlog.
+            let _ = nix::sys::termios::tcflush(self.fd, nix::sys::termios::FlushArg::TCOFLUSH);
+            self.out.clear();
+            self.out_pos = 0;
+            return;
+        }
         while self.out_pos < self.out.len() {
             match nix::unistd::write(self.fd, &self.out[self.out_pos..]) {
                 Ok(k) => self.out_pos += k,
@@ -338,7 +356,9 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
     );
     println!(
         "connect with: picocom {} (or screen, minicom, regen client); Ctrl-C stops",
-        a.link.as_deref().map_or(srv.path().into(), |l| l.display().to_string())
+        a.link
+            .as_deref()
+            .map_or(srv.path().into(), |l| l.display().to_string())
     );
     use std::io::Write;
     let _ = std::io::stdout().flush();
