@@ -256,11 +256,17 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
         assert_eq!(ok(&mut c, "list"), before, "{shown} changed a parameter");
         assert_eq!(mode_of(&mut c), "mode=run", "{shown}");
     }
-    // The simulated hardware's PWM rate: refused even where the console would take it.
+    // Line editing as on a terminal: DEL erases, CRLF ends one line (one reply).
+    let r = c.send_raw(b"get r_load_ohx\x7fm\r").unwrap();
+    assert_eq!(r.lines, ["ok r_load_ohm = 306 ohm"]);
+    // The simulated hardware's PWM rate: refused even where the console would take it
+    // (idle, and 40 kHz passes `Config::validate` with the default current bandwidth).
     ok(&mut c, "mode idle");
-    let r = c.command("set pwm_hz 10000").unwrap();
+    let r = c.command("set pwm_hz 40000").unwrap();
     assert!(
-        r.lines.len() == 1 && r.last().starts_with("error: pwm_hz"),
+        r.lines.len() == 1
+            && r.last()
+                .starts_with("error: pwm_hz is the simulated hardware"),
         "{:?}",
         r.lines
     );

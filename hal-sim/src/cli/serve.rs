@@ -52,8 +52,8 @@ pub struct ServeArgs {
     /// Stop after this many simulated seconds (default: run until Ctrl-C).
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Echo received characters and handle backspace (for a terminal without local echo;
-    /// `regen client` does not want it).
+    /// Echo received characters (for a terminal without local echo; `regen client` does not
+    /// want it). Backspace/DEL edit the line in any case.
     #[arg(long)]
     pub echo: bool,
     /// Also create a symbolic link to the pseudo-terminal at this path (a stable name for
