@@ -192,7 +192,9 @@ impl Controller {
     /// derate factor the loop applies. Reads the last period's telemetry; call it between
     /// steps (same execution context as the loop, or with the controller locked).
     pub fn supervise(&mut self) {
-        let v = self.prot.supervise(&self.cfg, self.mode, &self.tel);
+        let v = self
+            .prot
+            .supervise(&self.cfg, self.mode, &self.tel, self.enc.position);
         if let Some(f) = v.trip {
             let t = self.tel;
             self.trip(f, &t);
@@ -210,6 +212,7 @@ impl Controller {
     /// Zero the position (the travel `x` counts from here).
     pub fn rezero_position(&mut self) {
         self.enc.rezero();
+        self.prot.rezero();
     }
 
     /// Latch `f` (with a snapshot of `t`) and go to its safe state. Open dominates: once a

@@ -223,8 +223,12 @@ pub struct Protection {
     /// Leaky overrun bucket: + overruns, − 1 per tick.
     bucket: u16,
     ticks: u32,
-    /// Low-pass filtered |f_e|, N.
+    /// Low-pass filtered electromagnetic force (signed, so current noise averages out), N.
     force_filt: f32,
+    /// Encoder position at the last tick, counts, and the speed over the tick, rad/s.
+    last_pos: i32,
+    primed: bool,
+    omega_raw: f32,
     /// I²t state: per-unit winding temperature rise, settles at (|i|/i2t_cont_a)².
     i2t: f32,
     emf_count: u16,
@@ -243,6 +247,9 @@ impl Default for Protection {
             bucket: 0,
             ticks: 0,
             force_filt: 0.0,
+            last_pos: 0,
+            primed: false,
+            omega_raw: 0.0,
             i2t: 0.0,
             emf_count: 0,
             isum_count: 0,
@@ -269,13 +276,16 @@ pub fn derate_regen(r: Dq, omega_m: Q, derate: Q) -> Dq {
     }
 }
 
-/// |f_e| = 3/2·K_e·|i_q|/l, N.
+/// f_e = 3/2·K_e·i_q/l, N (sign of the torque).
 fn force_of(cfg: &Config, i_q: f32) -> f32 {
-    let f = 1.5 * cfg.ke_v_s_per_rad * i_q / cfg.lead_m_per_rad;
-    if f < 0.0 {
-        -f
+    1.5 * cfg.ke_v_s_per_rad * i_q / cfg.lead_m_per_rad
+}
+
+fn abs(x: f32) -> f32 {
+    if x < 0.0 {
+        -x
     } else {
-        f
+        x
     }
 }
 
@@ -302,7 +312,17 @@ impl Protection {
 
     /// The filtered force magnitude, N.
     pub fn force_n(&self) -> f32 {
-        self.force_filt
+        abs(self.force_filt)
+    }
+
+    /// Shaft speed over the last tick from the raw encoder count, rad/s.
+    pub fn omega_raw(&self) -> f32 {
+        self.omega_raw
+    }
+
+    /// The encoder was re-zeroed: the next tick measures no speed across the jump.
+    pub fn rezero(&mut self) {
+        self.primed = false;
     }
 
     /// Latch `f` with a snapshot built from the given measurements.
@@ -324,7 +344,7 @@ impl Protection {
                         v_bus: t.v_bus,
                         omega_m: t.omega_m,
                         x: t.x,
-                        force_n: self.force_filt,
+                        force_n: abs(self.force_filt),
                         i2t: self.i2t,
                         derate: self.derate.to_num(),
                     },
@@ -339,8 +359,15 @@ impl Protection {
         self.record = None;
     }
 
-    /// One supervision tick over the loop's last telemetry. `brake`: the chopper state.
-    pub fn supervise(&mut self, cfg: &Config, mode: Mode, t: &Telemetry) -> Verdict {
+    /// One supervision tick over the loop's last telemetry and the encoder's multi-turn
+    /// count.
+    pub fn supervise(
+        &mut self,
+        cfg: &Config,
+        mode: Mode,
+        t: &Telemetry,
+        enc_position: i32,
+    ) -> Verdict {
         let dt = 1.0 / SUPERVISE_HZ;
         self.ticks = self.ticks.wrapping_add(1);
         let v_bus: f32 = t.v_bus.to_num();
@@ -377,21 +404,24 @@ impl Protection {
             set(Fault::MachineI2t);
         }
 
-        // Force: |f_e| low-pass filtered (τ = f_filter_s); not in Short, where the force is
-        // the short circuit's own, accepted when choosing the short.
-        let f = force_of(cfg, i_q);
-        let a = dt / (cfg.f_filter_s + dt);
-        self.force_filt += (f - self.force_filt) * a;
-        if mode != Mode::Short && self.force_filt > cfg.f_trip_n {
-            set(Fault::OverForce);
-        }
-
         // Phase-current consistency: the star point floats, so i_a + i_b + i_c = 0.
         let s: f32 = t.i_abc[0].to_num::<f32>() + t.i_abc[1].to_num::<f32>() + t.i_abc[2].to_num::<f32>();
         self.isum_now = s > cfg.i_sum_tol_a || s < -cfg.i_sum_tol_a;
         self.isum_count = leaky(self.isum_count, self.isum_now);
         if self.isum_count >= ISUM_TICKS {
             set(Fault::CurrentSensor);
+        }
+
+        // Force: f_e low-pass filtered (τ = f_filter_s; signed, so that current noise
+        // averages out; the force changes sign only when the motion reverses, ≪ 1/τ); not in
+        // Short, where the force is the short circuit's own, accepted when choosing the short.
+        let f = force_of(cfg, i_q);
+        let a = dt / (cfg.f_filter_s + dt);
+        self.force_filt += (f - self.force_filt) * a;
+        // While the phase currents disagree (below), the force computed from them is not
+        // trusted: the sensor check decides within ISUM_TICKS ticks, to the same open state.
+        if mode != Mode::Short && self.isum_count == 0 && abs(self.force_filt) > cfg.f_trip_n {
+            set(Fault::OverForce);
         }
 
         // Loop overrun: leaky bucket, one overrun per ms sustained is tolerated.
@@ -401,14 +431,25 @@ impl Protection {
             set(Fault::LoopOverrun);
         }
 
+        // Speed from the raw count over the tick (no observer lag; one count per tick is
+        // 2π/cpr·1 kHz, 0.6 rad/s at 10,000 cpr).
+        let d = enc_position.wrapping_sub(self.last_pos);
+        self.omega_raw = if self.primed {
+            d as f32 * (core::f32::consts::TAU / cfg.encoder_cpr as f32) * SUPERVISE_HZ
+        } else {
+            0.0
+        };
+        self.last_pos = enc_position;
+        self.primed = true;
+
         if controlled {
             // Stroke.
             let x: f32 = t.x.to_num();
             if x < cfg.x_min_m || x > cfg.x_max_m {
                 set(Fault::StrokeLimit);
             }
-            // Speed plausibility.
-            if omega > cfg.omega_max_rad_s || omega < -cfg.omega_max_rad_s {
+            // Speed plausibility, on the raw count (the observer lags a runaway count).
+            if abs(self.omega_raw) > cfg.omega_max_rad_s {
                 set(Fault::SpeedImplausible);
             }
         }
@@ -471,7 +512,7 @@ impl Protection {
             Fault::EncoderImplausible => {
                 encoder_implausible.then_some("encoder still jumping")
             }
-            Fault::OverForce => (self.force_filt > FORCE_CLEAR * cfg.f_trip_n)
+            Fault::OverForce => (abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n)
                 .then_some("filtered force still above 0.9 f_trip_n"),
             Fault::MachineI2t => {
                 (self.i2t > I2T_CLEAR).then_some("machine still hot (I2t above 0.8)")
@@ -479,7 +520,7 @@ impl Protection {
             Fault::EncoderLoss => {
                 (self.emf_count > 0).then_some("emf/encoder mismatch detector not yet decayed")
             }
-            Fault::SpeedImplausible => (t.omega_m.to_num::<f32>().abs() > cfg.omega_max_rad_s)
+            Fault::SpeedImplausible => (abs(self.omega_raw) > cfg.omega_max_rad_s)
                 .then_some("speed still above omega_max_rad_s"),
             Fault::StrokeLimit => {
                 let x: f32 = t.x.to_num();
@@ -554,7 +595,7 @@ mod tests {
                 v_bus: q(v),
                 ..tel()
             };
-            p.supervise(&cfg, Mode::Run, &t);
+            p.supervise(&cfg, Mode::Run, &t, 0);
             // Q16.16 and the bus reading's f32 rounding: 1e-4.
             assert!((p.derate.to_num::<f32>() - want).abs() < 1e-4, "{v}");
         }
@@ -578,7 +619,7 @@ mod tests {
         let mut n = 0;
         loop {
             n += 1;
-            match p.supervise(&cfg, Mode::Idle, &t).trip {
+            match p.supervise(&cfg, Mode::Idle, &t, 0).trip {
                 None => assert!(n < 10_000),
                 Some(f) => {
                     assert_eq!(f, Fault::MachineI2t);
@@ -598,13 +639,13 @@ mod tests {
         let mut p = Protection::default();
         for _ in 0..1000 {
             p.report_overrun();
-            assert!(p.supervise(&cfg, Mode::Run, &tel()).trip.is_none());
+            assert!(p.supervise(&cfg, Mode::Run, &tel(), 0).trip.is_none());
         }
         for _ in 0..=cfg.overrun_max + 1 {
             p.report_overrun();
         }
         assert_eq!(
-            p.supervise(&cfg, Mode::Run, &tel()).trip,
+            p.supervise(&cfg, Mode::Run, &tel(), 0).trip,
             Some(Fault::LoopOverrun)
         );
     }
