@@ -213,6 +213,17 @@ pub struct Verdict {
     pub trip: Option<Fault>,
 }
 
+/// Order in which faults found in the same supervision tick are reported (cause first).
+const PRIORITY: [Fault; 7] = [
+    Fault::CurrentSensor,
+    Fault::SpeedImplausible,
+    Fault::EncoderLoss,
+    Fault::LoopOverrun,
+    Fault::StrokeLimit,
+    Fault::OverForce,
+    Fault::MachineI2t,
+];
+
 /// Protection state owned by the controller.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Protection {
@@ -375,12 +386,11 @@ impl Protection {
         let i_d: f32 = t.i_dq.d.to_num();
         let i_q: f32 = t.i_dq.q.to_num();
         let controlled = matches!(mode, Mode::Run | Mode::Open);
-        let mut trip = None;
-        let mut set = |f: Fault| {
-            if trip.is_none() {
-                trip = Some(f)
-            }
-        };
+        // Faults found this tick (bit per code); the reported one is chosen by cause
+        // priority at the end: a sensor that lies (current sum, encoder) before what is
+        // computed from it (force, I²t), so that a fault is named by its cause.
+        let mut found: u16 = 0;
+        let mut set = |f: Fault| found |= f.bit();
 
         // Bus management: derate factor, linear from 1 at derate_start_v to 0 at
         // derate_end_v.
@@ -486,6 +496,7 @@ impl Protection {
             w |= warn::HOT;
         }
         self.warnings = w;
+        let trip = PRIORITY.iter().copied().find(|f| found & f.bit() != 0);
         Verdict { trip }
     }
 
