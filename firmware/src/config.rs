@@ -320,7 +320,11 @@ impl Config {
         in_range(self.enc_emf_tol_v, 0.1, 2_000.0, "enc_emf_tol_v")?;
         in_range(self.x_min_m, -1_000.0, 1_000.0, "x_min_m")?;
         in_range(self.x_max_m, -1_000.0, 1_000.0, "x_max_m")?;
-        check(self.x_min_m < self.x_max_m, "x_min_m", "must be below x_max_m")?;
+        check(
+            self.x_min_m < self.x_max_m,
+            "x_min_m",
+            "must be below x_max_m",
+        )?;
         in_range(self.i_sum_tol_a, 0.0, 1_000.0, "i_sum_tol_a")?;
         // Three readings each rounded by half an LSB, plus a count of noise each.
         check(
@@ -462,9 +466,9 @@ impl Gains {
             i_max: q(c.i_max_a),
             // A trip above the ADC's range could never fire: clamp it to the last code below
             // the nearer rail, so that an over-range reading trips.
-            i_trip: q(c
-                .i_trip_a
-                .min(c.amps_per_count * (c.adc_zero_code.min(4095 - c.adc_zero_code) as f32 - 1.0))),
+            i_trip: q(c.i_trip_a.min(
+                c.amps_per_count * (c.adc_zero_code.min(4095 - c.adc_zero_code) as f32 - 1.0),
+            )),
             v_ov: q(c.v_bus_ov),
             v_uv: q(c.v_bus_uv),
             brake_on: q(c.brake_on_v),

@@ -305,7 +305,13 @@ impl Console {
                                 s.derate
                             );
                             for g in r.later() {
-                                let _ = write!(out, "later: {} {}: {}\r\n", g.code(), g.name(), g.describe());
+                                let _ = write!(
+                                    out,
+                                    "later: {} {}: {}\r\n",
+                                    g.code(),
+                                    g.name(),
+                                    g.describe()
+                                );
                             }
                         }
                         let _ = write!(out, "now in mode {}\r\n", ctl.mode().name());

@@ -156,7 +156,12 @@ impl Controller {
         if let Some(f) = self.fault {
             let later = self.prot.record().map_or(0, |r| r.later);
             // The first fault's cause and every later one's must be gone.
-            for g in core::iter::once(f).chain(Fault::ALL.iter().copied().filter(|g| later & (1 << g.code()) != 0)) {
+            for g in core::iter::once(f).chain(
+                Fault::ALL
+                    .iter()
+                    .copied()
+                    .filter(|g| later & (1 << g.code()) != 0),
+            ) {
                 if let Some(why) =
                     self.prot
                         .cause_present(g, &self.cfg, &self.tel, self.enc.implausible)

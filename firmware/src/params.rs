@@ -332,8 +332,22 @@ pub static PARAMS: &[Param] = &[
         true,
         "encoder/emf plausibility allowance (plus 50 %)"
     ),
-    real!(x_min_m, "m", -1_000.0, 1_000.0, true, "stroke limit, low end"),
-    real!(x_max_m, "m", -1_000.0, 1_000.0, true, "stroke limit, high end"),
+    real!(
+        x_min_m,
+        "m",
+        -1_000.0,
+        1_000.0,
+        true,
+        "stroke limit, low end"
+    ),
+    real!(
+        x_max_m,
+        "m",
+        -1_000.0,
+        1_000.0,
+        true,
+        "stroke limit, high end"
+    ),
     real!(
         i_sum_tol_a,
         "A",

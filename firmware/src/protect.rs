@@ -117,7 +117,9 @@ impl Fault {
             Fault::EncoderImplausible => "encoder count jumped implausibly in one period",
             Fault::OverForce => "force above the device rating f_trip_n",
             Fault::MachineI2t => "machine I2t thermal estimate at its rated temperature rise",
-            Fault::EncoderLoss => "back-emf seen by the current loop disagrees with the encoder speed",
+            Fault::EncoderLoss => {
+                "back-emf seen by the current loop disagrees with the encoder speed"
+            }
             Fault::SpeedImplausible => "speed above omega_max_rad_s",
             Fault::StrokeLimit => "travel outside x_min_m .. x_max_m",
             Fault::LoopOverrun => "current loop overran its period too often",
@@ -415,7 +417,8 @@ impl Protection {
         }
 
         // Phase-current consistency: the star point floats, so i_a + i_b + i_c = 0.
-        let s: f32 = t.i_abc[0].to_num::<f32>() + t.i_abc[1].to_num::<f32>() + t.i_abc[2].to_num::<f32>();
+        let s: f32 =
+            t.i_abc[0].to_num::<f32>() + t.i_abc[1].to_num::<f32>() + t.i_abc[2].to_num::<f32>();
         self.isum_now = s > cfg.i_sum_tol_a || s < -cfg.i_sum_tol_a;
         self.isum_count = leaky(self.isum_count, self.isum_now);
         if self.isum_count >= ISUM_TICKS {
@@ -520,9 +523,7 @@ impl Protection {
                 (v > cfg.derate_start_v).then_some("bus still above derate_start_v")
             }
             Fault::BusUnderVoltage => (v < cfg.v_bus_uv).then_some("bus still below v_bus_uv"),
-            Fault::EncoderImplausible => {
-                encoder_implausible.then_some("encoder still jumping")
-            }
+            Fault::EncoderImplausible => encoder_implausible.then_some("encoder still jumping"),
             Fault::OverForce => (abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n)
                 .then_some("filtered force still above 0.9 f_trip_n"),
             Fault::MachineI2t => {
@@ -538,9 +539,8 @@ impl Protection {
                 (x < cfg.x_min_m || x > cfg.x_max_m).then_some("travel still outside the stroke")
             }
             Fault::LoopOverrun => (self.bucket > 0).then_some("overruns still being reported"),
-            Fault::CurrentSensor => {
-                (self.isum_now || self.isum_count > 0).then_some("phase currents still do not sum to zero")
-            }
+            Fault::CurrentSensor => (self.isum_now || self.isum_count > 0)
+                .then_some("phase currents still do not sum to zero"),
         }
     }
 }
@@ -597,10 +597,7 @@ mod tests {
         for (v, want) in [
             (cfg.derate_start_v - 1.0, 1.0),
             (cfg.derate_end_v + 1.0, 0.0),
-            (
-                0.5 * (cfg.derate_start_v + cfg.derate_end_v),
-                0.5,
-            ),
+            (0.5 * (cfg.derate_start_v + cfg.derate_end_v), 0.5),
         ] {
             let t = Telemetry {
                 v_bus: q(v),
@@ -641,7 +638,9 @@ mod tests {
         let want = cfg.i2t_tau_s * (4.0f32 / 3.0).ln() * SUPERVISE_HZ;
         // Forward Euler at dt/τ = 1e-3 and the Q16.16 current: within 1 % (+1 tick).
         assert!((n as f32 - want).abs() < 0.01 * want + 1.0, "{n} vs {want}");
-        assert!(p.cause_present(Fault::MachineI2t, &cfg, &t, false).is_some());
+        assert!(p
+            .cause_present(Fault::MachineI2t, &cfg, &t, false)
+            .is_some());
     }
 
     #[test]

@@ -340,7 +340,13 @@ impl Sim {
     /// structure must stay the same structure (its stored energy is in the ledger).
     pub fn set_drive(&mut self, drive: Drive) -> Result<(), String> {
         match (&self.rig.drive, &drive) {
-            (Drive::Structure { structure: a, .. }, Drive::Structure { structure: b, excitation }) => {
+            (
+                Drive::Structure { structure: a, .. },
+                Drive::Structure {
+                    structure: b,
+                    excitation,
+                },
+            ) => {
                 if a != b {
                     return Err("drive: the structure cannot change during a run".into());
                 }

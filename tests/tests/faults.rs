@@ -74,8 +74,8 @@ struct Case {
     duration_s: f64,
     expect: Expect,
     /// For kinds whose moment is set by the physics, not the injection: measure from the
-    /// first period the plant meets this condition (true x outside the stroke; true force
-    /// above f_trip).
+    /// first period the plant meets this condition (true force above f_trip; or the first of
+    /// stroke and force).
     from_plant: Option<PlantCond>,
     /// Expected trip time from the injection for the I²t kind (checked to 5 % + 10 ms).
     i2t_predicted_s: Option<f64>,
@@ -83,7 +83,6 @@ struct Case {
 
 #[derive(Clone, Copy, Debug)]
 enum PlantCond {
-    Stroke(f64),
     Force(f64),
     /// Excitation beyond the rating: whichever the plant meets first decides the right
     /// fault: the true travel outside ±lim (stroke_limit), or the true electromagnetic force,
@@ -94,7 +93,11 @@ enum PlantCond {
     /// is right once the test's filtered force passed 0.95·f_trip before the stroke, and
     /// required once it passed 1.05·f_trip; stroke_limit otherwise. Within `AMBIGUOUS_S`
     /// of each other either name is right.
-    StrokeOrForce { lim: f64, f_trip: f64, tau: f64 },
+    StrokeOrForce {
+        lim: f64,
+        f_trip: f64,
+        tau: f64,
+    },
 }
 
 const AMBIGUOUS_S: f64 = 0.003;
@@ -459,7 +462,6 @@ fn run(c: &Case) -> Result<f64, String> {
         if fs.active() && t_ref.is_none() {
             t_ref = match c.from_plant {
                 None => Some(c.at_s),
-                Some(PlantCond::Stroke(lim)) => (sim.motion().0.abs() > lim).then_some(t),
                 Some(PlantCond::Force(f)) => (sim.force().1.abs() > f).then_some(t),
                 Some(PlantCond::StrokeOrForce { .. }) => None,
             };
@@ -506,8 +508,7 @@ fn run(c: &Case) -> Result<f64, String> {
     }
     let sim = &fs.sim;
     let i_lim = cfg.i_trip_a as f64
-        + 2.0 * ts * (2.0 / 3.0 * v_peak + cfg.ke_v_s_per_rad as f64 * w_peak)
-            / c.sc.machine.l_h;
+        + 2.0 * ts * (2.0 / 3.0 * v_peak + cfg.ke_v_s_per_rad as f64 * w_peak) / c.sc.machine.l_h;
     if i_peak > i_lim {
         return Err(format!("phase current {i_peak:.2} A > limit {i_lim:.2} A"));
     }
@@ -601,7 +602,7 @@ fn run(c: &Case) -> Result<f64, String> {
             // triangle's instantaneous reversals, where the true emf flips while the speed
             // observer lags ≈ 3 ms (100 Hz): the current loop's transient then returns up to
             // ≈ 1.5 J to the bus, 3.6 V on 1 mF at 415 V. Cap: end of band + 6 V, still 5 V
-            // under the trip (measured: ≤ 3.3 V over the band, 200 seeds).
+            // under the trip (measured: ≤ 3.5 V over the band, 200 seeds).
             let cap = if warning == regen_fw::protect::warn::BRAKING {
                 cfg.derate_start_v as f64
             } else {
@@ -732,8 +733,10 @@ fn debug_trace() {
                 ctl.fault().map(|f| f.name())
             );
         }
-        if ctl.fault().is_some() && s.time() > 0.01 + c.at_s && k > 0 {
-            if fs.sim.time() > 2.0 { break; }
+        // Stop 50 ms after the trip.
+        let t_trip = ctl.protection().record().map(|r| r.snap.t_ms as f64 * 1e-3);
+        if t_trip.is_some_and(|t| s.time() > t + 0.05) {
+            break;
         }
     }
 }
