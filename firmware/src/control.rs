@@ -131,7 +131,12 @@ impl Controller {
     /// fault's own safe mode and Idle.
     pub fn set_mode(&mut self, m: Mode) -> Result<(), Fault> {
         if let Some(f) = self.fault {
-            if m != Mode::Idle && m != f.safe_mode() {
+            // Open dominates: after a later fault that opened the phases, only Idle.
+            let opened = self
+                .prot
+                .record()
+                .is_some_and(|r| r.later().any(|g| g.safe_mode() == Mode::Idle));
+            if m != Mode::Idle && (m != f.safe_mode() || opened) {
                 return Err(f);
             }
         }
