@@ -24,6 +24,12 @@ pub enum Inject {
     BusSensorOpen,
     /// The bus-voltage sensor reads full scale.
     BusSensorRail,
+    /// The bus-voltage reading freezes at its value at the moment of injection.
+    BusSensorStuck,
+    /// Gaussian noise of `sigma_v` (V rms) on the bus-voltage reading.
+    BusSensorNoise { sigma_v: f64 },
+    /// The encoder count jitters by a uniform ±`counts` every period (no net drift).
+    EncoderNoise { counts: u16 },
     /// The encoder counter stops (cable cut, coupling slipped).
     EncoderStuck,
     /// The counter jumps by `counts` once and keeps the offset (a noise burst or a slip).
@@ -53,6 +59,9 @@ impl Inject {
             Inject::CurrentOffset { .. } => "current_offset",
             Inject::BusSensorOpen => "bus_sensor_open",
             Inject::BusSensorRail => "bus_sensor_rail",
+            Inject::BusSensorStuck => "bus_sensor_stuck",
+            Inject::BusSensorNoise { .. } => "bus_sensor_noise",
+            Inject::EncoderNoise { .. } => "encoder_noise",
             Inject::EncoderStuck => "encoder_stuck",
             Inject::EncoderGlitch { .. } => "encoder_glitch",
             Inject::EncoderRunaway { .. } => "encoder_runaway",
@@ -75,6 +84,7 @@ pub struct FaultSim {
     enc_offset: u16,
     rng: u64,
     counts_per_amp: f64,
+    counts_per_volt: f64,
     k: u64,
 }
 
@@ -82,6 +92,7 @@ impl FaultSim {
     /// Wrap `sim`; `seed` drives the injected noise.
     pub fn new(sim: Sim, inject: Inject, at_s: f64, seed: u64) -> FaultSim {
         let counts_per_amp = 1.0 / sim.controller().config().amps_per_count as f64;
+        let counts_per_volt = 1.0 / sim.controller().config().volts_per_count as f64;
         FaultSim {
             sim,
             inject,
@@ -91,6 +102,7 @@ impl FaultSim {
             enc_offset: 0,
             rng: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
             counts_per_amp,
+            counts_per_volt,
             k: 0,
         }
     }
@@ -157,11 +169,12 @@ impl FaultSim {
             }
         }
         let inj = self.inject;
-        let (frozen, enc_offset, rng, cpa) = (
+        let (frozen, enc_offset, rng, cpa, cpv) = (
             &mut self.frozen,
             &mut self.enc_offset,
             &mut self.rng,
             self.counts_per_amp,
+            self.counts_per_volt,
         );
         self.sim.step_with(
             |s: &mut RawSample| match inj {
@@ -182,6 +195,21 @@ impl FaultSim {
                 }
                 Inject::BusSensorOpen => s.v_bus = 0,
                 Inject::BusSensorRail => s.v_bus = 4095,
+                Inject::BusSensorStuck => {
+                    if first {
+                        *frozen = s.v_bus;
+                    }
+                    s.v_bus = *frozen;
+                }
+                Inject::BusSensorNoise { sigma_v } => {
+                    let c = s.v_bus as f64 + sigma_v * cpv * gauss(rng);
+                    s.v_bus = c.round().clamp(0.0, 4095.0) as u16;
+                }
+                Inject::EncoderNoise { counts } => {
+                    let n = 2 * counts as u64 + 1;
+                    let j = (uniform(rng) * n as f64) as i64 - counts as i64;
+                    s.encoder = s.encoder.wrapping_add(j as u16);
+                }
                 Inject::EncoderStuck => {
                     if first {
                         *frozen = s.encoder;
@@ -207,6 +235,14 @@ impl FaultSim {
         );
         Ok(())
     }
+}
+
+/// A uniform deviate in [0, 1) (xorshift64*).
+fn uniform(s: &mut u64) -> f64 {
+    *s ^= *s >> 12;
+    *s ^= *s << 25;
+    *s ^= *s >> 27;
+    (s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// A standard normal deviate (xorshift64* + Box–Muller).

@@ -133,9 +133,12 @@ const KINDS: &[&str] = &[
     "current_offset_small",
     "bus_sensor_open",
     "bus_sensor_rail",
+    "bus_sensor_stuck",
+    "bus_sensor_noise",
     "encoder_stuck",
     "encoder_glitch",
     "encoder_runaway",
+    "encoder_noise",
     "load_disconnect",
     "load_disconnect_brake_open",
     "overexcite_stroke",
@@ -242,6 +245,35 @@ fn case(kind: &str, seed: u64) -> Case {
                 bound_s: instant,
             },
             0.1,
+        ),
+        // A bus reading frozen while the source holds the bus, or noisy (2–8 V rms against
+        // the 100 V margins to the OV and UV trips, 12σ): the modulation is scaled by a
+        // wrong or noisy bus, which the current loop's integral absorbs; no fault. (Frozen
+        // with the source lost is a double fault the ADC cannot see: the board's bus
+        // comparator is the protection, docs/protection.md.)
+        "bus_sensor_stuck" => (
+            imposed(&mut rng, 5.0, 300.0),
+            Inject::BusSensorStuck,
+            Expect::Nothing,
+            0.3,
+        ),
+        "bus_sensor_noise" => (
+            imposed(&mut rng, 5.0, 300.0),
+            Inject::BusSensorNoise {
+                sigma_v: rng.uni(2.0, 8.0),
+            },
+            Expect::Nothing,
+            0.3,
+        ),
+        // ±1–10 counts of jitter per period (≤ 0.03 rad electrical): the PLL filters it, the
+        // 1 ms raw speed errs by at most 2·10 counts = 12.6 rad/s, far under ω_max; no fault.
+        "encoder_noise" => (
+            imposed(&mut rng, 5.0, 300.0),
+            Inject::EncoderNoise {
+                counts: 1 + rng.pick(10) as u16,
+            },
+            Expect::Nothing,
+            0.3,
         ),
         // After the stop the PLL speed decays within ≈ 2/ω_b = 3 ms (100 Hz); the true emf
         // (≥ 44 V at 0.12 m/s) then exceeds the allowance (10 V + 50 %) every tick: EMF_TICKS
