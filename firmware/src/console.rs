@@ -270,7 +270,7 @@ impl Console {
                 write_warnings(out, p.warnings);
                 let _ = write!(
                     out,
-                    " i2t={} force_filt={}N derate={}\r\n",
+                    " i2t={:.4} force_filt={:.0}N derate={:.3}\r\n",
                     p.i2t(),
                     p.force_n(),
                     p.derate.to_num::<f32>()
@@ -289,7 +289,7 @@ impl Console {
                             let s = &r.snap;
                             let _ = write!(
                                 out,
-                                "at t={} ms in mode {}: ia={} ib={} ic={} A id={} iq={} A vbus={} V w={} rad/s x={} m force={} N i2t={} derate={}\r\n",
+                                "at t={} ms in mode {}: ia={:.3} ib={:.3} ic={:.3} A id={:.3} iq={:.3} A vbus={:.2} V w={:.2} rad/s x={:.4} m force={:.0} N i2t={:.4} derate={:.3}\r\n",
                                 s.t_ms,
                                 s.mode.name(),
                                 s.i_abc[0].to_num::<f32>(),
