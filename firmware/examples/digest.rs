@@ -21,6 +21,7 @@ fn main() {
     let mut ctl = Controller::new(&cfg).unwrap();
     ctl.set_mode(Mode::Run).unwrap();
     let half = rec.len() / regen_fw::selftest::STEP_BYTES / 2;
+    let every = ctl.supervise_every() as usize;
     let mut k = 0usize;
     let (digest, steps) = replay(&mut ctl, &rec, |c, s| {
         if k == half {
@@ -31,7 +32,16 @@ fn main() {
             .unwrap();
         }
         k += 1;
-        c.step(s)
+        let a = c.step(s);
+        // Protection supervision every 20 steps (1 kHz) on a copy, as the Cortex-M4 run
+        // does (see there).
+        if k.is_multiple_of(every) {
+            c.clone().supervise();
+        }
+        a
     });
     println!("digest={digest:016x} steps={steps}");
+    if let Some(f) = ctl.fault() {
+        eprintln!("fault latched during the replay: {}", f.name());
+    }
 }

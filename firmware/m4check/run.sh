@@ -32,6 +32,9 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   max=$(echo "$line" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
   min=$(echo "$line" | sed -n 's/.*min=\([0-9]*\).*/\1/p')
   echo "instructions per current-loop step: min $min, max $max (target: at most 400)"
+  sline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_supervise 2>&1 | grep insnwin | tail -n1)
+  echo "$sline"
+  echo "instructions per protection supervision tick (1 kHz, outside the step): min $(echo "$sline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$sline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
 else
   echo "instruction count skipped: $tools not found"
 fi

@@ -70,6 +70,36 @@ pub struct Config {
     pub brake_on_v: f32,
     /// Brake chopper opens below this bus voltage, V.
     pub brake_off_v: f32,
+    /// Bus voltage where the regenerative current starts to be derated, V
+    /// (`brake_on_v ≤ derate_start_v < derate_end_v ≤ v_bus_ov`).
+    pub derate_start_v: f32,
+    /// Bus voltage where the regenerative current reaches zero, V.
+    pub derate_end_v: f32,
+    /// Force trip, N: the low-pass filtered electromagnetic force above it trips `over_force`
+    /// (`inf` = off, for experiments beyond the rating). Default 1.2× the device rating
+    /// f_rat = 1,076 N (the rated torque 2.74 N·m over the lead).
+    pub f_trip_n: f32,
+    /// Time constant of the force filter, s.
+    pub f_filter_s: f32,
+    /// Machine continuous current (dq magnitude), A: the I²t estimate settles at
+    /// `(|i|/i2t_cont_a)²` and trips at 1. Default 2.0 A: 3 % above the rated-torque current
+    /// (the default clip), so a drive held at its clip with ADC noise stays below the trip.
+    pub i2t_cont_a: f32,
+    /// Thermal time constant of the winding for the I²t estimate, s (assumed; the AKM42E
+    /// datasheet value is not in our reference).
+    pub i2t_tau_s: f32,
+    /// Largest plausible shaft speed, rad/s (default: 6,000 rpm, the AKM4x's maximum).
+    pub omega_max_rad_s: f32,
+    /// Encoder/emf plausibility: absolute allowance on the emf mismatch, V (plus 50 %).
+    pub enc_emf_tol_v: f32,
+    /// Stroke end limits of the travel `x` (from the zero position), m.
+    pub x_min_m: f32,
+    pub x_max_m: f32,
+    /// Largest tolerated |i_a + i_b + i_c|, A (sensor consistency).
+    pub i_sum_tol_a: f32,
+    /// Overrun bucket size: more than this many current-loop overruns beyond one per
+    /// millisecond trip `loop_overrun`.
+    pub overrun_max: u16,
     /// Command law.
     pub law: LawKind,
     /// Emulated load resistance per phase, Ω (`f32::INFINITY` = open circuit). The tracking
@@ -128,6 +158,18 @@ impl Default for Config {
             v_bus_uv: 20.0,
             brake_on_v: 85.0,
             brake_off_v: 82.0,
+            derate_start_v: 88.0,
+            derate_end_v: 93.0,
+            f_trip_n: 1_300.0,
+            f_filter_s: 0.01,
+            i2t_cont_a: 2.0,
+            i2t_tau_s: 300.0,
+            omega_max_rad_s: 628.0,
+            enc_emf_tol_v: 10.0,
+            x_min_m: -0.5,
+            x_max_m: 0.5,
+            i_sum_tol_a: 0.5,
+            overrun_max: 10,
             law: LawKind::Resistor,
             r_load_ohm: 306.0,
             law_rate_hz: 1_000.0,
@@ -190,7 +232,12 @@ impl Config {
         )?;
         in_range(self.encoder_offset_rad, -TAU, TAU, "encoder_offset_rad")?;
         in_range(self.amps_per_count, 1e-5, 1.0, "amps_per_count")?;
-        check(self.adc_zero_code < 4096, "adc_zero_code", "out of range")?;
+        // Both current signs need codes: at least 512 on either side of zero.
+        check(
+            (512..=3583).contains(&self.adc_zero_code),
+            "adc_zero_code",
+            "out of range (512 .. 3583)",
+        )?;
         in_range(self.volts_per_count, 1e-4, 1.0, "volts_per_count")?;
         in_range(self.pwm_hz, 5_000.0, 100_000.0, "pwm_hz")?;
         in_range(self.current_bw_hz, 10.0, 5_000.0, "current_bw_hz")?;
@@ -232,6 +279,63 @@ impl Config {
             self.brake_on_v < self.v_bus_ov,
             "brake_on_v",
             "must be below v_bus_ov",
+        )?;
+        // A trip the ADC cannot see is no protection.
+        check(
+            self.v_bus_ov < self.volts_per_count * 4095.0,
+            "v_bus_ov",
+            "above the bus ADC's full scale (volts_per_count·4095)",
+        )?;
+        check(
+            self.brake_off_v > self.v_bus_uv,
+            "brake_off_v",
+            "must exceed v_bus_uv (the chopper would drain the bus into an under-voltage trip)",
+        )?;
+        in_range(self.derate_start_v, 1.0, 2_000.0, "derate_start_v")?;
+        in_range(self.derate_end_v, 1.0, 2_000.0, "derate_end_v")?;
+        check(
+            self.derate_start_v >= self.brake_on_v,
+            "derate_start_v",
+            "must not be below brake_on_v (brake first, then derate)",
+        )?;
+        check(
+            self.derate_end_v > self.derate_start_v,
+            "derate_end_v",
+            "must exceed derate_start_v",
+        )?;
+        check(
+            self.derate_end_v <= self.v_bus_ov,
+            "derate_end_v",
+            "must not exceed v_bus_ov",
+        )?;
+        check(
+            !self.f_trip_n.is_nan() && self.f_trip_n >= 1.0,
+            "f_trip_n",
+            "must be ≥ 1 N (inf = off)",
+        )?;
+        in_range(self.f_filter_s, 1e-3, 10.0, "f_filter_s")?;
+        in_range(self.i2t_cont_a, 0.01, 1_000.0, "i2t_cont_a")?;
+        in_range(self.i2t_tau_s, 0.1, 1.0e5, "i2t_tau_s")?;
+        in_range(self.omega_max_rad_s, 1.0, 2_000.0, "omega_max_rad_s")?;
+        in_range(self.enc_emf_tol_v, 0.1, 2_000.0, "enc_emf_tol_v")?;
+        in_range(self.x_min_m, -1_000.0, 1_000.0, "x_min_m")?;
+        in_range(self.x_max_m, -1_000.0, 1_000.0, "x_max_m")?;
+        check(
+            self.x_min_m < self.x_max_m,
+            "x_min_m",
+            "must be below x_max_m",
+        )?;
+        in_range(self.i_sum_tol_a, 0.0, 1_000.0, "i_sum_tol_a")?;
+        // Three readings each rounded by half an LSB, plus a count of noise each.
+        check(
+            self.i_sum_tol_a >= 4.0 * self.amps_per_count,
+            "i_sum_tol_a",
+            "below 4 ADC counts (quantisation alone would trip it)",
+        )?;
+        check(
+            self.overrun_max >= 1 && self.overrun_max <= 10_000,
+            "overrun_max",
+            "out of range",
         )?;
         check(
             !self.r_load_ohm.is_nan() && self.r_load_ohm >= 0.0,
@@ -360,7 +464,11 @@ impl Gains {
             advance: Gain::from_f32(advance),
             v_lim_per_bus: Gain::from_f32(c.m_max * INV_SQRT3),
             i_max: q(c.i_max_a),
-            i_trip: q(c.i_trip_a),
+            // A trip above the ADC's range could never fire: clamp it to the last code below
+            // the nearer rail, so that an over-range reading trips.
+            i_trip: q(c.i_trip_a.min(
+                c.amps_per_count * (c.adc_zero_code.min(4095 - c.adc_zero_code) as f32 - 1.0),
+            )),
             v_ov: q(c.v_bus_ov),
             v_uv: q(c.v_bus_uv),
             brake_on: q(c.brake_on_v),

@@ -249,7 +249,7 @@ impl Console {
                 let t = ctl.telemetry();
                 let _ = write!(
                     out,
-                    "mode={} fault={} vbus={}V w={}rad/s x={}m id={}A iq={}A p={}W p_avg={}W energy={}J\r\n",
+                    "mode={} fault={} vbus={}V w={}rad/s x={}m id={}A iq={}A p={}W p_avg={}W energy={}J warnings=",
                     ctl.mode().name(),
                     ctl.fault().map(|f| f.name()).unwrap_or("none"),
                     t.v_bus.to_num::<f32>(),
@@ -261,16 +261,71 @@ impl Console {
                     self.p_avg_w,
                     self.energy_j
                 );
+                write_warnings(out, ctl.protection().warnings);
+                let _ = out.write_str("\r\n");
                 ok!("")
             }
-            "faults" if want(0) => match ctl.fault() {
-                Some(f) => ok!(" fault {} (safe mode {})", f.name(), f.safe_mode().name()),
-                None => ok!(" no fault"),
-            },
-            "clear" if want(0) => {
-                ctl.clear_fault();
-                ok!(" cleared")
+            "faults" if want(0) => {
+                let p = ctl.protection();
+                let _ = write!(out, "warnings: ");
+                write_warnings(out, p.warnings);
+                let _ = write!(
+                    out,
+                    " i2t={:.4} force_filt={:.0}N derate={:.3}\r\n",
+                    p.i2t(),
+                    p.force_n(),
+                    p.derate.to_num::<f32>()
+                );
+                match ctl.fault() {
+                    Some(f) => {
+                        let _ = write!(
+                            out,
+                            "fault {} {}: {}\r\nsafe state: {}\r\n",
+                            f.code(),
+                            f.name(),
+                            f.describe(),
+                            safe_words(f.safe_mode())
+                        );
+                        if let Some(r) = p.record() {
+                            let s = &r.snap;
+                            let _ = write!(
+                                out,
+                                "at t={} ms in mode {}: ia={:.3} ib={:.3} ic={:.3} A id={:.3} iq={:.3} A vbus={:.2} V w={:.2} rad/s x={:.4} m force={:.0} N i2t={:.4} derate={:.3}\r\n",
+                                s.t_ms,
+                                s.mode.name(),
+                                s.i_abc[0].to_num::<f32>(),
+                                s.i_abc[1].to_num::<f32>(),
+                                s.i_abc[2].to_num::<f32>(),
+                                s.i_dq.d.to_num::<f32>(),
+                                s.i_dq.q.to_num::<f32>(),
+                                s.v_bus.to_num::<f32>(),
+                                s.omega_m.to_num::<f32>(),
+                                s.x.to_num::<f32>(),
+                                s.force_n,
+                                s.i2t,
+                                s.derate
+                            );
+                            for g in r.later() {
+                                let _ = write!(
+                                    out,
+                                    "later: {} {}: {}\r\n",
+                                    g.code(),
+                                    g.name(),
+                                    g.describe()
+                                );
+                            }
+                        }
+                        let _ = write!(out, "now in mode {}\r\n", ctl.mode().name());
+                        ok!(" fault {} (safe mode {})", f.name(), f.safe_mode().name())
+                    }
+                    None => ok!(" no fault"),
+                }
             }
+            "clear" if want(0) => match (ctl.fault(), ctl.clear_fault()) {
+                (None, _) => ok!(" no fault"),
+                (Some(f), Ok(())) => ok!(" cleared {}", f.name()),
+                (Some(f), Err(why)) => fail!("{} not cleared: {}", f.name(), why),
+            },
             "mode" if want(1) => {
                 let m = match a1.unwrap_or("") {
                     "idle" => Mode::Idle,
@@ -331,6 +386,27 @@ impl Console {
             }
             _ => fail!("unknown command '{}' (see help)", Clip(cmd)),
         }
+    }
+}
+
+fn write_warnings<W: Write>(out: &mut W, w: u8) {
+    if w == 0 {
+        let _ = out.write_str("none");
+        return;
+    }
+    let mut first = true;
+    for (bit, name) in crate::protect::warn::NAMES {
+        if w & bit != 0 {
+            let _ = write!(out, "{}{}", if first { "" } else { "," }, name);
+            first = false;
+        }
+    }
+}
+
+fn safe_words(m: Mode) -> &'static str {
+    match m {
+        Mode::Short => "short (low-side switches on: phases shorted, no power to the bus)",
+        _ => "open (gates off: no current through the bridge)",
     }
 }
 
@@ -438,6 +514,84 @@ mod tests {
         // 200 periods at 20 kHz = 10 ms at 1 kHz → 10 lines of 3 fields.
         assert_eq!(out.lines().count(), 10);
         assert!(out.lines().all(|l| l.split(',').count() == 3));
+    }
+
+    #[test]
+    fn faults_decode_the_snapshot_and_clear_waits_for_the_cause() {
+        use crate::io::RawSample;
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        let mut con = Console::new();
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
+        let code = |v: f32| (v / cfg.volts_per_count + 0.5) as u16;
+        let sample = |v: f32| RawSample {
+            i_abc: [cfg.adc_zero_code; 3],
+            v_bus: code(v),
+            encoder: 0,
+        };
+        ctl.step(&sample(60.0));
+        let (_, s) = run(&mut con, &mut ctl, "clear");
+        assert!(s.starts_with("ok no fault"), "{s}");
+        // 100 V > v_bus_ov = 95 V: bus_over_voltage, safe state short.
+        ctl.step(&sample(100.0));
+        assert_eq!(ctl.mode(), Mode::Short);
+        let (r, s) = run(&mut con, &mut ctl, "faults");
+        assert!(r.is_ok());
+        assert!(s.contains("fault 2 bus_over_voltage"), "{s}");
+        assert!(s.contains("safe state: short"), "{s}");
+        // The snapshot holds the reading that tripped (one ADC count of 29 mV).
+        assert!(s.contains("vbus=99.9") || s.contains("vbus=100.0"), "{s}");
+        // Still above: clear refused with the reason, fault kept.
+        let (r, s) = run(&mut con, &mut ctl, "clear");
+        assert!(r.is_err() && s.contains("bus still above"), "{s}");
+        assert!(ctl.fault().is_some());
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_err());
+        // Back in the normal band: clear accepted, run allowed again.
+        ctl.step(&sample(60.0));
+        let (r, s) = run(&mut con, &mut ctl, "clear");
+        assert!(r.is_ok() && s.contains("cleared bus_over_voltage"), "{s}");
+        assert!(ctl.fault().is_none());
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
+        let (_, s) = run(&mut con, &mut ctl, "status");
+        assert!(s.contains("warnings=none"), "{s}");
+    }
+
+    #[test]
+    fn open_dominates_a_short_after_a_later_over_current() {
+        use crate::io::RawSample;
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        let mut con = Console::new();
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
+        let vcode = |v: f32| (v / cfg.volts_per_count + 0.5) as u16;
+        // Over-voltage: short.
+        ctl.step(&RawSample {
+            i_abc: [cfg.adc_zero_code; 3],
+            v_bus: vcode(100.0),
+            encoder: 0,
+        });
+        assert_eq!(ctl.mode(), Mode::Short);
+        // Then 22 A in phase a (> i_trip_a = 20 A) while shorted: the phases open.
+        let k = (22.0 / cfg.amps_per_count) as u16;
+        ctl.step(&RawSample {
+            i_abc: [
+                cfg.adc_zero_code + k,
+                cfg.adc_zero_code - k / 2,
+                cfg.adc_zero_code - k / 2,
+            ],
+            v_bus: vcode(60.0),
+            encoder: 0,
+        });
+        assert_eq!(ctl.mode(), Mode::Idle);
+        assert_eq!(ctl.fault().map(|f| f.name()), Some("bus_over_voltage"));
+        // The short may not come back, even though it is the first fault's safe state.
+        assert!(run(&mut con, &mut ctl, "mode short").0.is_err());
+        let (_, s) = run(&mut con, &mut ctl, "faults");
+        assert!(s.contains("later: 1 over_current"), "{s}");
+        assert!(s.contains("now in mode idle"), "{s}");
+        // Current still high in the last telemetry: clear refused on the later fault.
+        let (r, s) = run(&mut con, &mut ctl, "clear");
+        assert!(r.is_err() && s.contains("i_trip_a"), "{s}");
     }
 
     proptest::proptest! {

@@ -42,41 +42,8 @@ impl Mode {
     }
 }
 
-/// A latched fault.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Fault {
-    /// A phase current exceeded `i_trip_a`.
-    OverCurrent,
-    /// The bus voltage exceeded `v_bus_ov`.
-    BusOverVoltage,
-    /// The bus voltage fell below `v_bus_uv` while running.
-    BusUnderVoltage,
-    /// The encoder count jumped by more than a plausible amount in one period.
-    EncoderImplausible,
-}
-
-impl Fault {
-    /// Console name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Fault::OverCurrent => "over_current",
-            Fault::BusOverVoltage => "bus_over_voltage",
-            Fault::BusUnderVoltage => "bus_under_voltage",
-            Fault::EncoderImplausible => "encoder_implausible",
-        }
-    }
-
-    /// The state the drive goes to on this fault. Over-current and under-voltage open the
-    /// phases (the fault may be in the bridge, and nothing controls the current without a
-    /// bus); over-voltage and encoder faults short them (no power reaches the bus, and the
-    /// short needs no angle), which also brakes the structure hardest.
-    pub fn safe_mode(self) -> Mode {
-        match self {
-            Fault::OverCurrent | Fault::BusUnderVoltage => Mode::Idle,
-            Fault::BusOverVoltage | Fault::EncoderImplausible => Mode::Short,
-        }
-    }
-}
+pub use crate::protect::Fault;
+use crate::protect::{derate_regen, Protection, SUPERVISE_HZ};
 
 /// What the loop measured and commanded in its last period (SI units in fixed point).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -109,6 +76,8 @@ pub struct Controller {
     pi: CurrentPi,
     brake: bool,
     tel: Telemetry,
+    /// Protection state (protect.rs): derate factor, supervision, fault record.
+    prot: Protection,
 }
 
 impl Controller {
@@ -125,6 +94,7 @@ impl Controller {
             pi: CurrentPi::default(),
             brake: false,
             tel: Telemetry::default(),
+            prot: Protection::default(),
         })
     }
 
@@ -161,7 +131,12 @@ impl Controller {
     /// fault's own safe mode and Idle.
     pub fn set_mode(&mut self, m: Mode) -> Result<(), Fault> {
         if let Some(f) = self.fault {
-            if m != Mode::Idle && m != f.safe_mode() {
+            // Open dominates: after a later fault that opened the phases, only Idle.
+            let opened = self
+                .prot
+                .record()
+                .is_some_and(|r| r.later().any(|g| g.safe_mode() == Mode::Idle));
+            if m != Mode::Idle && (m != f.safe_mode() || opened) {
                 return Err(f);
             }
         }
@@ -180,9 +155,60 @@ impl Controller {
         self.fault
     }
 
-    /// Clear a latched fault (the drive stays in its safe mode until told otherwise).
-    pub fn clear_fault(&mut self) {
+    /// Clear a latched fault once its cause is gone (the drive stays in its safe mode until
+    /// told otherwise). Refused, with the reason, while the cause persists.
+    pub fn clear_fault(&mut self) -> Result<(), &'static str> {
+        if let Some(f) = self.fault {
+            let later = self.prot.record().map_or(0, |r| r.later);
+            // The first fault's cause and every later one's must be gone.
+            for g in core::iter::once(f).chain(
+                Fault::ALL
+                    .iter()
+                    .copied()
+                    .filter(|g| later & (1 << g.code()) != 0),
+            ) {
+                if let Some(why) =
+                    self.prot
+                        .cause_present(g, &self.cfg, &self.tel, self.enc.implausible)
+                {
+                    return Err(why);
+                }
+            }
+        }
         self.fault = None;
+        self.prot.forget();
+        Ok(())
+    }
+
+    /// Protection state: fault record with its snapshot, warnings, I²t, derate factor.
+    pub fn protection(&self) -> &Protection {
+        &self.prot
+    }
+
+    /// The board's timer saw the current loop finish after its period ended.
+    pub fn report_overrun(&mut self) {
+        self.prot.report_overrun();
+    }
+
+    /// Current-loop periods per supervision tick: call [`Controller::supervise`] once every
+    /// this many [`Controller::step`]s (1 kHz).
+    pub fn supervise_every(&self) -> u32 {
+        let n = self.cfg.pwm_hz / SUPERVISE_HZ + 0.5;
+        (n as u32).max(1)
+    }
+
+    /// Decimated protection (1 kHz, see protect.rs): I²t, force rating, stroke, speed and
+    /// encoder plausibility, current-sensor consistency, overruns, and the regenerative
+    /// derate factor the loop applies. Reads the last period's telemetry; call it between
+    /// steps (same execution context as the loop, or with the controller locked).
+    pub fn supervise(&mut self) {
+        let v = self
+            .prot
+            .supervise(&self.cfg, self.mode, &self.tel, self.enc.position);
+        if let Some(f) = v.trip {
+            let t = self.tel;
+            self.trip(f, &t);
+        }
     }
 
     pub fn telemetry(&self) -> &Telemetry {
@@ -196,13 +222,19 @@ impl Controller {
     /// Zero the position (the travel `x` counts from here).
     pub fn rezero_position(&mut self) {
         self.enc.rezero();
+        self.prot.rezero();
     }
 
-    fn trip(&mut self, f: Fault) {
+    /// Latch `f` (with a snapshot of `t`) and go to its safe state. Open dominates: once a
+    /// fault has opened the phases, a later fault never re-enables the gates.
+    #[cold]
+    fn trip(&mut self, f: Fault, t: &Telemetry) {
+        self.prot.latch(f, self.mode, t);
+        let open = self.fault.is_some() && self.mode == Mode::Idle;
         if self.fault.is_none() {
             self.fault = Some(f);
         }
-        self.mode = f.safe_mode();
+        self.mode = if open { Mode::Idle } else { f.safe_mode() };
         self.pi.reset();
     }
 
@@ -237,7 +269,16 @@ impl Controller {
             None
         };
         if let Some(f) = fault {
-            self.trip(f);
+            // Protection hook (protect.rs): snapshot of this period's measurements.
+            let t = Telemetry {
+                i_abc,
+                i_dq,
+                v_bus,
+                omega_m: shaft.omega_m,
+                x: shaft.x,
+                ..self.tel
+            };
+            self.trip(f, &t);
         }
         let g = &self.g;
 
@@ -254,7 +295,9 @@ impl Controller {
                     i_dq,
                     v_bus,
                 });
-                limit_vector(r, g.i_max).unwrap_or(r)
+                let r = limit_vector(r, g.i_max).unwrap_or(r);
+                // Protection hook (protect.rs): bus derating of a regenerative reference.
+                derate_regen(r, shaft.omega_m, self.prot.derate)
             }
             _ => Dq::default(),
         };

@@ -37,6 +37,7 @@ pub mod io;
 pub mod laws;
 pub mod params;
 pub mod pi;
+pub mod protect;
 pub mod selftest;
 pub mod store;
 pub mod svpwm;

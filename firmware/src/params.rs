@@ -269,6 +269,103 @@ pub static PARAMS: &[Param] = &[
         "brake chopper off below"
     ),
     real!(
+        derate_start_v,
+        "V",
+        1.0,
+        2_000.0,
+        true,
+        "regenerative current derated from this bus voltage (>= brake_on_v)"
+    ),
+    real!(
+        derate_end_v,
+        "V",
+        1.0,
+        2_000.0,
+        true,
+        "regenerative current zero at this bus voltage (<= v_bus_ov)"
+    ),
+    real!(
+        f_trip_n,
+        "N",
+        1.0,
+        f32::INFINITY,
+        true,
+        "force trip on the filtered force (device rating; inf = off)"
+    ),
+    real!(
+        f_filter_s,
+        "s",
+        1e-3,
+        10.0,
+        true,
+        "time constant of the force filter"
+    ),
+    real!(
+        i2t_cont_a,
+        "A",
+        0.01,
+        1_000.0,
+        true,
+        "machine continuous current for the I2t estimate"
+    ),
+    real!(
+        i2t_tau_s,
+        "s",
+        0.1,
+        1.0e5,
+        true,
+        "winding thermal time constant for the I2t estimate"
+    ),
+    real!(
+        omega_max_rad_s,
+        "rad/s",
+        1.0,
+        2_000.0,
+        true,
+        "largest plausible shaft speed"
+    ),
+    real!(
+        enc_emf_tol_v,
+        "V",
+        0.1,
+        2_000.0,
+        true,
+        "encoder/emf plausibility allowance (plus 50 %)"
+    ),
+    real!(
+        x_min_m,
+        "m",
+        -1_000.0,
+        1_000.0,
+        true,
+        "stroke limit, low end"
+    ),
+    real!(
+        x_max_m,
+        "m",
+        -1_000.0,
+        1_000.0,
+        true,
+        "stroke limit, high end"
+    ),
+    real!(
+        i_sum_tol_a,
+        "A",
+        0.0,
+        1_000.0,
+        true,
+        "largest |ia+ib+ic| (current-sensor consistency)"
+    ),
+    int!(
+        overrun_max,
+        u16,
+        "count",
+        1.0,
+        10_000.0,
+        true,
+        "loop overruns tolerated beyond one per ms"
+    ),
+    real!(
         m_max,
         "1",
         0.1,
@@ -334,8 +431,8 @@ pub static PARAMS: &[Param] = &[
         adc_zero_code,
         u16,
         "count",
-        0.0,
-        4_095.0,
+        512.0,
+        3_583.0,
         false,
         "ADC code of zero current"
     ),

@@ -114,6 +114,9 @@ pub struct FirmwareSpec {
     pub v_bus_uv: f32,
     pub brake_on_v: f32,
     pub brake_off_v: f32,
+    /// Regenerative derating band (between the brake and the over-voltage trip).
+    pub derate_start_v: f32,
+    pub derate_end_v: f32,
     pub ff_emf: bool,
     pub ff_decouple: bool,
     pub delay_comp: bool,
@@ -144,6 +147,8 @@ impl Default for FirmwareSpec {
             v_bus_uv: c.v_bus_uv,
             brake_on_v: 380.0,
             brake_off_v: 370.0,
+            derate_start_v: 395.0,
+            derate_end_v: 415.0,
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
             delay_comp: c.delay_comp,
@@ -337,6 +342,8 @@ impl Scenario {
             v_bus_uv: f.v_bus_uv,
             brake_on_v: f.brake_on_v,
             brake_off_v: f.brake_off_v,
+            derate_start_v: f.derate_start_v,
+            derate_end_v: f.derate_end_v,
             law: self.law_kind()?,
             r_load_ohm: self.law.r_load_ohm as f32,
             ..Config::default()

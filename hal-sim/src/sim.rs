@@ -233,6 +233,8 @@ pub struct Sim {
     steps: u64,
     rec: Option<Recorder>,
     ts: f64,
+    /// Periods per protection supervision tick (`Controller::supervise`, 1 kHz).
+    sup_every: u64,
 }
 
 impl Sim {
@@ -301,10 +303,59 @@ impl Sim {
             steps: 0,
             rec: None,
             ts,
+            sup_every: 1,
         };
+        sim.sup_every = sim.ctl.supervise_every() as u64;
         sim.energy.stored_start = sim.stored();
         sim.energy.stored_now = sim.energy.stored_start;
         Ok(sim)
+    }
+
+    /// Replace the bus (fault injection: load disconnected, brake resistor changed), keeping
+    /// its present voltage. Refused like [`Sim::new`] for non-positive parts.
+    pub fn set_bus(&mut self, bus: Bus) -> Result<(), String> {
+        if !(bus.capacitance_f > 0.0 && bus.source_r_ohm > 0.0 && bus.brake_r_ohm > 0.0) {
+            return Err("bus: capacitance_f, source_r_ohm and brake_r_ohm must be positive".into());
+        }
+        // The stored energy ½CV² is evaluated from the state: a new capacitance would
+        // create energy in the ledger.
+        if bus.capacitance_f != self.rig.bus.capacitance_f {
+            return Err("bus: the capacitance cannot change during a run".into());
+        }
+        let gs = if bus.source_v.is_some() {
+            1.0 / bus.source_r_ohm
+        } else {
+            0.0
+        };
+        let c = bus.capacitance_f;
+        self.bus_decay = [
+            (-gs * self.ts / c).exp(),
+            (-(gs + 1.0 / bus.brake_r_ohm) * self.ts / c).exp(),
+        ];
+        self.rig.bus = bus;
+        Ok(())
+    }
+
+    /// Replace what drives the screw (fault injection: excitation beyond the rating). A
+    /// structure must stay the same structure (its stored energy is in the ledger).
+    pub fn set_drive(&mut self, drive: Drive) -> Result<(), String> {
+        match (&self.rig.drive, &drive) {
+            (
+                Drive::Structure { structure: a, .. },
+                Drive::Structure {
+                    structure: b,
+                    excitation,
+                },
+            ) => {
+                if a != b {
+                    return Err("drive: the structure cannot change during a run".into());
+                }
+                self.exc = excitation.state();
+            }
+            _ => return Err("drive: only the excitation of a structure can change".into()),
+        }
+        self.rig.drive = drive;
+        Ok(())
     }
 
     /// Record the given channels every `every` periods.
@@ -388,10 +439,27 @@ impl Sim {
 
     /// One PWM period: sample, controller step, plant advance.
     pub fn step(&mut self) {
+        self.step_with(|_| {}, |_| {})
+    }
+
+    /// One PWM period with the sample and the actuation passed through `on_sample` and
+    /// `on_actuation` on their way (fault injection, `crate::faults`).
+    #[inline(always)]
+    pub fn step_with(
+        &mut self,
+        on_sample: impl FnOnce(&mut RawSample),
+        on_actuation: impl FnOnce(&mut Actuation),
+    ) {
         // The firmware's period through the hardware trait (as `regen_fw::io::run_period`,
         // written out because the controller and the plant live in one struct).
-        let sample = PlantIo(self).sample();
-        let out = self.ctl.step(&sample);
+        let mut sample = PlantIo(self).sample();
+        on_sample(&mut sample);
+        let mut out = self.ctl.step(&sample);
+        // Protection supervision at 1 kHz, between loop periods (as on the board).
+        if self.steps.is_multiple_of(self.sup_every) {
+            self.ctl.supervise();
+        }
+        on_actuation(&mut out);
         PlantIo(self).apply(&out);
         let act = self.active;
         self.advance(&act);

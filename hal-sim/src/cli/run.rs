@@ -47,6 +47,15 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     );
     if let Some(f) = sim.controller().fault() {
         println!("firmware fault latched: {}", f.name());
+        // The console's decoding: snapshot at the trip, safe state, later faults.
+        let mut out = String::new();
+        let _ = regen_fw::console::Console::new().execute(
+            "faults",
+            sim.controller_mut(),
+            &mut regen_fw::console::NoStore,
+            &mut out,
+        );
+        print!("{out}");
     }
     if let Some(rec) = sim.take_recorder() {
         let csv = a.out.join(format!("{}.csv", sc.name));

@@ -1,0 +1,662 @@
+//! Protection: fault codes, the safe state of each fault, the snapshot taken at a trip, the
+//! decimated supervision (I²t, force rating, stroke, speed and encoder plausibility,
+//! current-sensor consistency, loop overrun) and the DC-bus regenerative derating.
+//!
+//! Split by urgency (see `docs/protection.md`):
+//! * **In the current loop** ([`crate::Controller::step`], every period): phase over-current,
+//!   bus over- and under-voltage, encoder jump (compares on values the loop has anyway), and
+//!   one multiply applying the precomputed derate factor to a regenerative q-current
+//!   reference ([`derate_regen`]).
+//! * **Supervision** ([`crate::Controller::supervise`], [`SUPERVISE_HZ`] = 1 kHz): everything
+//!   that is a filter, an integral or a persistence count. It reads the loop's last telemetry,
+//!   runs in `f32` (the Cortex-M4F has a single-precision FPU; `+ − × ÷` are correctly rounded
+//!   IEEE-754, so host and board agree bit for bit) and never calls libm.
+//!
+//! Faults latch: the first one is kept with a [`Snapshot`] of the measurements; later ones
+//! are added to a bit mask. A fault is cleared only by command and only once its cause is gone
+//! ([`Protection::cause_present`]).
+
+use crate::config::Config;
+use crate::control::{Mode, Telemetry};
+use crate::frames::Dq;
+use crate::fx::{mul, Q};
+
+/// Rate of [`crate::Controller::supervise`], Hz.
+pub const SUPERVISE_HZ: f32 = 1_000.0;
+
+/// Encoder/emf mismatch: the back-emf the current loop needs may exceed `K_e·|ω|` by this
+/// fraction (plus `enc_emf_tol_v`) before it counts as a mismatch (model error in K_e, R, L).
+pub const EMF_REL_TOL: f32 = 0.5;
+/// Supervision ticks (ms) the emf mismatch must accumulate to trip (leaky count).
+pub const EMF_TICKS: u16 = 20;
+/// Supervision ticks (ms) the phase-current sum must accumulate to trip (leaky count).
+pub const ISUM_TICKS: u16 = 5;
+/// I²t state (1 = the machine's rated temperature rise) below which a trip may be cleared.
+pub const I2T_CLEAR: f32 = 0.8;
+/// The filtered force must fall below this fraction of `f_trip_n` to clear an over-force trip.
+pub const FORCE_CLEAR: f32 = 0.9;
+
+/// A latched fault. The discriminant is its code (console, logs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Fault {
+    /// A phase current exceeded `i_trip_a` (instantaneous, in the loop).
+    OverCurrent = 1,
+    /// The bus voltage exceeded `v_bus_ov` (instantaneous).
+    BusOverVoltage = 2,
+    /// The bus voltage fell below `v_bus_uv` while running (instantaneous).
+    BusUnderVoltage = 3,
+    /// The encoder count jumped by more than a plausible amount in one period (instantaneous).
+    EncoderImplausible = 4,
+    /// The filtered electromagnetic force exceeded `f_trip_n` (the device rating).
+    OverForce = 5,
+    /// The machine's I²t thermal estimate reached its rated temperature rise.
+    MachineI2t = 6,
+    /// The voltage the current loop needs says the machine turns while the encoder says
+    /// otherwise (encoder stuck, disconnected or slipping).
+    EncoderLoss = 7,
+    /// The measured speed exceeds `omega_max_rad_s`.
+    SpeedImplausible = 8,
+    /// The travel left `[x_min_m, x_max_m]`.
+    StrokeLimit = 9,
+    /// The current loop overran its period too often (`overrun_max`).
+    LoopOverrun = 10,
+    /// The three phase currents do not sum to zero (sensor stuck, offset jump, noise).
+    CurrentSensor = 11,
+}
+
+impl Fault {
+    /// Every fault, in code order.
+    pub const ALL: &'static [Fault] = &[
+        Fault::OverCurrent,
+        Fault::BusOverVoltage,
+        Fault::BusUnderVoltage,
+        Fault::EncoderImplausible,
+        Fault::OverForce,
+        Fault::MachineI2t,
+        Fault::EncoderLoss,
+        Fault::SpeedImplausible,
+        Fault::StrokeLimit,
+        Fault::LoopOverrun,
+        Fault::CurrentSensor,
+    ];
+
+    /// Numeric code.
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// Fault from its code.
+    pub fn from_code(c: u8) -> Option<Fault> {
+        Self::ALL.iter().copied().find(|f| f.code() == c)
+    }
+
+    /// Console name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Fault::OverCurrent => "over_current",
+            Fault::BusOverVoltage => "bus_over_voltage",
+            Fault::BusUnderVoltage => "bus_under_voltage",
+            Fault::EncoderImplausible => "encoder_implausible",
+            Fault::OverForce => "over_force",
+            Fault::MachineI2t => "machine_i2t",
+            Fault::EncoderLoss => "encoder_loss",
+            Fault::SpeedImplausible => "speed_implausible",
+            Fault::StrokeLimit => "stroke_limit",
+            Fault::LoopOverrun => "loop_overrun",
+            Fault::CurrentSensor => "current_sensor",
+        }
+    }
+
+    /// One sentence for the console (`faults`).
+    pub fn describe(self) -> &'static str {
+        match self {
+            Fault::OverCurrent => "a phase current exceeded i_trip_a",
+            Fault::BusOverVoltage => "bus voltage above v_bus_ov",
+            Fault::BusUnderVoltage => "bus voltage below v_bus_uv while running",
+            Fault::EncoderImplausible => "encoder count jumped implausibly in one period",
+            Fault::OverForce => "force above the device rating f_trip_n",
+            Fault::MachineI2t => "machine I2t thermal estimate at its rated temperature rise",
+            Fault::EncoderLoss => {
+                "back-emf seen by the current loop disagrees with the encoder speed"
+            }
+            Fault::SpeedImplausible => "speed above omega_max_rad_s",
+            Fault::StrokeLimit => "travel outside x_min_m .. x_max_m",
+            Fault::LoopOverrun => "current loop overran its period too often",
+            Fault::CurrentSensor => "phase currents do not sum to zero (sensor fault)",
+        }
+    }
+
+    /// The state the drive goes to (argued per fault in `docs/protection.md`).
+    /// * Open (gates off, [`Mode::Idle`]): over-current (the fault may be in the bridge; no
+    ///   current through it), under-voltage (no bus, no controlled switching), over-force and
+    ///   I²t (a short would brake harder and keep heating: its current reaches
+    ///   `K_e/(p·L)`), loop overrun (the loop that would supervise a short is the one that is
+    ///   late) and current-sensor faults (the over-current check itself is blind).
+    /// * Shorted ([`Mode::Short`], low sides on): over-voltage (no energy reaches the bus),
+    ///   encoder faults and implausible speed (the short needs no angle), stroke limit (brake
+    ///   hardest before the end stop).
+    pub fn safe_mode(self) -> Mode {
+        match self {
+            Fault::OverCurrent
+            | Fault::BusUnderVoltage
+            | Fault::OverForce
+            | Fault::MachineI2t
+            | Fault::LoopOverrun
+            | Fault::CurrentSensor => Mode::Idle,
+            Fault::BusOverVoltage
+            | Fault::EncoderImplausible
+            | Fault::EncoderLoss
+            | Fault::SpeedImplausible
+            | Fault::StrokeLimit => Mode::Short,
+        }
+    }
+
+    fn bit(self) -> u16 {
+        1 << self.code()
+    }
+}
+
+/// Measurements at the moment of a trip.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Snapshot {
+    /// Supervision ticks (ms) since start.
+    pub t_ms: u32,
+    /// Mode the drive was in.
+    pub mode: Mode,
+    pub i_abc: [Q; 3],
+    pub i_dq: Dq,
+    pub v_bus: Q,
+    pub omega_m: Q,
+    pub x: Q,
+    /// Filtered electromagnetic force, N.
+    pub force_n: f32,
+    /// I²t state (1 = rated temperature rise).
+    pub i2t: f32,
+    /// Regenerative derate factor in force.
+    pub derate: f32,
+}
+
+/// The latched fault record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Record {
+    pub fault: Fault,
+    pub snap: Snapshot,
+    /// Faults that tripped after the first one (bit `code`).
+    pub later: u16,
+}
+
+impl Record {
+    /// Later faults, in code order.
+    pub fn later(&self) -> impl Iterator<Item = Fault> + '_ {
+        Fault::ALL
+            .iter()
+            .copied()
+            .filter(|f| self.later & f.bit() != 0)
+    }
+}
+
+/// Non-latching conditions (shown by `status` and `faults`).
+pub mod warn {
+    /// The regenerative current is being derated (bus between `derate_start_v` and
+    /// `derate_end_v`).
+    pub const DERATING: u8 = 1;
+    /// The brake chopper is closed.
+    pub const BRAKING: u8 = 2;
+    /// The I²t estimate is above [`super::I2T_CLEAR`].
+    pub const HOT: u8 = 4;
+    /// Names, bit by bit.
+    pub const NAMES: [(u8, &str); 3] = [(DERATING, "derating"), (BRAKING, "braking"), (HOT, "hot")];
+}
+
+/// What a supervision tick decided.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Verdict {
+    pub trip: Option<Fault>,
+}
+
+/// Order in which faults found in the same supervision tick are reported (cause first).
+const PRIORITY: [Fault; 7] = [
+    Fault::CurrentSensor,
+    Fault::SpeedImplausible,
+    Fault::EncoderLoss,
+    Fault::LoopOverrun,
+    Fault::StrokeLimit,
+    Fault::OverForce,
+    Fault::MachineI2t,
+];
+
+/// Protection state owned by the controller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Protection {
+    /// Factor applied to a regenerative q-current reference (1 = none), Q16.16 in [0, 1].
+    pub derate: Q,
+    /// Overruns reported since the last supervision tick.
+    overruns: u16,
+    /// Leaky overrun bucket: + overruns, − 1 per tick.
+    bucket: u16,
+    ticks: u32,
+    /// Low-pass filtered electromagnetic force (signed, so current noise averages out), N.
+    force_filt: f32,
+    /// Encoder position at the last tick, counts, and the speed over the tick, rad/s.
+    last_pos: i32,
+    primed: bool,
+    omega_raw: f32,
+    /// I²t state: per-unit winding temperature rise, settles at (|i|/i2t_cont_a)².
+    i2t: f32,
+    emf_count: u16,
+    isum_count: u16,
+    isum_now: bool,
+    record: Option<Record>,
+    /// [`warn`] bits.
+    pub warnings: u8,
+}
+
+impl Default for Protection {
+    fn default() -> Self {
+        Protection {
+            derate: Q::ONE,
+            overruns: 0,
+            bucket: 0,
+            ticks: 0,
+            force_filt: 0.0,
+            last_pos: 0,
+            primed: false,
+            omega_raw: 0.0,
+            i2t: 0.0,
+            emf_count: 0,
+            isum_count: 0,
+            isum_now: false,
+            record: None,
+            warnings: 0,
+        }
+    }
+}
+
+/// Apply the derate factor to a current reference: the q component is scaled when it
+/// sends power to the bus (`i_q·ω < 0`, `P = −3/2·K_e·ω·i_q > 0`); a motoring reference
+/// (two-way laws) is left alone, since it takes energy out of the bus. Per period: a sign test
+/// and one multiply.
+#[inline(always)]
+pub fn derate_regen(r: Dq, omega_m: Q, derate: Q) -> Dq {
+    if (r.q.to_bits() ^ omega_m.to_bits()) < 0 {
+        Dq {
+            d: r.d,
+            q: mul(r.q, derate),
+        }
+    } else {
+        r
+    }
+}
+
+/// f_e = 3/2·K_e·i_q/l, N (sign of the torque).
+fn force_of(cfg: &Config, i_q: f32) -> f32 {
+    1.5 * cfg.ke_v_s_per_rad * i_q / cfg.lead_m_per_rad
+}
+
+fn abs(x: f32) -> f32 {
+    if x < 0.0 {
+        -x
+    } else {
+        x
+    }
+}
+
+impl Protection {
+    /// Report one current-loop overrun (the board's timer saw the loop finish late).
+    pub fn report_overrun(&mut self) {
+        self.overruns = self.overruns.saturating_add(1);
+    }
+
+    /// The latched record.
+    pub fn record(&self) -> Option<&Record> {
+        self.record.as_ref()
+    }
+
+    /// Supervision ticks (ms) since start.
+    pub fn ticks(&self) -> u32 {
+        self.ticks
+    }
+
+    /// The I²t state (per unit of the rated temperature rise).
+    pub fn i2t(&self) -> f32 {
+        self.i2t
+    }
+
+    /// The filtered force magnitude, N.
+    pub fn force_n(&self) -> f32 {
+        abs(self.force_filt)
+    }
+
+    /// Shaft speed over the last tick from the raw encoder count, rad/s.
+    pub fn omega_raw(&self) -> f32 {
+        self.omega_raw
+    }
+
+    /// The encoder was re-zeroed: the next tick measures no speed across the jump.
+    pub fn rezero(&mut self) {
+        self.primed = false;
+    }
+
+    /// Latch `f` with a snapshot built from the given measurements.
+    pub fn latch(&mut self, f: Fault, mode: Mode, t: &Telemetry) {
+        match &mut self.record {
+            Some(r) => {
+                if r.fault != f {
+                    r.later |= f.bit();
+                }
+            }
+            None => {
+                self.record = Some(Record {
+                    fault: f,
+                    snap: Snapshot {
+                        t_ms: self.ticks,
+                        mode,
+                        i_abc: t.i_abc,
+                        i_dq: t.i_dq,
+                        v_bus: t.v_bus,
+                        omega_m: t.omega_m,
+                        x: t.x,
+                        force_n: abs(self.force_filt),
+                        i2t: self.i2t,
+                        derate: self.derate.to_num(),
+                    },
+                    later: 0,
+                })
+            }
+        }
+    }
+
+    /// Forget the record (the controller checked the cause is gone).
+    pub fn forget(&mut self) {
+        self.record = None;
+    }
+
+    /// One supervision tick over the loop's last telemetry and the encoder's multi-turn
+    /// count.
+    pub fn supervise(
+        &mut self,
+        cfg: &Config,
+        mode: Mode,
+        t: &Telemetry,
+        enc_position: i32,
+    ) -> Verdict {
+        let dt = 1.0 / SUPERVISE_HZ;
+        self.ticks = self.ticks.wrapping_add(1);
+        let v_bus: f32 = t.v_bus.to_num();
+        let omega: f32 = t.omega_m.to_num();
+        let i_d: f32 = t.i_dq.d.to_num();
+        let i_q: f32 = t.i_dq.q.to_num();
+        let controlled = matches!(mode, Mode::Run | Mode::Open);
+        // Faults found this tick (bit per code); the reported one is chosen by cause
+        // priority at the end: a sensor that lies (current sum, encoder) before what is
+        // computed from it (force, I²t), so that a fault is named by its cause.
+        let mut found: u16 = 0;
+        let mut set = |f: Fault| found |= f.bit();
+
+        // Bus management: derate factor, linear from 1 at derate_start_v to 0 at
+        // derate_end_v.
+        let span = cfg.derate_end_v - cfg.derate_start_v;
+        let k = (cfg.derate_end_v - v_bus) / span;
+        let k = if k >= 1.0 {
+            1.0
+        } else if k > 0.0 {
+            k
+        } else {
+            0.0
+        };
+        self.derate = Q::from_num(k);
+
+        // I²t: dθ/dt = ((|i|/I_cont)² − θ)/τ (first-order winding temperature rise, per unit
+        // of the rise at the continuous current), forward Euler at 1 kHz (τ ≥ 0.1 s ≫ 1 ms).
+        let ic = cfg.i2t_cont_a;
+        let load = (i_d * i_d + i_q * i_q) / (ic * ic);
+        self.i2t += (load - self.i2t) * (dt / cfg.i2t_tau_s);
+        if self.i2t >= 1.0 {
+            set(Fault::MachineI2t);
+        }
+
+        // Phase-current consistency: the star point floats, so i_a + i_b + i_c = 0.
+        let s: f32 =
+            t.i_abc[0].to_num::<f32>() + t.i_abc[1].to_num::<f32>() + t.i_abc[2].to_num::<f32>();
+        self.isum_now = s > cfg.i_sum_tol_a || s < -cfg.i_sum_tol_a;
+        self.isum_count = leaky(self.isum_count, self.isum_now);
+        if self.isum_count >= ISUM_TICKS {
+            set(Fault::CurrentSensor);
+        }
+
+        // Force: f_e low-pass filtered (τ = f_filter_s; signed, so that current noise
+        // averages out; the force changes sign only when the motion reverses, ≪ 1/τ); not in
+        // Short, where the force is the short circuit's own, accepted when choosing the short.
+        let f = force_of(cfg, i_q);
+        let a = dt / (cfg.f_filter_s + dt);
+        self.force_filt += (f - self.force_filt) * a;
+        // While the phase currents disagree (below), the force computed from them is not
+        // trusted: the sensor check decides within ISUM_TICKS ticks, to the same open state.
+        if mode != Mode::Short && self.isum_count == 0 && abs(self.force_filt) > cfg.f_trip_n {
+            set(Fault::OverForce);
+        }
+
+        // Loop overrun: leaky bucket, one overrun per ms sustained is tolerated.
+        self.bucket = self.bucket.saturating_add(self.overruns).saturating_sub(1);
+        self.overruns = 0;
+        if self.bucket as f32 > cfg.overrun_max as f32 {
+            set(Fault::LoopOverrun);
+        }
+
+        // Speed from the raw count over the tick (no observer lag; one count per tick is
+        // 2π/cpr·1 kHz, 0.6 rad/s at 10,000 cpr).
+        let d = enc_position.wrapping_sub(self.last_pos);
+        self.omega_raw = if self.primed {
+            d as f32 * (core::f32::consts::TAU / cfg.encoder_cpr as f32) * SUPERVISE_HZ
+        } else {
+            0.0
+        };
+        self.last_pos = enc_position;
+        self.primed = true;
+
+        if controlled {
+            // Stroke.
+            let x: f32 = t.x.to_num();
+            if x < cfg.x_min_m || x > cfg.x_max_m {
+                set(Fault::StrokeLimit);
+            }
+            // Speed plausibility, on the raw count (the observer lags a runaway count).
+            if abs(self.omega_raw) > cfg.omega_max_rad_s {
+                set(Fault::SpeedImplausible);
+            }
+        }
+        // Encoder against the back-emf the loop needs: e = v − R·i − ω_e·L·(−i_q, i_d)
+        // (steady state in the rotor frame). With the encoder stuck, the true emf rotates in
+        // the frozen frame and the PI output follows it, so |e| ≫ K_e·|ω_enc|. Only while
+        // the loop controls current and is not voltage-limited (then v is not what the
+        // machine needs).
+        let mismatch = if controlled && !t.v_saturated {
+            let we = omega * cfg.pole_pairs as f32;
+            let l = cfg.l_phase_h;
+            let r = cfg.r_phase_ohm;
+            let ed = t.v_dq.d.to_num::<f32>() - r * i_d + we * l * i_q;
+            let eq = t.v_dq.q.to_num::<f32>() - r * i_q - we * l * i_d;
+            let w_abs = if omega < 0.0 { -omega } else { omega };
+            let lim = cfg.ke_v_s_per_rad * w_abs * (1.0 + EMF_REL_TOL) + cfg.enc_emf_tol_v;
+            ed * ed + eq * eq > lim * lim
+        } else {
+            false
+        };
+        self.emf_count = leaky(self.emf_count, mismatch);
+        if self.emf_count >= EMF_TICKS {
+            set(Fault::EncoderLoss);
+        }
+
+        let mut w = 0;
+        if self.derate < Q::ONE {
+            w |= warn::DERATING;
+        }
+        if t.brake {
+            w |= warn::BRAKING;
+        }
+        if self.i2t > I2T_CLEAR {
+            w |= warn::HOT;
+        }
+        self.warnings = w;
+        let trip = PRIORITY.iter().copied().find(|f| found & f.bit() != 0);
+        Verdict { trip }
+    }
+
+    /// Why `f` may not be cleared yet (None: its cause is gone), judged on the last
+    /// telemetry and the supervision state.
+    pub fn cause_present(
+        &self,
+        f: Fault,
+        cfg: &Config,
+        t: &Telemetry,
+        encoder_implausible: bool,
+    ) -> Option<&'static str> {
+        let v: f32 = t.v_bus.to_num();
+        match f {
+            Fault::OverCurrent => t
+                .i_abc
+                .iter()
+                .any(|i| i.to_num::<f32>().abs() >= cfg.i_trip_a)
+                .then_some("a phase current is still above i_trip_a"),
+            Fault::BusOverVoltage => {
+                (v > cfg.derate_start_v).then_some("bus still above derate_start_v")
+            }
+            Fault::BusUnderVoltage => (v < cfg.v_bus_uv).then_some("bus still below v_bus_uv"),
+            Fault::EncoderImplausible => encoder_implausible.then_some("encoder still jumping"),
+            Fault::OverForce => (abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n)
+                .then_some("filtered force still above 0.9 f_trip_n"),
+            Fault::MachineI2t => {
+                (self.i2t > I2T_CLEAR).then_some("machine still hot (I2t above 0.8)")
+            }
+            Fault::EncoderLoss => {
+                (self.emf_count > 0).then_some("emf/encoder mismatch detector not yet decayed")
+            }
+            Fault::SpeedImplausible => (abs(self.omega_raw) > cfg.omega_max_rad_s)
+                .then_some("speed still above omega_max_rad_s"),
+            Fault::StrokeLimit => {
+                let x: f32 = t.x.to_num();
+                (x < cfg.x_min_m || x > cfg.x_max_m).then_some("travel still outside the stroke")
+            }
+            Fault::LoopOverrun => (self.bucket > 0).then_some("overruns still being reported"),
+            Fault::CurrentSensor => (self.isum_now || self.isum_count > 0)
+                .then_some("phase currents still do not sum to zero"),
+        }
+    }
+}
+
+/// Leaky persistence count: +1 when the condition holds, −1 otherwise (floor 0).
+fn leaky(n: u16, cond: bool) -> u16 {
+    if cond {
+        n.saturating_add(1)
+    } else {
+        n.saturating_sub(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fx::q;
+
+    fn tel() -> Telemetry {
+        Telemetry {
+            v_bus: q(60.0),
+            ..Telemetry::default()
+        }
+    }
+
+    #[test]
+    fn codes_and_names_are_unique_and_round_trip() {
+        for (i, f) in Fault::ALL.iter().enumerate() {
+            assert_eq!(Fault::from_code(f.code()), Some(*f));
+            assert!(Fault::ALL[i + 1..].iter().all(|g| g.name() != f.name()));
+            assert!(f.bit() != 0);
+        }
+        assert_eq!(Fault::from_code(0), None);
+    }
+
+    #[test]
+    fn derate_scales_only_regenerative_q_current() {
+        let half = q(0.5);
+        let r = Dq {
+            d: q(0.3),
+            q: q(-2.0),
+        };
+        // ω > 0, i_q < 0: regenerating → halved.
+        assert_eq!(derate_regen(r, q(10.0), half).q, q(-1.0));
+        assert_eq!(derate_regen(r, q(10.0), half).d, q(0.3));
+        // ω < 0, i_q < 0: motoring → untouched.
+        assert_eq!(derate_regen(r, q(-10.0), half), r);
+    }
+
+    #[test]
+    fn derate_factor_is_linear_between_start_and_end() {
+        let cfg = Config::default();
+        let mut p = Protection::default();
+        for (v, want) in [
+            (cfg.derate_start_v - 1.0, 1.0),
+            (cfg.derate_end_v + 1.0, 0.0),
+            (0.5 * (cfg.derate_start_v + cfg.derate_end_v), 0.5),
+        ] {
+            let t = Telemetry {
+                v_bus: q(v),
+                ..tel()
+            };
+            p.supervise(&cfg, Mode::Run, &t, 0);
+            // Q16.16 and the bus reading's f32 rounding: 1e-4.
+            assert!((p.derate.to_num::<f32>() - want).abs() < 1e-4, "{v}");
+        }
+    }
+
+    #[test]
+    fn i2t_trips_after_the_first_order_time() {
+        // At I = 2·I_cont from cold, θ(t) = 4·(1 − e^(−t/τ)) reaches 1 at t = τ·ln(4/3).
+        let cfg = Config {
+            i2t_tau_s: 1.0,
+            // 2·I_cont is also 2.2× the force rating: that check is not the one under test.
+            f_trip_n: f32::INFINITY,
+            ..Config::default()
+        };
+        let i = 2.0 * cfg.i2t_cont_a;
+        let t = Telemetry {
+            i_dq: Dq { d: q(0.0), q: q(i) },
+            ..tel()
+        };
+        let mut p = Protection::default();
+        let mut n = 0;
+        loop {
+            n += 1;
+            match p.supervise(&cfg, Mode::Idle, &t, 0).trip {
+                None => assert!(n < 10_000),
+                Some(f) => {
+                    assert_eq!(f, Fault::MachineI2t);
+                    break;
+                }
+            }
+        }
+        let want = cfg.i2t_tau_s * (4.0f32 / 3.0).ln() * SUPERVISE_HZ;
+        // Forward Euler at dt/τ = 1e-3 and the Q16.16 current: within 1 % (+1 tick).
+        assert!((n as f32 - want).abs() < 0.01 * want + 1.0, "{n} vs {want}");
+        assert!(p
+            .cause_present(Fault::MachineI2t, &cfg, &t, false)
+            .is_some());
+    }
+
+    #[test]
+    fn overrun_bucket_tolerates_one_per_tick_and_trips_on_bursts() {
+        let cfg = Config::default();
+        let mut p = Protection::default();
+        for _ in 0..1000 {
+            p.report_overrun();
+            assert!(p.supervise(&cfg, Mode::Run, &tel(), 0).trip.is_none());
+        }
+        for _ in 0..=cfg.overrun_max + 1 {
+            p.report_overrun();
+        }
+        assert_eq!(
+            p.supervise(&cfg, Mode::Run, &tel(), 0).trip,
+            Some(Fault::LoopOverrun)
+        );
+    }
+}

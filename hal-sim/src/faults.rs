@@ -1,0 +1,258 @@
+//! Fault injection: a layer around [`Sim`] that, from a chosen moment, falsifies the sample
+//! on its way to the firmware (current, bus and encoder sensors stuck, open, noisy, offset,
+//! glitching or running away), changes the plant at run time (bus load disconnected, brake
+//! resistor open, excitation beyond the rating) or reports current-loop overruns. The
+//! simulation itself is unchanged: the layer uses [`Sim::step_with`], [`Sim::set_bus`] and
+//! [`Sim::set_drive`].
+
+use crate::plant::{Drive, Excitation};
+use crate::sim::Sim;
+use regen_fw::io::RawSample;
+
+/// What goes wrong.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Inject {
+    /// The phase's ADC code freezes at its value at the moment of injection.
+    CurrentStuck { phase: usize },
+    /// The phase's sensor line opens: the code sits at a rail (0 or 4095).
+    CurrentOpen { phase: usize, high: bool },
+    /// Gaussian noise of `sigma_a` (A rms) added to the phase's reading.
+    CurrentNoise { phase: usize, sigma_a: f64 },
+    /// The phase's zero offset jumps by `offset_a`.
+    CurrentOffset { phase: usize, offset_a: f64 },
+    /// The bus-voltage sensor reads 0 (line open).
+    BusSensorOpen,
+    /// The bus-voltage sensor reads full scale.
+    BusSensorRail,
+    /// The bus-voltage reading freezes at its value at the moment of injection.
+    BusSensorStuck,
+    /// Gaussian noise of `sigma_v` (V rms) on the bus-voltage reading.
+    BusSensorNoise { sigma_v: f64 },
+    /// The encoder count jitters by a uniform ±`counts` every period (no net drift).
+    EncoderNoise { counts: u16 },
+    /// The encoder counter stops (cable cut, coupling slipped).
+    EncoderStuck,
+    /// The counter jumps by `counts` once and keeps the offset (a noise burst or a slip).
+    EncoderGlitch { counts: i32 },
+    /// The counter runs away by `counts_per_step` every period (a broken channel counting
+    /// noise).
+    EncoderRunaway { counts_per_step: i32 },
+    /// The bus source/sink is disconnected (no load for regenerated power); with
+    /// `brake_open` the brake resistor is open too.
+    LoadDisconnect { brake_open: bool },
+    /// The structure's base excitation is multiplied by `factor`.
+    Overexcite { factor: f64 },
+    /// The board reports a current-loop overrun every `every` periods.
+    Overrun { every: u32 },
+    /// The emulated load is switched to `r_load_ohm` (an overload the law commands: the
+    /// current goes to its clip).
+    Overload { r_load_ohm: f32 },
+}
+
+impl Inject {
+    /// Short name (suite reports).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Inject::CurrentStuck { .. } => "current_stuck",
+            Inject::CurrentOpen { .. } => "current_open",
+            Inject::CurrentNoise { .. } => "current_noise",
+            Inject::CurrentOffset { .. } => "current_offset",
+            Inject::BusSensorOpen => "bus_sensor_open",
+            Inject::BusSensorRail => "bus_sensor_rail",
+            Inject::BusSensorStuck => "bus_sensor_stuck",
+            Inject::BusSensorNoise { .. } => "bus_sensor_noise",
+            Inject::EncoderNoise { .. } => "encoder_noise",
+            Inject::EncoderStuck => "encoder_stuck",
+            Inject::EncoderGlitch { .. } => "encoder_glitch",
+            Inject::EncoderRunaway { .. } => "encoder_runaway",
+            Inject::LoadDisconnect { brake_open: false } => "load_disconnect",
+            Inject::LoadDisconnect { brake_open: true } => "load_disconnect_brake_open",
+            Inject::Overexcite { .. } => "overexcite",
+            Inject::Overrun { .. } => "overrun",
+            Inject::Overload { .. } => "overload",
+        }
+    }
+}
+
+/// A simulation with one fault injected at `at_s`.
+pub struct FaultSim {
+    pub sim: Sim,
+    pub inject: Inject,
+    pub at_s: f64,
+    active: bool,
+    frozen: u16,
+    enc_offset: u16,
+    rng: u64,
+    counts_per_amp: f64,
+    counts_per_volt: f64,
+    k: u64,
+}
+
+impl FaultSim {
+    /// Wrap `sim`; `seed` drives the injected noise.
+    pub fn new(sim: Sim, inject: Inject, at_s: f64, seed: u64) -> FaultSim {
+        let counts_per_amp = 1.0 / sim.controller().config().amps_per_count as f64;
+        let counts_per_volt = 1.0 / sim.controller().config().volts_per_count as f64;
+        FaultSim {
+            sim,
+            inject,
+            at_s,
+            active: false,
+            frozen: 0,
+            enc_offset: 0,
+            rng: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
+            counts_per_amp,
+            counts_per_volt,
+            k: 0,
+        }
+    }
+
+    /// Whether the fault is in force.
+    pub fn active(&self) -> bool {
+        self.active
+    }
+
+    /// Plant changes at the moment of injection.
+    fn start(&mut self) -> Result<(), String> {
+        match self.inject {
+            Inject::LoadDisconnect { brake_open } => {
+                let mut b = self.sim.rig().bus;
+                b.source_v = None;
+                if brake_open {
+                    b.brake_r_ohm = f64::INFINITY;
+                }
+                self.sim.set_bus(b)?;
+            }
+            Inject::Overexcite { factor } => {
+                let mut d = self.sim.rig().drive.clone();
+                if let Drive::Structure { excitation, .. } = &mut d {
+                    match excitation {
+                        Excitation::Sine { a0_m_s2, .. } | Excitation::Triangle { a0_m_s2, .. } => {
+                            *a0_m_s2 *= factor
+                        }
+                        Excitation::KanaiTajimi { s0, .. } => *s0 *= factor * factor,
+                        _ => return Err("overexcite: sine, triangle or Kanai–Tajimi only".into()),
+                    }
+                } else {
+                    return Err("overexcite needs a structure".into());
+                }
+                self.sim.set_drive(d)?;
+            }
+            Inject::Overload { r_load_ohm } => {
+                let mut c = *self.sim.controller().config();
+                c.r_load_ohm = r_load_ohm;
+                self.sim
+                    .controller_mut()
+                    .set_config(&c)
+                    .map_err(|e| e.to_string())?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// One PWM period.
+    pub fn step(&mut self) -> Result<(), String> {
+        if !self.active && self.sim.time() >= self.at_s - 0.5 * self.sim.period() {
+            self.active = true;
+            self.start()?;
+        }
+        if !self.active {
+            self.sim.step();
+            return Ok(());
+        }
+        self.k += 1;
+        let first = self.k == 1;
+        if let Inject::Overrun { every } = self.inject {
+            if self.k.is_multiple_of(every.max(1) as u64) {
+                self.sim.controller_mut().report_overrun();
+            }
+        }
+        let inj = self.inject;
+        let (frozen, enc_offset, rng, cpa, cpv) = (
+            &mut self.frozen,
+            &mut self.enc_offset,
+            &mut self.rng,
+            self.counts_per_amp,
+            self.counts_per_volt,
+        );
+        self.sim.step_with(
+            |s: &mut RawSample| match inj {
+                Inject::CurrentStuck { phase } => {
+                    if first {
+                        *frozen = s.i_abc[phase];
+                    }
+                    s.i_abc[phase] = *frozen;
+                }
+                Inject::CurrentOpen { phase, high } => s.i_abc[phase] = if high { 4095 } else { 0 },
+                Inject::CurrentNoise { phase, sigma_a } => {
+                    let c = s.i_abc[phase] as f64 + sigma_a * cpa * gauss(rng);
+                    s.i_abc[phase] = c.round().clamp(0.0, 4095.0) as u16;
+                }
+                Inject::CurrentOffset { phase, offset_a } => {
+                    let c = s.i_abc[phase] as f64 + offset_a * cpa;
+                    s.i_abc[phase] = c.round().clamp(0.0, 4095.0) as u16;
+                }
+                Inject::BusSensorOpen => s.v_bus = 0,
+                Inject::BusSensorRail => s.v_bus = 4095,
+                Inject::BusSensorStuck => {
+                    if first {
+                        *frozen = s.v_bus;
+                    }
+                    s.v_bus = *frozen;
+                }
+                Inject::BusSensorNoise { sigma_v } => {
+                    let c = s.v_bus as f64 + sigma_v * cpv * gauss(rng);
+                    s.v_bus = c.round().clamp(0.0, 4095.0) as u16;
+                }
+                Inject::EncoderNoise { counts } => {
+                    let n = 2 * counts as u64 + 1;
+                    let j = (uniform(rng) * n as f64) as i64 - counts as i64;
+                    s.encoder = s.encoder.wrapping_add(j as u16);
+                }
+                Inject::EncoderStuck => {
+                    if first {
+                        *frozen = s.encoder;
+                    }
+                    s.encoder = *frozen;
+                }
+                Inject::EncoderGlitch { counts } => {
+                    if first {
+                        *enc_offset = counts as u16;
+                    }
+                    s.encoder = s.encoder.wrapping_add(*enc_offset);
+                }
+                Inject::EncoderRunaway { counts_per_step } => {
+                    *enc_offset = enc_offset.wrapping_add(counts_per_step as u16);
+                    s.encoder = s.encoder.wrapping_add(*enc_offset);
+                }
+                Inject::LoadDisconnect { .. }
+                | Inject::Overexcite { .. }
+                | Inject::Overrun { .. }
+                | Inject::Overload { .. } => {}
+            },
+            |_| {},
+        );
+        Ok(())
+    }
+}
+
+/// A uniform deviate in [0, 1) (xorshift64*).
+fn uniform(s: &mut u64) -> f64 {
+    *s ^= *s >> 12;
+    *s ^= *s << 25;
+    *s ^= *s >> 27;
+    (s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// A standard normal deviate (xorshift64* + Box–Muller).
+fn gauss(s: &mut u64) -> f64 {
+    let mut u = || {
+        *s ^= *s >> 12;
+        *s ^= *s << 25;
+        *s ^= *s >> 27;
+        ((s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let (a, b) = (u(), u());
+    (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+}
