@@ -321,44 +321,39 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let stride = n.div_ceil(opt.screen_samples).max(1);
     let mut chosen: Vec<Effect> = Vec::new();
     let mut cols = effects::build_columns(&ctx, &chosen);
+    let n_base = cols.len();
     let mut full = normals(&refs(&cols), &rec.f, &hold, 1);
     let base_full = full.clone();
     let (tr, ho) = full.clone();
     let th = tr.solve();
-    // screening subsample (every `stride`-th sample)
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let sub_f: Vec<f64> = idx.iter().map(|&i| rec.f[i]).collect();
-    let sub_hold: Vec<bool> = idx.iter().map(|&i| hold[i]).collect();
-    let sub = |c: &[(String, Vec<f64>)]| -> Vec<Vec<f64>> {
-        c.iter()
-            .map(|(_, v)| idx.iter().map(|&i| v[i]).collect())
-            .collect()
-    };
+    // Screening subsample (every `stride`-th sample), gathered into contiguous arrays once.
+    let sub = effects::SubSignals::new(&ctx, (0..n).step_by(stride).collect());
+    let sig = sub.sig();
+    let sub_f: Vec<f64> = sub.rows.iter().map(|&i| rec.f[i]).collect();
+    let sub_hold: Vec<bool> = sub.rows.iter().map(|&i| hold[i]).collect();
+    let mut sub_cols: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|(_, v)| sub.rows.iter().map(|&i| v[i]).collect())
+        .collect();
     let baseline_holdout = rel(ho.rss(&th), ho.ff);
     let baseline_train = rel(tr.rss(&th), tr.ff);
     // Baseline term significance: drop each in turn.
     let mut baseline_terms = Vec::new();
-    let units = ["kg", "N·s/m", "N", "N"];
-    let names = [
-        "inertia",
-        "viscous_friction",
-        "coulomb_friction",
-        "force_offset",
-    ];
-    for drop in 0..cols.len() {
-        let keep: Vec<&[f64]> = cols
+    for drop in 0..n_base {
+        let keep: Vec<&[f64]> = sub_cols
             .iter()
             .enumerate()
             .filter(|(i, _)| *i != drop)
-            .map(|(_, c)| c.1.as_slice())
+            .map(|(_, c)| c.as_slice())
             .collect();
-        let (t2, h2) = normals(&keep, &rec.f, &hold, stride);
+        let (t2, h2) = normals(&keep, &sub_f, &sub_hold, 1);
         let th2 = t2.solve();
         let without = rel(h2.rss(&th2), h2.ff);
+        let (name, unit) = effects::baseline_term(&cols[drop].0);
         baseline_terms.push(BaselineTerm {
-            effect: names[drop].to_string(),
+            effect: name.to_string(),
             value: th[drop],
-            unit: units[drop].to_string(),
+            unit: unit.to_string(),
             holdout_rel_error_without: without,
             // kept when dropping it makes the held-out rss grow by the same margin an
             // extension must bring
@@ -366,11 +361,14 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
         });
     }
+    // Screening columns of the candidates that need a pass over the whole record (the
+    // resonance filter) are the same in every round: computed once per parameter value.
+    let mut cache: std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>> =
+        std::collections::HashMap::new();
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
     let catalogue = effects::catalogue(&ctx);
     while chosen.len() < opt.max_effects {
-        let sub_cols = sub(&cols);
         let base_refs: Vec<&[f64]> = sub_cols.iter().map(|v| v.as_slice()).collect();
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
         let th_b = base.0.solve();
@@ -381,8 +379,16 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             if chosen.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
-            let eval = |eff: &Effect| -> (f64, f64) {
-                let z = effects::effect_columns(&ctx, eff, Some(&idx));
+            let mut eval = |eff: &Effect| -> (f64, f64) {
+                let fresh;
+                let z = if eff.kind == EffectKind::Compliance {
+                    cache
+                        .entry((eff.kind as usize, eff.param.to_bits()))
+                        .or_insert_with(|| effects::columns_on(&ctx, &sig, eff))
+                } else {
+                    fresh = effects::columns_on(&ctx, &sig, eff);
+                    &fresh
+                };
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
                 let nn = extend_normals(&base, &base_refs, &zr, &sub_f, &sub_hold, 1);
                 let t = nn.0.solve();
@@ -422,7 +428,12 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             break;
         }
         chosen.push(eff.clone());
-        let z = effects::effect_columns(&ctx, &eff, None);
+        let z = effects::effect_columns(&ctx, &eff);
+        sub_cols.extend(
+            effects::columns_on(&ctx, &sig, &eff)
+                .into_iter()
+                .map(|(_, v)| v),
+        );
         {
             let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
             full = extend_normals(&full, &refs(&cols), &zr, &rec.f, &hold, 1);

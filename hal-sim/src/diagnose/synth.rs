@@ -184,7 +184,7 @@ pub fn generate_csv(s: &SynthSpec) -> String {
     let ctx = Context::new(&rec); // base_pred = the exact device baseline force
     let mut f = rec.f.clone();
     for (e, c) in &s.hidden {
-        for ((_, col), k) in effect_columns(&ctx, e, None).iter().zip(c) {
+        for ((_, col), k) in effect_columns(&ctx, e).iter().zip(c) {
             for (fi, ci) in f.iter_mut().zip(col) {
                 *fi += k * ci;
             }
