@@ -437,6 +437,101 @@ pub fn resonator(
     (lp, bp, ub)
 }
 
+/// `resonator` for several resonance frequencies in one pass over the record (independent
+/// recurrences interleaved, so the pass is bound by arithmetic throughput rather than by the
+/// latency of one filter's feedback chain). Same outputs as `resonator` per frequency.
+pub fn resonator_batch(
+    u: &[f64],
+    freqs: &[f64],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let m = freqs.len();
+    let coef = |f: f64, k: f64| {
+        let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+        let a1 = 1.0 / (1.0 + g * (g + k));
+        [a1, g * a1, g * g * a1]
+    };
+    let ca: Vec<[f64; 3]> = freqs
+        .iter()
+        .map(|&f| coef(f, 2.0 * COMPLIANCE_ZETA))
+        .collect();
+    let cb: Vec<[f64; 3]> = freqs
+        .iter()
+        .map(|&f| coef(2.0 * f, std::f64::consts::SQRT_2))
+        .collect();
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let mut st = vec![[0.0, u0, 0.0, u0]; m]; // ic1, ic2, jc1, jc2
+    let cap = rows.map_or(u.len(), |r| r.len());
+    let mut out: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..m)
+        .map(|_| {
+            (
+                Vec::with_capacity(cap),
+                Vec::with_capacity(cap),
+                Vec::with_capacity(cap),
+            )
+        })
+        .collect();
+    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
+    let mut next = 0usize;
+    let mut tmp = vec![[0.0f64; 3]; m];
+    for (i, &xin) in u[..last].iter().enumerate() {
+        for k in 0..m {
+            let [ic1, ic2, jc1, jc2] = st[k];
+            let [b1, b2, b3] = cb[k];
+            let [a1, a2, a3] = ca[k];
+            let w3 = xin - jc2;
+            let w1 = b1 * jc1 + b2 * w3;
+            let w2 = jc2 + b2 * jc1 + b3 * w3;
+            let x = w2;
+            let v3 = x - ic2;
+            let v1 = a1 * ic1 + a2 * v3;
+            let v2 = ic2 + a2 * ic1 + a3 * v3;
+            st[k] = [2.0 * v1 - ic1, 2.0 * v2 - ic2, 2.0 * w1 - jc1, 2.0 * w2 - jc2];
+            tmp[k] = [v2, v1, x];
+        }
+        let keep = match rows {
+            None => true,
+            Some(r) => r[next] == i,
+        };
+        if keep {
+            for k in 0..m {
+                out[k].0.push(tmp[k][0]);
+                out[k].1.push(tmp[k][1]);
+                out[k].2.push(tmp[k][2]);
+            }
+            if let Some(r) = rows {
+                next += 1;
+                if next == r.len() {
+                    break;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Columns of several effects of one kind on the rows of `s` (the compliance filters of all
+/// the values in one pass).
+pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
+    if effs.is_empty() || effs.iter().any(|e| e.kind != EffectKind::Compliance) {
+        return effs.iter().map(|e| columns_on(ctx, s, e)).collect();
+    }
+    let freqs: Vec<f64> = effs.iter().map(|e| e.param).collect();
+    resonator_batch(&ctx.rec.a, &freqs, ctx.dt, s.rows)
+        .into_iter()
+        .map(|(lp, bp, ub)| compliance_columns(lp, bp, ub))
+        .collect()
+}
+
+fn compliance_columns(lp: Vec<f64>, bp: Vec<f64>, ub: Vec<f64>) -> Vec<(String, Vec<f64>)> {
+    let c1 = lp.iter().zip(&ub).map(|(l, u)| l - u).collect();
+    vec![
+        ("compliance.lp_minus_a".into(), c1),
+        ("compliance.bp".into(), bp),
+    ]
+}
+
 /// Unit-coefficient shape of an effect for synthesis and fitting: the regressor columns at
 /// every sample of the record.
 pub fn effect_columns(ctx: &Context, e: &Effect) -> Vec<(String, Vec<f64>)> {
@@ -506,9 +601,18 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             // columns LP(a_b) − a_b (coefficient m2) and BP(a_b) (coefficient 2ζ·m2), the
             // denominator damping ζ₀ = COMPLIANCE_ZETA, a_b = a band-limited to 2·f_r.
             let (lp, bpf, ub) = resonator(&ctx.rec.a, e.param, ctx.dt, s.rows);
-            let c1 = (0..n).map(|i| lp[i] - ub[i]).collect();
-            vec![col("lp_minus_a", c1), col("bp", bpf)]
+            compliance_columns(lp, bpf, ub)
         }
+    }
+}
+
+/// Physical admissibility of an effect's fitted coefficients: a resonance needs a positive
+/// modal mass and a non-negative damping ratio (anything else is a filter shape fitted to
+/// something that is not a mode, and is not named `compliance`).
+pub fn plausible(kind: EffectKind, coef: &[f64]) -> bool {
+    match kind {
+        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0,
+        _ => true,
     }
 }
 
@@ -598,11 +702,18 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
 /// Local refinement grid around a coarse best value.
 pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
     match e.kind {
+        // each compliance value costs a pass of the resonator over the whole record: a
+        // coarser refinement (7 values per level) keeps the scan cheap on long records
+        EffectKind::Compliance => (0..=6)
+            .map(|i| Effect {
+                kind: e.kind,
+                param: e.param * (1.0 + width * (i as f64 / 3.0 - 1.0)),
+            })
+            .collect(),
         EffectKind::PositionPeriodicFriction
         | EffectKind::Cogging
         | EffectKind::Stribeck
-        | EffectKind::CurrentLimit
-        | EffectKind::Compliance => (0..=20)
+        | EffectKind::CurrentLimit => (0..=20)
             .map(|i| Effect {
                 kind: e.kind,
                 param: e.param * (1.0 + width * (i as f64 / 10.0 - 1.0)),

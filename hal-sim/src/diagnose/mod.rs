@@ -363,8 +363,8 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     }
     // Screening columns of the candidates that need a pass over the whole record (the
     // resonance filter) are the same in every round: computed once per parameter value.
-    let mut cache: std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>> =
-        std::collections::HashMap::new();
+    type Cache = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
+    let mut cache = Cache::new();
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
     let catalogue = effects::catalogue(&ctx);
@@ -379,7 +379,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             if chosen.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
-            let mut eval = |eff: &Effect| -> (f64, f64) {
+            let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64) {
                 let fresh;
                 let z = if eff.kind == EffectKind::Compliance {
                     cache
@@ -392,15 +392,37 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
                 let nn = extend_normals(&base, &base_refs, &zr, &sub_f, &sub_hold, 1);
                 let t = nn.0.solve();
+                if !effects::plausible(eff.kind, &t[base_refs.len()..]) {
+                    return (f64::INFINITY, 0.0);
+                }
                 let rt = nn.0.rss(&t);
                 let k_extra = z.len() + eff.kind.scanned() as usize;
                 let dbic = bic(rt, nn.0.n, base_refs.len() + k_extra)
                     - bic(rss_t0, nn.0.n, base_refs.len());
                 (nn.1.rss(&t), dbic)
             };
+            // fill the cache for a list of compliance values in one pass over the record
+            let prefill = |effs: &[Effect], cache: &mut Cache| {
+                if cand.kind != EffectKind::Compliance {
+                    return;
+                }
+                let missing: Vec<Effect> = effs
+                    .iter()
+                    .filter(|e| !cache.contains_key(&(e.kind as usize, e.param.to_bits())))
+                    .cloned()
+                    .collect();
+                for (e, c) in missing
+                    .iter()
+                    .zip(effects::columns_batch(&ctx, &sig, &missing))
+                {
+                    cache.insert((e.kind as usize, e.param.to_bits()), c);
+                }
+            };
+            let coarse = effects::grid(&ctx, cand);
+            prefill(&coarse, &mut cache);
             let mut cb: Option<(f64, f64, Effect)> = None;
-            for eff in effects::grid(&ctx, cand) {
-                let (rh, db) = eval(&eff);
+            for eff in coarse {
+                let (rh, db) = eval(&eff, &mut cache);
                 if cb.as_ref().is_none_or(|b| rh < b.0) {
                     cb = Some((rh, db, eff));
                 }
@@ -408,8 +430,10 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             if cand.kind.scanned() {
                 for width in [0.15, 0.03] {
                     let centre = cb.as_ref().unwrap().2.clone();
-                    for eff in effects::refine(&ctx, &centre, width) {
-                        let (rh, db) = eval(&eff);
+                    let fine = effects::refine(&ctx, &centre, width);
+                    prefill(&fine, &mut cache);
+                    for eff in fine {
+                        let (rh, db) = eval(&eff, &mut cache);
                         if rh < cb.as_ref().unwrap().0 {
                             cb = Some((rh, db, eff));
                         }

@@ -100,14 +100,12 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
                 header_line = ln;
             }
             Some(h) => {
-                let fields: Vec<&str> = line.split(',').collect();
-                if fields.len() != h.len() {
-                    return Err(err(
-                        Some(ln),
-                        format!("{} fields, header has {}", fields.len(), h.len()),
-                    ));
-                }
-                for (j, fld) in fields.iter().enumerate() {
+                let mut nf = 0;
+                for (j, fld) in line.split(',').enumerate() {
+                    nf = j + 1;
+                    if j >= h.len() {
+                        break;
+                    }
                     let val: f64 = fld.trim().parse().map_err(|_| {
                         err(
                             Some(ln),
@@ -121,6 +119,13 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
                         ));
                     }
                     cols[j].push(val);
+                }
+                if nf != h.len() {
+                    let nf = line.split(',').count();
+                    return Err(err(
+                        Some(ln),
+                        format!("{nf} fields, header has {}", h.len()),
+                    ));
                 }
                 first_data_line.push(ln);
             }
