@@ -149,11 +149,17 @@ impl<'a> Context<'a> {
         c.base_pred = predict(&cols, &tr.solve());
         let mut ab: Vec<f64> = c.base_pred.iter().map(|f| f.abs()).collect();
         let last = ab.len() - 1;
+        // ascending quantiles: each selection only searches above the previous one
+        let mut from = 0;
         c.clip_levels = CLIP_QUANTILES
             .iter()
             .map(|q| {
-                let k = (last as f64 * q) as usize;
-                *ab.select_nth_unstable_by(k, |x, y| x.total_cmp(y)).1
+                let k = ((last as f64 * q) as usize).max(from);
+                let v = *ab[from..]
+                    .select_nth_unstable_by(k - from, |x, y| x.total_cmp(y))
+                    .1;
+                from = k;
+                v
             })
             .collect();
         c
@@ -607,11 +613,12 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
 }
 
 /// Physical admissibility of an effect's fitted coefficients: a resonance needs a positive
-/// modal mass and a non-negative damping ratio (anything else is a filter shape fitted to
-/// something that is not a mode, and is not named `compliance`).
+/// modal mass and a damping ratio in [0, 1] (an overdamped "mode" has no resonance; such a
+/// fit is a filter shape fitted to something that is not a mode, and is not named
+/// `compliance`).
 pub fn plausible(kind: EffectKind, coef: &[f64]) -> bool {
     match kind {
-        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0,
+        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
         _ => true,
     }
 }

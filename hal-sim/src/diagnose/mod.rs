@@ -241,6 +241,83 @@ pub fn extend_normals(
     out
 }
 
+/// Training / held-out weights (1/0 and 0/1) of the samples, for branch-free sums.
+pub struct HoldWeights {
+    pub train: Vec<f64>,
+    pub hold: Vec<f64>,
+}
+
+impl HoldWeights {
+    pub fn new(hold: &[bool]) -> Self {
+        HoldWeights {
+            train: hold.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect(),
+            hold: hold.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect(),
+        }
+    }
+}
+
+/// (Σ a·b·wt, Σ a·b·wh) over contiguous slices, four partial sums each (independent
+/// accumulation chains, so the loop runs at arithmetic throughput).
+fn dot2(a: &[f64], b: &[f64], wt: &[f64], wh: &[f64]) -> (f64, f64) {
+    let n = a.len().min(b.len()).min(wt.len()).min(wh.len());
+    let (mut t, mut h) = ([0.0f64; 4], [0.0f64; 4]);
+    let m = n / 4 * 4;
+    let mut i = 0;
+    while i < m {
+        for l in 0..4 {
+            let p = a[i + l] * b[i + l];
+            t[l] += p * wt[i + l];
+            h[l] += p * wh[i + l];
+        }
+        i += 4;
+    }
+    for j in m..n {
+        let p = a[j] * b[j];
+        t[0] += p * wt[j];
+        h[0] += p * wh[j];
+    }
+    ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
+}
+
+/// `extend_normals` over every sample, each new Gram entry one contiguous weighted dot
+/// product (training and held-out parts at once).
+pub fn extend_normals_dense(
+    base: &(Normal, Normal),
+    bcols: &[&[f64]],
+    z: &[&[f64]],
+    f: &[f64],
+    w: &HoldWeights,
+) -> (Normal, Normal) {
+    let p = bcols.len();
+    let k = z.len();
+    let m = p + k;
+    let mut out = (Normal::new(m), Normal::new(m));
+    for (dst, src) in [(&mut out.0, &base.0), (&mut out.1, &base.1)] {
+        for i in 0..p {
+            for j in 0..p {
+                dst.g[i * m + j] = src.g[i * p + j];
+            }
+            dst.b[i] = src.b[i];
+        }
+        dst.ff = src.ff;
+        dst.n = src.n;
+    }
+    for c in 0..k {
+        let row = p + c;
+        for (j, bc) in bcols.iter().chain(z[..=c].iter()).enumerate() {
+            let (t, h) = dot2(z[c], bc, &w.train, &w.hold);
+            out.0.g[row * m + j] = t;
+            out.0.g[j * m + row] = t;
+            out.1.g[row * m + j] = h;
+            out.1.g[j * m + row] = h;
+        }
+        let (t, h) = dot2(z[c], f, &w.train, &w.hold);
+        out.0.b[row] = t;
+        out.1.b[row] = h;
+    }
+    out
+}
+
 /// Relative error ‖f − f̂‖₂/‖f‖₂ from rss and ‖f‖².
 pub fn rel(rss: f64, ff: f64) -> f64 {
     if ff > 0.0 {
@@ -296,6 +373,9 @@ pub struct Diagnosis {
     pub final_full_rel_error: f64,
     /// Final model: column names and coefficients (fitted on the whole record).
     pub model: Vec<(String, f64)>,
+    /// The model after each stage, refitted on the whole record: index 0 the baseline,
+    /// index k the baseline with the first k findings (the cross-check evaluates each).
+    pub stage_models: Vec<Vec<(String, f64)>>,
     pub effects: Vec<Effect>,
     pub residual: Vec<f64>,
     pub prediction: Vec<f64>,
@@ -331,6 +411,8 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let sig = sub.sig();
     let sub_f: Vec<f64> = sub.rows.iter().map(|&i| rec.f[i]).collect();
     let sub_hold: Vec<bool> = sub.rows.iter().map(|&i| hold[i]).collect();
+    let sub_w = HoldWeights::new(&sub_hold);
+    let full_w = HoldWeights::new(&hold);
     let mut sub_cols: Vec<Vec<f64>> = cols
         .iter()
         .map(|(_, v)| sub.rows.iter().map(|&i| v[i]).collect())
@@ -361,12 +443,17 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
         });
     }
-    // Screening columns of the candidates that need a pass over the whole record (the
-    // resonance filter) are the same in every round: computed once per parameter value.
+    // The screening columns of every candidate value are the same in every round: computed
+    // once (on the subsample, at most `screen_samples` rows each) and kept.
     type Cache = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
     let mut cache = Cache::new();
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
+    let whole_fit = |full: &(Normal, Normal), cols: &[(String, Vec<f64>)]| {
+        let t = full.0.plus(&full.1).solve();
+        cols.iter().map(|c| c.0.clone()).zip(t).collect::<Vec<_>>()
+    };
+    let mut stage_models = vec![whole_fit(&full, &cols)];
     let catalogue = effects::catalogue(&ctx);
     while chosen.len() < opt.max_effects {
         let base_refs: Vec<&[f64]> = sub_cols.iter().map(|v| v.as_slice()).collect();
@@ -380,17 +467,11 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64) {
-                let fresh;
-                let z = if eff.kind == EffectKind::Compliance {
-                    cache
-                        .entry((eff.kind as usize, eff.param.to_bits()))
-                        .or_insert_with(|| effects::columns_on(&ctx, &sig, eff))
-                } else {
-                    fresh = effects::columns_on(&ctx, &sig, eff);
-                    &fresh
-                };
+                let z = cache
+                    .entry((eff.kind as usize, eff.param.to_bits()))
+                    .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-                let nn = extend_normals(&base, &base_refs, &zr, &sub_f, &sub_hold, 1);
+                let nn = extend_normals_dense(&base, &base_refs, &zr, &sub_f, &sub_w);
                 let t = nn.0.solve();
                 if !effects::plausible(eff.kind, &t[base_refs.len()..]) {
                     return (f64::INFINITY, 0.0);
@@ -460,9 +541,10 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
         );
         {
             let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-            full = extend_normals(&full, &refs(&cols), &zr, &rec.f, &hold, 1);
+            full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         }
         cols.extend(z);
+        stage_models.push(whole_fit(&full, &cols));
         let th_cur = full.0.solve();
         let after = rel(full.1.rss(&th_cur), full.1.ff);
         let params = effects::parameters(&ctx, &chosen, &cols, &th_cur, chosen.len() - 1);
@@ -510,6 +592,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
         final_holdout_rel_error: ho_rel,
         final_full_rel_error: final_full,
         model: cols.iter().map(|c| c.0.clone()).zip(th_full).collect(),
+        stage_models,
         effects: chosen,
         residual,
         prediction: pred,
@@ -525,13 +608,11 @@ pub fn cross_check(d: &mut Diagnosis, other: &Record) {
     let ctx = effects::Context::new(other);
     let ffo: f64 = other.f.iter().map(|v| v * v).sum();
     let err_of = |k: usize| -> f64 {
-        // baseline + first k effects, coefficients refitted on the first record is what we
-        // have only for the full model; for the intermediate models evaluate the full-model
-        // coefficients of the retained columns.
+        // baseline + first k effects, with that stage's coefficients (whole first record)
         let cols = effects::build_columns(&ctx, &d.effects[..k]);
         let mut pred = vec![0.0; other.len()];
         for (name, c) in &cols {
-            if let Some((_, th)) = d.model.iter().find(|(n, _)| n == name) {
+            if let Some((_, th)) = d.stage_models[k].iter().find(|(n, _)| n == name) {
                 for (p, v) in pred.iter_mut().zip(c) {
                     *p += th * v;
                 }

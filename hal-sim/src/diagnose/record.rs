@@ -224,6 +224,22 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
     })
 }
 
+impl Record {
+    /// Low-pass the force with the same zero-phase filter as the derived velocity and
+    /// acceleration ("parallel filtering", the EMPS benchmark's processing): force content
+    /// above the cutoff, which the derived acceleration cannot follow, is removed from both
+    /// sides of the model, and relative errors become comparable with figures computed that
+    /// way.
+    pub fn filter_force(&mut self, cutoff_hz: Option<f64>) {
+        let fs = 1.0 / self.dt();
+        let fc = cutoff_hz.unwrap_or(fs / 20.0);
+        self.f = filtfilt(&self.f, fc, fs);
+        self.derivative_method.push_str(&format!(
+            "; force f_N low-passed by the same filter ({fc:.3} Hz, parallel filtering)"
+        ));
+    }
+}
+
 /// Read and parse a file.
 pub fn read_csv(path: &std::path::Path, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
     let text =
