@@ -133,7 +133,11 @@ fn closed_loop_record_force_is_explained_with_the_electromagnetic_term() {
     // −K_e·ω/(R+R_L) through the firmware's speed estimate and current loop, which the record
     // does not show), but still far better than with no electromagnetic term (the held-out
     // error without the term is reported and must be large).
-    assert!(d2.final_full_rel_error < 0.05, "{}", d2.final_full_rel_error);
+    assert!(
+        d2.final_full_rel_error < 0.05,
+        "{}",
+        d2.final_full_rel_error
+    );
     let without = d2
         .baseline_terms
         .iter()

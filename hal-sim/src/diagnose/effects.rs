@@ -253,7 +253,7 @@ pub fn em_column(r: &Record) -> Option<(&'static str, Vec<f64>, String)> {
     let (lo, hi) = rl
         .iter()
         .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
-    if !(lo + rs > 0.0) || hi - lo <= 1e-9 * hi.abs() {
+    if lo + rs <= 0.0 || hi - lo <= 1e-9 * hi.abs() {
         return None;
     }
     Some((
@@ -493,7 +493,12 @@ pub fn resonator_batch(
             let v3 = x - ic2;
             let v1 = a1 * ic1 + a2 * v3;
             let v2 = ic2 + a2 * ic1 + a3 * v3;
-            st[k] = [2.0 * v1 - ic1, 2.0 * v2 - ic2, 2.0 * w1 - jc1, 2.0 * w2 - jc2];
+            st[k] = [
+                2.0 * v1 - ic1,
+                2.0 * v2 - ic2,
+                2.0 * w1 - jc1,
+                2.0 * w2 - jc2,
+            ];
             tmp[k] = [v2, v1, x];
         }
         let keep = match rows {
