@@ -16,6 +16,7 @@ const LOADS: [f64; 3] = [10.0, 40.0, 160.0];
 
 struct SimRecord {
     csv_iq: String,
+    csv_abc: String,
     csv_load: String,
     ke: f64,
     reflected_mass: f64,
@@ -41,6 +42,9 @@ fn closed_loop_record() -> SimRecord {
     let mut csv_iq = format!(
         "# closed-loop simulator record\n# lead_m_per_rev = {lead_rev}\nt_s,x_m,f_N,i_q_A\n"
     );
+    let mut csv_abc = format!(
+        "# closed-loop simulator record\n# lead_m_per_rev = {lead_rev}\nt_s,x_m,f_N,i_a_A,i_b_A,i_c_A,theta_e_rad\n"
+    );
     let mut csv_load = format!(
         "# closed-loop simulator record\n# lead_m_per_rev = {lead_rev}\n# r_s_ohm = {r_s}\nt_s,x_m,f_N,r_load_ohm\n"
     );
@@ -62,10 +66,20 @@ fn closed_loop_record() -> SimRecord {
         let (_, iq) = sim.i_dq();
         let _ = writeln!(csv_iq, "{:.6},{x:.9e},{f:.6},{iq:.6}", sim.time());
         let _ = writeln!(csv_load, "{:.6},{x:.9e},{f:.6},{load}", sim.time());
+        // electrical angle of the d axis as the plant defines it (p·x/l + offset)
+        let th = sc.machine.pole_pairs as f64 * x / sc.screw.lead_m_per_rad
+            + sc.machine.angle_offset_rad;
+        let [ia, ib, ic] = sim.currents();
+        let _ = writeln!(
+            csv_abc,
+            "{:.6},{x:.9e},{f:.6},{ia:.6},{ib:.6},{ic:.6},{th:.9}",
+            sim.time()
+        );
     }
     assert!(sim.controller().fault().is_none(), "firmware faulted");
     SimRecord {
         csv_iq,
+        csv_abc,
         csv_load,
         ke: sc.machine.ke_v_s_per_rad,
         reflected_mass: sc.screw.reflected_mass(),
@@ -109,6 +123,22 @@ fn closed_loop_record_force_is_explained_with_the_electromagnetic_term() {
     // Friction as configured (Coulomb within 10 %: it is 1-2 % of the force here).
     assert!((term(&d, "viscous_friction") / s.viscous - 1.0).abs() < 0.05);
     assert!((term(&d, "coulomb_friction") / s.coulomb - 1.0).abs() < 0.1);
+
+    // The same record with phase currents and the electrical angle instead of i_q: the
+    // diagnosis applies the amplitude-invariant Park transform itself; same bound on K_e.
+    let rec = parse_csv(&s.csv_abc, None).expect("phase-current record parses");
+    let d3 = diagnose(&rec, &Options::default());
+    let ke3 = term(&d3, "electromagnetic_force");
+    println!(
+        "from i_a/b/c + theta_e: K_e {ke3:.4}; error whole record {:.3} %",
+        100.0 * d3.final_full_rel_error
+    );
+    assert!((ke3 / s.ke - 1.0).abs() < 0.02, "K_e {ke3} vs {}", s.ke);
+    assert!(
+        d3.final_full_rel_error < 0.01,
+        "{}",
+        d3.final_full_rel_error
+    );
 
     // The same record with only the load resistance: the term becomes K_e²·3/2·v/(l²(R+R_L)).
     let rec = parse_csv(&s.csv_load, None).expect("load record parses");
