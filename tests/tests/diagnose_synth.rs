@@ -107,6 +107,7 @@ fn hidden_compliance_is_named() {
     let mut named = 0usize;
     let mut others_named = 0usize;
     let mut others = 0usize;
+    let mut extra_records = 0usize;
     let mut cuts = Vec::new();
     for seed in 0..seeds {
         let n_other = (seed % 2) as usize;
@@ -122,6 +123,9 @@ fn hidden_compliance_is_named() {
             .map(|f| f.parameters.clone());
         if found.is_some() {
             named += 1;
+        }
+        if names.iter().any(|n| !want.contains(&n.as_str())) {
+            extra_records += 1;
         }
         for w in want.iter().filter(|w| **w != "compliance") {
             others += 1;
@@ -141,7 +145,7 @@ fn hidden_compliance_is_named() {
     cuts.sort_by(|a, b| a.total_cmp(b));
     let median_cut = cuts[cuts.len() / 2];
     println!(
-        "compliance named in {named}/{seeds} records, other hidden effects named {others_named}/{others}, median held-out cut {median_cut:.1}x"
+        "compliance named in {named}/{seeds} records, other hidden effects named {others_named}/{others}, records with an extra name {extra_records}/{seeds}, median held-out cut {median_cut:.1}x"
     );
     // Bound: 14 of 16 (87.5 %). A diagnosis whose true rate were 60 % would reach it with
     // probability about 2 % (binomial tail), so a lucky pass is unlikely.

@@ -509,7 +509,13 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 }
             }
             if cand.kind.scanned() {
-                for width in [0.15, 0.03] {
+                // a resonance's residual is sharp in frequency: one more level for it
+                let widths: &[f64] = if cand.kind == EffectKind::Compliance {
+                    &[0.15, 0.03, 0.006]
+                } else {
+                    &[0.15, 0.03]
+                };
+                for &width in widths {
                     let centre = cb.as_ref().unwrap().2.clone();
                     let fine = effects::refine(&ctx, &centre, width);
                     prefill(&fine, &mut cache);
