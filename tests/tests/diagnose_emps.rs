@@ -84,3 +84,90 @@ fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
     // The findings must hold on the validation record: the extended model is not worse there.
     assert!(c.final_rel_error <= c.baseline_rel_error);
 }
+
+/// The validation record's force pulses (a 1 Hz square wave of 5 V added to the controller
+/// output, so `f_N` steps by gtau·5 V = 176 N at each edge) excite force content the derived
+/// acceleration cannot follow. Two facts are checked: (1) the raw-force residual is
+/// concentrated right after the pulse edges, and (2) with the benchmark's processing
+/// (force low-passed by the same zero-phase filter as the derivatives, "parallel filtering")
+/// the cross-test error comes within the published 5.98 %.
+#[test]
+fn emps_validation_pulses_where_the_model_misses_and_parallel_filtering() {
+    let Some(dir) = emps_dir() else {
+        println!(
+            "SKIPPED: shared/data/emps not found beside any ancestor of {}",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        return;
+    };
+    let val =
+        read_csv(&dir.join("emps_validation_pulses.csv"), None).expect("validation record parses");
+    // (1) diagnose the validation record itself (raw force) and locate its residual
+    let dv = diagnose(&val, &Options::default());
+    let pulses = val.extra.get("pulses_N").expect("pulses_N column");
+    let mut near = vec![false; val.len()];
+    let mut edges = 0;
+    for i in 1..val.len() {
+        if pulses[i] != pulses[i - 1] {
+            edges += 1;
+            for n in near.iter_mut().skip(i).take(30) {
+                *n = true;
+            }
+        }
+    }
+    let rms = |sel: bool| {
+        let (s, c) = dv
+            .residual
+            .iter()
+            .zip(&near)
+            .filter(|(_, n)| **n == sel)
+            .fold((0.0, 0usize), |(s, c), (r, _)| (s + r * r, c + 1));
+        ((s / c as f64).sqrt(), c)
+    };
+    let (r_near, n_near) = rms(true);
+    let (r_far, n_far) = rms(false);
+    let share = r_near * r_near * n_near as f64
+        / (r_near * r_near * n_near as f64 + r_far * r_far * n_far as f64);
+    println!(
+        "validation record diagnosed on its own: baseline {:.2} %, diagnosed {:.2} % (whole record); findings {:?}",
+        100.0 * dv.baseline_full_rel_error,
+        100.0 * dv.final_full_rel_error,
+        dv.findings.iter().map(|f| f.effect.as_str()).collect::<Vec<_>>()
+    );
+    println!(
+        "residual rms within 30 ms after the {edges} pulse edges {r_near:.2} N ({n_near} samples) vs {r_far:.2} N elsewhere; {:.0} % of the residual energy in {:.0} % of the samples",
+        100.0 * share,
+        100.0 * n_near as f64 / val.len() as f64
+    );
+    // Where it shows: right after the edges the residual rms is several times what it is
+    // elsewhere (a residual uniform in time would give equal rms; measured 3.3x).
+    assert!(edges >= 40, "{edges} pulse edges");
+    assert!(r_near > 2.5 * r_far, "{r_near} vs {r_far}");
+
+    // (2) parallel filtering on both records
+    let mut est =
+        read_csv(&dir.join("emps_estimation.csv"), None).expect("estimation record parses");
+    est.filter_force(None);
+    let mut valf = val.clone();
+    valf.filter_force(None);
+    let mut d = diagnose(&est, &Options::default());
+    cross_check(&mut d, &valf);
+    let c = d.cross.as_ref().unwrap();
+    println!(
+        "parallel filtering: estimation baseline {:.2} % (published 4.08 %), diagnosed {:.2} % (published asymmetric 3.11 %); validation cross-test baseline {:.2} % (published 5.98 %), diagnosed {:.2} %",
+        100.0 * d.baseline_full_rel_error,
+        100.0 * d.final_full_rel_error,
+        100.0 * c.baseline_rel_error,
+        100.0 * c.final_rel_error
+    );
+    for (name, e) in &c.after_each {
+        println!("  validation after {name}: {:.2} %", 100.0 * e);
+    }
+    // Our filter (Butterworth-2 at 50 Hz) is not the benchmark's decimation filter, so the
+    // published figures are matched within 10 % of their value, not exactly.
+    assert!(d.baseline_full_rel_error < 1.1 * 0.0408);
+    assert!(c.baseline_rel_error < 1.1 * 0.0598);
+    assert!(d.final_full_rel_error < 0.0311);
+    // the findings hold on the validation record: the diagnosed model is better there too
+    assert!(c.final_rel_error < c.baseline_rel_error);
+}

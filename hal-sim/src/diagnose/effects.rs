@@ -28,10 +28,13 @@ pub enum EffectKind {
     /// Extra inertia that acts only while the device is driven (reflected rotor inertia
     /// seen through an efficiency < 1).
     ReflectedInertia,
+    /// An unmodelled resonance: a mass hung on the device through a spring-damper
+    /// (parameter: resonance frequency, Hz).
+    Compliance,
 }
 
 impl EffectKind {
-    pub const ALL: [EffectKind; 9] = [
+    pub const ALL: [EffectKind; 10] = [
         EffectKind::DirectionAsymmetricFriction,
         EffectKind::PositionDependentFriction,
         EffectKind::PositionPeriodicFriction,
@@ -41,6 +44,7 @@ impl EffectKind {
         EffectKind::Lag,
         EffectKind::CurrentLimit,
         EffectKind::ReflectedInertia,
+        EffectKind::Compliance,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -53,6 +57,7 @@ impl EffectKind {
             EffectKind::Lag => "lag",
             EffectKind::CurrentLimit => "current_limit",
             EffectKind::ReflectedInertia => "reflected_inertia",
+            EffectKind::Compliance => "compliance",
         }
     }
     pub fn from_name(s: &str) -> Option<Self> {
@@ -67,6 +72,7 @@ impl EffectKind {
                 | EffectKind::Stribeck
                 | EffectKind::Lag
                 | EffectKind::CurrentLimit
+                | EffectKind::Compliance
         )
     }
 }
@@ -91,6 +97,14 @@ pub struct Context<'a> {
     /// Baseline prediction (set after the baseline fit; used by lag, current limit,
     /// efficiency).
     pub base_pred: Vec<f64>,
+    /// Shortest wavelength scanned: the stroke / 400, but at least 8 median position steps.
+    pub lambda_min: f64,
+    /// Quantiles 80 … 99 % of |baseline prediction| (the current-limit grid).
+    pub clip_levels: Vec<f64>,
+    /// Motion bandwidth: the highest frequency where the spectrum of the position increments
+    /// stands 100× above its noise floor (median of the upper half band). The compliance scan
+    /// stops there: a resonance is seen only where the motion has content.
+    pub f_motion: f64,
 }
 
 /// Smoothed sign: exact sign outside ±v_eps, linear inside (v_eps = 0.2 % of the peak speed,
@@ -117,32 +131,146 @@ impl<'a> Context<'a> {
             vmax,
             dt: rec.dt(),
             base_pred: Vec::new(),
+            lambda_min: 0.0,
+            clip_levels: Vec::new(),
+            f_motion: 0.0,
         };
+        c.f_motion = motion_bandwidth(&rec.x, c.dt);
+        let stroke = 2.0 * x_half;
+        let mut steps: Vec<f64> = rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+        let k = steps.len() / 2;
+        let med = *steps.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+        c.lambda_min = (stroke / 400.0).max(8.0 * med).min(stroke / 4.0);
         // baseline fit on the whole record gives the force proxy for the pred-based effects
         let cols = base_columns(&c);
         let refs: Vec<&[f64]> = cols.iter().map(|(_, v)| v.as_slice()).collect();
         let all = vec![false; rec.len()];
         let (tr, _) = super::normals(&refs, &rec.f, &all, 1);
         c.base_pred = predict(&cols, &tr.solve());
+        let mut ab: Vec<f64> = c.base_pred.iter().map(|f| f.abs()).collect();
+        let last = ab.len() - 1;
+        // ascending quantiles: each selection only searches above the previous one
+        let mut from = 0;
+        c.clip_levels = CLIP_QUANTILES
+            .iter()
+            .map(|q| {
+                let k = ((last as f64 * q) as usize).max(from);
+                let v = *ab[from..]
+                    .select_nth_unstable_by(k - from, |x, y| x.total_cmp(y))
+                    .1;
+                from = k;
+                v
+            })
+            .collect();
         c
     }
 }
 
 fn base_columns(ctx: &Context) -> Vec<(String, Vec<f64>)> {
     let r = ctx.rec;
-    vec![
+    let mut c = vec![
         ("inertia".into(), r.a.clone()),
         ("viscous".into(), r.v.clone()),
         ("coulomb".into(), ctx.sgn.clone()),
         ("offset".into(), vec![1.0; r.len()]),
-    ]
+    ];
+    if let Some((name, col, _)) = em_column(r) {
+        c.push((name.into(), col));
+    }
+    c
+}
+
+/// Reporting name and unit of a baseline column.
+pub fn baseline_term(col: &str) -> (&'static str, &'static str) {
+    match col {
+        "inertia" => ("inertia", "kg"),
+        "viscous" => ("viscous_friction", "N·s/m"),
+        "coulomb" => ("coulomb_friction", "N"),
+        "offset" => ("force_offset", "N"),
+        "em_ke" => ("electromagnetic_force", "V·s/rad (K_e)"),
+        "em_force_per_amp" => ("electromagnetic_force", "N/A (i_q gain; no lead given)"),
+        "em_ke2" => ("electromagnetic_force", "V²·s²/rad² (K_e²)"),
+        _ => ("unknown", ""),
+    }
+}
+
+/// The electromagnetic-force column of the baseline when the record carries currents or a
+/// load resistance (conventions of firmware/src/lib.rs: amplitude-invariant Park transform,
+/// per-phase peak K_e, torque T = 3/2·K_e·i_q, axial force on the screw T/l with l the lead
+/// in m/rad; the force the device needs from outside then carries −T/l):
+/// * `i_q_A`, or phase currents `i_a_A`, `i_b_A` (and `i_c_A`) with `theta_e_rad`: column
+///   `−3/2·i_q/l`, coefficient K_e (V·s/rad) — with no `lead_m_per_rev` metadata the column is
+///   `−i_q` and its coefficient a force per ampere;
+/// * `r_load_ohm` only (an emulated resistor, `i_q = −K_e·ω_m/(R+R_L)`): column
+///   `3/2·v/(l²·(R+R_L))`, coefficient K_e², R from `r_s_ohm` metadata (0 when absent). A
+///   constant load is exactly collinear with viscous friction and is then left to the
+///   viscous term (no column).
+///
+/// Returns (column name, values, description of the source).
+pub fn em_column(r: &Record) -> Option<(&'static str, Vec<f64>, String)> {
+    let lead = r.meta.get("lead_m_per_rev").copied().filter(|l| *l > 0.0);
+    let l = lead.map(|l| l / std::f64::consts::TAU);
+    let iq: Option<(Vec<f64>, &str)> = if let Some(q) = r.extra.get("i_q_A") {
+        Some((q.clone(), "i_q_A"))
+    } else if let (Some(ia), Some(ib), Some(th)) = (
+        r.extra.get("i_a_A"),
+        r.extra.get("i_b_A"),
+        r.extra.get("theta_e_rad"),
+    ) {
+        let ic = r.extra.get("i_c_A");
+        let q = (0..r.len())
+            .map(|i| {
+                let al = ia[i];
+                let be = match ic {
+                    Some(c) => (ib[i] - c[i]) / 3f64.sqrt(),
+                    None => (ia[i] + 2.0 * ib[i]) / 3f64.sqrt(),
+                };
+                let (sn, cs) = th[i].sin_cos();
+                -sn * al + cs * be
+            })
+            .collect();
+        Some((q, "Park transform of the phase currents at theta_e_rad"))
+    } else {
+        None
+    };
+    if let Some((q, src)) = iq {
+        return Some(match l {
+            Some(l) => (
+                "em_ke",
+                q.iter().map(|i| -1.5 * i / l).collect(),
+                format!("−3/2·i_q/l from {src}, lead {} m/rev", lead.unwrap()),
+            ),
+            None => (
+                "em_force_per_amp",
+                q.iter().map(|i| -i).collect(),
+                format!("−i_q from {src} (no lead_m_per_rev: coefficient in N/A)"),
+            ),
+        });
+    }
+    let rl = r.extra.get("r_load_ohm")?;
+    let l = l?;
+    let rs = r.meta.get("r_s_ohm").copied().unwrap_or(0.0);
+    let (lo, hi) = rl
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    if lo + rs <= 0.0 || hi - lo <= 1e-9 * hi.abs() {
+        return None;
+    }
+    Some((
+        "em_ke2",
+        r.v.iter()
+            .zip(rl)
+            .map(|(v, rl)| 1.5 * v / (l * l * (rs + rl)))
+            .collect(),
+        format!("3/2·v/(l²·(R+R_L)) from r_load_ohm, R = {rs} Ω"),
+    ))
 }
 
 /// Baseline columns followed by the columns of each chosen effect.
 pub fn build_columns(ctx: &Context, chosen: &[Effect]) -> Vec<(String, Vec<f64>)> {
     let mut cols = base_columns(ctx);
     for e in chosen {
-        cols.extend(effect_columns(ctx, e, None));
+        cols.extend(effect_columns(ctx, e));
     }
     cols
 }
@@ -159,68 +287,344 @@ pub fn predict(cols: &[(String, Vec<f64>)], th: &[f64]) -> Vec<f64> {
     p
 }
 
-/// Unit-coefficient shape of an effect for synthesis and fitting: the regressor columns, at
-/// the sample indices `rows` (all samples when None).
-pub fn effect_columns(
-    ctx: &Context,
-    e: &Effect,
-    rows: Option<&[usize]>,
-) -> Vec<(String, Vec<f64>)> {
-    let r = ctx.rec;
-    let all: Vec<usize>;
-    let idx: &[usize] = match rows {
-        Some(x) => x,
-        None => {
-            all = (0..r.len()).collect();
-            &all
+/// Longest lag (samples) the screening windows hold; the lag grid and its refinement stay
+/// within it.
+pub const LAG_MAX: usize = 80;
+
+/// The signals effect columns are computed from, at a set of rows of the record: either every
+/// sample (`rows` None, slices borrowed from the context) or a gathered subsample for screening
+/// (the values are exactly those of the full record at these rows, so screening sees the
+/// same columns as the final fit; anything that needs the sample history — lag, resonance
+/// filter — is taken from the full record).
+pub struct Sig<'s> {
+    pub rows: Option<&'s [usize]>,
+    pub x: &'s [f64],
+    pub v: &'s [f64],
+    pub a: &'s [f64],
+    pub sgn: &'s [f64],
+    pub xn: &'s [f64],
+    pub bp: &'s [f64],
+    /// Subsample only: `lag_win[j·(LAG_MAX+1)+k]` = full-record baseline prediction at
+    /// `rows[j] − k` (clamped at 0).
+    pub lag_win: &'s [f64],
+}
+
+impl<'s> Sig<'s> {
+    /// Every sample of the record.
+    pub fn full(ctx: &'s Context) -> Self {
+        Sig {
+            rows: None,
+            x: &ctx.rec.x,
+            v: &ctx.rec.v,
+            a: &ctx.rec.a,
+            sgn: &ctx.sgn,
+            xn: &ctx.xn,
+            bp: &ctx.base_pred,
+            lag_win: &[],
         }
+    }
+    fn len(&self) -> usize {
+        self.x.len()
+    }
+}
+
+/// Gathered copy of the context signals at `rows` (contiguous in memory, so that screening
+/// does not miss the cache on every sample of a long record).
+pub struct SubSignals {
+    pub rows: Vec<usize>,
+    pub x: Vec<f64>,
+    pub v: Vec<f64>,
+    pub a: Vec<f64>,
+    pub sgn: Vec<f64>,
+    pub xn: Vec<f64>,
+    pub bp: Vec<f64>,
+    pub lag_win: Vec<f64>,
+}
+
+impl SubSignals {
+    pub fn new(ctx: &Context, rows: Vec<usize>) -> Self {
+        let g = |s: &[f64]| rows.iter().map(|&i| s[i]).collect::<Vec<f64>>();
+        let w = LAG_MAX + 1;
+        let mut lag_win = Vec::with_capacity(rows.len() * w);
+        for &i in &rows {
+            for k in 0..w {
+                lag_win.push(ctx.base_pred[i.saturating_sub(k)]);
+            }
+        }
+        SubSignals {
+            x: g(&ctx.rec.x),
+            v: g(&ctx.rec.v),
+            a: g(&ctx.rec.a),
+            sgn: g(&ctx.sgn),
+            xn: g(&ctx.xn),
+            bp: g(&ctx.base_pred),
+            lag_win,
+            rows,
+        }
+    }
+    pub fn sig(&self) -> Sig<'_> {
+        Sig {
+            rows: Some(&self.rows),
+            x: &self.x,
+            v: &self.v,
+            a: &self.a,
+            sgn: &self.sgn,
+            xn: &self.xn,
+            bp: &self.bp,
+            lag_win: &self.lag_win,
+        }
+    }
+}
+
+/// Damping ratio of the resonance filter of the `compliance` candidate (a lightly damped
+/// structural mode; the numerator damping is fitted linearly, see `effect_columns`).
+pub const COMPLIANCE_ZETA: f64 = 0.1;
+
+/// Second-order resonator driven by `u` band-limited to twice the resonance (causal
+/// Butterworth-2 low-pass at 2·f_r, so that derivative noise far above the resonance, where
+/// the motion has no content, cannot be fitted as a resonance), each stage a zero-delay-
+/// feedback state-variable filter (bilinear transform prewarped at its corner,
+/// unconditionally stable). Returns the low-pass `ω²/(s²+2ζωs+ω²)·u_b` and band-pass
+/// `ωs/(s²+2ζωs+ω²)·u_b` outputs at `rows` (all samples when None), and the band-limited input
+/// u_b is what the compliance columns subtract. Starts at rest on the first input.
+pub fn resonator(
+    u: &[f64],
+    f_hz: f64,
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let coef = |f: f64, k: f64| {
+        let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+        let a1 = 1.0 / (1.0 + g * (g + k));
+        (a1, g * a1, g * g * a1)
     };
+    let (a1, a2, a3) = coef(f_hz, 2.0 * COMPLIANCE_ZETA);
+    // input band limit: Butterworth-2 low-pass at 2·f_r (same filter structure, k = √2)
+    let (b1, b2, b3) = coef(2.0 * f_hz, std::f64::consts::SQRT_2);
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let (mut ic1, mut ic2) = (0.0, u0);
+    let (mut jc1, mut jc2) = (0.0, u0);
+    let cap = rows.map_or(u.len(), |r| r.len());
+    let (mut lp, mut bp) = (Vec::with_capacity(cap), Vec::with_capacity(cap));
+    let mut ub = Vec::with_capacity(cap);
+    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
+    let mut next = 0usize;
+    for (i, &xin) in u[..last].iter().enumerate() {
+        let w3 = xin - jc2;
+        let w1 = b1 * jc1 + b2 * w3;
+        let w2 = jc2 + b2 * jc1 + b3 * w3;
+        jc1 = 2.0 * w1 - jc1;
+        jc2 = 2.0 * w2 - jc2;
+        let x = w2;
+        let v3 = x - ic2;
+        let v1 = a1 * ic1 + a2 * v3;
+        let v2 = ic2 + a2 * ic1 + a3 * v3;
+        ic1 = 2.0 * v1 - ic1;
+        ic2 = 2.0 * v2 - ic2;
+        match rows {
+            None => {
+                lp.push(v2);
+                bp.push(v1);
+                ub.push(x);
+            }
+            Some(r) => {
+                if r[next] == i {
+                    lp.push(v2);
+                    bp.push(v1);
+                    ub.push(x);
+                    next += 1;
+                    if next == r.len() {
+                        break;
+                    }
+                }
+            }
+        }
+    }
+    (lp, bp, ub)
+}
+
+/// `resonator` for several resonance frequencies in one pass over the record (independent
+/// recurrences interleaved, so the pass is bound by arithmetic throughput rather than by the
+/// latency of one filter's feedback chain). Same outputs as `resonator` per frequency.
+pub fn resonator_batch(
+    u: &[f64],
+    freqs: &[f64],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let m = freqs.len();
+    let coef = |f: f64, k: f64| {
+        let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+        let a1 = 1.0 / (1.0 + g * (g + k));
+        [a1, g * a1, g * g * a1]
+    };
+    let ca: Vec<[f64; 3]> = freqs
+        .iter()
+        .map(|&f| coef(f, 2.0 * COMPLIANCE_ZETA))
+        .collect();
+    let cb: Vec<[f64; 3]> = freqs
+        .iter()
+        .map(|&f| coef(2.0 * f, std::f64::consts::SQRT_2))
+        .collect();
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let mut st = vec![[0.0, u0, 0.0, u0]; m]; // ic1, ic2, jc1, jc2
+    let cap = rows.map_or(u.len(), |r| r.len());
+    let mut out: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..m)
+        .map(|_| {
+            (
+                Vec::with_capacity(cap),
+                Vec::with_capacity(cap),
+                Vec::with_capacity(cap),
+            )
+        })
+        .collect();
+    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
+    let mut next = 0usize;
+    let mut tmp = vec![[0.0f64; 3]; m];
+    for (i, &xin) in u[..last].iter().enumerate() {
+        for k in 0..m {
+            let [ic1, ic2, jc1, jc2] = st[k];
+            let [b1, b2, b3] = cb[k];
+            let [a1, a2, a3] = ca[k];
+            let w3 = xin - jc2;
+            let w1 = b1 * jc1 + b2 * w3;
+            let w2 = jc2 + b2 * jc1 + b3 * w3;
+            let x = w2;
+            let v3 = x - ic2;
+            let v1 = a1 * ic1 + a2 * v3;
+            let v2 = ic2 + a2 * ic1 + a3 * v3;
+            st[k] = [
+                2.0 * v1 - ic1,
+                2.0 * v2 - ic2,
+                2.0 * w1 - jc1,
+                2.0 * w2 - jc2,
+            ];
+            tmp[k] = [v2, v1, x];
+        }
+        let keep = match rows {
+            None => true,
+            Some(r) => r[next] == i,
+        };
+        if keep {
+            for k in 0..m {
+                out[k].0.push(tmp[k][0]);
+                out[k].1.push(tmp[k][1]);
+                out[k].2.push(tmp[k][2]);
+            }
+            if let Some(r) = rows {
+                next += 1;
+                if next == r.len() {
+                    break;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Columns of several effects of one kind on the rows of `s` (the compliance filters of all
+/// the values in one pass).
+pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
+    if effs.is_empty() || effs.iter().any(|e| e.kind != EffectKind::Compliance) {
+        return effs.iter().map(|e| columns_on(ctx, s, e)).collect();
+    }
+    let freqs: Vec<f64> = effs.iter().map(|e| e.param).collect();
+    resonator_batch(&ctx.rec.a, &freqs, ctx.dt, s.rows)
+        .into_iter()
+        .map(|(lp, bp, ub)| compliance_columns(lp, bp, ub))
+        .collect()
+}
+
+fn compliance_columns(lp: Vec<f64>, bp: Vec<f64>, ub: Vec<f64>) -> Vec<(String, Vec<f64>)> {
+    let c1 = lp.iter().zip(&ub).map(|(l, u)| l - u).collect();
+    vec![
+        ("compliance.lp_minus_a".into(), c1),
+        ("compliance.bp".into(), bp),
+    ]
+}
+
+/// Unit-coefficient shape of an effect for synthesis and fitting: the regressor columns at
+/// every sample of the record.
+pub fn effect_columns(ctx: &Context, e: &Effect) -> Vec<(String, Vec<f64>)> {
+    columns_on(ctx, &Sig::full(ctx), e)
+}
+
+/// The regressor columns of an effect on the rows of `s`.
+pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)> {
+    let n = s.len();
     let name = e.kind.name();
     let col = |suffix: &str, v: Vec<f64>| (format!("{name}.{suffix}"), v);
-    let bp = &ctx.base_pred;
-    let map = |g: &dyn Fn(usize) -> f64| idx.iter().map(|&i| g(i)).collect::<Vec<f64>>();
+    let map = |g: &dyn Fn(usize) -> f64| (0..n).map(g).collect::<Vec<f64>>();
+    let (x, v, a, sg, xn, bp) = (s.x, s.v, s.a, s.sgn, s.xn, s.bp);
     match e.kind {
-        EffectKind::DirectionAsymmetricFriction => vec![col("abs_v", map(&|i| r.v[i].abs()))],
+        EffectKind::DirectionAsymmetricFriction => vec![col("abs_v", map(&|i| v[i].abs()))],
         EffectKind::PositionDependentFriction => vec![
-            col("x_sgn", map(&|i| ctx.xn[i] * ctx.sgn[i])),
-            col("x2_sgn", map(&|i| ctx.xn[i] * ctx.xn[i] * ctx.sgn[i])),
+            col("x_sgn", map(&|i| xn[i] * sg[i])),
+            col("x2_sgn", map(&|i| xn[i] * xn[i] * sg[i])),
         ],
         EffectKind::PositionPeriodicFriction | EffectKind::Cogging => {
             let k = 2.0 * std::f64::consts::PI / e.param;
             let fr = e.kind == EffectKind::PositionPeriodicFriction;
-            let mut s = Vec::with_capacity(idx.len());
-            let mut c = Vec::with_capacity(idx.len());
-            for &i in idx {
-                let (sn, cs) = (k * r.x[i]).sin_cos();
-                let g = if fr { ctx.sgn[i] } else { 1.0 };
-                s.push(sn * g);
-                c.push(cs * g);
+            let mut sn_c = Vec::with_capacity(n);
+            let mut cs_c = Vec::with_capacity(n);
+            for i in 0..n {
+                let (sn, cs) = (k * x[i]).sin_cos();
+                let g = if fr { sg[i] } else { 1.0 };
+                sn_c.push(sn * g);
+                cs_c.push(cs * g);
             }
-            vec![col("sin", s), col("cos", c)]
+            vec![col("sin", sn_c), col("cos", cs_c)]
         }
-        EffectKind::Stribeck => vec![col(
-            "sgn_exp",
-            map(&|i| ctx.sgn[i] * (-(r.v[i] / e.param).powi(2)).exp()),
-        )],
+        EffectKind::Stribeck => {
+            let iv = 1.0 / e.param;
+            vec![col(
+                "sgn_exp",
+                map(&|i| sg[i] * (-(v[i] * iv).powi(2)).exp()),
+            )]
+        }
         EffectKind::ScrewEfficiency => vec![col(
             "driven_force",
-            map(&|i| if bp[i] * r.v[i] > 0.0 { bp[i] } else { 0.0 }),
+            map(&|i| if bp[i] * v[i] > 0.0 { bp[i] } else { 0.0 }),
         )],
         EffectKind::ReflectedInertia => vec![col(
             "driven_accel",
-            map(&|i| if bp[i] * r.v[i] > 0.0 { r.a[i] } else { 0.0 }),
+            map(&|i| if bp[i] * v[i] > 0.0 { a[i] } else { 0.0 }),
         )],
         EffectKind::Lag => {
             let k = ((e.param / ctx.dt).round() as usize).max(1);
-            vec![col(
-                "delayed_minus_now",
-                map(&|i| bp[i.saturating_sub(k)] - bp[i]),
-            )]
+            let z = match s.rows {
+                None => map(&|i| bp[i.saturating_sub(k)] - bp[i]),
+                Some(_) => {
+                    let w = LAG_MAX + 1;
+                    let k = k.min(LAG_MAX);
+                    map(&|j| s.lag_win[j * w + k] - bp[j])
+                }
+            };
+            vec![col("delayed_minus_now", z)]
         }
         EffectKind::CurrentLimit => {
             let l = e.param;
             vec![col("clip_minus_free", map(&|i| bp[i].clamp(-l, l) - bp[i]))]
         }
+        EffectKind::Compliance => {
+            // A mass m2 hung on the device through a spring-damper (resonance f_r, damping
+            // ratio ζ) adds m2·(H(s) − 1)·a, H = (2ζωs + ω²)/(s² + 2ζ₀ωs + ω²) = LP + 2ζ·BP:
+            // columns LP(a_b) − a_b (coefficient m2) and BP(a_b) (coefficient 2ζ·m2), the
+            // denominator damping ζ₀ = COMPLIANCE_ZETA, a_b = a band-limited to 2·f_r.
+            let (lp, bpf, ub) = resonator(&ctx.rec.a, e.param, ctx.dt, s.rows);
+            compliance_columns(lp, bpf, ub)
+        }
+    }
+}
+
+/// Physical admissibility of an effect's fitted coefficients: a resonance needs a positive
+/// modal mass and a damping ratio in [0, 1] (an overdamped "mode" has no resonance; such a
+/// fit is a filter shape fitted to something that is not a mode, and is not named
+/// `compliance`).
+pub fn plausible(kind: EffectKind, coef: &[f64]) -> bool {
+    match kind {
+        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
+        _ => true,
     }
 }
 
@@ -231,6 +635,27 @@ pub fn catalogue(_ctx: &Context) -> Vec<Effect> {
         .map(|&kind| Effect { kind, param: 0.0 })
         .collect()
 }
+
+/// Highest frequency where the Welch spectrum of the position increments (at most 64
+/// segments) stands 100× (in power) above the median of its upper half band, which is the
+/// sensor noise floor wherever the motion is band-limited well below fs/4.
+pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
+    let dx: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    if dx.len() < 64 {
+        return 0.0;
+    }
+    let sp = super::report::welch_spread(&dx, dt, 64);
+    let mut up: Vec<f64> = sp[sp.len() / 2..].iter().map(|p| p.1 * p.1).collect();
+    let k = up.len() / 2;
+    let floor = *up.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    sp.iter()
+        .rev()
+        .find(|p| p.1 * p.1 > 100.0 * floor)
+        .map_or(0.0, |p| p.0)
+}
+
+/// Quantiles of |f̂₀| scanned as current-limit levels.
+const CLIP_QUANTILES: [f64; 7] = [0.80, 0.85, 0.9, 0.93, 0.96, 0.98, 0.99];
 
 fn logspace(a: f64, b: f64, n: usize) -> Vec<f64> {
     (0..n)
@@ -249,11 +674,7 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         EffectKind::PositionPeriodicFriction | EffectKind::Cogging => {
             let stroke = 2.0 * ctx.x_half;
             // shortest wavelength: 8 encoder-noise-free samples per period at the median step
-            let mut steps: Vec<f64> = ctx.rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-            let k = steps.len() / 2;
-            let med = *steps.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
-            let lmin = (stroke / 400.0).max(8.0 * med).min(stroke / 4.0);
-            let mut g: Vec<Effect> = logspace(lmin, stroke / 1.5, 40)
+            let mut g: Vec<Effect> = logspace(ctx.lambda_min, stroke / 1.5, 40)
                 .into_iter()
                 .map(mk)
                 .collect();
@@ -274,13 +695,17 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             .iter()
             .map(|&k| mk(k as f64 * ctx.dt))
             .collect(),
-        EffectKind::CurrentLimit => {
-            let mut a: Vec<f64> = ctx.base_pred.iter().map(|f| f.abs()).collect();
-            a.sort_by(|x, y| x.total_cmp(y));
-            [0.80, 0.85, 0.9, 0.93, 0.96, 0.98, 0.99]
-                .iter()
-                .map(|q| mk(a[((a.len() - 1) as f64 * q) as usize]))
-                .collect()
+        EffectKind::CurrentLimit => ctx.clip_levels.iter().map(|&l| mk(l)).collect(),
+        EffectKind::Compliance => {
+            // from 10 periods over the record to 0.4·fs
+            let t = ctx.dt * ctx.rec.len() as f64;
+            let hi = ctx.f_motion.min(0.4 / ctx.dt);
+            let lo = 10.0 / t;
+            if hi > 1.5 * lo {
+                logspace(lo, hi, 24).into_iter().map(mk).collect()
+            } else {
+                vec![]
+            }
         }
         _ => vec![mk(0.0)],
     }
@@ -289,6 +714,14 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
 /// Local refinement grid around a coarse best value.
 pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
     match e.kind {
+        // each compliance value costs a pass of the resonator over the whole record: a
+        // coarser refinement (7 values per level) keeps the scan cheap on long records
+        EffectKind::Compliance => (0..=6)
+            .map(|i| Effect {
+                kind: e.kind,
+                param: e.param * (1.0 + width * (i as f64 / 3.0 - 1.0)),
+            })
+            .collect(),
         EffectKind::PositionPeriodicFriction
         | EffectKind::Cogging
         | EffectKind::Stribeck
@@ -302,7 +735,7 @@ pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
             let k = (e.param / ctx.dt).round() as i64;
             let w = ((k as f64 * width).ceil() as i64).max(1);
             (k - w..=k + w)
-                .filter(|&j| j >= 1)
+                .filter(|&j| j >= 1 && j <= LAG_MAX as i64)
                 .map(|j| Effect {
                     kind: e.kind,
                     param: j as f64 * ctx.dt,
@@ -375,6 +808,17 @@ pub fn parameters(
             ("limit_N".into(), e.param),
             ("gain".into(), get("clip_minus_free")),
         ],
+        EffectKind::Compliance => {
+            let m2 = get("lp_minus_a");
+            vec![
+                ("resonance_Hz".into(), e.param),
+                ("modal_mass_kg".into(), m2),
+                (
+                    "damping_ratio".into(),
+                    if m2 != 0.0 { 0.5 * get("bp") / m2 } else { 0.0 },
+                ),
+            ]
+        }
     }
 }
 
@@ -400,6 +844,7 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         EffectKind::Stribeck => format!("Stribeck velocity {:.3e} m/s", e.param),
         EffectKind::Lag => format!("force lags motion by {:.4} s", e.param),
         EffectKind::CurrentLimit => format!("force clipped near {:.1} N", e.param),
+        EffectKind::Compliance => format!("resonance near {:.3} Hz", e.param),
         _ => String::new(),
     }
 }

@@ -241,6 +241,83 @@ pub fn extend_normals(
     out
 }
 
+/// Training / held-out weights (1/0 and 0/1) of the samples, for branch-free sums.
+pub struct HoldWeights {
+    pub train: Vec<f64>,
+    pub hold: Vec<f64>,
+}
+
+impl HoldWeights {
+    pub fn new(hold: &[bool]) -> Self {
+        HoldWeights {
+            train: hold.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect(),
+            hold: hold.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect(),
+        }
+    }
+}
+
+/// (Σ a·b·wt, Σ a·b·wh) over contiguous slices, four partial sums each (independent
+/// accumulation chains, so the loop runs at arithmetic throughput).
+fn dot2(a: &[f64], b: &[f64], wt: &[f64], wh: &[f64]) -> (f64, f64) {
+    let n = a.len().min(b.len()).min(wt.len()).min(wh.len());
+    let (mut t, mut h) = ([0.0f64; 4], [0.0f64; 4]);
+    let m = n / 4 * 4;
+    let mut i = 0;
+    while i < m {
+        for l in 0..4 {
+            let p = a[i + l] * b[i + l];
+            t[l] += p * wt[i + l];
+            h[l] += p * wh[i + l];
+        }
+        i += 4;
+    }
+    for j in m..n {
+        let p = a[j] * b[j];
+        t[0] += p * wt[j];
+        h[0] += p * wh[j];
+    }
+    ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
+}
+
+/// `extend_normals` over every sample, each new Gram entry one contiguous weighted dot
+/// product (training and held-out parts at once).
+pub fn extend_normals_dense(
+    base: &(Normal, Normal),
+    bcols: &[&[f64]],
+    z: &[&[f64]],
+    f: &[f64],
+    w: &HoldWeights,
+) -> (Normal, Normal) {
+    let p = bcols.len();
+    let k = z.len();
+    let m = p + k;
+    let mut out = (Normal::new(m), Normal::new(m));
+    for (dst, src) in [(&mut out.0, &base.0), (&mut out.1, &base.1)] {
+        for i in 0..p {
+            for j in 0..p {
+                dst.g[i * m + j] = src.g[i * p + j];
+            }
+            dst.b[i] = src.b[i];
+        }
+        dst.ff = src.ff;
+        dst.n = src.n;
+    }
+    for c in 0..k {
+        let row = p + c;
+        for (j, bc) in bcols.iter().chain(z[..=c].iter()).enumerate() {
+            let (t, h) = dot2(z[c], bc, &w.train, &w.hold);
+            out.0.g[row * m + j] = t;
+            out.0.g[j * m + row] = t;
+            out.1.g[row * m + j] = h;
+            out.1.g[j * m + row] = h;
+        }
+        let (t, h) = dot2(z[c], f, &w.train, &w.hold);
+        out.0.b[row] = t;
+        out.1.b[row] = h;
+    }
+    out
+}
+
 /// Relative error ‖f − f̂‖₂/‖f‖₂ from rss and ‖f‖².
 pub fn rel(rss: f64, ff: f64) -> f64 {
     if ff > 0.0 {
@@ -296,6 +373,9 @@ pub struct Diagnosis {
     pub final_full_rel_error: f64,
     /// Final model: column names and coefficients (fitted on the whole record).
     pub model: Vec<(String, f64)>,
+    /// The model after each stage, refitted on the whole record: index 0 the baseline,
+    /// index k the baseline with the first k findings (the cross-check evaluates each).
+    pub stage_models: Vec<Vec<(String, f64)>>,
     pub effects: Vec<Effect>,
     pub residual: Vec<f64>,
     pub prediction: Vec<f64>,
@@ -321,44 +401,41 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let stride = n.div_ceil(opt.screen_samples).max(1);
     let mut chosen: Vec<Effect> = Vec::new();
     let mut cols = effects::build_columns(&ctx, &chosen);
+    let n_base = cols.len();
     let mut full = normals(&refs(&cols), &rec.f, &hold, 1);
     let base_full = full.clone();
     let (tr, ho) = full.clone();
     let th = tr.solve();
-    // screening subsample (every `stride`-th sample)
-    let idx: Vec<usize> = (0..n).step_by(stride).collect();
-    let sub_f: Vec<f64> = idx.iter().map(|&i| rec.f[i]).collect();
-    let sub_hold: Vec<bool> = idx.iter().map(|&i| hold[i]).collect();
-    let sub = |c: &[(String, Vec<f64>)]| -> Vec<Vec<f64>> {
-        c.iter()
-            .map(|(_, v)| idx.iter().map(|&i| v[i]).collect())
-            .collect()
-    };
+    // Screening subsample (every `stride`-th sample), gathered into contiguous arrays once.
+    let sub = effects::SubSignals::new(&ctx, (0..n).step_by(stride).collect());
+    let sig = sub.sig();
+    let sub_f: Vec<f64> = sub.rows.iter().map(|&i| rec.f[i]).collect();
+    let sub_hold: Vec<bool> = sub.rows.iter().map(|&i| hold[i]).collect();
+    let sub_w = HoldWeights::new(&sub_hold);
+    let full_w = HoldWeights::new(&hold);
+    let mut sub_cols: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|(_, v)| sub.rows.iter().map(|&i| v[i]).collect())
+        .collect();
     let baseline_holdout = rel(ho.rss(&th), ho.ff);
     let baseline_train = rel(tr.rss(&th), tr.ff);
     // Baseline term significance: drop each in turn.
     let mut baseline_terms = Vec::new();
-    let units = ["kg", "N·s/m", "N", "N"];
-    let names = [
-        "inertia",
-        "viscous_friction",
-        "coulomb_friction",
-        "force_offset",
-    ];
-    for drop in 0..cols.len() {
-        let keep: Vec<&[f64]> = cols
+    for drop in 0..n_base {
+        let keep: Vec<&[f64]> = sub_cols
             .iter()
             .enumerate()
             .filter(|(i, _)| *i != drop)
-            .map(|(_, c)| c.1.as_slice())
+            .map(|(_, c)| c.as_slice())
             .collect();
-        let (t2, h2) = normals(&keep, &rec.f, &hold, stride);
+        let (t2, h2) = normals(&keep, &sub_f, &sub_hold, 1);
         let th2 = t2.solve();
         let without = rel(h2.rss(&th2), h2.ff);
+        let (name, unit) = effects::baseline_term(&cols[drop].0);
         baseline_terms.push(BaselineTerm {
-            effect: names[drop].to_string(),
+            effect: name.to_string(),
             value: th[drop],
-            unit: units[drop].to_string(),
+            unit: unit.to_string(),
             holdout_rel_error_without: without,
             // kept when dropping it makes the held-out rss grow by the same margin an
             // extension must bring
@@ -366,11 +443,19 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
         });
     }
+    // The screening columns of every candidate value are the same in every round: computed
+    // once (on the subsample, at most `screen_samples` rows each) and kept.
+    type Cache = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
+    let mut cache = Cache::new();
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
+    let whole_fit = |full: &(Normal, Normal), cols: &[(String, Vec<f64>)]| {
+        let t = full.0.plus(&full.1).solve();
+        cols.iter().map(|c| c.0.clone()).zip(t).collect::<Vec<_>>()
+    };
+    let mut stage_models = vec![whole_fit(&full, &cols)];
     let catalogue = effects::catalogue(&ctx);
     while chosen.len() < opt.max_effects {
-        let sub_cols = sub(&cols);
         let base_refs: Vec<&[f64]> = sub_cols.iter().map(|v| v.as_slice()).collect();
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
         let th_b = base.0.solve();
@@ -381,29 +466,61 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             if chosen.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
-            let eval = |eff: &Effect| -> (f64, f64) {
-                let z = effects::effect_columns(&ctx, eff, Some(&idx));
+            let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64) {
+                let z = cache
+                    .entry((eff.kind as usize, eff.param.to_bits()))
+                    .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-                let nn = extend_normals(&base, &base_refs, &zr, &sub_f, &sub_hold, 1);
+                let nn = extend_normals_dense(&base, &base_refs, &zr, &sub_f, &sub_w);
                 let t = nn.0.solve();
+                if !effects::plausible(eff.kind, &t[base_refs.len()..]) {
+                    return (f64::INFINITY, 0.0);
+                }
                 let rt = nn.0.rss(&t);
                 let k_extra = z.len() + eff.kind.scanned() as usize;
                 let dbic = bic(rt, nn.0.n, base_refs.len() + k_extra)
                     - bic(rss_t0, nn.0.n, base_refs.len());
                 (nn.1.rss(&t), dbic)
             };
+            // fill the cache for a list of compliance values in one pass over the record
+            let prefill = |effs: &[Effect], cache: &mut Cache| {
+                if cand.kind != EffectKind::Compliance {
+                    return;
+                }
+                let missing: Vec<Effect> = effs
+                    .iter()
+                    .filter(|e| !cache.contains_key(&(e.kind as usize, e.param.to_bits())))
+                    .cloned()
+                    .collect();
+                for (e, c) in missing
+                    .iter()
+                    .zip(effects::columns_batch(&ctx, &sig, &missing))
+                {
+                    cache.insert((e.kind as usize, e.param.to_bits()), c);
+                }
+            };
+            let coarse = effects::grid(&ctx, cand);
+            prefill(&coarse, &mut cache);
             let mut cb: Option<(f64, f64, Effect)> = None;
-            for eff in effects::grid(&ctx, cand) {
-                let (rh, db) = eval(&eff);
+            for eff in coarse {
+                let (rh, db) = eval(&eff, &mut cache);
                 if cb.as_ref().is_none_or(|b| rh < b.0) {
                     cb = Some((rh, db, eff));
                 }
             }
             if cand.kind.scanned() {
-                for width in [0.15, 0.03] {
+                // a resonance's residual is sharp in frequency: one more level for it
+                let widths: &[f64] = if cand.kind == EffectKind::Compliance {
+                    &[0.15, 0.03, 0.006]
+                } else {
+                    &[0.15, 0.03]
+                };
+                for &width in widths {
                     let centre = cb.as_ref().unwrap().2.clone();
-                    for eff in effects::refine(&ctx, &centre, width) {
-                        let (rh, db) = eval(&eff);
+                    let fine = effects::refine(&ctx, &centre, width);
+                    prefill(&fine, &mut cache);
+                    for eff in fine {
+                        let (rh, db) = eval(&eff, &mut cache);
                         if rh < cb.as_ref().unwrap().0 {
                             cb = Some((rh, db, eff));
                         }
@@ -422,12 +539,18 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             break;
         }
         chosen.push(eff.clone());
-        let z = effects::effect_columns(&ctx, &eff, None);
+        let z = effects::effect_columns(&ctx, &eff);
+        sub_cols.extend(
+            effects::columns_on(&ctx, &sig, &eff)
+                .into_iter()
+                .map(|(_, v)| v),
+        );
         {
             let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-            full = extend_normals(&full, &refs(&cols), &zr, &rec.f, &hold, 1);
+            full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         }
         cols.extend(z);
+        stage_models.push(whole_fit(&full, &cols));
         let th_cur = full.0.solve();
         let after = rel(full.1.rss(&th_cur), full.1.ff);
         let params = effects::parameters(&ctx, &chosen, &cols, &th_cur, chosen.len() - 1);
@@ -475,6 +598,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
         final_holdout_rel_error: ho_rel,
         final_full_rel_error: final_full,
         model: cols.iter().map(|c| c.0.clone()).zip(th_full).collect(),
+        stage_models,
         effects: chosen,
         residual,
         prediction: pred,
@@ -490,13 +614,11 @@ pub fn cross_check(d: &mut Diagnosis, other: &Record) {
     let ctx = effects::Context::new(other);
     let ffo: f64 = other.f.iter().map(|v| v * v).sum();
     let err_of = |k: usize| -> f64 {
-        // baseline + first k effects, coefficients refitted on the first record is what we
-        // have only for the full model; for the intermediate models evaluate the full-model
-        // coefficients of the retained columns.
+        // baseline + first k effects, with that stage's coefficients (whole first record)
         let cols = effects::build_columns(&ctx, &d.effects[..k]);
         let mut pred = vec![0.0; other.len()];
         for (name, c) in &cols {
-            if let Some((_, th)) = d.model.iter().find(|(n, _)| n == name) {
+            if let Some((_, th)) = d.stage_models[k].iter().find(|(n, _)| n == name) {
                 for (p, v) in pred.iter_mut().zip(c) {
                     *p += th * v;
                 }

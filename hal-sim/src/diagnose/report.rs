@@ -56,7 +56,8 @@ pub struct Peak {
     pub unexplained: bool,
 }
 
-/// In-place radix-2 complex FFT.
+/// In-place radix-2 complex FFT (length a power of two; twiddle factors tabulated once per
+/// call, so each costs one `sin_cos` per half length).
 pub fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
     let mut j = 0;
@@ -72,12 +73,18 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
             im.swap(i, j);
         }
     }
+    let tw: Vec<(f64, f64)> = (0..n / 2)
+        .map(|k| {
+            let (s, c) = (-2.0 * std::f64::consts::PI * k as f64 / n as f64).sin_cos();
+            (c, s)
+        })
+        .collect();
     let mut len = 2;
     while len <= n {
-        let ang = -2.0 * std::f64::consts::PI / len as f64;
+        let step = n / len;
         for s in (0..n).step_by(len) {
             for k in 0..len / 2 {
-                let (wi, wr) = (ang * k as f64).sin_cos();
+                let (wr, wi) = tw[k * step];
                 let (a, b) = (s + k, s + k + len / 2);
                 let tr = re[b] * wr - im[b] * wi;
                 let ti = re[b] * wi + im[b] * wr;
@@ -94,6 +101,12 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
 /// Welch power spectrum (Hann, 50 % overlap, segments of up to 4096 samples). Returns
 /// (frequency Hz, amplitude N of a sinusoid at that bin).
 pub fn welch(r: &[f64], dt: f64) -> Vec<(f64, f64)> {
+    welch_spread(r, dt, usize::MAX)
+}
+
+/// Welch spectrum averaging at most `max_segments` segments spread evenly over the record
+/// (each segment's mean removed).
+pub fn welch_spread(r: &[f64], dt: f64, max_segments: usize) -> Vec<(f64, f64)> {
     let mut seg = 4096usize;
     while seg > r.len() && seg > 16 {
         seg /= 2;
@@ -103,23 +116,35 @@ pub fn welch(r: &[f64], dt: f64) -> Vec<(f64, f64)> {
         .collect();
     let wsum: f64 = win.iter().sum();
     let mut p = vec![0.0; seg / 2];
-    let mut count = 0;
-    let mut s = 0;
-    while s + seg <= r.len() {
-        let mut re: Vec<f64> = (0..seg).map(|i| r[s + i] * win[i]).collect();
-        let mut im = vec![0.0; seg];
+    let total = if r.len() >= seg {
+        (r.len() - seg) / (seg / 2) + 1
+    } else {
+        0
+    };
+    let used = total.min(max_segments.max(1));
+    let mut re = vec![0.0; seg];
+    let mut im = vec![0.0; seg];
+    for j in 0..used {
+        let s = if used > 1 {
+            (j * (total - 1) / (used - 1)) * (seg / 2)
+        } else {
+            0
+        };
+        let m = r[s..s + seg].iter().sum::<f64>() / seg as f64;
+        for i in 0..seg {
+            re[i] = (r[s + i] - m) * win[i];
+            im[i] = 0.0;
+        }
         fft(&mut re, &mut im);
         for k in 0..seg / 2 {
             p[k] += re[k] * re[k] + im[k] * im[k];
         }
-        count += 1;
-        s += seg / 2;
     }
     (0..seg / 2)
         .map(|k| {
             (
                 k as f64 / (seg as f64 * dt),
-                2.0 * (p[k] / count.max(1) as f64).sqrt() / wsum,
+                2.0 * (p[k] / used.max(1) as f64).sqrt() / wsum,
             )
         })
         .collect()
@@ -258,7 +283,15 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
     );
     let _ = writeln!(s, "  derivatives: {}", d.derivative_method);
     let _ = writeln!(s, "  split: 10 blocks, blocks 2,5,8 held out (30 %)");
-    let _ = writeln!(s, "Baseline f = M·a + Fv·v + Fc·sgn(v) + offset:");
+    let em = d
+        .baseline_terms
+        .iter()
+        .any(|b| b.effect == "electromagnetic_force");
+    let _ = writeln!(
+        s,
+        "Baseline f = M·a + Fv·v + Fc·sgn(v) + offset{}:",
+        if em { " + electromagnetic force" } else { "" }
+    );
     for b in &d.baseline_terms {
         let _ = writeln!(
             s,
@@ -437,7 +470,7 @@ pub fn json(d: &Diagnosis) -> String {
 /// Extended model as TOML (format documented in docs/diagnose.md).
 pub fn model_toml(d: &Diagnosis) -> String {
     let mut s = String::from("# device force model from `regen diagnose` (docs/diagnose.md)\n# f = sum(coefficient * column), columns defined in hal_sim::diagnose::effects\n[baseline]\n");
-    for (name, v) in d.model.iter().take(4) {
+    for (name, v) in d.model.iter().filter(|(n, _)| !n.contains('.')) {
         let _ = writeln!(s, "{name} = {}", jnum(*v));
     }
     for e in &d.effects {

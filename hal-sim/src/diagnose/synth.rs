@@ -142,6 +142,27 @@ impl SynthSpec {
     }
 }
 
+impl SynthSpec {
+    /// A resonance hidden (a mass of 8-20 kg hung on the device through a spring-damper,
+    /// resonance 0.9-1.6 Hz inside the 0.1-2 Hz excitation band, damping ratio 0.05-0.2),
+    /// beside `others` further effects drawn as in `random_hidden`.
+    pub fn with_compliance(seed: u64, samples: usize, others: usize) -> Self {
+        let mut s = Self::random_hidden(seed, samples, others);
+        let mut rng = Rng::new(seed.wrapping_mul(104_729).wrapping_add(71));
+        let f_r = rng.range(0.9, 1.6);
+        let zeta = rng.range(0.05, 0.2);
+        let m2 = rng.range(8.0, 20.0);
+        s.hidden.push((
+            Effect {
+                kind: EffectKind::Compliance,
+                param: f_r,
+            },
+            vec![m2, 2.0 * zeta * m2],
+        ));
+        s
+    }
+}
+
 /// Generate the record as CSV text.
 pub fn generate_csv(s: &SynthSpec) -> String {
     let mut rng = Rng::new(s.seed);
@@ -184,7 +205,7 @@ pub fn generate_csv(s: &SynthSpec) -> String {
     let ctx = Context::new(&rec); // base_pred = the exact device baseline force
     let mut f = rec.f.clone();
     for (e, c) in &s.hidden {
-        for ((_, col), k) in effect_columns(&ctx, e, None).iter().zip(c) {
+        for ((_, col), k) in effect_columns(&ctx, e).iter().zip(c) {
             for (fi, ci) in f.iter_mut().zip(col) {
                 *fi += k * ci;
             }
