@@ -85,8 +85,25 @@ impl core::fmt::Write for LastLine {
     }
 }
 
-/// Post the differences between the copy before and after a command.
-fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) {
+/// Wait (≤ 5 ms) until the loop has taken the posted changes, so that the next command's
+/// copy includes them (two `set` lines arriving together must not undo each other, and `save`
+/// must store what was set before it).
+async fn wait_applied() {
+    for _ in 0..100 {
+        let empty = critical_section::with(|cs| {
+            let q = PENDING.borrow_ref(cs);
+            q.clear.is_none() && q.cfg.is_none() && q.mode.is_none()
+        });
+        if empty {
+            return;
+        }
+        embassy_time::Timer::after_micros(50).await;
+    }
+    defmt::warn!("console change not taken by the loop within 5 ms");
+}
+
+/// Post the differences between the copy before and after a command; `true` if any.
+fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
     let mut p = Pending::default();
     if before.fault().is_some() && after.fault().is_none() {
         p.clear = before.fault();
@@ -98,7 +115,7 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) {
         p.mode = Some(after.mode());
     }
     if p.clear.is_none() && p.cfg.is_none() && p.mode.is_none() {
-        return;
+        return false;
     }
     critical_section::with(|cs| {
         let mut q = PENDING.borrow_ref_mut(cs);
@@ -107,6 +124,7 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) {
         q.cfg = p.cfg.or(q.cfg);
         q.mode = p.mode.or(q.mode);
     });
+    true
 }
 
 #[embassy_executor::task]
@@ -157,7 +175,9 @@ pub async fn console_task(
                         };
                         let mut ctl = before.clone();
                         let _ = con.execute(text, &mut ctl, &mut store, reply);
-                        post(&before, &ctl);
+                        if post(&before, &ctl) {
+                            wait_applied().await;
+                        }
                     } else {
                         let _ = reply.write_str("error: line is not UTF-8\r\n");
                     }

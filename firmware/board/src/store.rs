@@ -7,7 +7,8 @@
 //! words per page (6 records of the 40-word layout). Reading returns `v` when the two halves
 //! are complementary, `0xFFFF_FFFF` when the double word is erased, and `0` (which breaks the
 //! record's CRC) otherwise. Writing a double word that is not erased is refused (the store then
-//! reports a failed save; its records stay consistent, see `regen_fw::store`).
+//! reports a failed save; its records stay consistent, see `regen_fw::store`). Every program
+//! and erase is verified by reading back.
 //!
 //! Stalls. Erase and program go through embassy's *interrupt-driven* flash driver, run to
 //! completion with `block_on` in the console task: interrupts stay enabled (embassy's blocking
@@ -74,11 +75,25 @@ impl Flash for BoardFlash {
         let mut b = [0u8; 8];
         b[..4].copy_from_slice(&v.to_le_bytes());
         b[4..].copy_from_slice(&(!v).to_le_bytes());
-        block_on(self.region.write(off, &b)).map_err(|_| PowerLost)
+        block_on(self.region.write(off, &b)).map_err(|_| PowerLost)?;
+        // Read back: the driver's interrupt clears the error flags before the waiting future
+        // looks at them, so a failed program is caught here rather than trusted.
+        if self.read_dw(off) != (v, !v) {
+            return Err(PowerLost);
+        }
+        Ok(())
     }
 
     fn erase(&mut self, sector: usize) -> Result<(), PowerLost> {
         let page = *STORE_PAGE_OFFSETS.get(sector).ok_or(PowerLost)?;
-        block_on(self.region.erase(page, page + STORE_PAGE_BYTES)).map_err(|_| PowerLost)
+        block_on(self.region.erase(page, page + STORE_PAGE_BYTES)).map_err(|_| PowerLost)?;
+        // Verify the erase (same reason as the write read-back).
+        let all_ones = (0..self.sector_words())
+            .all(|w| self.read_dw(page + 8 * w as u32) == (!0, !0));
+        if all_ones {
+            Ok(())
+        } else {
+            Err(PowerLost)
+        }
     }
 }
