@@ -87,7 +87,10 @@ pub const fn dtg(ns: u32) -> u8 {
         ticks as u8
     } else {
         let t2 = ticks.div_ceil(2);
-        assert!(t2 >= 64 && t2 <= 127, "dead time out of the encodable range");
+        assert!(
+            t2 >= 64 && t2 <= 127,
+            "dead time out of the encodable range"
+        );
         0x80 | (t2 - 64) as u8
     }
 }

@@ -66,7 +66,11 @@ async fn main(spawner: embassy_executor::Spawner) {
     let (ctl, cfg) = match Controller::new(&cfg) {
         Ok(c) => (c, cfg),
         Err(e) => {
-            defmt::error!("stored configuration refused ({}: {}): defaults", e.field, e.reason);
+            defmt::error!(
+                "stored configuration refused ({}: {}): defaults",
+                e.field,
+                e.reason
+            );
             let d = Config::default();
             match Controller::new(&d) {
                 Ok(c) => (c, d),
@@ -79,7 +83,10 @@ async fn main(spawner: embassy_executor::Spawner) {
     };
 
     let Some(arr) = board::arr_for(cfg.pwm_hz) else {
-        defmt::error!("pwm_hz {} not realisable on TIM1: drive stays off", cfg.pwm_hz);
+        defmt::error!(
+            "pwm_hz {} not realisable on TIM1: drive stays off",
+            cfg.pwm_hz
+        );
         return;
     };
     // The driver owns the PWM pins and TIM1's clock: dropping it would switch both off, so it

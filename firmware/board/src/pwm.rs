@@ -119,7 +119,8 @@ pub fn configure(arr: u16) -> Option<Pwm> {
     t.sr().modify(|w| w.set_uif(false));
     if at == UpdateAt::Bottom {
         for n in 0..3 {
-            t.ccmr_output(n / 2).modify(|w| w.set_ocm(n % 2, vals::Ocm::PWM_MODE2));
+            t.ccmr_output(n / 2)
+                .modify(|w| w.set_ocm(n % 2, vals::Ocm::PWM_MODE2));
         }
     }
     Some(Pwm { arr, at })

@@ -88,8 +88,8 @@ impl Flash for BoardFlash {
         let page = *STORE_PAGE_OFFSETS.get(sector).ok_or(PowerLost)?;
         block_on(self.region.erase(page, page + STORE_PAGE_BYTES)).map_err(|_| PowerLost)?;
         // Verify the erase (same reason as the write read-back).
-        let all_ones = (0..self.sector_words())
-            .all(|w| self.read_dw(page + 8 * w as u32) == (!0, !0));
+        let all_ones =
+            (0..self.sector_words()).all(|w| self.read_dw(page + 8 * w as u32) == (!0, !0));
         if all_ones {
             Ok(())
         } else {

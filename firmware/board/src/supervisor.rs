@@ -71,18 +71,18 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
         let f = ctl.fault();
         if f != last_fault {
             match f {
-                Some(f) => defmt::error!(
-                    "fault {}: drive in {}",
-                    f.name(),
-                    ctl.mode().name()
-                ),
+                Some(f) => defmt::error!("fault {}: drive in {}", f.name(), ctl.mode().name()),
                 None => defmt::info!("fault cleared"),
             }
             last_fault = f;
         }
         let o = OVERRUNS.load(Ordering::Relaxed);
         if o != last_overruns {
-            defmt::warn!("current-loop overruns: {} (total {})", o.wrapping_sub(last_overruns), o);
+            defmt::warn!(
+                "current-loop overruns: {} (total {})",
+                o.wrapping_sub(last_overruns),
+                o
+            );
             last_overruns = o;
         }
         let r = MODE_REFUSED.load(Ordering::Relaxed);
