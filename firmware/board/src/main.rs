@@ -32,6 +32,17 @@ fn ADC1_2() {
     drive::on_sample();
 }
 
+/// A fault (and a panic: panic-probe ends in a HardFault) opens the bridge first: the
+/// current loop no longer runs, and the last duties must not stay applied. The watchdog then
+/// resets the image within its timeout.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_ef: &cortex_m_rt::ExceptionFrame) -> ! {
+    pwm::force_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
 #[embassy_executor::main]
 async fn main(spawner: embassy_executor::Spawner) {
     let p = embassy_stm32::init(board::rcc_config());

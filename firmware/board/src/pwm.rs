@@ -54,6 +54,11 @@ fn tim() -> pac::timer::TimAdv {
 /// no update event was seen within 2 ms (the timer is not counting).
 pub fn configure(arr: u16) -> Option<Pwm> {
     let t = tim();
+    // Under a debugger: a halted core stops TIM1, and RM0440 §28.3.21 then disables the outputs
+    // as if MOE were reset (no frozen duties on a live bridge at a breakpoint); the watchdog
+    // is frozen too, so a halt does not reset the image.
+    pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     // Stop, then set everything while stopped.
     t.cr1().modify(|w| w.set_cen(false));
     t.bdtr().modify(|w| {
@@ -102,7 +107,8 @@ pub fn configure(arr: u16) -> Option<Pwm> {
     t.egr().write(|w| w.set_ug(true));
     t.sr().modify(|w| w.set_uif(false));
     t.cr1().modify(|w| w.set_cen(true));
-    // Observe the first update event: 2 ms is 40 periods at 20 kHz, 3,000 at the lowest PWM.
+    // Observe the first update event: ≥ 42,500 polls of ≥ 4 cycles = ≥ 1 ms, i.e. ≥ 5 periods
+    // at the lowest PWM frequency the configuration accepts (5 kHz).
     let mut n = 0u32;
     while !t.sr().read().uif() {
         n += 1;
