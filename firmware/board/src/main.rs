@@ -43,6 +43,14 @@ unsafe fn HardFault(_ef: &cortex_m_rt::ExceptionFrame) -> ! {
     }
 }
 
+/// NMI: on the G474 a flash double-ECC error (a double word torn by a power cut during a
+/// store save) or an HSE failure. Bridge off, note the ECC address, reset (`store.rs`).
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    pwm::force_off();
+    store::note_ecc_and_reset()
+}
+
 #[embassy_executor::main]
 async fn main(spawner: embassy_executor::Spawner) {
     let p = embassy_stm32::init(board::rcc_config());
@@ -62,8 +70,16 @@ async fn main(spawner: embassy_executor::Spawner) {
     let mut flash = store::BoardFlash {
         region: parts.flash,
     };
+    let ecc_page = store::recover_ecc(&mut flash);
+    if let Some(page) = ecc_page {
+        defmt::warn!(
+            "store page {} held an ECC error (power cut during a save): erased",
+            page
+        );
+    }
     let (cfg, store_fault) = boot(&flash);
     let boot_msg: &'static str = match store_fault {
+        None if ecc_page.is_some() => "store page with ECC error erased; older parameters loaded",
         None => "parameters loaded from flash",
         Some(StoreFault::Empty) => {
             defmt::warn!("parameter store empty or corrupt: defaults in use");

@@ -20,12 +20,20 @@
 //! is blocked for the save (≤ 45 ms): the watchdog timeout accounts for it (`board.rs`).
 //! The core's console additionally refuses `save` in mode `run`.
 //!
-//! Known hardware-only risk: a double word torn by a power loss during its programming can
-//! carry an uncorrectable ECC error, which the G474 reports as an NMI on read. Not handled
-//! here (the NMI handler is cortex-m-rt's default); see docs/board.md.
+//! Torn double words. A power cut while a double word is being programmed can leave it with an
+//! uncorrectable ECC error; the G474 raises an NMI when it is read, which would otherwise turn
+//! every boot (the store scan reads the page) into a reset loop. The NMI handler
+//! ([`note_ecc_and_reset`]) records FLASH_ECCR's bank and address in RAM that survives a reset
+//! and resets; at the next boot [`recover_ecc`] erases the store page holding that address
+//! before the scan. The records in that page are lost (the store then boots from the other
+//! page's newest record, or defaults with the usual fault), not the drive.
+
+use core::mem::MaybeUninit;
+use core::ptr::addr_of_mut;
 
 use embassy_futures::block_on;
 use embassy_stm32::flash::{Async, Bank2Region};
+use embassy_stm32::pac;
 use regen_fw::store::{Flash, PowerLost};
 
 use crate::board::{STORE_PAGE_BYTES, STORE_PAGE_OFFSETS};
@@ -96,4 +104,49 @@ impl Flash for BoardFlash {
             Err(PowerLost)
         }
     }
+}
+
+const ECC_MAGIC: u32 = 0xECC0_5AFE;
+
+/// `[ECC_MAGIC, bank2 << 31 | byte offset in bank]`, kept across a reset (`.uninit` is not
+/// initialised by the start-up code).
+#[link_section = ".uninit.regen_ecc"]
+static mut ECC_NOTE: MaybeUninit<[u32; 2]> = MaybeUninit::uninit();
+
+/// From the NMI handler: note a flash double-ECC error, then reset.
+pub fn note_ecc_and_reset() -> ! {
+    let e = pac::FLASH.eccr().read();
+    if e.eccd() {
+        let where_ = e.addr_ecc() | if e.bk_ecc() { 1 << 31 } else { 0 };
+        // SAFETY: single word-aligned volatile store to a static only this function and
+        // `recover_ecc` (at boot, before interrupts run) touch.
+        unsafe {
+            addr_of_mut!(ECC_NOTE)
+                .cast::<[u32; 2]>()
+                .write_volatile([ECC_MAGIC, where_])
+        };
+        pac::FLASH.eccr().modify(|w| w.set_eccd(true)); // write 1 to clear
+    }
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// At boot, before the store is read: if the last reset came from an ECC error inside a store
+/// page, erase that page. Returns the page erased.
+pub fn recover_ecc(f: &mut BoardFlash) -> Option<usize> {
+    // SAFETY: see `note_ecc_and_reset`; any bit pattern is a valid `[u32; 2]`.
+    let note = unsafe {
+        let p = addr_of_mut!(ECC_NOTE).cast::<[u32; 2]>();
+        let n = p.read_volatile();
+        p.write_volatile([0, 0]);
+        n
+    };
+    if note[0] != ECC_MAGIC || note[1] >> 31 == 0 {
+        return None;
+    }
+    // ADDR_ECC is the byte offset of the failing double word in its bank (RM0440 §3.7.9).
+    let off = note[1] & 0x7_FFFF;
+    let sector = STORE_PAGE_OFFSETS
+        .iter()
+        .position(|&p| (p..p + STORE_PAGE_BYTES).contains(&off))?;
+    f.erase(sector).ok().map(|_| sector)
 }
