@@ -141,8 +141,16 @@ pub fn on_sample() {
         ENERGY_LO.store(acc as u32, Ordering::Relaxed);
         ENERGY_HI.store((acc >> 32) as u32, Ordering::Relaxed);
 
-        // Console changes, between this step and the next.
-        let p = core::mem::take(&mut *PENDING.borrow_ref_mut(cs));
+        // Console changes, between this step and the next (copied out only when present:
+        // the mailbox holds a 264-byte configuration).
+        let mut q = PENDING.borrow_ref_mut(cs);
+        if q.clear.is_none() && q.cfg.is_none() && q.mode.is_none() {
+            PERIODS.fetch_add(1, Ordering::Relaxed);
+            check_overrun();
+            return;
+        }
+        let p = core::mem::take(&mut *q);
+        drop(q);
         if let Some(f) = p.clear {
             if st.ctl.fault() == Some(f) {
                 st.ctl.clear_fault();
@@ -164,11 +172,15 @@ pub fn on_sample() {
             }
         }
         PERIODS.fetch_add(1, Ordering::Relaxed);
-
-        // Overrun: the next sequence already finished (its flag is set again) before this
-        // period's work is done.
-        if pac::ADC2.isr().read().jeos() {
-            OVERRUNS.fetch_add(1, Ordering::Relaxed);
-        }
+        check_overrun();
     });
+}
+
+/// Overrun: the next sequence already finished (its flag is set again) before this period's
+/// work is done.
+#[inline(always)]
+fn check_overrun() {
+    if pac::ADC2.isr().read().jeos() {
+        OVERRUNS.fetch_add(1, Ordering::Relaxed);
+    }
 }
