@@ -170,13 +170,17 @@ pub async fn console_task(
                     if too_long {
                         let _ = write!(reply, "error: line longer than {LINE_MAX} characters\r\n");
                     } else if let Ok(text) = core::str::from_utf8(&line) {
-                        let Some(before) = drive::snapshot() else {
-                            continue;
-                        };
-                        let mut ctl = before.clone();
-                        let _ = con.execute(text, &mut ctl, &mut store, reply);
-                        if post(&before, &ctl) {
-                            wait_applied().await;
+                        match drive::snapshot() {
+                            Some(before) => {
+                                let mut ctl = before.clone();
+                                let _ = con.execute(text, &mut ctl, &mut store, reply);
+                                if post(&before, &ctl) {
+                                    wait_applied().await;
+                                }
+                            }
+                            None => {
+                                let _ = reply.write_str("error: current loop not started\r\n");
+                            }
                         }
                     } else {
                         let _ = reply.write_str("error: line is not UTF-8\r\n");

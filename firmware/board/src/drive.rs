@@ -12,7 +12,7 @@
 //! * Counters ([`PERIODS`], [`OVERRUNS`]) are atomics read by the supervision task.
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicU32, Ordering};
 
 use critical_section::Mutex;
 use embassy_stm32::adc::InjectedAdc;
@@ -95,8 +95,6 @@ pub static PERIODS: AtomicU32 = AtomicU32::new(0);
 pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
 /// A posted mode change was refused by the controller (fault latched in between).
 pub static MODE_REFUSED: AtomicU32 = AtomicU32::new(0);
-/// The last actuation had the gates enabled.
-pub static BRIDGE_ON: AtomicBool = AtomicBool::new(false);
 /// Sum of `p_elec` over all periods, in Q16.16 watt·periods, low and high words (the
 /// console's energy counter is recomputed from it: exact, not from sampled power).
 pub static ENERGY_LO: AtomicU32 = AtomicU32::new(0);
@@ -130,8 +128,7 @@ pub fn on_sample() {
             pac::ADC2.isr().write(|w| w.set_jeos(true));
             return;
         };
-        let a = run_period(&mut st.ctl, &mut st.io);
-        BRIDGE_ON.store(a.enable, Ordering::Relaxed);
+        run_period(&mut st.ctl, &mut st.io);
 
         // Exact energy: Σ p_elec (Q16.16) per period, 64-bit.
         let p = st.ctl.telemetry().p_elec.to_bits() as i64;
