@@ -18,7 +18,7 @@ use core::fmt::Write;
 
 use crate::config::Config;
 use crate::control::{Controller, Mode};
-use crate::numtext::{self, Fixed, NumError, Num};
+use crate::numtext::{self, Fixed, Num, NumError};
 use crate::params::{self, PARAMS};
 
 /// The persistent store as the console sees it.

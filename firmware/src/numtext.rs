@@ -443,7 +443,13 @@ mod tests {
         ] {
             assert_eq!(parse_f32(s), Err(NumError::NotANumber), "{s:?}");
         }
-        for s in ["1e39", "-1e99", "3.5e38", "1e99999999999", "99999999999999999999e30"] {
+        for s in [
+            "1e39",
+            "-1e99",
+            "3.5e38",
+            "1e99999999999",
+            "99999999999999999999e30",
+        ] {
             assert_eq!(parse_f32(s), Err(NumError::Overflow), "{s}");
         }
     }
