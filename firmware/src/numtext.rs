@@ -78,7 +78,7 @@ fn n_digits(mut v: u64) -> i32 {
 /// The `f32` nearest `mant·10^e10` (`mant > 0`), see the module's precision note.
 fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
     // Canonical form, so that equal values take the same path through `scale`.
-    while mant % 10 == 0 && mant != 0 {
+    while mant.is_multiple_of(10) && mant != 0 {
         mant /= 10;
         e10 = e10.saturating_add(1);
     }
@@ -279,7 +279,7 @@ fn shortest(x: f32) -> (u64, i32) {
         }
     }
     let (mut d, mut e) = digits(hi);
-    while d % 10 == 0 && d != 0 {
+    while d.is_multiple_of(10) && d != 0 {
         d /= 10;
         e += 1;
     }
@@ -458,8 +458,27 @@ mod tests {
     fn formats_like_core_for_console_values() {
         // Values whose shortest representation is positional: identical text to core's `{}`.
         for v in [
-            0.0f32, -0.0, 1.0, 100.0, -2.5, 0.0122, 0.0293, 2048.0, 20000.0, 0.1, 0.3, 1e-5, 1e9,
-            123456.79, 3.1415927, 6.2831855, -6.2831855, 1.0e-4, 5.0e-4, 95.0, 0.6,
+            0.0f32,
+            -0.0,
+            1.0,
+            100.0,
+            -2.5,
+            0.0122,
+            0.0293,
+            2048.0,
+            20000.0,
+            0.1,
+            0.3,
+            1e-5,
+            1e9,
+            123456.79,
+            core::f32::consts::PI,
+            core::f32::consts::TAU,
+            -core::f32::consts::TAU,
+            1.0e-4,
+            5.0e-4,
+            95.0,
+            0.6,
         ] {
             assert_eq!(format!("{}", Num(v)), format!("{v}"), "{v:e}");
         }
