@@ -18,6 +18,7 @@ use core::fmt::Write;
 
 use crate::config::Config;
 use crate::control::{Controller, Mode};
+use crate::numtext::{self, Fixed, Num, NumError};
 use crate::params::{self, PARAMS};
 
 /// The persistent store as the console sees it.
@@ -81,15 +82,12 @@ pub type CmdResult = Result<(), Refused>;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Refused;
 
-fn parse_f32(s: &str) -> Option<f32> {
+fn parse_f32(s: &str) -> Result<f32, NumError> {
     match s {
-        "inf" | "+inf" => Some(f32::INFINITY),
+        "inf" | "+inf" => Ok(f32::INFINITY),
         // Only the literal `inf` means infinity: a finite literal too large for f32 (1e99)
         // or a spelled-out "infinity"/"nan" is refused, not rounded to ±inf.
-        _ => match s.parse::<f64>() {
-            Ok(v) if v.is_finite() && (v as f32).is_finite() => Some(v as f32),
-            _ => None,
-        },
+        _ => numtext::parse_f32(s),
     }
 }
 
@@ -117,10 +115,10 @@ impl Console {
         self.tel_count += 1;
         if self.tel_count >= self.tel_every {
             self.tel_count = 0;
-            let _ = write!(out, "{:.6}", self.tel_periods as f32 * ts);
+            let _ = write!(out, "{}", Fixed(self.tel_periods as f32 * ts, 6));
             for &i in &self.tel[..self.n_tel] {
                 if let Some(ch) = CHANNELS.get(i as usize) {
-                    let _ = write!(out, ",{}", (ch.2)(ctl));
+                    let _ = write!(out, ",{}", Num((ch.2)(ctl)));
                 }
             }
             let _ = out.write_str("\r\n");
@@ -182,11 +180,11 @@ impl Console {
                         out,
                         "{} = {} {} [{} .. {}] default {} {} - {}\r\n",
                         p.name,
-                        (p.get)(c),
+                        Num((p.get)(c)),
                         p.unit,
-                        p.min,
-                        p.max,
-                        p.default_value(),
+                        Num(p.min),
+                        Num(p.max),
+                        Num(p.default_value()),
                         if p.runtime { "rt" } else { "idle-only" },
                         p.desc
                     );
@@ -196,7 +194,7 @@ impl Console {
             "get" if want(1) => {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
-                    Some(p) => ok!(" {} = {} {}", p.name, (p.get)(ctl.config()), p.unit),
+                    Some(p) => ok!(" {} = {} {}", p.name, Num((p.get)(ctl.config())), p.unit),
                     None => fail!("unknown parameter '{}' (try list)", Clip(n)),
                 }
             }
@@ -205,8 +203,9 @@ impl Console {
                 let Some(p) = params::find(n) else {
                     fail!("unknown parameter '{}' (try list)", Clip(n))
                 };
-                let Some(v) = parse_f32(a2.unwrap_or("")) else {
-                    fail!("'{}' is not a number", Clip(a2.unwrap_or("")))
+                let v = match parse_f32(a2.unwrap_or("")) {
+                    Ok(v) => v,
+                    Err(e) => fail!("'{}' {}", Clip(a2.unwrap_or("")), e),
                 };
                 let mut c = *ctl.config();
                 if let Err(e) = p.apply(&mut c, v, running) {
@@ -215,7 +214,7 @@ impl Console {
                 if let Err(e) = ctl.set_config(&c) {
                     fail!("{}", e)
                 }
-                ok!(" {} = {} {}", p.name, (p.get)(ctl.config()), p.unit)
+                ok!(" {} = {} {}", p.name, Num((p.get)(ctl.config())), p.unit)
             }
             "save" if want(0) => {
                 if running {
@@ -252,14 +251,14 @@ impl Console {
                     "mode={} fault={} vbus={}V w={}rad/s x={}m id={}A iq={}A p={}W p_avg={}W energy={}J warnings=",
                     ctl.mode().name(),
                     ctl.fault().map(|f| f.name()).unwrap_or("none"),
-                    t.v_bus.to_num::<f32>(),
-                    t.omega_m.to_num::<f32>(),
-                    t.x.to_num::<f32>(),
-                    t.i_dq.d.to_num::<f32>(),
-                    t.i_dq.q.to_num::<f32>(),
-                    t.p_elec.to_num::<f32>(),
-                    self.p_avg_w,
-                    self.energy_j
+                    Num(t.v_bus.to_num()),
+                    Num(t.omega_m.to_num()),
+                    Num(t.x.to_num()),
+                    Num(t.i_dq.d.to_num()),
+                    Num(t.i_dq.q.to_num()),
+                    Num(t.p_elec.to_num()),
+                    Num(self.p_avg_w),
+                    Num(self.energy_j)
                 );
                 write_warnings(out, ctl.protection().warnings);
                 let _ = out.write_str("\r\n");
@@ -357,12 +356,12 @@ impl Console {
                     n += 1;
                 }
                 let rate = match parse_f32(a2.unwrap_or("")) {
-                    Some(r) if r.is_finite() && r > 0.0 => r,
+                    Ok(r) if r.is_finite() && r > 0.0 => r,
                     _ => fail!("rate must be a positive number of Hz"),
                 };
                 let pwm = ctl.config().pwm_hz;
                 if rate > pwm.min(2_000.0) {
-                    fail!("rate must be <= {} Hz", pwm.min(2_000.0))
+                    fail!("rate must be <= {} Hz", Num(pwm.min(2_000.0)))
                 }
                 let every = pwm / rate;
                 if every > 1.0e8 {
@@ -378,7 +377,7 @@ impl Console {
                     let _ = write!(out, ",{}", CHANNELS[i as usize].0);
                 }
                 let _ = out.write_str("\r\n");
-                ok!(" tel {} Hz", pwm / self.tel_every as f32)
+                ok!(" tel {} Hz", Num(pwm / self.tel_every as f32))
             }
             "help" | "list" | "get" | "set" | "save" | "load" | "defaults" | "status"
             | "faults" | "clear" | "mode" | "tel" => {

@@ -35,6 +35,7 @@ pub mod frames;
 pub mod fx;
 pub mod io;
 pub mod laws;
+pub mod numtext;
 pub mod params;
 pub mod pi;
 pub mod protect;

@@ -1,12 +1,171 @@
-//! STM32G474RE board image — SKELETON ONLY (see docs/board.md, "NOT done"): it initialises
-//! embassy and nothing else. The drive (PWM, ADC, current-loop interrupt, encoder, console,
-//! supervision) is not implemented yet.
+//! STM32G474RE board image of the regenerative servo drive.
+//!
+//! * `board`: clocks (170 MHz, boost), pins, scaling, flash layout, watchdog — every choice.
+//! * `pwm`: TIM1 centre-aligned complementary PWM, dead time, sampling instant, gate enable.
+//! * `drive`: the current loop in the ADC interrupt (highest priority), `DriveIo` for the board.
+//! * `console`: `regen_fw::console` over USART2 (ST-LINK VCP), telemetry.
+//! * `store`: `regen_fw::store` on two pages of flash bank 2.
+//! * `supervisor`: watchdog, loop-alive and overrun checks, fault logs.
+//!
+//! The control core `regen-fw` is linked unchanged: the interrupt calls the same
+//! `regen_fw::io::run_period` the simulator calls.
 #![no_std]
 #![no_main]
+
+mod board;
+mod console;
+mod drive;
+mod pwm;
+mod store;
+mod supervisor;
+
+use embassy_stm32::interrupt::{InterruptExt, Priority};
+use embassy_stm32::{interrupt, pac};
+use regen_fw::store::{boot, FlashStore, StoreFault};
+use regen_fw::{Config, Controller};
 use {defmt_rtt as _, panic_probe as _};
 
+/// The current-loop interrupt: ADC1 and ADC2 share this vector; only ADC2's end of injected
+/// sequence is enabled, so it fires once per PWM period.
+#[interrupt]
+fn ADC1_2() {
+    drive::on_sample();
+}
+
+/// A fault (and a panic: panic-probe ends in a HardFault) opens the bridge first: the
+/// current loop no longer runs, and the last duties must not stay applied. The watchdog then
+/// resets the image within its timeout.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_ef: &cortex_m_rt::ExceptionFrame) -> ! {
+    pwm::force_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// NMI: on the G474 a flash double-ECC error (a double word torn by a power cut during a
+/// store save) or an HSE failure. Bridge off, note the ECC address, reset (`store.rs`).
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    pwm::force_off();
+    store::note_ecc_and_reset()
+}
+
 #[embassy_executor::main]
-async fn main(_s: embassy_executor::Spawner) {
-    let _p = embassy_stm32::init(Default::default());
-    defmt::info!("regen-board skeleton: drive not implemented");
+async fn main(spawner: embassy_executor::Spawner) {
+    let p = embassy_stm32::init(board::rcc_config());
+    let parts = board::take(p);
+
+    // Every other interrupt below the current loop: the loop preempts the UART, flash and
+    // embassy's time driver (TIM15, sharing its vector with TIM1's break), never the reverse.
+    for irq in [
+        interrupt::USART2,
+        interrupt::FLASH,
+        interrupt::TIM1_BRK_TIM15,
+    ] {
+        irq.set_priority(Priority::P2);
+    }
+
+    // Parameters: the store, or defaults with a reported fault.
+    let mut flash = store::BoardFlash {
+        region: parts.flash,
+    };
+    let ecc_page = store::recover_ecc(&mut flash);
+    if let Some(page) = ecc_page {
+        defmt::warn!(
+            "store page {} held an ECC error (power cut during a save): erased",
+            page
+        );
+    }
+    let (cfg, store_fault) = boot(&flash);
+    let boot_msg: &'static str = match store_fault {
+        None if ecc_page.is_some() => "store page with ECC error erased; older parameters loaded",
+        None => "parameters loaded from flash",
+        Some(StoreFault::Empty) => {
+            defmt::warn!("parameter store empty or corrupt: defaults in use");
+            "store empty or corrupt: DEFAULT parameters (fault store_empty)"
+        }
+        Some(StoreFault::Invalid) => {
+            defmt::warn!("stored parameters invalid: defaults in use");
+            "stored parameters invalid: DEFAULT parameters (fault store_invalid)"
+        }
+    };
+    let (ctl, cfg) = match Controller::new(&cfg) {
+        Ok(c) => (c, cfg),
+        Err(e) => {
+            defmt::error!(
+                "stored configuration refused ({}: {}): defaults",
+                e.field,
+                e.reason
+            );
+            let d = Config::default();
+            match Controller::new(&d) {
+                Ok(c) => (c, d),
+                Err(_) => {
+                    defmt::error!("default configuration refused: drive stays off");
+                    return;
+                }
+            }
+        }
+    };
+
+    let Some(arr) = board::arr_for(cfg.pwm_hz) else {
+        defmt::error!(
+            "pwm_hz {} not realisable on TIM1: drive stays off",
+            cfg.pwm_hz
+        );
+        return;
+    };
+    // The driver owns the PWM pins and TIM1's clock: dropping it would switch both off, so it
+    // is kept for the program's life (the loop drives TIM1 through its registers).
+    core::mem::forget(parts.pwm);
+    let Some(pwm) = pwm::configure(arr) else {
+        defmt::error!("TIM1 does not count: drive stays off");
+        return;
+    };
+    defmt::info!(
+        "TIM1: ARR {} ({} Hz), dead time DTG {:#x}, update at {}",
+        arr,
+        board::TIM1_HZ / (2 * arr as u32),
+        board::dtg(board::DEAD_TIME_NS),
+        pwm.at
+    );
+
+    critical_section::with(|cs| {
+        drive::LOOP.borrow_ref_mut(cs).replace(drive::LoopState {
+            ctl,
+            io: drive::BoardIo {
+                adc1: parts.adc1,
+                adc2: parts.adc2,
+                qei: parts.qei,
+                pwm,
+                brake: parts.brake,
+            },
+        });
+    });
+    // Discard a sequence completed before the loop state existed, then start the loop.
+    pac::ADC1.isr().write(|w| w.set_jeos(true));
+    pac::ADC2.isr().write(|w| w.set_jeos(true));
+    interrupt::ADC1_2.set_priority(Priority::P0);
+    // SAFETY: the handler only touches state behind critical-section mutexes and atomics.
+    unsafe { interrupt::ADC1_2.enable() };
+    defmt::info!("current loop running at {} Hz, mode idle", cfg.pwm_hz);
+
+    match supervisor::supervisor_task(parts.iwdg) {
+        Ok(t) => spawner.spawn(t),
+        Err(_) => defmt::error!("supervision task not started"),
+    }
+    match parts.uart {
+        Some(uart) => {
+            let (tx, rx) = uart.split();
+            match console::console_task(tx, rx, FlashStore(flash), boot_msg) {
+                Ok(t) => spawner.spawn(t),
+                Err(_) => defmt::error!("console task not started"),
+            }
+        }
+        None => {
+            defmt::error!("console UART not available: running without console");
+            let _ = &mut flash;
+        }
+    }
 }

@@ -1,0 +1,235 @@
+//! The serial console task: `regen_fw::console` over USART2 (ST-LINK virtual COM port).
+//!
+//! Lines in → `Console::execute` on a *copy* of the controller → reply out; what the command
+//! changed is posted to the current loop (`drive::PENDING`) and applied between two steps.
+//! The reply says what the copy accepted; a mode change can still be refused by the loop if a
+//! fault latched in the meantime (counted, logged by supervision, visible in `status`).
+//!
+//! Telemetry. `Console::tick` must see the controller once per period; the task instead wakes
+//! every 0.5 ms (the fastest `tel` rate is 2 kHz), copies the controller, and calls `tick` once
+//! per period elapsed since the last wake, all against that copy. A telemetry line therefore
+//! carries its exact period timestamp but values from the end of the batch (≤ 0.5 ms, i.e.
+//! ≤ 10 periods, later). Only the last line of a batch is kept, and a line is dropped (and
+//! counted) when the UART is still busy with the previous one, so a stream faster than
+//! 115,200 baud thins out instead of backing up. The console's energy counter is overwritten
+//! after each batch with the loop's exact per-period integral (`drive::energy_j`).
+
+use core::fmt::Write as _;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use embassy_futures::select::{select, Either};
+use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
+use embassy_time::{Duration, Ticker};
+use embedded_io_async::{Read, Write};
+use regen_fw::console::Console;
+use regen_fw::store::FlashStore;
+
+use crate::drive::{self, Pending, PENDING, PERIODS};
+use crate::store::BoardFlash;
+
+/// Telemetry lines dropped because the UART was busy.
+pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
+
+const LINE_MAX: usize = 120;
+/// `list` writes ≈ 3 KB (35 parameters); room for a registry half as large again.
+const REPLY_MAX: usize = 4608;
+
+/// A `fmt::Write` sink into a fixed buffer that records overflow instead of truncating
+/// silently.
+struct Buf<const N: usize> {
+    b: heapless::Vec<u8, N>,
+    overflow: bool,
+}
+
+impl<const N: usize> Buf<N> {
+    const fn new() -> Self {
+        Buf {
+            b: heapless::Vec::new(),
+            overflow: false,
+        }
+    }
+    fn clear(&mut self) {
+        self.b.clear();
+        self.overflow = false;
+    }
+}
+
+impl<const N: usize> core::fmt::Write for Buf<N> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        if self.b.extend_from_slice(s.as_bytes()).is_err() {
+            self.overflow = true;
+            return Err(core::fmt::Error);
+        }
+        Ok(())
+    }
+}
+
+/// Keeps only the last complete telemetry line written to it.
+struct LastLine {
+    cur: Buf<160>,
+    last: Buf<160>,
+    lines: u32,
+}
+
+impl core::fmt::Write for LastLine {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let r = self.cur.write_str(s);
+        if s.ends_with('\n') {
+            if !self.cur.overflow {
+                core::mem::swap(&mut self.cur, &mut self.last);
+                self.lines += 1;
+            }
+            self.cur.clear();
+        }
+        r
+    }
+}
+
+/// Wait (≤ 5 ms) until the loop has taken the posted changes, so that the next command's
+/// copy includes them (two `set` lines arriving together must not undo each other, and `save`
+/// must store what was set before it).
+async fn wait_applied() {
+    for _ in 0..100 {
+        let empty = critical_section::with(|cs| {
+            let q = PENDING.borrow_ref(cs);
+            q.clear.is_none() && q.cfg.is_none() && q.mode.is_none()
+        });
+        if empty {
+            return;
+        }
+        embassy_time::Timer::after_micros(50).await;
+    }
+    defmt::warn!("console change not taken by the loop within 5 ms");
+}
+
+/// Post the differences between the copy before and after a command; `true` if any.
+fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
+    let mut p = Pending::default();
+    if before.fault().is_some() && after.fault().is_none() {
+        p.clear = before.fault();
+    }
+    if after.config() != before.config() {
+        p.cfg = Some(*after.config());
+    }
+    if after.mode() != before.mode() {
+        p.mode = Some(after.mode());
+    }
+    if p.clear.is_none() && p.cfg.is_none() && p.mode.is_none() {
+        return false;
+    }
+    critical_section::with(|cs| {
+        let mut q = PENDING.borrow_ref_mut(cs);
+        // Later changes win field by field; a pending change not yet applied is kept.
+        q.clear = p.clear.or(q.clear);
+        q.cfg = p.cfg.or(q.cfg);
+        q.mode = p.mode.or(q.mode);
+    });
+    true
+}
+
+#[embassy_executor::task]
+pub async fn console_task(
+    mut tx: BufferedUartTx<'static>,
+    mut rx: BufferedUartRx<'static>,
+    mut store: FlashStore<BoardFlash>,
+    boot_msg: &'static str,
+) {
+    // Lives in the task's static storage (embassy allocates task futures statically).
+    let mut reply_buf: Buf<REPLY_MAX> = Buf::new();
+    let reply = &mut reply_buf;
+    let mut con = Console::new();
+    let mut line: heapless::Vec<u8, LINE_MAX> = heapless::Vec::new();
+    let mut too_long = false;
+    let mut tel = LastLine {
+        cur: Buf::new(),
+        last: Buf::new(),
+        lines: 0,
+    };
+    let mut last_period = PERIODS.load(Ordering::Relaxed);
+    let mut ticker = Ticker::every(Duration::from_micros(500));
+    let mut inbuf = [0u8; 32];
+
+    let _ = tx.write_all(b"\r\n# regen-board ").await;
+    let _ = tx.write_all(boot_msg.as_bytes()).await;
+    let _ = tx.write_all(b"\r\n").await;
+
+    loop {
+        match select(rx.read(&mut inbuf), ticker.next()).await {
+            Either::First(Ok(n)) => {
+                for &c in &inbuf[..n] {
+                    if c != b'\n' && c != b'\r' {
+                        if line.push(c).is_err() {
+                            too_long = true;
+                        }
+                        continue;
+                    }
+                    if line.is_empty() && !too_long {
+                        continue; // the other half of a CR LF, or an empty line
+                    }
+                    reply.clear();
+                    if too_long {
+                        let _ = write!(reply, "error: line longer than {LINE_MAX} characters\r\n");
+                    } else if let Ok(text) = core::str::from_utf8(&line) {
+                        match drive::snapshot() {
+                            Some(before) => {
+                                let mut ctl = before.clone();
+                                let _ = con.execute(text, &mut ctl, &mut store, reply);
+                                if post(&before, &ctl) {
+                                    wait_applied().await;
+                                }
+                            }
+                            None => {
+                                let _ = reply.write_str("error: current loop not started\r\n");
+                            }
+                        }
+                    } else {
+                        let _ = reply.write_str("error: line is not UTF-8\r\n");
+                    }
+                    if reply.overflow {
+                        reply.b.truncate(REPLY_MAX - 40);
+                        let _ = reply.write_str("\r\nerror: reply truncated\r\n");
+                    }
+                    let _ = tx.write_all(&reply.b).await;
+                    line.clear();
+                    too_long = false;
+                }
+            }
+            Either::First(Err(_)) => {
+                // Framing/noise/overrun on the line: drop the partial line.
+                line.clear();
+                too_long = false;
+            }
+            Either::Second(()) => {
+                let now = PERIODS.load(Ordering::Relaxed);
+                let n = now.wrapping_sub(last_period);
+                last_period = now;
+                if n == 0 {
+                    continue;
+                }
+                let Some(ctl) = drive::snapshot() else {
+                    continue;
+                };
+                tel.lines = 0;
+                // At most one second of periods per batch (after a long stall the rest is
+                // skipped: no line could be sent in time anyway).
+                let batch = n.min(ctl.config().pwm_hz as u32);
+                for _ in 0..batch {
+                    con.tick(&ctl, &mut tel);
+                }
+                con.energy_j = drive::energy_j(ctl.config().ts());
+                if tel.lines > 0 {
+                    TEL_DROPPED.fetch_add(tel.lines - 1, Ordering::Relaxed);
+                    // Send only if the UART has drained the previous line; else drop it.
+                    match embassy_futures::poll_once(tx.flush()) {
+                        core::task::Poll::Ready(_) => {
+                            let _ = tx.write_all(&tel.last.b).await;
+                        }
+                        core::task::Poll::Pending => {
+                            TEL_DROPPED.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}

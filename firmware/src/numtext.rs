@@ -1,0 +1,574 @@
+//! Decimal text ↔ `f32` for the console, small enough for the board image.
+//!
+//! core's `str::parse::<f64>` (Eisel–Lemire with a 10 KiB power-of-five table and a big-decimal
+//! fallback) and `{}` on floats (Grisu with a Dragon fallback) cost about 25 KiB of flash on the
+//! Cortex-M4; the console needs neither their full precision nor their range (everything it
+//! reads or writes is an `f32`). This module does both with `f64` arithmetic (already linked
+//! for the command laws' design code) and a 23-entry table of exact powers of ten.
+//!
+//! * [`parse_f32`] accepts what `str::parse::<f64>` accepted on the console: an optional sign,
+//!   digits with an optional `.` (at least one digit, `1.` and `.5` included), an optional
+//!   exponent `e`/`E` with optional sign and at least one digit. Anything else (`nan`, `inf`,
+//!   `0x10`, `1_000`, `1e`, spaces) is [`NumError::NotANumber`]; a value beyond `f32::MAX` is
+//!   [`NumError::Overflow`]; a value below the smallest subnormal rounds to zero as in core.
+//!   **Precision**: the result is the `f32` nearest the decimal (ties to even), except when
+//!   the decimal lies within about 4·10⁻¹⁶ (relative) of the midpoint between two `f32`
+//!   values, where it may be the other neighbour: always within 1 ulp of the correctly
+//!   rounded value (tested against core's correctly rounded parser). Digits past the 19th
+//!   significant one are ignored (a relative change below 10⁻¹⁸).
+//! * [`Num`] displays an `f32` with the fewest significant digits (1 … 9) that parse back
+//!   ([`parse_f32`] and core's parser both) to the same `f32`, like core's `{}`; positional
+//!   for 10⁻⁵ ≤ |v| < 10¹⁰ (`0.0122`, `100`, `-2.5`), otherwise with an exponent (`1e-7`,
+//!   `3.4028235e38`), where core's `{}` wrote every zero. `inf`, `-inf`, `NaN`, `0` and `-0`
+//!   as core writes them.
+//! * [`Fixed`] displays with a fixed number of decimals (≤ 9), like core's `{:.N}`, rounded to
+//!   nearest (a tie within 10⁻¹⁶ relative may round either way); beyond 10¹⁸ units of the
+//!   last decimal it falls back to [`Num`].
+//!
+//! Nothing here panics or allocates.
+
+use core::fmt;
+
+/// Why [`parse_f32`] refused a text.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NumError {
+    /// Not a decimal number (includes `nan` and `inf`).
+    NotANumber,
+    /// A finite decimal whose magnitude exceeds `f32::MAX`.
+    Overflow,
+}
+
+impl fmt::Display for NumError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            NumError::NotANumber => "is not a number",
+            NumError::Overflow => "is out of the f32 range",
+        })
+    }
+}
+
+/// 10^0 … 10^22: every one exact in `f64`.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// `x·10^n` by multiplications or divisions by exact powers of ten: one correctly rounded
+/// operation for |n| ≤ 22, at most ⌈|n|/22⌉ for larger |n| (the callers keep |n| ≤ 66).
+fn scale(mut x: f64, n: i32) -> f64 {
+    let mut m = n.unsigned_abs();
+    while m > 0 {
+        let step = m.min(22);
+        let p = POW10[step as usize];
+        x = if n > 0 { x * p } else { x / p };
+        m -= step;
+    }
+    x
+}
+
+fn n_digits(mut v: u64) -> i32 {
+    let mut n = 1;
+    while v >= 10 {
+        v /= 10;
+        n += 1;
+    }
+    n
+}
+
+/// The `f32` nearest `mant·10^e10` (`mant > 0`), see the module's precision note.
+fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
+    // Canonical form, so that equal values take the same path through `scale`.
+    while mant.is_multiple_of(10) && mant != 0 {
+        mant /= 10;
+        e10 = e10.saturating_add(1);
+    }
+    if mant == 0 {
+        return Ok(0.0);
+    }
+    let top = e10.saturating_add(n_digits(mant)); // mant·10^e10 < 10^top, ≥ 10^(top−1)
+    if top - 1 > 38 {
+        return Err(NumError::Overflow); // ≥ 1e39 > f32::MAX
+    }
+    if top <= -46 {
+        return Ok(0.0); // ≤ 1e-46, below half the smallest subnormal (7.0e-46)
+    }
+    // Here −65 ≤ e10 ≤ 38 and mant < 10^19: no intermediate leaves f64's normal range.
+    let v = scale(mant as f64, e10) as f32;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(NumError::Overflow)
+    }
+}
+
+/// Parse a console number; see the module documentation for the accepted forms.
+pub fn parse_f32(s: &str) -> Result<f32, NumError> {
+    let b = s.as_bytes();
+    let mut i = 0;
+    let neg = match b.first() {
+        Some(b'-') => {
+            i = 1;
+            true
+        }
+        Some(b'+') => {
+            i = 1;
+            false
+        }
+        _ => false,
+    };
+    let mut mant: u64 = 0;
+    let mut kept = 0; // significant digits in `mant`
+    let mut e10: i32 = 0;
+    let mut any = false;
+    let mut frac = false;
+    while i < b.len() {
+        let c = b[i];
+        if c == b'.' && !frac {
+            frac = true;
+            i += 1;
+            continue;
+        }
+        if !c.is_ascii_digit() {
+            break;
+        }
+        any = true;
+        let d = (c - b'0') as u64;
+        if mant == 0 && d == 0 {
+            // A leading zero: only its place counts.
+            if frac {
+                e10 = e10.saturating_sub(1);
+            }
+        } else if kept < 19 {
+            mant = mant * 10 + d;
+            kept += 1;
+            if frac {
+                e10 = e10.saturating_sub(1);
+            }
+        } else if !frac {
+            e10 = e10.saturating_add(1); // a dropped integer digit still scales
+        }
+        i += 1;
+    }
+    if !any {
+        return Err(NumError::NotANumber);
+    }
+    if i < b.len() && (b[i] == b'e' || b[i] == b'E') {
+        i += 1;
+        let eneg = match b.get(i) {
+            Some(b'-') => {
+                i += 1;
+                true
+            }
+            Some(b'+') => {
+                i += 1;
+                false
+            }
+            _ => false,
+        };
+        let mut e: i32 = 0;
+        let mut edigits = false;
+        while i < b.len() && b[i].is_ascii_digit() {
+            e = (e * 10 + (b[i] - b'0') as i32).min(1_000_000);
+            edigits = true;
+            i += 1;
+        }
+        if !edigits {
+            return Err(NumError::NotANumber);
+        }
+        e10 = e10.saturating_add(if eneg { -e } else { e });
+    }
+    if i != b.len() {
+        return Err(NumError::NotANumber);
+    }
+    let v = decimal_to_f32(mant, e10)?;
+    Ok(if neg { -v } else { v })
+}
+
+/// A small stack buffer implementing the text building (never more than 32 bytes used).
+struct Buf {
+    b: [u8; 40],
+    n: usize,
+}
+
+impl Buf {
+    fn new() -> Buf {
+        Buf { b: [0; 40], n: 0 }
+    }
+    fn push(&mut self, c: u8) {
+        if let Some(slot) = self.b.get_mut(self.n) {
+            *slot = c;
+            self.n += 1;
+        }
+    }
+    /// The decimal digits of `v`, `width` of them at least (zero padded).
+    fn push_u64(&mut self, mut v: u64, width: usize) {
+        let mut d = [0u8; 20];
+        let mut n = 0;
+        while (v > 0 || n < width.max(1)) && n < d.len() {
+            d[n] = b'0' + (v % 10) as u8;
+            v /= 10;
+            n += 1;
+        }
+        while n > 0 {
+            n -= 1;
+            self.push(d[n]);
+        }
+    }
+    fn push_str(&mut self, s: &str) {
+        for &c in s.as_bytes() {
+            self.push(c);
+        }
+    }
+    fn out(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Only ASCII is ever pushed.
+        f.write_str(core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?"))
+    }
+}
+
+/// Round a non-negative `f64` below 2^63 to the nearest integer (ties away from zero; the
+/// shortest-digit search checks its candidates, so the tie rule does not matter there).
+fn round_u64(x: f64) -> u64 {
+    (x + 0.5) as u64
+}
+
+/// The shortest decimal `d·10^e` (d with 1 … 9 digits) that converts back to `x`
+/// (finite, > 0).
+fn shortest(x: f32) -> (u64, i32) {
+    let xd = x as f64;
+    let bits = x.to_bits();
+    let be = ((bits >> 23) & 0xff) as i32;
+    let e2 = if be == 0 {
+        31 - (bits & 0x7f_ffff).leading_zeros() as i32 - 149 // subnormal
+    } else {
+        be - 127
+    };
+    // k ≈ floor(log10 x) (1233/4096 ≈ log10 2), then made exact so that
+    // s = x·10^(8−k) rounds to a 9-digit integer.
+    let mut k = (e2 * 1233) >> 12;
+    let mut s = scale(xd, 8 - k);
+    for _ in 0..4 {
+        if s >= 999_999_999.5 {
+            k += 1;
+        } else if s < 99_999_999.5 {
+            k -= 1;
+        } else {
+            break;
+        }
+        s = scale(xd, 8 - k);
+    }
+    let digits = |p: i32| -> (u64, i32) {
+        let mut d = round_u64(s / POW10[(9 - p) as usize]);
+        let mut e = k - p + 1;
+        if d >= POW10[p as usize] as u64 {
+            d /= 10; // 9.99… rounded up to 10.0…
+            e += 1;
+        }
+        (d, e)
+    };
+    let good = |(d, e): (u64, i32)| decimal_to_f32(d, e) == Ok(x);
+    // Fewest digits that round-trip: 9 always do for an f32 (half a unit of the 9th digit is
+    // ≤ 5·10⁻⁹ relative, half an f32 ulp ≥ 2.98·10⁻⁸); a binary search over 1 … 8, each
+    // candidate checked by converting it back.
+    let (mut lo, mut hi) = (1, 9);
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        if good(digits(mid)) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    let (mut d, mut e) = digits(hi);
+    while d.is_multiple_of(10) && d != 0 {
+        d /= 10;
+        e += 1;
+    }
+    (d, e)
+}
+
+fn write_special(v: f32, buf: &mut Buf) -> bool {
+    if v.is_nan() {
+        buf.push_str("NaN");
+    } else if v.is_infinite() {
+        buf.push_str(if v > 0.0 { "inf" } else { "-inf" });
+    } else if v == 0.0 {
+        buf.push_str(if v.is_sign_negative() { "-0" } else { "0" });
+    } else {
+        return false;
+    }
+    true
+}
+
+fn write_num(v: f32, buf: &mut Buf) {
+    if write_special(v, buf) {
+        return;
+    }
+    if v < 0.0 {
+        buf.push(b'-');
+    }
+    let (d, e) = shortest(v.abs());
+    let nd = n_digits(d);
+    let k = e + nd - 1; // decimal exponent of the leading digit
+    if (-5..10).contains(&k) {
+        if e >= 0 {
+            buf.push_u64(d, 0);
+            for _ in 0..e {
+                buf.push(b'0');
+            }
+        } else {
+            let f = (-e) as u32; // digits after the point
+            let p = 10u64.pow(f.min(19));
+            if f >= nd as u32 {
+                buf.push(b'0');
+            } else {
+                buf.push_u64(d / p, 0);
+            }
+            buf.push(b'.');
+            buf.push_u64(d % p, f as usize);
+        }
+    } else {
+        let p = 10u64.pow((nd - 1) as u32);
+        buf.push_u64(d / p, 0);
+        if nd > 1 {
+            buf.push(b'.');
+            buf.push_u64(d % p, (nd - 1) as usize);
+        }
+        buf.push(b'e');
+        if k < 0 {
+            buf.push(b'-');
+        }
+        buf.push_u64(k.unsigned_abs() as u64, 0);
+    }
+}
+
+/// Display an `f32` with the fewest digits that read back to it (see the module docs).
+#[derive(Clone, Copy, Debug)]
+pub struct Num(pub f32);
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut buf = Buf::new();
+        write_num(self.0, &mut buf);
+        buf.out(f)
+    }
+}
+
+/// Display an `f32` with `self.1` decimals (at most 9), like `{:.N}`.
+#[derive(Clone, Copy, Debug)]
+pub struct Fixed(pub f32, pub u8);
+
+impl fmt::Display for Fixed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut buf = Buf::new();
+        let n = self.1.min(9) as i32;
+        let s = scale(self.0.abs() as f64, n);
+        if !self.0.is_finite() || s >= 1e18 {
+            write_num(self.0, &mut buf);
+        } else {
+            // Ties to even, as core: `s` is exact here for the console's values (an f32 times
+            // 10^n ≤ 10^9 fits f64's 53 bits whenever the f32 has few fraction bits).
+            let mut q = s as u64;
+            let r = s - q as f64;
+            if r > 0.5 || (r == 0.5 && q % 2 == 1) {
+                q += 1;
+            }
+            if self.0.is_sign_negative() {
+                buf.push(b'-');
+            }
+            let p = POW10[n as usize] as u64;
+            buf.push_u64(q / p, 0);
+            if n > 0 {
+                buf.push(b'.');
+                buf.push_u64(q % p, n as usize);
+            }
+        }
+        buf.out(f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::format;
+    use std::string::String;
+
+    fn ulps(a: f32, b: f32) -> u32 {
+        // Distance in representable steps (same sign assumed, as in the uses below).
+        (a.to_bits() as i64 - b.to_bits() as i64).unsigned_abs() as u32
+    }
+
+    /// What the console accepted before (core's parser, then the f32 range check), and the
+    /// value it gave (core's f64 parse then `as f32`).
+    fn core_accepts(s: &str) -> Option<f32> {
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && (v as f32).is_finite() => Some(v as f32),
+            _ => None,
+        }
+    }
+
+    #[test]
+    fn parses_every_console_form() {
+        let cases: &[(&str, f32)] = &[
+            ("0", 0.0),
+            ("100", 100.0),
+            ("+100", 100.0),
+            ("-2.5", -2.5),
+            ("1.", 1.0),
+            (".5", 0.5),
+            ("-.5", -0.5),
+            ("0.0122", 0.0122),
+            ("1e-3", 1e-3),
+            ("1E3", 1e3),
+            ("2.5e+2", 250.0),
+            ("-1.5e-07", -1.5e-7),
+            ("000012.5000", 12.5),
+            ("3.4028235e38", f32::MAX),
+            ("1e-50", 0.0),
+            ("1e-99999999999", 0.0),
+            ("1.17549435e-38", f32::MIN_POSITIVE),
+            ("1.4e-45", f32::from_bits(1)),
+            ("0.000000000000000000000000000000000000001", 1e-39),
+        ];
+        for &(s, v) in cases {
+            assert_eq!(parse_f32(s), Ok(v), "{s}");
+        }
+        assert!(parse_f32("-0").unwrap().is_sign_negative());
+        // Digits past the 19th are dropped: still the nearest f32 here.
+        let long = "123456789012345678901234567890";
+        assert_eq!(parse_f32(long), Ok(long.parse::<f32>().unwrap()));
+        for s in [
+            "", "+", "-", ".", "e3", ".e3", "1e", "1e+", "1e-", "1.2.3", "--1", "+-1", "1 ", " 1",
+            "0x10", "1_000", "nan", "NaN", "inf", "-inf", "infinity", "1f", "1e3.5", "١",
+        ] {
+            assert_eq!(parse_f32(s), Err(NumError::NotANumber), "{s:?}");
+        }
+        for s in [
+            "1e39",
+            "-1e99",
+            "3.5e38",
+            "1e99999999999",
+            "99999999999999999999e30",
+        ] {
+            assert_eq!(parse_f32(s), Err(NumError::Overflow), "{s}");
+        }
+    }
+
+    #[test]
+    fn formats_like_core_for_console_values() {
+        // Values whose shortest representation is positional: identical text to core's `{}`.
+        for v in [
+            0.0f32,
+            -0.0,
+            1.0,
+            100.0,
+            -2.5,
+            0.0122,
+            0.0293,
+            2048.0,
+            20000.0,
+            0.1,
+            0.3,
+            1e-5,
+            1e9,
+            123456.79,
+            core::f32::consts::PI,
+            core::f32::consts::TAU,
+            -core::f32::consts::TAU,
+            1.0e-4,
+            5.0e-4,
+            95.0,
+            0.6,
+        ] {
+            assert_eq!(format!("{}", Num(v)), format!("{v}"), "{v:e}");
+        }
+        assert_eq!(format!("{}", Num(f32::INFINITY)), "inf");
+        assert_eq!(format!("{}", Num(f32::NEG_INFINITY)), "-inf");
+        assert_eq!(format!("{}", Num(f32::NAN)), "NaN");
+        assert_eq!(format!("{}", Num(1e-7)), "1e-7");
+        assert_eq!(format!("{}", Num(-1.5e-7)), "-1.5e-7");
+        assert_eq!(format!("{}", Num(1e10)), "1e10");
+        assert_eq!(format!("{}", Num(f32::MAX)), "3.4028235e38");
+        assert_eq!(format!("{}", Num(f32::from_bits(1))), "1e-45");
+        assert_eq!(format!("{}", Fixed(0.5, 6)), "0.500000");
+        assert_eq!(format!("{}", Fixed(-12.25, 1)), "-12.2"); // 12.25 exact: tie
+        assert_eq!(format!("{}", Fixed(3.0, 0)), "3");
+        assert_eq!(format!("{}", Fixed(1e30, 6)), "1e30");
+        assert_eq!(format!("{}", Fixed(f32::NAN, 6)), "NaN");
+    }
+
+    /// Significant digits of a shortest text (from its mantissa, sign, point and exponent off).
+    fn sig_digits(s: &str) -> usize {
+        let m = s.split('e').next().unwrap_or("");
+        let digits: String = m.chars().filter(|c| c.is_ascii_digit()).collect();
+        let t = digits.trim_start_matches('0').trim_end_matches('0');
+        t.len().max(1)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20_000))]
+
+        /// Every finite f32 (any bit pattern): the text reads back to the same value, by our
+        /// parser and by core's (correctly rounded) one, and it is no longer than core's
+        /// shortest representation: at most one digit more, and only where the shortest
+        /// decimal lies on the narrow side of a power of two (see `shortest`).
+        #[test]
+        fn num_round_trips_every_f32(bits in any::<u32>()) {
+            let v = f32::from_bits(bits);
+            prop_assume!(v.is_finite());
+            let s = format!("{}", Num(v));
+            prop_assert_eq!(parse_f32(&s).map(f32::to_bits), Ok(v.to_bits()), "{}", s);
+            prop_assert_eq!(s.parse::<f32>().map(f32::to_bits), Ok(v.to_bits()), "{}", s);
+            if v != 0.0 {
+                let core_n = sig_digits(&format!("{:e}", v));
+                let ours = sig_digits(&s);
+                prop_assert!(ours <= core_n + usize::from(bits & 0x7f_ffff == 0), "{} vs {:e}", s, v);
+            }
+        }
+
+        /// The `f32` values the console shows in practice (Q16.16 telemetry, parameters):
+        /// identical text to core's `{}` in the positional range.
+        #[test]
+        fn num_matches_core_on_q16(raw in any::<i32>()) {
+            let v = raw as f32 / 65536.0;
+            prop_assume!(v == 0.0 || v.abs() >= 1e-5);
+            let ours = format!("{}", Num(v));
+            let core_s = format!("{v}");
+            prop_assert_eq!(ours, core_s);
+        }
+
+        /// Decimal texts of every accepted shape: accepted exactly when core accepted them, and
+        /// within 1 ulp of core's correctly rounded `f32` parse.
+        #[test]
+        fn parse_agrees_with_core(s in "[-+]?[0-9]{0,22}(\\.[0-9]{0,22})?([eE][-+]?[0-9]{1,3})?") {
+            let ours = parse_f32(&s);
+            match core_accepts(&s) {
+                None => prop_assert!(ours.is_err(), "{} -> {:?}", s, ours),
+                Some(_) => {
+                    let exact: f32 = s.parse().unwrap();
+                    let v = ours.unwrap();
+                    prop_assert!(ulps(v, exact) <= 1, "{} -> {:e} vs {:e}", s, v, exact);
+                }
+            }
+        }
+
+        /// Short decimals as typed on the console (≤ 7 significant digits, |exponent| ≤ 10):
+        /// the exact nearest f32 (the f64 path has one rounding before the final one).
+        #[test]
+        fn parse_short_decimals_exactly(m in 0u32..10_000_000, e in -10i32..=10, neg in any::<bool>()) {
+            let s = format!("{}{}e{}", if neg { "-" } else { "" }, m, e);
+            let exact: f32 = s.parse().unwrap();
+            prop_assert_eq!(parse_f32(&s).map(f32::to_bits), Ok(exact.to_bits()), "{}", s);
+        }
+
+        /// `Fixed` against core's `{:.N}` for values whose scaled magnitude is well inside the
+        /// exact range (f32 times 10^N below 2^53): identical text.
+        #[test]
+        fn fixed_matches_core(raw in any::<i32>(), n in 0u8..=6) {
+            let v = raw as f32 / 4096.0;
+            let ours = format!("{}", Fixed(v, n));
+            let core_s = format!("{:.*}", n as usize, v);
+            prop_assert_eq!(ours, core_s);
+        }
+    }
+}
