@@ -6,7 +6,7 @@
 //! first-order `ωc/(s + ωc)`. In discrete time the integral gain per step is `Ki·Ts`.
 
 use crate::frames::Dq;
-use crate::fx::{clamp_sym, sat_i32, Gain, Q};
+use crate::fx::{clamp_sym, Gain, Q};
 
 /// Gains of one axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -100,30 +100,32 @@ fn limit_slow(d: i64, q: i64, r: i64) -> Option<Dq> {
     let q1 = num / mag;
     let q2 = ((num % mag) << 15) / mag;
     let k = ((q1 << 15) + q2).min(1 << 30) as i64;
+    // k ≤ 2^30: |d·k >> 30| ≤ |d|, which came from an i32.
     Some(Dq {
-        d: Q::from_bits(sat_i32((d * k) >> 30)),
-        q: Q::from_bits(sat_i32((q * k) >> 30)),
+        d: Q::from_bits(((d * k) >> 30) as i32),
+        q: Q::from_bits(((q * k) >> 30) as i32),
     })
 }
 
-/// Integer square root (floor), bit by bit: 16 rounds.
+/// Integer square root (floor) by Newton's iteration with hardware division: from an
+/// estimate above √n the iterates decrease monotonically to ⌊√n⌋ (stop when they no longer
+/// decrease). The start, one Newton step from 2^⌈bits/2⌉ done by shifts, is within 25 % of
+/// √n, so three to four divisions follow.
 #[inline]
-pub fn isqrt(mut n: u32) -> u32 {
-    let mut res = 0u32;
-    let mut bit = 1u32 << 30;
-    while bit > n {
-        bit >>= 2;
+pub fn isqrt(n: u32) -> u32 {
+    if n < 2 {
+        return n;
     }
-    while bit != 0 {
-        if n >= res + bit {
-            n -= res + bit;
-            res = (res >> 1) + bit;
-        } else {
-            res >>= 1;
+    let k = (33 - n.leading_zeros()) / 2; // ⌈bits/2⌉ ≥ 1, 2^k > √n
+                                          // (2^k + n/2^k)/2 ≥ √n (AM–GM); < 2^16 + 2^15, so no overflow below.
+    let mut x = (1u32 << (k - 1)) + (n >> (k + 1));
+    loop {
+        let y = (x + n / x) >> 1;
+        if y >= x {
+            return x;
         }
-        bit >>= 2;
+        x = y;
     }
-    res
 }
 
 #[cfg(test)]
@@ -261,7 +263,13 @@ mod tests {
 
     #[test]
     fn isqrt_exact() {
-        for n in [0u32, 1, 2, 3, 4, 15, 16, 17, 1 << 20, u32::MAX] {
+        let mut ns = std::vec![0u32, 1, 2, 3, 4, 15, 16, 17, 1 << 20, u32::MAX, u32::MAX - 1];
+        ns.extend((0..32).map(|b| 1u32 << b));
+        ns.extend((1..32).map(|b| (1u32 << b) - 1));
+        ns.extend((1..=65_535u32).map(|r| r * r));
+        ns.extend((1..=65_535u32).map(|r| r * r - 1));
+        ns.extend((0..100_000u32).map(|k| k.wrapping_mul(2_654_435_761)));
+        for n in ns {
             let r = isqrt(n) as u64;
             assert!(r * r <= n as u64 && (r + 1) * (r + 1) > n as u64, "{n}");
         }
