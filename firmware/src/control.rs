@@ -306,7 +306,7 @@ impl Controller {
         let over_v = vb > k.ov;
         let under_v = vb < k.uv && self.mode == Mode::Run;
         // Brake chopper with hysteresis (independent of mode: it protects the bus).
-        self.brake = vb > k.brake_on || (self.brake && vb > k.brake_off);
+        self.brake = vb > if self.brake { k.brake_off } else { k.brake_on };
         if over_i | over_v | self.enc.implausible | under_v {
             self.trip_on(over_i, over_v);
         }

@@ -51,6 +51,12 @@ pub struct Encoder {
     pub implausible: bool,
 }
 
+/// `t mod cpr` in [0, cpr) (cpr ≥ 16 by validation; 0 is treated as 1).
+#[inline(never)]
+fn wrap_turn(t: i32, cpr: u32) -> u32 {
+    t.rem_euclid(cpr.max(1) as i32) as u32
+}
+
 impl Encoder {
     /// Set the multi-turn zero here (the next update defines count 0).
     pub fn rezero(&mut self) {
@@ -68,17 +74,15 @@ impl Encoder {
         self.last_raw = raw;
         self.implausible = delta.unsigned_abs() > g.max_step_counts as u32;
         self.position = self.position.saturating_add(delta);
-        // Count within the turn, kept by wrap-around (|delta| < cpr; beyond, clamped — the
-        // step is implausible then and trips). in_turn < cpr ≤ 16384 and |delta| ≤ 32768:
-        // the sum cannot overflow.
-        let cpr = g.cpr as i32;
-        let mut t = self.in_turn as i32 + delta;
-        if t < 0 {
-            t += cpr;
-        } else if t >= cpr {
-            t -= cpr;
-        }
-        self.in_turn = (t.max(0) as u32).min(g.cpr.saturating_sub(1));
+        // Count within the turn, kept by wrap-around. in_turn < cpr ≤ 16384 and |delta| ≤
+        // 32768: the sum cannot overflow. One unsigned compare covers both directions;
+        // the reduction runs only on a wrap.
+        let t = self.in_turn as i32 + delta;
+        self.in_turn = if (t as u32) < g.cpr {
+            t as u32
+        } else {
+            wrap_turn(t, g.cpr)
+        };
         let theta_e = Angle(
             self.in_turn
                 .wrapping_mul(g.e_per_count)

@@ -83,11 +83,14 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
     if (d * d) as u64 + (q * q) as u64 <= (r * r) as u64 {
         return None;
     }
-    limit_slow(d, q, r)
+    Some(limit_slow(v.d.to_bits(), v.q.to_bits(), r as i32))
 }
 
+/// The scaling itself (out of line: taken only while limiting). Arguments as `i32` so the
+/// caller keeps no 64-bit copies of its vector.
 #[inline(never)]
-fn limit_slow(d: i64, q: i64, r: i64) -> Option<Dq> {
+fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
+    let (d, q, r) = (d as i64, q as i64, r as i64);
     // Bring the larger component to 15 bits, keep the ratios, take the magnitude.
     let m = d.unsigned_abs().max(q.unsigned_abs()).max(1);
     let sh = (64 - m.leading_zeros()).saturating_sub(15);
@@ -101,10 +104,10 @@ fn limit_slow(d: i64, q: i64, r: i64) -> Option<Dq> {
     let q2 = ((num % mag) << 15) / mag;
     let k = ((q1 << 15) + q2).min(1 << 30) as i64;
     // k ≤ 2^30: |d·k >> 30| ≤ |d|, which came from an i32.
-    Some(Dq {
+    Dq {
         d: Q::from_bits(((d * k) >> 30) as i32),
         q: Q::from_bits(((q * k) >> 30) as i32),
-    })
+    }
 }
 
 /// Integer square root (floor) by Newton's iteration with hardware division: from an

@@ -5,7 +5,7 @@
 //! `|v| ≤ V_bus/√3` (the circle inscribed in the hexagon). Over-modulation is handled before
 //! this stage: the current controller limits its output vector to that circle (times
 //! `m_max ≤ 1`), so the duties here never clip for a limited vector; for any other input the
-//! duties are clamped to [0, 1] per phase (which amounts to clipping to the hexagon, with
+//! duties are clamped to [0, 1 − 2^-15] per phase (which amounts to clipping to the hexagon, with
 //! distortion).
 
 use crate::frames::{inverse_clarke, AlphaBeta};
@@ -44,7 +44,7 @@ pub fn modulate(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
 ///   limiter's and the rotation's relative errors), so the centred values fit;
 /// * `centred·inv_vbus` < 2^31·2^23, and `>> 24` leaves < 2^30.
 ///
-/// The final clamp to [0, 1] stays: it covers a bus below the 1 V floor of [`inv_bus`].
+/// The final clamp (one SSAT) stays: it covers a bus below the floor of [`inv_bus`].
 #[inline(always)]
 pub fn modulate_limited(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
     let (al, be) = (v.alpha.to_bits(), v.beta.to_bits());
@@ -61,7 +61,7 @@ pub fn modulate_limited(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
         let centred = x - off;
         // centred·inv >> 24 as one high-word multiply.
         let frac = crate::fx::mulhs(centred, inv8);
-        Duty::from_bits((frac + (1 << 14)).clamp(0, 1 << 15) as u16)
+        Duty::from_bits((frac.clamp(-(1 << 14), (1 << 14) - 1) + (1 << 14)) as u16)
     };
     [d(a), d(b), d(c)]
 }
@@ -71,8 +71,10 @@ fn duty(v: Q, off: Q, inv_vbus: u32) -> Duty {
     let centred = v.to_bits() as i64 - off.to_bits() as i64; // volts · 2^16
                                                              // fraction of the bus, Q.15: centred·2^23/V >> (16 + 23 − 15)
     let frac = sat_i32((centred * inv_vbus as i64) >> 24);
-    let d = frac.saturating_add(1 << 14); // + 0.5
-    Duty::from_bits(d.clamp(0, 1 << 15) as u16)
+    // Centred ± half the bus: [−2^14, 2^14 − 1] (one SSAT) + 0.5. The high side is never
+    // commanded fully on (1 − 2^-15 at most: 1.5 ns of a 50 µs period, below any gate
+    // driver's resolution; bootstrap supplies need an off time anyway).
+    Duty::from_bits((frac.clamp(-(1 << 14), (1 << 14) - 1) + (1 << 14)) as u16)
 }
 
 /// Duties that put every phase at half the bus (zero line-to-line voltage).
