@@ -124,6 +124,9 @@ pub struct Controller {
     pi: CurrentPi,
     brake: bool,
     rec: StepRecord,
+    /// Slow terms and the period count to their next refresh (0 = refresh now).
+    held: HeldTerms,
+    slow_tick: u8,
 }
 
 impl Controller {
@@ -152,6 +155,8 @@ impl Controller {
                 duties: [Duty::ZERO; 3],
                 v_saturated: false,
             },
+            held: HeldTerms::default(),
+            slow_tick: 0,
         })
     }
 
@@ -164,6 +169,7 @@ impl Controller {
         }
         self.cfg = *cfg;
         self.g = g;
+        self.slow_tick = 0;
         Ok(())
     }
 
@@ -194,6 +200,7 @@ impl Controller {
         }
         if m != self.mode {
             self.pi.reset();
+            self.slow_tick = 0;
         }
         self.mode = m;
         Ok(())
@@ -240,6 +247,7 @@ impl Controller {
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
+        self.slow_tick = 0; // the law may change: refresh its terms at the next step
         &mut self.law
     }
 
@@ -254,6 +262,7 @@ impl Controller {
         }
         self.mode = f.safe_mode();
         self.pi.reset();
+        self.slow_tick = 0;
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
@@ -325,33 +334,27 @@ impl Controller {
                 let vb12 = vb.min(CODE_MAX) as i32;
                 let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
                 let vel = self.enc.vel;
-                let e_q = k.ke_per_vel.scale(vel);
 
-                // Current reference from the command law, limited to i_max.
-                let i_ref = if self.mode == Mode::Run {
-                    match &mut self.law {
-                        Law::Resistor(r) => Dq {
-                            d: Q::ZERO,
-                            q: clamp_sym(r.conductance.scale(e_q).saturating_neg(), g.i_max),
-                        },
-                        law => other_law(law, &self.enc, g, e_q, i_dq, v_bus),
-                    }
-                } else {
-                    Dq::default()
-                };
-
-                // Feed-forward: back-emf on q, cross-coupling ∓ω_e·L·i.
-                let mut ff = Dq {
-                    d: Q::ZERO,
-                    q: if g.ff_emf { e_q } else { Q::ZERO },
-                };
-                if g.ff_decouple {
-                    let wl = k.wl_per_vel.scale(vel);
-                    ff.d = mul(wl, i_ref.q).saturating_neg();
-                    if i_ref.d != Q::ZERO {
-                        ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
-                    }
+                // Slow terms: the law's current reference (limited to i_max) and the
+                // feed-forward. For the resistor law they depend on the speed estimate alone,
+                // which changes at the rate of the motion and the PLL (≤ speed_bw_hz), so they
+                // are refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between;
+                // the PI (1 kHz bandwidth) corrects what the hold leaves. Other laws keep
+                // their own rates and run every period.
+                let resistor = matches!(self.law, Law::Resistor(_));
+                if self.slow_tick == 0 || !resistor {
+                    self.held = slow_terms(
+                        &mut self.law,
+                        self.mode == Mode::Run,
+                        &self.enc,
+                        g,
+                        i_dq,
+                        v_bus,
+                    );
                 }
+                self.slow_tick = (self.slow_tick + 1) & (SLOW_DIV - 1);
+                let HeldTerms { i_ref, ff } = self.held;
+
                 // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
                 let err = Dq {
                     d: Q::from_bits(i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
@@ -387,6 +390,47 @@ impl Controller {
             brake: self.brake,
         }
     }
+}
+
+/// Periods per refresh of the slow terms under the resistor law (a power of two).
+const SLOW_DIV: u8 = 4;
+
+/// Current reference and feed-forward, held between refreshes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct HeldTerms {
+    i_ref: Dq,
+    ff: Dq,
+}
+
+/// The law's reference limited to i_max (zero unless running) and the feed-forward: back-emf
+/// on q, cross-coupling ∓ω_e·L·i.
+#[inline(always)]
+fn slow_terms(law: &mut Law, run: bool, enc: &Encoder, g: &Gains, i_dq: Dq, v_bus: Q) -> HeldTerms {
+    let vel = enc.vel;
+    let e_q = g.k.ke_per_vel.scale(vel);
+    let i_ref = if run {
+        match law {
+            Law::Resistor(r) => Dq {
+                d: Q::ZERO,
+                q: clamp_sym(r.conductance.scale(e_q).saturating_neg(), g.i_max),
+            },
+            law => other_law(law, enc, g, e_q, i_dq, v_bus),
+        }
+    } else {
+        Dq::default()
+    };
+    let mut ff = Dq {
+        d: Q::ZERO,
+        q: if g.ff_emf { e_q } else { Q::ZERO },
+    };
+    if g.ff_decouple {
+        let wl = g.k.wl_per_vel.scale(vel);
+        ff.d = mul(wl, i_ref.q).saturating_neg();
+        if i_ref.d != Q::ZERO {
+            ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
+        }
+    }
+    HeldTerms { i_ref, ff }
 }
 
 /// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so
