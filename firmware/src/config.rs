@@ -404,10 +404,7 @@ impl Gains {
             alpha_per_code: scale32(c.amps_per_count / 3.0 * 65_536.0, 8192)?,
             beta_per_code: scale32(c.amps_per_count * INV_SQRT3 * 65_536.0, 4096)?,
             volts_per_code: scale32(c.volts_per_count * 65_536.0, CODE_MAX)?,
-            v_max_per_code: scale32(
-                c.m_max * INV_SQRT3 * c.volts_per_count * 65_536.0,
-                CODE_MAX,
-            )?,
+            v_max_per_code: scale32(c.m_max * INV_SQRT3 * c.volts_per_count * 65_536.0, CODE_MAX)?,
             i_lo: zero.wrapping_sub(n_trip),
             i_span: 2 * n_trip,
             ov: floor_code(c.v_bus_ov / c.volts_per_count),
@@ -415,9 +412,7 @@ impl Gains {
             brake_on: floor_code(c.brake_on_v / c.volts_per_count),
             brake_off: floor_code(c.brake_off_v / c.volts_per_count),
             ke_per_vel: Gain::from_f32(c.ke_v_s_per_rad * rad_s_per_count_step),
-            wl_per_vel: Gain::from_f32(
-                c.l_phase_h * c.pole_pairs as f32 * rad_s_per_count_step,
-            ),
+            wl_per_vel: Gain::from_f32(c.l_phase_h * c.pole_pairs as f32 * rad_s_per_count_step),
             adv_per_vel,
         };
         let advance = if c.delay_comp {

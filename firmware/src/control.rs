@@ -571,10 +571,19 @@ mod tests {
         let cfg = Config::default();
         let z = cfg.adc_zero_code;
         let bus = 2458; // 72 V
-        for (code, trip) in [(z + 1638, false), (z + 1639, true), (z - 1638, false), (z - 1639, true)] {
+        for (code, trip) in [
+            (z + 1638, false),
+            (z + 1639, true),
+            (z - 1638, false),
+            (z - 1639, true),
+        ] {
             let mut ctl = Controller::new(&cfg).unwrap();
             ctl.set_mode(Mode::Run).unwrap();
-            ctl.step(&RawSample { i_abc: [z, code, z], v_bus: bus, encoder: 0 });
+            ctl.step(&RawSample {
+                i_abc: [z, code, z],
+                v_bus: bus,
+                encoder: 0,
+            });
             assert_eq!(ctl.fault() == Some(Fault::OverCurrent), trip, "code {code}");
         }
         // Over-voltage above 95 V = 3242.67 codes; under-voltage below 20 V = 682.67 codes.
@@ -586,12 +595,23 @@ mod tests {
         ] {
             let mut ctl = Controller::new(&cfg).unwrap();
             ctl.set_mode(Mode::Run).unwrap();
-            ctl.step(&RawSample { i_abc: [z; 3], v_bus: v, encoder: 0 });
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: v,
+                encoder: 0,
+            });
             assert_eq!(ctl.fault(), f, "bus code {v}");
         }
         // Brake: closes above 85 V (2901.3 codes), opens below 82 V (2798.9 codes).
         let mut ctl = Controller::new(&cfg).unwrap();
-        let mut brake = |v: u16| ctl.step(&RawSample { i_abc: [z; 3], v_bus: v, encoder: 0 }).brake;
+        let mut brake = |v: u16| {
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: v,
+                encoder: 0,
+            })
+            .brake
+        };
         assert!(!brake(2901));
         assert!(brake(2902));
         assert!(brake(2800));

@@ -87,8 +87,8 @@ fn within_bound(x: Q, y: Q) -> bool {
 /// `(x·c + y·s) >> 16` in one 64-bit accumulation (multiply, multiply-accumulate, shift).
 #[inline(always)]
 fn dot(x: Q, c: Q, y: Q, s: Q) -> Q {
-    let w = (x.to_bits() as i64 * c.to_bits() as i64 + y.to_bits() as i64 * s.to_bits() as i64)
-        >> 16;
+    let w =
+        (x.to_bits() as i64 * c.to_bits() as i64 + y.to_bits() as i64 * s.to_bits() as i64) >> 16;
     debug_assert!(w == w as i32 as i64, "rotation out of range");
     Q::from_bits(w as i32)
 }

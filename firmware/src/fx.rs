@@ -145,7 +145,10 @@ impl Scale32 {
     /// `value·x` for `|x| ≤ x_max` of the constructor (debug builds check it).
     #[inline(always)]
     pub fn apply(self, x: i32) -> i32 {
-        debug_assert!(x.checked_mul(self.m).is_some(), "Scale32 input out of range");
+        debug_assert!(
+            x.checked_mul(self.m).is_some(),
+            "Scale32 input out of range"
+        );
         (((x.wrapping_mul(self.m)) as i64 * self.k as i64) >> 32) as i32
     }
 }
@@ -156,7 +159,10 @@ impl Scale32 {
 #[inline(always)]
 pub fn mul_shr<const S: u32>(a: i32, b: i32) -> i32 {
     let w = (a as i64 * b as i64) >> S;
-    debug_assert!(w == w as i32 as i64, "mul_shr bound violated: {a}·{b} >> {S}");
+    debug_assert!(
+        w == w as i32 as i64,
+        "mul_shr bound violated: {a}·{b} >> {S}"
+    );
     w as i32
 }
 
@@ -348,10 +354,10 @@ const fn const_sin(x: f64) -> f64 {
 /// the table a quarter turn on), so it costs two table pairs, two multiplies and no wrap.
 #[inline(always)]
 fn sin_cos_turn(a: u32) -> (Q, Q) {
-    let idx = (a >> (32 - SIN_BITS)) as usize; // 0 … 511
-    let frac = ((a >> (16 - SIN_BITS)) & 0xFFFF) as i32; // 16-bit position between entries
-    // Table entries are within ±65536 and neighbours differ by < 2^10, so (hi − lo)·frac
-    // < 2^26: no overflow.
+    // Index 0 … 511 and the 16-bit position between entries. Table entries are within
+    // ±65536 and neighbours differ by < 2^10, so (hi − lo)·frac < 2^26: no overflow.
+    let idx = (a >> (32 - SIN_BITS)) as usize;
+    let frac = ((a >> (16 - SIN_BITS)) & 0xFFFF) as i32;
     let (s0, s1) = (SIN_TABLE[idx], SIN_TABLE[idx + 1]);
     let (c0, c1) = (SIN_TABLE[idx + SIN_N / 4], SIN_TABLE[idx + SIN_N / 4 + 1]);
     (

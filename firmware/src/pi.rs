@@ -138,8 +138,8 @@ const fn build_sqrt_seed() -> [u16; 64] {
     let mut t = [0u16; 64];
     let mut i = 0;
     while i < 64 {
-        let v = (2 * i as u64 + 1) << 24; // (i + ½)·2^25
-        // Integer square root by bisection (compile time only).
+        // (i + ½)·2^25, and its integer square root by bisection (compile time only).
+        let v = (2 * i as u64 + 1) << 24;
         let (mut lo, mut hi) = (0u64, 1u64 << 16);
         while hi - lo > 1 {
             let mid = (lo + hi) / 2;
@@ -164,8 +164,9 @@ pub fn isqrt(n: u32) -> u32 {
     if n < 2 {
         return n;
     }
-    let k = (33 - n.leading_zeros()) / 2; // ⌈bits/2⌉ ≥ 1, 2^k > √n
-                                          // (2^k + n/2^k)/2 ≥ √n (AM–GM); < 2^16 + 2^15, so no overflow below.
+    // k = ⌈bits/2⌉ ≥ 1, so 2^k > √n; (2^k + n/2^k)/2 ≥ √n (AM–GM) and < 2^16 + 2^15, so
+    // no overflow below.
+    let k = (33 - n.leading_zeros()) / 2;
     let mut x = (1u32 << (k - 1)) + (n >> (k + 1));
     loop {
         let y = (x + n / x) >> 1;
@@ -325,7 +326,19 @@ mod tests {
 
     #[test]
     fn isqrt_exact() {
-        let mut ns = std::vec![0u32, 1, 2, 3, 4, 15, 16, 17, 1 << 20, u32::MAX, u32::MAX - 1];
+        let mut ns = std::vec![
+            0u32,
+            1,
+            2,
+            3,
+            4,
+            15,
+            16,
+            17,
+            1 << 20,
+            u32::MAX,
+            u32::MAX - 1
+        ];
         ns.extend((0..32).map(|b| 1u32 << b));
         ns.extend((1..32).map(|b| (1u32 << b) - 1));
         ns.extend((1..=65_535u32).map(|r| r * r));

@@ -68,8 +68,8 @@ pub fn modulate_limited(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
 
 #[inline(always)]
 fn duty(v: Q, off: Q, inv_vbus: u32) -> Duty {
-    let centred = v.to_bits() as i64 - off.to_bits() as i64; // volts · 2^16
-                                                             // fraction of the bus, Q.15: centred·2^23/V >> (16 + 23 − 15)
+    // Volts · 2^16, then the fraction of the bus, Q.15: centred·2^23/V >> (16 + 23 − 15).
+    let centred = v.to_bits() as i64 - off.to_bits() as i64;
     let frac = sat_i32((centred * inv_vbus as i64) >> 24);
     // Centred ± half the bus: [−2^14, 2^14 − 1] (one SSAT) + 0.5. The high side is never
     // commanded fully on (1 − 2^-15 at most: 1.5 ns of a 50 µs period, below any gate

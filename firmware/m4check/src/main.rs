@@ -4,14 +4,14 @@
 #![no_std]
 #![no_main]
 
+use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
-use regen_fw::selftest::{replay, STEP_BYTES};
-use core::hint::black_box;
 use regen_fw::encoder::{Encoder, EncoderGains};
 use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
 use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
+use regen_fw::selftest::{replay, STEP_BYTES};
 use regen_fw::svpwm::{inv_bus, modulate_limited};
 use regen_fw::{Actuation, Config, Controller, Mode, RawSample};
 
