@@ -275,8 +275,10 @@ impl Controller {
             Fault::BusOverVoltage
         } else if self.enc.implausible {
             Fault::EncoderImplausible
-        } else {
+        } else if self.mode == Mode::Run {
             Fault::BusUnderVoltage
+        } else {
+            return; // a low bus matters only while running
         };
         self.trip(f);
     }
@@ -313,8 +315,8 @@ impl Controller {
         let off = |c: u16| (c as u32).wrapping_sub(lo);
         let over_i = off(s.i_abc[0]).max(off(s.i_abc[1])).max(off(s.i_abc[2])) > k.i_span;
         let over_v = vb > k.ov;
-        let under_v = vb < k.uv && self.mode == Mode::Run;
-        // Brake chopper with hysteresis (independent of mode: it protects the bus).
+        let under_v = vb < k.uv; // a fault only in Run: decided in `trip_on`
+                                 // Brake chopper with hysteresis (independent of mode: it protects the bus).
         self.brake = vb > if self.brake { k.brake_off } else { k.brake_on };
         if over_i | over_v | self.enc.implausible | under_v {
             self.trip_on(over_i, over_v);
@@ -601,6 +603,17 @@ mod tests {
                 encoder: 0,
             });
             assert_eq!(ctl.fault(), f, "bus code {v}");
+        }
+        // A low bus is no fault while idle (power-up), nor in the other non-running modes.
+        for m in [Mode::Idle, Mode::Open, Mode::Short] {
+            let mut ctl = Controller::new(&cfg).unwrap();
+            ctl.set_mode(m).unwrap();
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: 0,
+                encoder: 0,
+            });
+            assert_eq!((ctl.fault(), ctl.mode()), (None, m));
         }
         // Brake: closes above 85 V (2901.3 codes), opens below 82 V (2798.9 codes).
         let mut ctl = Controller::new(&cfg).unwrap();
