@@ -357,9 +357,9 @@ pub struct StepConsts {
 /// Largest code of a 12-bit converter.
 pub const CODE_MAX: u32 = 4095;
 
-fn scale32(v: f32, x_max: u32) -> Result<Scale32, ConfigError> {
+fn scale32(v: f32, x_max: u32, field: &'static str) -> Result<Scale32, ConfigError> {
     Scale32::new(v, x_max).ok_or(ConfigError {
-        field: "amps_per_count",
+        field,
         reason: "scaling not representable",
     })
 }
@@ -401,10 +401,18 @@ impl Gains {
         let k = StepConsts {
             // amps_per_count ≤ 1 and volts_per_count ≤ 1 (validated) keep every value below
             // 2^16·1 and the inputs within the stated counts, so `new` always succeeds.
-            alpha_per_code: scale32(c.amps_per_count / 3.0 * 65_536.0, 8192)?,
-            beta_per_code: scale32(c.amps_per_count * INV_SQRT3 * 65_536.0, 4096)?,
-            volts_per_code: scale32(c.volts_per_count * 65_536.0, CODE_MAX)?,
-            v_max_per_code: scale32(c.m_max * INV_SQRT3 * c.volts_per_count * 65_536.0, CODE_MAX)?,
+            alpha_per_code: scale32(c.amps_per_count / 3.0 * 65_536.0, 8192, "amps_per_count")?,
+            beta_per_code: scale32(
+                c.amps_per_count * INV_SQRT3 * 65_536.0,
+                4096,
+                "amps_per_count",
+            )?,
+            volts_per_code: scale32(c.volts_per_count * 65_536.0, CODE_MAX, "volts_per_count")?,
+            v_max_per_code: scale32(
+                c.m_max * INV_SQRT3 * c.volts_per_count * 65_536.0,
+                CODE_MAX,
+                "m_max",
+            )?,
             i_lo: zero.wrapping_sub(n_trip),
             i_span: 2 * n_trip,
             ov: floor_code(c.v_bus_ov / c.volts_per_count),

@@ -131,13 +131,14 @@ fn sqrt_norm(n: u32) -> u32 {
     (x + n / x) >> 1
 }
 
-/// √((i + ½)·2^25), for the seed of [`sqrt_norm`] (entries below 8 are not used).
-static SQRT_SEED: [u16; 64] = build_sqrt_seed();
+/// √((i + ½)·2^25), for the seed of [`sqrt_norm`] (entries below 8 and above 63 are not
+/// used; 128 entries make the index provably in range for any `u32 >> 25`).
+static SQRT_SEED: [u16; 128] = build_sqrt_seed();
 
-const fn build_sqrt_seed() -> [u16; 64] {
-    let mut t = [0u16; 64];
+const fn build_sqrt_seed() -> [u16; 128] {
+    let mut t = [0u16; 128];
     let mut i = 0;
-    while i < 64 {
+    while i < 128 {
         // (i + ½)·2^25, and its integer square root by bisection (compile time only).
         let v = (2 * i as u64 + 1) << 24;
         let (mut lo, mut hi) = (0u64, 1u64 << 16);
