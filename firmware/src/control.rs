@@ -332,20 +332,23 @@ impl Controller {
             Mode::Idle => (Dq::default(), Dq::default(), CENTRED, false, false),
             Mode::Short => (Dq::default(), Dq::default(), [Duty::ZERO; 3], true, false),
             Mode::Run | Mode::Open => {
-                // Bus: 4095·vpc < 30,000 V.
-                let vb12 = vb.min(CODE_MAX) as i32;
-                let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
                 let vel = self.enc.vel;
 
-                // Slow terms: the law's current reference (limited to i_max) and the
-                // feed-forward. For the resistor law they depend on the speed estimate alone,
-                // which changes at the rate of the motion and the PLL (≤ speed_bw_hz), so they
-                // are refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between;
-                // the PI (1 kHz bandwidth) corrects what the hold leaves. Other laws keep
-                // their own rates and run every period.
+                // Slow terms: the law's current reference (limited to i_max), the
+                // feed-forward, and the bus terms (radius of the voltage circle, 1/V_bus). For
+                // the resistor law the first two depend on the speed estimate alone, which
+                // changes at the rate of the motion and the PLL (≤ speed_bw_hz), and the bus
+                // voltage moves slowly on its capacitor (a few amperes into millifarads: well
+                // under 1 % of the bus in 200 µs); so they are refreshed every SLOW_DIV periods
+                // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
+                // loop) corrects what the hold leaves. The bus trips above still compare every
+                // sample. Other laws keep their own rates and run every period.
                 let resistor = matches!(self.law, Law::Resistor(_));
                 if self.slow_tick == 0 || !resistor {
-                    self.held = slow_terms(
+                    // Bus: 4095·vpc < 30,000 V.
+                    let vb12 = vb.min(CODE_MAX) as i32;
+                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
+                    let (i_ref, ff) = slow_terms(
                         &mut self.law,
                         self.mode == Mode::Run,
                         &self.enc,
@@ -353,17 +356,27 @@ impl Controller {
                         i_dq,
                         v_bus,
                     );
+                    self.held = HeldTerms {
+                        i_ref,
+                        ff,
+                        // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
+                        v_max: Q::from_bits(k.v_max_per_code.apply(vb12)),
+                        inv_vbus: inv_bus(v_bus),
+                    };
                 }
                 self.slow_tick = (self.slow_tick + 1) & (SLOW_DIV - 1);
-                let HeldTerms { i_ref, ff } = self.held;
+                let HeldTerms {
+                    i_ref,
+                    ff,
+                    v_max,
+                    inv_vbus,
+                } = self.held;
 
                 // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
                 let err = Dq {
                     d: Q::from_bits(i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
                     q: Q::from_bits(i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
                 };
-                // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
-                let v_max = Q::from_bits(k.v_max_per_code.apply(vb12));
                 let out = self.pi.update(err, ff, &g.pi, v_max);
 
                 // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay):
@@ -372,7 +385,7 @@ impl Controller {
                 let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
                 // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
                 let v_ab = inverse_park_bounded(out.v, s2, c2);
-                let duties = modulate_limited(v_ab, inv_bus(v_bus));
+                let duties = modulate_limited(v_ab, inv_vbus);
                 (i_ref, out.v, duties, true, out.saturated)
             }
         };
@@ -397,17 +410,19 @@ impl Controller {
 /// Periods per refresh of the slow terms under the resistor law (a power of two).
 const SLOW_DIV: u8 = 4;
 
-/// Current reference and feed-forward, held between refreshes.
+/// Current reference, feed-forward and bus terms, held between refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct HeldTerms {
     i_ref: Dq,
     ff: Dq,
+    v_max: Q,
+    inv_vbus: u32,
 }
 
 /// The law's reference limited to i_max (zero unless running) and the feed-forward: back-emf
 /// on q, cross-coupling ∓ω_e·L·i.
 #[inline(always)]
-fn slow_terms(law: &mut Law, run: bool, enc: &Encoder, g: &Gains, i_dq: Dq, v_bus: Q) -> HeldTerms {
+fn slow_terms(law: &mut Law, run: bool, enc: &Encoder, g: &Gains, i_dq: Dq, v_bus: Q) -> (Dq, Dq) {
     let vel = enc.vel;
     let e_q = g.k.ke_per_vel.scale(vel);
     let i_ref = if run {
@@ -432,7 +447,7 @@ fn slow_terms(law: &mut Law, run: bool, enc: &Encoder, g: &Gains, i_dq: Dq, v_bu
             ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
         }
     }
-    HeldTerms { i_ref, ff }
+    (i_ref, ff)
 }
 
 /// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so
