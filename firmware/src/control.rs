@@ -315,8 +315,9 @@ impl Controller {
         let off = |c: u16| (c as u32).wrapping_sub(lo);
         let over_i = off(s.i_abc[0]).max(off(s.i_abc[1])).max(off(s.i_abc[2])) > k.i_span;
         let over_v = vb > k.ov;
-        let under_v = vb < k.uv; // a fault only in Run: decided in `trip_on`
-                                 // Brake chopper with hysteresis (independent of mode: it protects the bus).
+        // Under-voltage is a fault only in Run: `trip_on` decides (keeps the test cheap).
+        let under_v = vb < k.uv;
+        // Brake chopper with hysteresis (independent of mode: it protects the bus).
         self.brake = vb > if self.brake { k.brake_off } else { k.brake_on };
         if over_i | over_v | self.enc.implausible | under_v {
             self.trip_on(over_i, over_v);
