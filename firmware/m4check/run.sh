@@ -35,6 +35,21 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   sline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_supervise 2>&1 | grep insnwin | tail -n1)
   echo "$sline"
   echo "instructions per protection supervision tick (1 kHz, outside the step): min $(echo "$sline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$sline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  # The distribution over the recorded run (the counter prints every call with verbose=1).
+  plug=${TMPDIR:-/tmp}/libinsnwin.so
+  nm=$(command -v rust-nm || command -v llvm-nm || command -v nm)
+  addr=$($nm "$elf" | awk '$3=="regen_step" {print "0x"$1}' | head -n1)
+  timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+    -semihosting-config enable=on,target=native -icount shift=0 \
+    -plugin "$plug,func=$addr,verbose=1" -d plugin -kernel "$elf" 2>&1 |
+    awk '/insnwin: #/ {print $3}' | sort -n |
+    awk '{a[NR]=$1} END {printf "distribution over %d steps: p10 %d, median %d, p90 %d\n", NR, a[int(NR*0.1)], a[int(NR/2)], a[int(NR*0.9)]}'
+  # Pieces, each counted alone on the same run (a call and its arguments included).
+  for f in piece_encoder piece_sin_cos piece_park piece_inverse_park piece_pi piece_svpwm piece_gain; do
+    p=$(timeout 300 sh "$tools/count.sh" "$elf" "$f" 2>&1 | grep insnwin | tail -n1 |
+      sed -n 's/.*min=\([0-9]*\) max=\([0-9]*\).*/\1–\2/p')
+    echo "  $f: $p"
+  done
 else
   echo "instruction count skipped: $tools not found"
 fi

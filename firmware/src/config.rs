@@ -7,7 +7,7 @@
 use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
-use crate::fx::{q, Angle, Gain, Q};
+use crate::fx::{q, Angle, Gain, Scale32, Q};
 use crate::laws::{LawKind, LtiParams};
 use crate::pi::PiGains;
 
@@ -422,6 +422,66 @@ pub struct Gains {
     pub brake_off: Q,
     pub ff_emf: bool,
     pub ff_decouple: bool,
+    /// Constants of the step in the forms its fast paths use.
+    pub k: StepConsts,
+}
+
+/// The current loop's constants folded for the step: raw-code scalings and thresholds, and
+/// products of gains with the speed estimate, so each costs one multiply per period.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct StepConsts {
+    /// α (Q16.16 LSB) per unit of `2a − b − c` (ADC codes, |.| ≤ 8192; the zero code
+    /// cancels): `amps_per_count/3·2^16`.
+    pub alpha_per_code: Scale32,
+    /// β per unit of `b − c` (codes, |.| ≤ 4096): `amps_per_count/√3·2^16`.
+    pub beta_per_code: Scale32,
+    /// Bus voltage (LSB) per bus code (≤ 4095): `volts_per_count·2^16`.
+    pub volts_per_code: Scale32,
+    /// Radius of the allowed voltage circle (LSB) per bus code: `m_max/√3·volts_per_count·2^16`.
+    pub v_max_per_code: Scale32,
+    /// Over-current window on the phase codes: trip when `code − i_lo` (wrapping `u32`)
+    /// exceeds `i_span`, i.e. `|code − zero| > ⌊i_trip/amps_per_count⌋`.
+    pub i_lo: u32,
+    pub i_span: u32,
+    /// Bus thresholds in codes: over-voltage when `code > ov`, under-voltage when
+    /// `code < uv`, brake closes when `code > brake_on`, stays closed while `code > brake_off`.
+    pub ov: u32,
+    pub uv: u32,
+    pub brake_on: u32,
+    pub brake_off: u32,
+    /// Back-emf per speed estimate: `K_e·2π·f_pwm/cpr`, V per (count per step).
+    pub ke_per_vel: Gain,
+    /// `ω_e·L` per speed estimate: `L·p·2π·f_pwm/cpr`, Ω per (count per step).
+    pub wl_per_vel: Gain,
+    /// Output-angle advance per speed-estimate LSB, `1.5·(electrical angle per count)/2^4`:
+    /// advance (angle LSB) = `(vel_bits · adv_per_vel) >> 12` (0 without delay compensation).
+    pub adv_per_vel: i32,
+}
+
+/// Largest code of a 12-bit converter.
+pub const CODE_MAX: u32 = 4095;
+
+fn scale32(v: f32, x_max: u32, field: &'static str) -> Result<Scale32, ConfigError> {
+    Scale32::new(v, x_max).ok_or(ConfigError {
+        field,
+        reason: "scaling not representable",
+    })
+}
+
+/// `⌊v⌋` of a non-negative threshold ratio as a code bound, saturated to `u32`.
+fn floor_code(v: f32) -> u32 {
+    // `as` truncates toward zero and saturates (NaN → 0); v ≥ 0 here.
+    v as u32
+}
+
+/// `⌈v⌉` of a non-negative ratio.
+fn ceil_code(v: f32) -> u32 {
+    let f = v as u32;
+    if (f as f32) < v {
+        f.saturating_add(1)
+    } else {
+        f
+    }
 }
 
 impl Gains {
@@ -431,6 +491,42 @@ impl Gains {
         let ts = c.ts();
         let wc = TAU * c.current_bw_hz;
         let wb = TAU * c.speed_bw_hz * ts;
+        let turn_per_count = (4_294_967_296u64 / c.encoder_cpr as u64) as u32;
+        let rad_s_per_count_step = TAU * c.pwm_hz / c.encoder_cpr as f32;
+        // 1.5 periods of electrical angle per (count per step): 1.5·tpc·p ≤ 1.5·2^28·50 <
+        // 2^35, divided by 2^4 → < 2^31 (cpr ≥ 16, p ≤ 50).
+        let adv_per_vel = if c.delay_comp {
+            ((3 * turn_per_count as u64 * c.pole_pairs as u64) >> 5).min(i32::MAX as u64) as i32
+        } else {
+            0
+        };
+        let n_trip = floor_code(c.i_trip_a / c.amps_per_count).min(70_000);
+        let zero = c.adc_zero_code as u32;
+        let k = StepConsts {
+            // amps_per_count ≤ 1 and volts_per_count ≤ 1 (validated) keep every value below
+            // 2^16·1 and the inputs within the stated counts, so `new` always succeeds.
+            alpha_per_code: scale32(c.amps_per_count / 3.0 * 65_536.0, 8192, "amps_per_count")?,
+            beta_per_code: scale32(
+                c.amps_per_count * INV_SQRT3 * 65_536.0,
+                4096,
+                "amps_per_count",
+            )?,
+            volts_per_code: scale32(c.volts_per_count * 65_536.0, CODE_MAX, "volts_per_count")?,
+            v_max_per_code: scale32(
+                c.m_max * INV_SQRT3 * c.volts_per_count * 65_536.0,
+                CODE_MAX,
+                "m_max",
+            )?,
+            i_lo: zero.wrapping_sub(n_trip),
+            i_span: 2 * n_trip,
+            ov: floor_code(c.v_bus_ov / c.volts_per_count),
+            uv: ceil_code(c.v_bus_uv / c.volts_per_count),
+            brake_on: floor_code(c.brake_on_v / c.volts_per_count),
+            brake_off: floor_code(c.brake_off_v / c.volts_per_count),
+            ke_per_vel: Gain::from_f32(c.ke_v_s_per_rad * rad_s_per_count_step),
+            wl_per_vel: Gain::from_f32(c.l_phase_h * c.pole_pairs as f32 * rad_s_per_count_step),
+            adv_per_vel,
+        };
         let advance = if c.delay_comp {
             // Δθ (LSB) = ω_e·1.5·Ts·2^32/2π; applied to ω_e in Q16.16 → divide by 2^16.
             1.5 * ts * 65_536.0 / (2.0 * PI)
@@ -447,12 +543,13 @@ impl Gains {
             },
             enc: EncoderGains {
                 cpr: c.encoder_cpr,
-                turn_per_count: (4_294_967_296u64 / c.encoder_cpr as u64) as u32,
+                turn_per_count,
                 pole_pairs: c.pole_pairs as u32,
+                e_per_count: turn_per_count.wrapping_mul(c.pole_pairs as u32),
                 offset: Angle::from_radians(c.encoder_offset_rad as f64),
-                kp: Gain::from_f32(2.0 * wb),
-                ki: Gain::from_f32(wb * wb),
-                rad_s_per_count_step: Gain::from_f32(TAU * c.pwm_hz / c.encoder_cpr as f32),
+                kp31: crate::fx::fixed_i32(2.0 * wb, 31),
+                ki34: crate::fx::fixed_i32(wb * wb, 34),
+                rad_s_per_count_step: Gain::from_f32(rad_s_per_count_step),
                 m_per_count: Gain::from_f32(c.lead_m_per_rad * TAU / c.encoder_cpr as f32),
                 // Four times the count change at 20,000 rpm would still be implausible.
                 max_step_counts: ((20_000.0 / 60.0 * c.encoder_cpr as f32 / c.pwm_hz) as i32 + 1)
@@ -475,6 +572,7 @@ impl Gains {
             brake_off: q(c.brake_off_v),
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
+            k,
         })
     }
 }

@@ -6,14 +6,14 @@
 //! brake chopper. The step is a pure function of (state, sample, parameters); parameters are
 //! replaced only between steps ([`Controller::set_config`]).
 
-use crate::config::{Config, ConfigError, Gains};
+use crate::config::{Config, ConfigError, Gains, CODE_MAX};
 use crate::encoder::Encoder;
-use crate::frames::{clarke, inverse_park, park, Dq};
+use crate::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
 use crate::fx::{clamp_sym, mul, Angle, Duty, Q};
 use crate::io::{Actuation, RawSample};
 use crate::laws::{CommandLaw, Law, LawInput};
 use crate::pi::{limit_vector, CurrentPi};
-use crate::svpwm::{inv_bus, modulate, CENTRED};
+use crate::svpwm::{inv_bus, modulate_limited, CENTRED};
 
 /// Operating mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -45,7 +45,8 @@ impl Mode {
 pub use crate::protect::Fault;
 use crate::protect::{derate_regen, Protection, SUPERVISE_HZ};
 
-/// What the loop measured and commanded in its last period (SI units in fixed point).
+/// What the loop measured and commanded in its last period (SI units in fixed point), as
+/// [`Controller::telemetry`] returns it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Telemetry {
     pub i_abc: [Q; 3],
@@ -64,6 +65,20 @@ pub struct Telemetry {
     pub brake: bool,
 }
 
+/// What the step stores for telemetry: the raw sample and the values it computes anyway.
+/// Scaled phase currents, bus voltage, speed, travel and power are derived on reading
+/// ([`Controller::telemetry`]), which is rare compared with the 20 kHz step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct StepRecord {
+    sample: RawSample,
+    i_dq: Dq,
+    i_ref: Dq,
+    v_dq: Dq,
+    theta_e: Angle,
+    duties: [Duty; 3],
+    v_saturated: bool,
+}
+
 /// The current controller and everything it owns.
 #[derive(Clone, Debug)]
 pub struct Controller {
@@ -75,7 +90,10 @@ pub struct Controller {
     enc: Encoder,
     pi: CurrentPi,
     brake: bool,
-    tel: Telemetry,
+    rec: StepRecord,
+    /// Slow terms and the period count to their next refresh (0 = refresh now).
+    held: HeldTerms,
+    slow_tick: u8,
     /// Protection state (protect.rs): derate factor, supervision, fault record.
     prot: Protection,
 }
@@ -93,7 +111,21 @@ impl Controller {
             enc: Encoder::default(),
             pi: CurrentPi::default(),
             brake: false,
-            tel: Telemetry::default(),
+            rec: StepRecord {
+                // Zero-current codes: the telemetry reads zero before the first step.
+                sample: RawSample {
+                    i_abc: [cfg.adc_zero_code; 3],
+                    ..RawSample::default()
+                },
+                i_dq: Dq::default(),
+                i_ref: Dq::default(),
+                v_dq: Dq::default(),
+                theta_e: Angle::default(),
+                duties: [Duty::ZERO; 3],
+                v_saturated: false,
+            },
+            held: HeldTerms::default(),
+            slow_tick: 0,
             prot: Protection::default(),
         })
     }
@@ -107,6 +139,7 @@ impl Controller {
         }
         self.cfg = *cfg;
         self.g = g;
+        self.slow_tick = 0;
         Ok(())
     }
 
@@ -142,6 +175,7 @@ impl Controller {
         }
         if m != self.mode {
             self.pi.reset();
+            self.slow_tick = 0;
         }
         self.mode = m;
         Ok(())
@@ -159,6 +193,7 @@ impl Controller {
     /// told otherwise). Refused, with the reason, while the cause persists.
     pub fn clear_fault(&mut self) -> Result<(), &'static str> {
         if let Some(f) = self.fault {
+            let tel = self.telemetry();
             let later = self.prot.record().map_or(0, |r| r.later);
             // The first fault's cause and every later one's must be gone.
             for g in core::iter::once(f).chain(
@@ -169,7 +204,7 @@ impl Controller {
             ) {
                 if let Some(why) =
                     self.prot
-                        .cause_present(g, &self.cfg, &self.tel, self.enc.implausible)
+                        .cause_present(g, &self.cfg, &tel, self.enc.implausible)
                 {
                     return Err(why);
                 }
@@ -202,20 +237,38 @@ impl Controller {
     /// derate factor the loop applies. Reads the last period's telemetry; call it between
     /// steps (same execution context as the loop, or with the controller locked).
     pub fn supervise(&mut self) {
+        let t = self.telemetry();
         let v = self
             .prot
-            .supervise(&self.cfg, self.mode, &self.tel, self.enc.position);
+            .supervise(&self.cfg, self.mode, &t, self.enc.position);
         if let Some(f) = v.trip {
-            let t = self.tel;
             self.trip(f, &t);
         }
     }
 
-    pub fn telemetry(&self) -> &Telemetry {
-        &self.tel
+    /// Telemetry of the last period (derived here from what the step stored).
+    pub fn telemetry(&self) -> Telemetry {
+        let (g, r) = (&self.g, &self.rec);
+        let (v, i) = (r.v_dq, r.i_dq);
+        let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
+        Telemetry {
+            i_abc: r.sample.i_abc.map(|c| amps_of_code(g, c)),
+            i_dq: i,
+            i_ref: r.i_ref,
+            v_dq: v,
+            v_bus: volts_of_code(g, r.sample.v_bus),
+            omega_m: self.enc.omega_m(&g.enc),
+            x: self.enc.x(&g.enc),
+            theta_e: r.theta_e,
+            p_elec: p.saturating_add(p / 2).saturating_neg(),
+            duties: r.duties,
+            v_saturated: r.v_saturated,
+            brake: self.brake,
+        }
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
+        self.slow_tick = 0; // the law may change: refresh its terms at the next step
         &mut self.law
     }
 
@@ -236,9 +289,42 @@ impl Controller {
         }
         self.mode = if open { Mode::Idle } else { f.safe_mode() };
         self.pi.reset();
+        self.slow_tick = 0;
+    }
+
+    /// Which fault, in order of precedence, once the step has seen that one occurred.
+    #[cold]
+    #[inline(never)]
+    fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
+        let f = if over_current {
+            Fault::OverCurrent
+        } else if over_voltage {
+            Fault::BusOverVoltage
+        } else if self.enc.implausible {
+            Fault::EncoderImplausible
+        } else if self.mode == Mode::Run {
+            Fault::BusUnderVoltage
+        } else {
+            return; // a low bus matters only while running
+        };
+        // Snapshot (protect.rs): this period's currents and bus, the encoder as just updated,
+        // the rest as of the last period.
+        let g = &self.g;
+        let t = Telemetry {
+            i_abc: s.i_abc.map(|c| amps_of_code(g, c)),
+            v_bus: volts_of_code(g, s.v_bus),
+            ..self.telemetry()
+        };
+        self.trip(f, &t);
     }
 
     /// One current-loop period.
+    ///
+    /// Ranges (the reason most arithmetic below needs no saturation): ADC codes are 12-bit
+    /// (larger codes are clamped where they enter arithmetic); `amps_per_count ≤ 1`,
+    /// `volts_per_count ≤ 1` and 4096 codes < 30,000 A or V (validated), so `|α|, |β|` <
+    /// 2,731 A and `|i_dq|` < 3,614 A (< 2^28 LSB), `V_bus` < 30,000 V; `|i_ref|` ≤
+    /// `i_max·(1 + 2^-12)` ≤ 1,001 A.
     ///
     /// Never inlined: on the board it stays a function of this crate, compiled at this crate's
     /// opt-level (`s`), while the rest of the image is built for size (`z`), see
@@ -246,114 +332,384 @@ impl Controller {
     #[inline(never)]
     pub fn step(&mut self, s: &RawSample) -> Actuation {
         let g = &self.g;
-        // Measurements.
-        let cur = |code: u16| {
-            g.amps_per_count
-                .scale(Q::from_bits((code as i32 - g.adc_zero) << 16))
-        };
-        let i_abc = [cur(s.i_abc[0]), cur(s.i_abc[1]), cur(s.i_abc[2])];
-        let v_bus = g
-            .volts_per_count
-            .scale(Q::from_bits((s.v_bus as i32) << 16));
-        let shaft = self.enc.update(s.encoder, &g.enc);
-        let (sin, cos) = shaft.theta_e.sin_cos();
-        let i_dq = park(clarke(i_abc[0], i_abc[1], i_abc[2]), sin, cos);
-        let e_q = g.ke.scale(shaft.omega_m);
+        let k = &g.k;
 
-        // Protection (instantaneous).
-        let over_i = i_abc.iter().any(|i| i.abs() > g.i_trip);
-        let fault = if over_i {
-            Some(crate::control::Fault::OverCurrent)
-        } else if v_bus > g.v_ov {
-            Some(Fault::BusOverVoltage)
-        } else if self.enc.implausible {
-            Some(Fault::EncoderImplausible)
-        } else if self.mode == Mode::Run && v_bus < g.v_uv {
-            Some(Fault::BusUnderVoltage)
-        } else {
-            None
+        // ---- Measurements (scalings folded into constants; the zero code cancels) ----
+        let [ia, ib, ic] = s.i_abc.map(|c| c as i32);
+        // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
+        // change nothing then and bound anything larger.
+        let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
+        let s_beta = (ib - ic).clamp(-4096, 4095);
+        // 8192·apc/3 < 2,731 A: fits.
+        let i_ab = AlphaBeta {
+            alpha: Q::from_bits(k.alpha_per_code.apply(s_alpha)),
+            beta: Q::from_bits(k.beta_per_code.apply(s_beta)),
         };
-        if let Some(f) = fault {
-            // Protection hook (protect.rs): snapshot of this period's measurements.
-            let t = Telemetry {
-                i_abc,
-                i_dq,
-                v_bus,
-                omega_m: shaft.omega_m,
-                x: shaft.x,
-                ..self.tel
-            };
-            self.trip(f, &t);
-        }
-        let g = &self.g;
+        let vb = s.v_bus as u32;
+        let theta_e = self.enc.update(s.encoder, &g.enc);
 
+        // ---- Protection (instantaneous, on raw codes) ----
+        // Phase over-current, bus over-/under-voltage, implausible encoder step. Further
+        // per-step protection hooks in here; the first fault found wins (see `trip_on`).
+        let lo = k.i_lo;
+        let off = |c: u16| (c as u32).wrapping_sub(lo);
+        let over_i = off(s.i_abc[0]).max(off(s.i_abc[1])).max(off(s.i_abc[2])) > k.i_span;
+        let over_v = vb > k.ov;
+        // Under-voltage is a fault only in Run: `trip_on` decides (keeps the test cheap).
+        let under_v = vb < k.uv;
         // Brake chopper with hysteresis (independent of mode: it protects the bus).
-        self.brake = v_bus > g.brake_on || (self.brake && v_bus > g.brake_off);
+        self.brake = vb > if self.brake { k.brake_off } else { k.brake_on };
+        if over_i | over_v | self.enc.implausible | under_v {
+            self.trip_on(s, over_i, over_v);
+        }
+        // ---- End of protection ----
 
-        // Current reference.
-        let i_ref = match self.mode {
-            Mode::Run => {
-                let r = self.law.command(&LawInput {
-                    omega_m: shaft.omega_m,
-                    e_q,
-                    x: shaft.x,
-                    i_dq,
-                    v_bus,
-                });
-                let r = limit_vector(r, g.i_max).unwrap_or(r);
-                // Protection hook (protect.rs): bus derating of a regenerative reference.
-                derate_regen(r, shaft.omega_m, self.prot.derate)
-            }
-            _ => Dq::default(),
-        };
+        let g = &self.g;
+        let k = &g.k;
+        let (sin, cos) = theta_e.sin_cos();
+        let i_dq = park_bounded(i_ab, sin, cos);
 
-        let (duties, enable, v_dq, sat) = match self.mode {
-            Mode::Idle => (CENTRED, false, Dq::default(), false),
-            Mode::Short => ([Duty::ZERO; 3], true, Dq::default(), false),
+        let (i_ref, v_dq, duties, enable, sat) = match self.mode {
+            Mode::Idle => (Dq::default(), Dq::default(), CENTRED, false, false),
+            Mode::Short => (Dq::default(), Dq::default(), [Duty::ZERO; 3], true, false),
             Mode::Run | Mode::Open => {
-                let mut ff = Dq::default();
-                let w_e = shaft.omega_m.saturating_mul_int(g.pole_pairs);
-                if g.ff_emf {
-                    ff.q = e_q;
+                let vel = self.enc.vel;
+
+                // Slow terms: the law's current reference (limited to i_max), the
+                // feed-forward, and the bus terms (radius of the voltage circle, 1/V_bus). For
+                // the resistor law the first two depend on the speed estimate alone, which
+                // changes at the rate of the motion and the PLL (≤ speed_bw_hz), and the bus
+                // voltage moves slowly on its capacitor (a few amperes into millifarads: well
+                // under 1 % of the bus in 200 µs); so they are refreshed every SLOW_DIV periods
+                // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
+                // loop) corrects what the hold leaves. The bus trips above still compare every
+                // sample. Other laws keep their own rates and run every period.
+                let resistor = matches!(self.law, Law::Resistor(_));
+                if self.slow_tick == 0 || !resistor {
+                    // Bus: 4095·vpc < 30,000 V.
+                    let vb12 = vb.min(CODE_MAX) as i32;
+                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
+                    let (i_ref, ff) = slow_terms(
+                        &mut self.law,
+                        self.mode == Mode::Run,
+                        &self.enc,
+                        g,
+                        i_dq,
+                        v_bus,
+                        self.prot.derate,
+                    );
+                    self.held = HeldTerms {
+                        i_ref,
+                        ff,
+                        // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
+                        v_max: Q::from_bits(k.v_max_per_code.apply(vb12)),
+                        inv_vbus: inv_bus(v_bus),
+                    };
                 }
-                if g.ff_decouple {
-                    let wl = g.l.scale(w_e);
-                    ff.d = -mul(wl, i_ref.q);
-                    ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
-                }
+                self.slow_tick = (self.slow_tick + 1) & (SLOW_DIV - 1);
+                let HeldTerms {
+                    i_ref,
+                    ff,
+                    v_max,
+                    inv_vbus,
+                } = self.held;
+
+                // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
                 let err = Dq {
-                    d: i_ref.d.saturating_sub(i_dq.d),
-                    q: i_ref.q.saturating_sub(i_dq.q),
+                    d: Q::from_bits(i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
+                    q: Q::from_bits(i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
                 };
-                let v_max = g.v_lim_per_bus.scale(v_bus);
                 let out = self.pi.update(err, ff, &g.pi, v_max);
-                let adv = g.advance.mul_wide(w_e.to_bits() as i64) as i32 as u32;
-                let (s2, c2) = Angle(shaft.theta_e.0.wrapping_add(adv)).sin_cos();
-                let v_ab = inverse_park(out.v, s2, c2);
-                (modulate(v_ab, inv_bus(v_bus)), true, out.v, out.saturated)
+
+                // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay):
+                // |vel·adv_per_vel| < 2^62; the angle wraps (mod 2^32) by design.
+                let adv = ((vel.to_bits() as i64 * k.adv_per_vel as i64) >> 12) as u32;
+                let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
+                // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
+                let v_ab = inverse_park_bounded(out.v, s2, c2);
+                let duties = modulate_limited(v_ab, inv_vbus);
+                (i_ref, out.v, duties, true, out.saturated)
             }
         };
 
-        let p = mul(v_dq.d, i_dq.d).saturating_add(mul(v_dq.q, i_dq.q));
-        self.tel = Telemetry {
-            i_abc,
+        self.rec = StepRecord {
+            sample: *s,
             i_dq,
             i_ref,
             v_dq,
-            v_bus,
-            omega_m: shaft.omega_m,
-            x: shaft.x,
-            theta_e: shaft.theta_e,
-            p_elec: -(p.saturating_add(p / 2)),
+            theta_e,
             duties,
             v_saturated: sat,
-            brake: self.brake,
         };
-        let _ = clamp_sym;
         Actuation {
             duties,
             enable,
             brake: self.brake,
         }
+    }
+}
+
+/// Periods per refresh of the slow terms under the resistor law (a power of two).
+const SLOW_DIV: u8 = 4;
+
+/// Current reference, feed-forward and bus terms, held between refreshes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct HeldTerms {
+    i_ref: Dq,
+    ff: Dq,
+    v_max: Q,
+    inv_vbus: u32,
+}
+
+/// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
+fn amps_of_code(g: &Gains, code: u16) -> Q {
+    g.amps_per_count
+        .scale(Q::from_bits((code as i32 - g.adc_zero) << 16))
+}
+
+/// Bus voltage of an ADC code, V (telemetry and fault snapshots).
+fn volts_of_code(g: &Gains, code: u16) -> Q {
+    g.volts_per_count
+        .scale(Q::from_bits((code as i32) << 16))
+}
+
+/// The law's reference limited to i_max (zero unless running) and the feed-forward: back-emf
+/// on q, cross-coupling ∓ω_e·L·i.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn slow_terms(
+    law: &mut Law,
+    run: bool,
+    enc: &Encoder,
+    g: &Gains,
+    i_dq: Dq,
+    v_bus: Q,
+    derate: Q,
+) -> (Dq, Dq) {
+    let vel = enc.vel;
+    let e_q = g.k.ke_per_vel.scale(vel);
+    let i_ref = if run {
+        let r = match law {
+            Law::Resistor(r) => Dq {
+                d: Q::ZERO,
+                q: clamp_sym(r.conductance.scale(e_q).saturating_neg(), g.i_max),
+            },
+            law => other_law(law, enc, g, e_q, i_dq, v_bus),
+        };
+        // Protection hook (protect.rs): bus derating of a regenerative reference (e_q has
+        // the sign of the speed).
+        derate_regen(r, e_q, derate)
+    } else {
+        Dq::default()
+    };
+    let mut ff = Dq {
+        d: Q::ZERO,
+        q: if g.ff_emf { e_q } else { Q::ZERO },
+    };
+    if g.ff_decouple {
+        let wl = g.k.wl_per_vel.scale(vel);
+        ff.d = mul(wl, i_ref.q).saturating_neg();
+        if i_ref.d != Q::ZERO {
+            ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
+        }
+    }
+    (i_ref, ff)
+}
+
+/// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so
+/// the step's common path stays small; the reference limited to `i_max`.
+#[inline(never)]
+fn other_law(law: &mut Law, enc: &Encoder, g: &Gains, e_q: Q, i_dq: Dq, v_bus: Q) -> Dq {
+    let r = law.command(&LawInput {
+        omega_m: enc.omega_m(&g.enc),
+        e_q,
+        x: enc.x(&g.enc),
+        i_dq,
+        v_bus,
+    });
+    if r.d == Q::ZERO {
+        Dq {
+            d: Q::ZERO,
+            q: clamp_sym(r.q, g.i_max),
+        }
+    } else {
+        limit_vector(r, g.i_max).unwrap_or(r)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::laws::LawKind;
+    use proptest::prelude::*;
+    use std::vec;
+
+    /// A configuration anywhere in the validated ranges, at the extremes most of the time
+    /// (the ranges the step's no-saturation arguments rely on).
+    fn extreme_config() -> impl Strategy<Value = Config> {
+        (
+            prop::sample::select(vec![1e-5f32, 0.0122, 0.5, 1.0]),
+            prop::sample::select(vec![1e-4f32, 0.0293, 1.0]),
+            prop::sample::select(vec![1e-6f32, 6e-3, 1.0]),
+            prop::sample::select(vec![1e-4f32, 0.943, 20.0]),
+            prop::sample::select(vec![1u8, 5, 50]),
+            prop::sample::select(vec![16u32, 10_000, 16_384]),
+            prop::sample::select(vec![5_000.0f32, 20_000.0, 100_000.0]),
+            prop::sample::select(vec![0.1f32, 0.95, 1.0]),
+            prop::sample::select(vec![0.0f32, 1.937, 1_000.0]),
+            prop::sample::select(vec![0.0f32, 2.0, 306.0, f32::INFINITY]),
+            prop::sample::select(LawKind::ALL.to_vec()),
+            any::<(bool, bool, bool)>(),
+        )
+            .prop_map(
+                |(apc, vpc, l, ke, pp, cpr, pwm, m, imax, rl, law, (fe, fd, dc))| {
+                    let d = Config::default();
+                    Config {
+                        amps_per_count: apc,
+                        volts_per_count: vpc,
+                        l_phase_h: l,
+                        ke_v_s_per_rad: ke,
+                        pole_pairs: pp,
+                        encoder_cpr: cpr,
+                        pwm_hz: pwm,
+                        current_bw_hz: d.current_bw_hz.min(0.09 * pwm),
+                        speed_bw_hz: d.speed_bw_hz.min(0.04 * pwm),
+                        m_max: m,
+                        i_max_a: imax,
+                        i_trip_a: 2_000.0,
+                        v_bus_ov: 2_000.0,
+                        v_bus_uv: 0.0,
+                        brake_on_v: 1_900.0,
+                        brake_off_v: 1_800.0,
+                        // Infinite R_L: refused by the impedance law; the tracking law's
+                        // constructor does not terminate on it (a separate defect, reported).
+                        r_load_ohm: if matches!(law, LawKind::Impedance | LawKind::Tracking)
+                            && !rl.is_finite()
+                        {
+                            1.0
+                        } else {
+                            rl
+                        },
+                        law,
+                        law_rate_hz: pwm.min(1_000.0),
+                        ff_emf: fe,
+                        ff_decouple: fd,
+                        delay_comp: dc,
+                        ..d
+                    }
+                },
+            )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        /// Any raw sample, any validated configuration, every mode: the step never panics
+        /// (debug builds check every no-saturation bound the step relies on), duties stay in
+        /// [0, 1] and the voltage command stays within the bus circle.
+        #[test]
+        fn step_never_overflows(cfg in extreme_config(),
+                                samples in prop::collection::vec(any::<[u16; 5]>(), 1..40),
+                                mode in prop::sample::select(vec![Mode::Run, Mode::Open, Mode::Idle, Mode::Short])) {
+            let mut ctl = Controller::new(&cfg).unwrap();
+            for x in samples {
+                if ctl.fault().is_some() {
+                    let _ = ctl.clear_fault();
+                }
+                let _ = ctl.set_mode(mode);
+                let s = RawSample { i_abc: [x[0], x[1], x[2]], v_bus: x[3], encoder: x[4] };
+                let a = ctl.step(&s);
+                for d in a.duties {
+                    prop_assert!(d <= Duty::ONE);
+                }
+                let t = ctl.telemetry();
+                let vb = (x[3].min(4095) as f64) * cfg.volts_per_count as f64;
+                let v = (t.v_dq.d.to_num::<f64>().powi(2) + t.v_dq.q.to_num::<f64>().powi(2)).sqrt();
+                prop_assert!(v <= vb * cfg.m_max as f64 / 3f64.sqrt() * (1.0 + 3e-4) + 1e-3,
+                             "|v| = {} on {} V", v, vb);
+            }
+        }
+
+        /// Codes beyond 12 bits (a wiring or driver fault) give the same currents as the
+        /// clamped 12-bit ones would never exceed: the Clarke inputs saturate, not wrap.
+        #[test]
+        fn clarke_on_codes_matches_scaled_currents(a in 0u16..4096, b in 0u16..4096, c in 0u16..4096) {
+            let cfg = Config::default();
+            let mut ctl = Controller::new(&cfg).unwrap();
+            ctl.step(&RawSample { i_abc: [a, b, c], v_bus: 2458, encoder: 0 });
+            let t = ctl.telemetry();
+            let i = t.i_abc.map(|x| x.to_num::<f64>());
+            // θ = 0 at count 0 (no offset): d = α, q = β. Two roundings of 2^-16 A each plus
+            // the f32 constants (relative 1e-7).
+            let alpha = (2.0 * i[0] - i[1] - i[2]) / 3.0;
+            let beta = (i[1] - i[2]) / 3f64.sqrt();
+            prop_assert!((t.i_dq.d.to_num::<f64>() - alpha).abs() < 1e-4);
+            prop_assert!((t.i_dq.q.to_num::<f64>() - beta).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn trips_on_raw_code_thresholds() {
+        // Over-current at |code − zero| > i_trip/amps_per_count = 20/(50/4096) = 1638.4.
+        let cfg = Config::default();
+        let z = cfg.adc_zero_code;
+        let bus = 2458; // 72 V
+        for (code, trip) in [
+            (z + 1638, false),
+            (z + 1639, true),
+            (z - 1638, false),
+            (z - 1639, true),
+        ] {
+            let mut ctl = Controller::new(&cfg).unwrap();
+            ctl.set_mode(Mode::Run).unwrap();
+            ctl.step(&RawSample {
+                i_abc: [z, code, z],
+                v_bus: bus,
+                encoder: 0,
+            });
+            assert_eq!(ctl.fault() == Some(Fault::OverCurrent), trip, "code {code}");
+        }
+        // Over-voltage above 95 V = 3242.67 codes; under-voltage below 20 V = 682.67 codes.
+        for (v, f) in [
+            (3242u16, None),
+            (3243, Some(Fault::BusOverVoltage)),
+            (683, None),
+            (682, Some(Fault::BusUnderVoltage)),
+        ] {
+            let mut ctl = Controller::new(&cfg).unwrap();
+            ctl.set_mode(Mode::Run).unwrap();
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: v,
+                encoder: 0,
+            });
+            assert_eq!(ctl.fault(), f, "bus code {v}");
+        }
+        // A low bus is no fault while idle (power-up), nor in the other non-running modes.
+        for m in [Mode::Idle, Mode::Open, Mode::Short] {
+            let mut ctl = Controller::new(&cfg).unwrap();
+            ctl.set_mode(m).unwrap();
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: 0,
+                encoder: 0,
+            });
+            assert_eq!((ctl.fault(), ctl.mode()), (None, m));
+        }
+        // Brake: closes above 85 V (2901.3 codes), opens below 82 V (2798.9 codes).
+        let mut ctl = Controller::new(&cfg).unwrap();
+        let mut brake = |v: u16| {
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: v,
+                encoder: 0,
+            })
+            .brake
+        };
+        assert!(!brake(2901));
+        assert!(brake(2902));
+        assert!(brake(2800));
+        assert!(brake(2799));
+        assert!(!brake(2798));
     }
 }

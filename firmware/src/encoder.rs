@@ -6,7 +6,7 @@
 //! `ki = (ω_b·Ts)²` (critically damped, bandwidth ω_b). It filters the count quantisation
 //! without the bias of a plain difference filter and gives a position between counts.
 
-use crate::fx::{sat_i32, Angle, Gain, Q};
+use crate::fx::{mulhs, sat_i32, Angle, Gain, Q};
 
 /// Constants derived from the configuration (see [`crate::config`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -17,11 +17,14 @@ pub struct EncoderGains {
     pub turn_per_count: u32,
     /// Pole pairs.
     pub pole_pairs: u32,
+    /// Electrical angle per count, `turn_per_count·pole_pairs` (wrapping: angles are mod 2³²).
+    pub e_per_count: u32,
     /// Electrical angle of the d axis when the count within a turn is zero.
     pub offset: Angle,
-    /// PLL gains per step (dimensionless).
-    pub kp: Gain,
-    pub ki: Gain,
+    /// PLL gains per step (dimensionless): `kp·2^31` and `ki·2^34`, which fit because
+    /// `kp = 2ω_b·Ts ≤ 0.6` and `ki = (ω_b·Ts)² ≤ 0.09` by validation (`ω_b·Ts ≤ 0.3`).
+    pub kp31: i32,
+    pub ki34: i32,
     /// Shaft speed per (count per step): 2π·f_pwm/cpr, rad/s.
     pub rad_s_per_count_step: Gain,
     /// Metres of travel per count: lead (m/rad)·2π/cpr.
@@ -39,23 +42,19 @@ pub struct Encoder {
     pub position: i32,
     /// Count within the revolution, 0 … cpr−1.
     pub in_turn: u32,
-    /// PLL position estimate, counts · 2^16.
-    pos_est: i64,
+    /// PLL position error `position − p̂` after the last update, counts · 2^16 (saturating).
+    /// Keeping the error instead of `p̂` keeps the loop in 32 bits: `p̂` itself needs 48.
+    err: i32,
     /// PLL speed estimate, counts per step (Q16.16).
     pub vel: Q,
     /// The last raw change exceeded `max_step_counts` (encoder glitch or loss).
     pub implausible: bool,
 }
 
-/// Angles and speed from one update.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub struct Shaft {
-    /// Electrical angle of the d axis.
-    pub theta_e: Angle,
-    /// Mechanical speed, rad/s.
-    pub omega_m: Q,
-    /// Linear travel from the zero position, m (from the PLL position).
-    pub x: Q,
+/// `t mod cpr` in [0, cpr) (cpr ≥ 16 by validation; 0 is treated as 1).
+#[inline(never)]
+fn wrap_turn(t: i32, cpr: u32) -> u32 {
+    t.rem_euclid(cpr.max(1) as i32) as u32
 }
 
 impl Encoder {
@@ -64,40 +63,58 @@ impl Encoder {
         *self = Encoder::default();
     }
 
-    /// One step with the raw hardware counter.
+    /// One step with the raw hardware counter; returns the electrical angle of the d axis.
     #[inline(always)]
-    pub fn update(&mut self, raw: u16, g: &EncoderGains) -> Shaft {
+    pub fn update(&mut self, raw: u16, g: &EncoderGains) -> Angle {
         if !self.primed {
             self.primed = true;
             self.last_raw = raw;
         }
         let delta = raw.wrapping_sub(self.last_raw) as i16 as i32;
         self.last_raw = raw;
-        self.implausible = delta.abs() > g.max_step_counts;
+        self.implausible = delta.unsigned_abs() > g.max_step_counts as u32;
         self.position = self.position.saturating_add(delta);
-        // Count within the turn, kept by wrap-around (|delta| < cpr).
-        let mut t = self.in_turn as i32 + delta;
-        if t < 0 {
-            t += g.cpr as i32;
-        } else if t >= g.cpr as i32 {
-            t -= g.cpr as i32;
-        }
-        self.in_turn = (t.max(0) as u32).min(g.cpr.saturating_sub(1));
-        let theta_m = self.in_turn.wrapping_mul(g.turn_per_count);
-        let theta_e = Angle(theta_m.wrapping_mul(g.pole_pairs).wrapping_add(g.offset.0));
+        // Count within the turn, kept by wrap-around. in_turn < cpr ≤ 16384 and |delta| ≤
+        // 32768: the sum cannot overflow. One unsigned compare covers both directions;
+        // the reduction runs only on a wrap.
+        let t = self.in_turn as i32 + delta;
+        self.in_turn = if (t as u32) < g.cpr {
+            t as u32
+        } else {
+            wrap_turn(t, g.cpr)
+        };
+        let theta_e = Angle(
+            self.in_turn
+                .wrapping_mul(g.e_per_count)
+                .wrapping_add(g.offset.0),
+        );
 
-        // Tracking loop.
-        let err_bits = sat_i32(((self.position as i64) << 16) - self.pos_est);
-        let err = Q::from_bits(err_bits);
-        self.pos_est = self.pos_est + self.vel.to_bits() as i64 + g.kp.scale(err).to_bits() as i64;
-        self.vel = self.vel.saturating_add(g.ki.scale(err));
+        // Tracking loop, on the error e = p − p̂: the new count moves e by delta (delta·2^16
+        // lies in [−2^31, 2^31 − 2^16], so the shift cannot overflow); then
+        // p̂ ← p̂ + v̂ + kp·e and v̂ ← v̂ + ki·e, i.e. e ← e − kp·e − v̂.
+        let err = self.err.saturating_add(delta << 16);
+        // High-word products (one SMMUL each): kp·e = 2·⌊e·kp31/2^32⌋, ki·e = ⌊e·ki34/2^32⌋/4.
+        let kp_e = mulhs(err, g.kp31) << 1; // |.| ≤ 0.6·|e| + 2: fits
+        let ki_e = mulhs(err, g.ki34) >> 2;
+        // e − kp·e lies between e and 0 (up to 2 LSB of rounding beyond 0 for |e| ≤ 2), and
+        // never beyond i32 at the ends (kp ≤ 0.6): no overflow.
+        self.err = err.wrapping_sub(kp_e).saturating_sub(self.vel.to_bits());
+        self.vel = self.vel.saturating_add(Q::from_bits(ki_e));
+        theta_e
+    }
 
-        // x = position estimate · m/count (64-bit, saturated to Q16.16 metres).
-        let x = sat_i32(g.m_per_count.mul_wide(self.pos_est));
-        Shaft {
-            theta_e,
-            omega_m: g.rad_s_per_count_step.scale(self.vel),
-            x: Q::from_bits(x),
-        }
+    /// PLL position estimate, counts · 2^16.
+    pub fn pos_est(&self) -> i64 {
+        ((self.position as i64) << 16) - self.err as i64
+    }
+
+    /// Linear travel from the zero position, m (from the PLL position), saturated to Q16.16.
+    pub fn x(&self, g: &EncoderGains) -> Q {
+        Q::from_bits(sat_i32(g.m_per_count.mul_wide(self.pos_est())))
+    }
+
+    /// Mechanical speed, rad/s.
+    pub fn omega_m(&self, g: &EncoderGains) -> Q {
+        g.rad_s_per_count_step.scale(self.vel)
     }
 }

@@ -73,6 +73,48 @@ pub fn inverse_park(v: Dq, sin: Q, cos: Q) -> AlphaBeta {
     }
 }
 
+/// Largest vector length (LSB) the unsaturated rotations below accept: 2^31 − 2^19 (32,760 A
+/// or V). A rotation by table (sin, cos) scales a vector by at most 1 + 4e-5 (< 2^19/2^31),
+/// so every output stays below 2^31.
+pub const ROTATE_BOUND: i64 = (1 << 31) - (1 << 19);
+
+#[inline(always)]
+fn within_bound(x: Q, y: Q) -> bool {
+    let (x, y) = (x.to_bits() as i64, y.to_bits() as i64);
+    x * x + y * y <= ROTATE_BOUND * ROTATE_BOUND
+}
+
+/// `(x·c + y·s) >> 16` in one 64-bit accumulation (multiply, multiply-accumulate, shift).
+#[inline(always)]
+fn dot(x: Q, c: Q, y: Q, s: Q) -> Q {
+    let w =
+        (x.to_bits() as i64 * c.to_bits() as i64 + y.to_bits() as i64 * s.to_bits() as i64) >> 16;
+    debug_assert!(w == w as i32 as i64, "rotation out of range");
+    Q::from_bits(w as i32)
+}
+
+/// [`park`] without saturation, for `|(α, β)| ≤ ROTATE_BOUND` (and `(sin, cos)` from
+/// [`crate::fx::Angle::sin_cos`]): the result has the length of the input within 4e-5, so it
+/// fits; the sum is formed before the one rounding shift.
+#[inline(always)]
+pub fn park_bounded(v: AlphaBeta, sin: Q, cos: Q) -> Dq {
+    debug_assert!(within_bound(v.alpha, v.beta));
+    Dq {
+        d: dot(v.alpha, cos, v.beta, sin),
+        q: dot(v.beta, cos, -v.alpha, sin),
+    }
+}
+
+/// [`inverse_park`] without saturation, for `|(d, q)| ≤ ROTATE_BOUND` (see [`park_bounded`]).
+#[inline(always)]
+pub fn inverse_park_bounded(v: Dq, sin: Q, cos: Q) -> AlphaBeta {
+    debug_assert!(within_bound(v.d, v.q));
+    AlphaBeta {
+        alpha: dot(v.d, cos, -v.q, sin),
+        beta: dot(v.d, sin, v.q, cos),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -121,6 +163,23 @@ mod tests {
             prop_assert!((f(back.alpha) - al as f64).abs() < 1e-3);
             prop_assert!((f(back.beta) - be as f64).abs() < 1e-3);
             prop_assert!((f(a) + f(b) + f(c)).abs() < 1e-3);
+        }
+
+        #[test]
+        fn bounded_rotations_equal_the_saturating_ones(r in 0.0f64..=1.0, phi in 0.0f64..core::f64::consts::TAU, th in any::<u32>()) {
+            // Same products, one rounding instead of two: within 1 LSB of the saturating
+            // forms (which cannot saturate here), and no overflow up to the bound itself.
+            let len = if r > 0.9 { ROTATE_BOUND as f64 } else { r * ROTATE_BOUND as f64 };
+            let (a, b) = ((len * phi.cos()) as i32, (len * phi.sin()) as i32);
+            let (s, c) = Angle(th).sin_cos();
+            let v = AlphaBeta { alpha: Q::from_bits(a), beta: Q::from_bits(b) };
+            let (x, y) = (park_bounded(v, s, c), park(v, s, c));
+            prop_assert!((x.d.to_bits() as i64 - y.d.to_bits() as i64).abs() <= 1);
+            prop_assert!((x.q.to_bits() as i64 - y.q.to_bits() as i64).abs() <= 1);
+            let w = Dq { d: Q::from_bits(a), q: Q::from_bits(b) };
+            let (x, y) = (inverse_park_bounded(w, s, c), inverse_park(w, s, c));
+            prop_assert!((x.alpha.to_bits() as i64 - y.alpha.to_bits() as i64).abs() <= 1);
+            prop_assert!((x.beta.to_bits() as i64 - y.beta.to_bits() as i64).abs() <= 1);
         }
 
         #[test]

@@ -27,11 +27,35 @@ pub type Duty = U1F15;
 pub struct Gain {
     bits: i32,
     frac: u8,
+    /// 2^(32−frac) (0 for ZERO): `x >> frac` of a 64-bit product as multiplies.
+    pow: u32,
+    /// 2^(frac−1) and 2^frac − 1 (0 for ZERO): the saturation test without a shift.
+    half: u32,
+    span: u32,
 }
 
 impl Gain {
     /// Zero gain.
-    pub const ZERO: Gain = Gain { bits: 0, frac: 0 };
+    pub const ZERO: Gain = Gain {
+        bits: 0,
+        frac: 0,
+        pow: 0,
+        half: 0,
+        span: 0,
+    };
+
+    const fn with_frac(bits: i32, frac: u8) -> Gain {
+        if bits == 0 {
+            return Gain::ZERO;
+        }
+        Gain {
+            bits,
+            frac,
+            pow: 1 << (32 - frac as u32),
+            half: 1 << (frac - 1),
+            span: (1u32 << frac) - 1,
+        }
+    }
 
     /// The nearest representable gain to `v` with the most fractional bits that still hold
     /// it (at most 30). Non-finite input gives zero; out-of-range input saturates.
@@ -53,7 +77,7 @@ impl Gain {
         } else {
             round_f32(scaled) as i32
         };
-        Gain { bits, frac }
+        Gain::with_frac(bits, frac)
     }
 
     /// The gain as `f32` (for reports and tests).
@@ -71,20 +95,110 @@ impl Gain {
     /// `self · x`, saturated to [`Q`].
     #[inline(always)]
     pub fn scale(self, x: Q) -> Q {
-        // Same result as `sat_i32((bits·x) >> frac)`, in 32-bit halves: one long multiply, two
-        // register shifts and a sign test instead of a 64-bit variable shift and compare.
+        // Same result as `sat_i32((bits·x) >> frac)` without a variable shift: with
+        // p = hi·2^32 + lo, p >> f fits in i32 iff hi ∈ [−2^(f−1), 2^(f−1)) (an add and an
+        // unsigned compare), and then p >> f = hi·2^(32−f) + (lo·2^(32−f)) >> 32 (mod 2^32):
+        // one multiply-long and one multiply-accumulate. ZERO has p = 0 and all fields 0.
         let p = self.bits as i64 * x.to_bits() as i64;
         let (hi, lo) = ((p >> 32) as i32, p as u32);
-        let f = self.frac as u32; // 1 ..= 30 (from_f32), 0 only for ZERO
-        if f == 0 {
-            return Q::from_bits(sat_i32(p));
+        if (hi as u32).wrapping_add(self.half) > self.span {
+            // hi < 0 → MIN, else MAX.
+            return Q::from_bits((hi >> 31) ^ i32::MAX);
         }
-        // p >> f fits in i32 iff bits 31+f … 63 of p are all equal: hi >> (f−1) is 0 or −1.
-        let top = hi >> (f - 1);
-        if top != 0 && top != -1 {
-            return if hi < 0 { Q::MIN } else { Q::MAX };
+        let low = ((lo as u64 * self.pow as u64) >> 32) as u32;
+        Q::from_bits((hi as u32).wrapping_mul(self.pow).wrapping_add(low) as i32)
+    }
+}
+
+/// A constant multiplier for a bounded integer input, as one multiply by a power of two and
+/// one high-word multiply (`SMMUL`): `apply(x) = ((x·2^a)·k) >> 32 ≈ value·x`, with `a` as
+/// small as keeps `|k| < 2^31` (the most precise `k`) and `|x|·2^a < 2^31` for every
+/// `|x| ≤ x_max`. Everything stays in 32-bit registers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Scale32 {
+    m: i32,
+    k: i32,
+}
+
+impl Scale32 {
+    /// The multiplier `v` (finite, |v| < 2^31) for inputs `|x| ≤ x_max` (≥ 1). `None` when
+    /// no exponent satisfies both bounds (the caller's validation should exclude that).
+    pub fn new(v: f32, x_max: u32) -> Option<Scale32> {
+        if !v.is_finite() {
+            return None;
         }
-        Q::from_bits(((hi as u32).wrapping_shl(32 - f) | lo.wrapping_shr(f)) as i32)
+        let mag = if v < 0.0 { -v } else { v };
+        // Smallest a ≥ 0 with |v|·2^(32−a) < 2^31.
+        let mut a: u32 = 0;
+        while a <= 31 && mag * pow2((32 - a) as u8) >= 2_147_483_000.0 {
+            a += 1;
+        }
+        if a > 30 || (x_max as u64) << a >= 1 << 31 {
+            return None;
+        }
+        Some(Scale32 {
+            m: 1 << a,
+            k: round_f32(v * pow2((32 - a) as u8)) as i32,
+        })
+    }
+
+    /// `value·x` for `|x| ≤ x_max` of the constructor (debug builds check it).
+    #[inline(always)]
+    pub fn apply(self, x: i32) -> i32 {
+        debug_assert!(
+            x.checked_mul(self.m).is_some(),
+            "Scale32 input out of range"
+        );
+        (((x.wrapping_mul(self.m)) as i64 * self.k as i64) >> 32) as i32
+    }
+}
+
+/// `(a·b) >> S` for operands whose shifted product is known to fit in `i32` (the caller
+/// states the bound in a comment). One long multiply and two shifts, no saturation; debug
+/// builds (the host tests) check the bound.
+#[inline(always)]
+pub fn mul_shr<const S: u32>(a: i32, b: i32) -> i32 {
+    let w = (a as i64 * b as i64) >> S;
+    debug_assert!(
+        w == w as i32 as i64,
+        "mul_shr bound violated: {a}·{b} >> {S}"
+    );
+    w as i32
+}
+
+/// `(a·b) >> 32`: the high word of the product (one `SMMUL`), always in range.
+#[inline(always)]
+pub fn mulhs(a: i32, b: i32) -> i32 {
+    ((a as i64 * b as i64) >> 32) as i32
+}
+
+/// `v·2^n` rounded, for a constant with `|v|·2^n < 2^31`; saturates outside, NaN → 0.
+pub fn fixed_i32(v: f32, n: u8) -> i32 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let s = v * pow2(n);
+    if s >= 2_147_483_647.0 {
+        i32::MAX
+    } else if s <= -2_147_483_648.0 {
+        i32::MIN
+    } else {
+        round_f32(s) as i32
+    }
+}
+
+/// `v·2^30` rounded, for a constant known to lie in (−2, 2) (Q2.30); saturates outside.
+pub fn q30(v: f32) -> i32 {
+    if !v.is_finite() {
+        return 0;
+    }
+    let s = v * pow2(30);
+    if s >= 2_147_483_647.0 {
+        i32::MAX
+    } else if s <= -2_147_483_648.0 {
+        i32::MIN
+    } else {
+        round_f32(s) as i32
     }
 }
 
@@ -92,7 +206,7 @@ fn pow2(n: u8) -> f32 {
     (1u64 << n) as f32
 }
 
-fn round_f32(x: f32) -> f32 {
+pub(crate) fn round_f32(x: f32) -> f32 {
     // core has no f32::round in no_std on stable; ties away from zero like f32::round.
     let t = x as i64 as f32; // truncation toward zero (|x| < 2^31 here)
     let d = x - t;
@@ -129,7 +243,13 @@ pub fn q(v: f32) -> Q {
 /// Saturating `a·b` in Q16.16 (64-bit product, one shift).
 #[inline(always)]
 pub fn mul(a: Q, b: Q) -> Q {
-    Q::from_bits(sat_i32((a.to_bits() as i64 * b.to_bits() as i64) >> 16))
+    // As `sat_i32(p >> 16)`: p >> 16 fits iff hi ∈ [−2^15, 2^15).
+    let p = a.to_bits() as i64 * b.to_bits() as i64;
+    let (hi, lo) = ((p >> 32) as i32, p as u32);
+    if (hi as u32).wrapping_add(1 << 15) > 0xFFFF {
+        return Q::from_bits((hi >> 31) ^ i32::MAX);
+    }
+    Q::from_bits(((hi as u32) << 16 | lo >> 16) as i32)
 }
 
 /// Clamp `x` to `[-lim, lim]` (`lim ≥ 0`).
@@ -167,7 +287,7 @@ impl Angle {
     /// (sin, cos) in Q16.16, from a 512-point table with linear interpolation (error < 2e-5).
     #[inline(always)]
     pub fn sin_cos(self) -> (Q, Q) {
-        (sin_turn(self.0), sin_turn(self.0.wrapping_add(1 << 30)))
+        sin_cos_turn(self.0)
     }
 }
 
@@ -183,14 +303,18 @@ fn floor_f64(x: f64) -> f64 {
 const SIN_BITS: u32 = 9;
 const SIN_N: usize = 1 << SIN_BITS;
 
-/// sin(2π·k/512)·65536, k = 0 … 512, built at compile time.
-static SIN_TABLE: [i32; SIN_N + 1] = build_sin_table();
+/// Table length: 512 points plus a quarter turn (so cos θ = sin(θ + π/2) reads the same
+/// table at index + 128 without wrapping) plus one for the interpolation.
+const SIN_LEN: usize = SIN_N + SIN_N / 4 + 1;
 
-const fn build_sin_table() -> [i32; SIN_N + 1] {
-    let mut t = [0i32; SIN_N + 1];
+/// sin(2π·k/512)·65536, k = 0 … 640, built at compile time.
+static SIN_TABLE: [i32; SIN_LEN] = build_sin_table();
+
+const fn build_sin_table() -> [i32; SIN_LEN] {
+    let mut t = [0i32; SIN_LEN];
     let mut k = 0;
-    while k <= SIN_N {
-        let x = core::f64::consts::TAU * k as f64 / SIN_N as f64;
+    while k < SIN_LEN {
+        let x = core::f64::consts::TAU * (k % SIN_N) as f64 / SIN_N as f64;
         let s = const_sin(x) * 65536.0;
         t[k] = if s >= 0.0 {
             (s + 0.5) as i32
@@ -226,15 +350,20 @@ const fn const_sin(x: f64) -> f64 {
     sum
 }
 
+/// (sin, cos) of a turn fraction: one index and one interpolation weight serve both (cos is
+/// the table a quarter turn on), so it costs two table pairs, two multiplies and no wrap.
 #[inline(always)]
-fn sin_turn(a: u32) -> Q {
+fn sin_cos_turn(a: u32) -> (Q, Q) {
+    // Index 0 … 511 and the 16-bit position between entries. Table entries are within
+    // ±65536 and neighbours differ by < 2^10, so (hi − lo)·frac < 2^26: no overflow.
     let idx = (a >> (32 - SIN_BITS)) as usize;
-    let frac = ((a >> (16 - SIN_BITS)) & 0xFFFF) as i32; // 16-bit position between entries
-    let (lo, hi) = (
-        SIN_TABLE[idx & (SIN_N - 1)],
-        SIN_TABLE[(idx & (SIN_N - 1)) + 1],
-    );
-    Q::from_bits(lo + (((hi - lo) * frac) >> 16))
+    let frac = ((a >> (16 - SIN_BITS)) & 0xFFFF) as i32;
+    let (s0, s1) = (SIN_TABLE[idx], SIN_TABLE[idx + 1]);
+    let (c0, c1) = (SIN_TABLE[idx + SIN_N / 4], SIN_TABLE[idx + SIN_N / 4 + 1]);
+    (
+        Q::from_bits(s0 + (((s1 - s0) * frac) >> 16)),
+        Q::from_bits(c0 + (((c1 - c0) * frac) >> 16)),
+    )
 }
 
 #[cfg(test)]
@@ -281,6 +410,33 @@ mod tests {
                 assert_eq!(g.scale(Q::from_bits(x)).to_bits(), want, "{v} · {x}");
             }
         }
+    }
+
+    #[test]
+    fn scale32_is_the_product() {
+        use proptest::prelude::*;
+        proptest!(|(v in -2.0e4f32..2.0e4, xm in 1u32..1_000_000, x in any::<i32>())| {
+            if let Some(s) = Scale32::new(v, xm) {
+                let x = x % (xm as i32 + 1);
+                let want = v as f64 * x as f64;
+                // k has ≥ 24 significant bits (f32) or is v·2^32 rounded; result floors.
+                let tol = want.abs() * 1e-6 + 1.0 + x.unsigned_abs() as f64 / 2f64.powi(31) * 2.0;
+                prop_assert!((s.apply(x) as f64 - want).abs() <= tol, "{} vs {}", s.apply(x), want);
+            }
+        });
+        // The constructor refuses what cannot be held.
+        assert!(Scale32::new(3.0e9, 1).is_none());
+        assert!(Scale32::new(1.0, u32::MAX).is_none());
+        assert!(Scale32::new(f32::NAN, 1).is_none());
+    }
+
+    #[test]
+    fn mul_equals_the_saturated_wide_product() {
+        use proptest::prelude::*;
+        proptest!(|(a in any::<i32>(), b in any::<i32>())| {
+            let want = sat_i32((a as i64 * b as i64) >> 16);
+            prop_assert_eq!(mul(Q::from_bits(a), Q::from_bits(b)).to_bits(), want);
+        });
     }
 
     #[test]

@@ -91,6 +91,8 @@ pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending {
 
 /// Current-loop periods run since boot (wraps).
 pub static PERIODS: AtomicU32 = AtomicU32::new(0);
+/// Periods since the last protection supervision tick.
+static SUPERVISE_COUNT: AtomicU32 = AtomicU32::new(0);
 /// Periods whose computation was not finished before the next sample was ready.
 pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
 /// A posted mode change was refused by the controller (fault latched in between).
@@ -130,6 +132,17 @@ pub fn on_sample() {
         };
         run_period(&mut st.ctl, &mut st.io);
 
+        // Protection supervision (I²t, force, stroke, speed, sensors, derating) at 1 kHz, in
+        // the loop's own context so it never races the step: ≈ 500 instructions one period in
+        // `supervise_every()` (20 at 20 kHz).
+        let n = SUPERVISE_COUNT.load(Ordering::Relaxed) + 1;
+        if n >= st.ctl.supervise_every() {
+            SUPERVISE_COUNT.store(0, Ordering::Relaxed);
+            st.ctl.supervise();
+        } else {
+            SUPERVISE_COUNT.store(n, Ordering::Relaxed);
+        }
+
         // Exact energy: Σ p_elec (Q16.16) per period, 64-bit.
         let p = st.ctl.telemetry().p_elec.to_bits() as i64;
         let acc = ((ENERGY_HI.load(Ordering::Relaxed) as u64) << 32
@@ -143,14 +156,16 @@ pub fn on_sample() {
         let mut q = PENDING.borrow_ref_mut(cs);
         if q.clear.is_none() && q.cfg.is_none() && q.mode.is_none() {
             PERIODS.fetch_add(1, Ordering::Relaxed);
-            check_overrun();
+            check_overrun(&mut st.ctl);
             return;
         }
         let p = core::mem::take(&mut *q);
         drop(q);
         if let Some(f) = p.clear {
+            // The console's copy checked the cause is gone; if it came back since, the
+            // controller refuses and the fault stays latched (the console shows it).
             if st.ctl.fault() == Some(f) {
-                st.ctl.clear_fault();
+                let _ = st.ctl.clear_fault();
             }
         }
         if let Some(c) = p.cfg {
@@ -169,15 +184,17 @@ pub fn on_sample() {
             }
         }
         PERIODS.fetch_add(1, Ordering::Relaxed);
-        check_overrun();
+        check_overrun(&mut st.ctl);
     });
 }
 
 /// Overrun: the next sequence already finished (its flag is set again) before this period's
 /// work is done.
 #[inline(always)]
-fn check_overrun() {
+fn check_overrun(ctl: &mut Controller) {
     if pac::ADC2.isr().read().jeos() {
         OVERRUNS.fetch_add(1, Ordering::Relaxed);
+        // The controller counts them against `overrun_limit` (protect.rs) and trips.
+        ctl.report_overrun();
     }
 }

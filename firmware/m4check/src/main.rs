@@ -4,9 +4,15 @@
 #![no_std]
 #![no_main]
 
+use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
+use regen_fw::encoder::{Encoder, EncoderGains};
+use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
+use regen_fw::fx::{Angle, Duty, Gain, Q};
+use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
+use regen_fw::svpwm::{inv_bus, modulate_limited};
 use regen_fw::{Actuation, Config, Controller, Mode, RawSample};
 
 static VECTORS: &[u8] = include_bytes!("../vectors.bin");
@@ -27,6 +33,77 @@ pub fn regen_supervise(ctl: &mut Controller) {
     ctl.supervise()
 }
 
+// Pieces of the step, each counted on its own (`count.sh ELF piece_…`) with the values of
+// the same recorded run; each count includes a call and its argument passing.
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_encoder(e: &mut Encoder, raw: u16, g: &EncoderGains) -> Angle {
+    e.update(raw, g)
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_sin_cos(a: Angle) -> (Q, Q) {
+    a.sin_cos()
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_park(v: AlphaBeta, s: Q, c: Q) -> Dq {
+    park_bounded(v, s, c)
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_inverse_park(v: Dq, s: Q, c: Q) -> AlphaBeta {
+    inverse_park_bounded(v, s, c)
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_pi(pi: &mut CurrentPi, err: Dq, ff: Dq, g: &PiGains, v_max: Q) -> PiOutput {
+    pi.update(err, ff, g, v_max)
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_svpwm(v: AlphaBeta, v_bus: Q) -> [Duty; 3] {
+    modulate_limited(v, inv_bus(v_bus))
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_gain(g: Gain, x: Q) -> Q {
+    g.scale(x)
+}
+
+/// Runs the pieces on the values of the step just taken (results discarded).
+fn pieces(ctl: &Controller, s: &RawSample, enc: &mut Encoder, pi: &mut CurrentPi) {
+    let g = ctl.gains();
+    let t = ctl.telemetry();
+    let th = black_box(piece_encoder(enc, s.encoder, &g.enc));
+    let (sn, cs) = piece_sin_cos(t.theta_e);
+    let i_ab = AlphaBeta {
+        alpha: t.i_abc[0],
+        beta: t.i_abc[1],
+    };
+    black_box(piece_park(i_ab, sn, cs));
+    let err = Dq {
+        d: t.i_ref.d - t.i_dq.d,
+        q: t.i_ref.q - t.i_dq.q,
+    };
+    let ff = Dq {
+        d: Q::ZERO,
+        q: g.ke.scale(t.omega_m),
+    };
+    let v_max = g.v_lim_per_bus.scale(t.v_bus);
+    let o = piece_pi(pi, err, ff, &g.pi, v_max);
+    black_box(piece_gain(g.k.ke_per_vel, Q::from_bits(th.0 as i32 >> 8)));
+    let v_ab = piece_inverse_park(o.v, sn, cs);
+    black_box(piece_svpwm(v_ab, t.v_bus));
+}
+
 #[entry]
 fn main() -> ! {
     let cfg = Config::default();
@@ -41,6 +118,8 @@ fn main() -> ! {
     let every = ctl.supervise_every() as usize;
     let mut k = 0usize;
     let mut bad_cfg = false;
+    let mut enc = Encoder::default();
+    let mut pi = CurrentPi::default();
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half
             && c.set_config(&Config {
@@ -59,6 +138,7 @@ fn main() -> ! {
         if k.is_multiple_of(every) {
             regen_supervise(&mut c.clone());
         }
+        pieces(c, s, &mut enc, &mut pi);
         a
     });
     if bad_cfg {
@@ -74,12 +154,16 @@ fn exit(code: i32) -> ! {
     } else {
         debug::exit(debug::EXIT_FAILURE);
     }
-    loop {}
+    loop {
+        cortex_m::asm::wfi();
+    }
 }
 
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
     hprintln!("panic");
     debug::exit(debug::EXIT_FAILURE);
-    loop {}
+    loop {
+        cortex_m::asm::wfi();
+    }
 }

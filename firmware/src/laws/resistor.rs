@@ -37,7 +37,7 @@ impl CommandLaw for Resistor {
     fn command(&mut self, inp: &LawInput) -> Dq {
         Dq {
             d: Q::ZERO,
-            q: -self.conductance.scale(inp.e_q),
+            q: self.conductance.scale(inp.e_q).saturating_neg(),
         }
     }
 }
