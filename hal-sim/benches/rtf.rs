@@ -1,46 +1,113 @@
-//! Closed-loop real-time factor (one core, 20 kHz, averaged inverter) and the analytic
-//! sweep's time. `cargo bench -p hal-sim --bench rtf` prints the figures.
+//! Closed-loop real-time factor (one core, 20 kHz, averaged inverter) with its split between
+//! the firmware's control step and the plant, and the analytic sweep's time.
+//! `cargo bench -p hal-sim --bench rtf` prints the figures; `RTF_SIM_S` sets the simulated
+//! seconds per timed run (default 20; e.g. 0.5 under `valgrind --tool=callgrind`).
+//!
+//! The split is measured by replay, so that each side sees exactly the inputs it sees in the
+//! closed loop: one closed-loop run records every period's sample and actuation; the
+//! firmware alone then steps a fresh controller through the recorded samples, and the plant
+//! alone advances a fresh simulation through the recorded actuations (its trajectory and
+//! energy ledger are bit-identical to the closed loop's, which the benchmark checks).
 
 use hal_sim::analytic::{logspace, optimum_load, tmd_power, DampingFormula};
 use hal_sim::plant::Structure;
 use hal_sim::scenario::Scenario;
+use regen_fw::io::{Actuation, RawSample};
+use std::hint::black_box;
 use std::time::Instant;
 
+/// Best (least disturbed) of `reps` timings of `f`, seconds: the machine is shared.
+fn best_of(reps: usize, mut f: impl FnMut() -> f64) -> f64 {
+    (0..reps).map(|_| f()).fold(f64::MAX, f64::min)
+}
+
 fn main() {
+    let sim_s: f64 = std::env::var("RTF_SIM_S")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .filter(|s: &f64| *s > 0.0)
+        .unwrap_or(20.0);
+    let reps = 3;
     let mut sc = Scenario::tmd(306.0);
     sc.record.channels.clear();
-    let sim_s = 20.0;
-    let mut best = f64::MAX;
+    let cfg = sc.config().expect("config");
+
+    // Closed loop, Sim::step as every user runs it.
     let mut sim = sc.build().expect("scenario");
-    for _ in 0..3 {
+    let steps = (sim_s / sim.period()).round();
+    let total = best_of(reps, || {
         let t = Instant::now();
         sim.run_for(sim_s);
-        best = best.min(t.elapsed().as_secs_f64());
+        t.elapsed().as_secs_f64()
+    });
+    let residual = sim.energy().relative_residual();
+
+    // One recorded closed-loop run (controller held outside the simulation).
+    let n = steps as usize;
+    let mut samples: Vec<RawSample> = Vec::with_capacity(n);
+    let mut acts: Vec<Actuation> = Vec::with_capacity(n);
+    let mut rec = sc.build().expect("scenario");
+    let mut ctl = regen_fw::Controller::new(&cfg).expect("controller");
+    ctl.set_mode(regen_fw::Mode::Run).expect("run mode");
+    for _ in 0..n {
+        let s = rec.take_sample();
+        let a = ctl.step(&s);
+        rec.apply_and_advance(&a);
+        samples.push(s);
+        acts.push(a);
     }
-    let steps = sim_s / sim.period();
+    let e_rec = rec.energy();
+
+    // Firmware alone on the recorded samples.
+    let fw = best_of(reps, || {
+        let mut ctl = regen_fw::Controller::new(&cfg).expect("controller");
+        ctl.set_mode(regen_fw::Mode::Run).expect("run mode");
+        let t = Instant::now();
+        for s in &samples {
+            black_box(ctl.step(black_box(s)));
+        }
+        t.elapsed().as_secs_f64()
+    });
+
+    // Plant alone on the recorded actuations.
+    let mut identical = true;
+    let plant = best_of(reps, || {
+        let mut p = sc.build().expect("scenario");
+        let t = Instant::now();
+        for a in &acts {
+            black_box(p.take_sample());
+            p.apply_and_advance(black_box(a));
+        }
+        let dt = t.elapsed().as_secs_f64();
+        identical &= p.energy() == e_rec;
+        dt
+    });
+
+    let ns = |s: f64| s / steps * 1e9;
     println!(
-        "closed loop (TMD, resistor law, 20 kHz, averaged inverter, one core): {:.0}x real time, {:.1} ns per PWM period; energy residual {:.1e}",
-        sim_s / best,
-        best / steps * 1e9,
-        sim.energy().relative_residual()
+        "closed loop (TMD 306 Ω, resistor law, 20 kHz, averaged inverter, one core, {sim_s} s simulated, best of {reps}):"
     );
-    // The firmware's step alone, for the split of the period's cost.
-    let mut ctl = regen_fw::Controller::new(&sc.config().unwrap()).unwrap();
-    ctl.set_mode(regen_fw::Mode::Run).unwrap();
-    let n_ctl = 2_000_000u32;
-    let t = Instant::now();
-    for k in 0..n_ctl {
-        let s = regen_fw::RawSample {
-            i_abc: [2048 + (k & 7) as u16, 2040, 2050],
-            v_bus: 2900,
-            encoder: (k / 4) as u16,
-        };
-        std::hint::black_box(ctl.step(std::hint::black_box(&s)));
-    }
     println!(
-        "firmware Controller::step alone on the host: {:.1} ns",
-        t.elapsed().as_secs_f64() / n_ctl as f64 * 1e9
+        "  total              {:7.1} ns per PWM period = {:.0}x real time (energy residual {residual:.1e})",
+        ns(total),
+        sim_s / total
     );
+    println!(
+        "  firmware step      {:7.1} ns per period (Controller::step alone on the recorded samples)",
+        ns(fw)
+    );
+    println!(
+        "  plant              {:7.1} ns per period (sensors + electrical + bus + mechanics + ledger, on the recorded actuations; replay bit-identical: {})",
+        ns(plant),
+        if identical { "yes" } else { "NO" }
+    );
+    println!(
+        "  firmware + plant   {:7.1} ns per period = {:.0}x real time; plant alone {:.0}x",
+        ns(fw + plant),
+        sim_s / (fw + plant),
+        sim_s / plant
+    );
+
     let t = Instant::now();
     let st = Structure::default();
     let mut n = 0;

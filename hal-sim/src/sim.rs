@@ -393,6 +393,25 @@ impl Sim {
         let sample = PlantIo(self).sample();
         let out = self.ctl.step(&sample);
         PlantIo(self).apply(&out);
+        self.finish_period();
+    }
+
+    /// The plant side of [`Sim::step`] without the controller, first half: the sample the
+    /// converters and the encoder take now (advances the sensor-noise generator). With
+    /// [`Sim::apply_and_advance`] it drives the plant open loop or from a controller held
+    /// outside (`take_sample`, compute, `apply_and_advance` is exactly one `step`).
+    pub fn take_sample(&mut self) -> RawSample {
+        PlantIo(self).sample()
+    }
+
+    /// Second half: `out` becomes the pending actuation (in force over the next period) and
+    /// the plant advances one period.
+    pub fn apply_and_advance(&mut self, out: &Actuation) {
+        PlantIo(self).apply(out);
+        self.finish_period();
+    }
+
+    fn finish_period(&mut self) {
         let act = self.active;
         self.advance(&act);
         self.active = self.pending;
