@@ -17,6 +17,7 @@
 pub mod analytic;
 pub mod cli;
 pub mod diagnose;
+pub mod fastmath;
 pub mod lqg;
 pub mod plant;
 pub mod scenario;
