@@ -92,9 +92,12 @@ impl SinCos {
             // Horner forms of the Taylor series, coefficients as constants so that no
             // division is left at run time.
             let (sd, cd) = if d.abs() <= Self::SHORT_STEP {
+                // Estrin's scheme: shorter dependency chains than Horner (the angle is on
+                // the period's critical path).
+                let d4 = d2 * d2;
                 (
-                    d * (1.0 + d2 * (S[0] + d2 * (S[1] + d2 * S[2]))),
-                    1.0 + d2 * (C[0] + d2 * (C[1] + d2 * (C[2] + d2 * C[3]))),
+                    d * ((1.0 + d2 * S[0]) + d4 * (S[1] + d2 * S[2])),
+                    (1.0 + d2 * C[0]) + d4 * ((C[1] + d2 * C[2]) + d4 * C[3]),
                 )
             } else {
                 (
