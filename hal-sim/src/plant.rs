@@ -281,11 +281,22 @@ impl Excitation {
     }
 
     /// Ground acceleration over the step [t, t+dt] (held constant over the step).
+    #[inline]
     pub fn next(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
         match self {
             Excitation::Sine { a0_m_s2, freq_hz } => {
                 a0_m_s2 * st.rot.at(TAU * freq_hz * (t + dt / 2.0)).0
             }
+            _ => self.next_other(st, t, dt),
+        }
+    }
+
+    /// [`Excitation::next`] for everything but the sine, out of line so that the common
+    /// period stays compact.
+    #[inline(never)]
+    fn next_other(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
+        match self {
+            Excitation::Sine { .. } => self.next(st, t, dt),
             Excitation::Triangle { a0_m_s2, freq_hz } => {
                 let ph = ((t + dt / 2.0) * freq_hz + 0.25).rem_euclid(1.0);
                 if ph < 0.5 {

@@ -522,85 +522,28 @@ impl Sim {
         // Electrical period.
         let vb0 = self.s.v_bus;
         let e_ = &mut self.energy;
-        let mut i_avg = [0.0; 2];
-        let mut p_inv = 0.0; // bus → machine, W (average)
-        let mut i2_avg = 0.0; // mean of i_α² + i_β²
+        let mut el = Elec::default();
         if act.enable {
-            let duty = |k: usize| act.duties[k].to_bits() as f64 * DUTY_LSB;
             let d: [f64; 3] = if p.dead > 0.0 {
-                let [a, b] = self.s.i_ab;
-                let i_ph = [a, -0.5 * a + SQRT3_2 * b, -0.5 * a - SQRT3_2 * b];
-                core::array::from_fn(|k| {
-                    let d = duty(k);
-                    let d = if i_ph[k] != 0.0 {
-                        d - p.dead * i_ph[k].signum()
-                    } else {
-                        d
-                    };
-                    d.clamp(0.0, 1.0)
-                })
+                dead_time_duties(act, p.dead, &self.s.i_ab)
             } else {
                 // U1F15 duties are ≥ 0; clamp the top as before.
-                core::array::from_fn(|k| duty(k).min(1.0))
+                core::array::from_fn(|k| (act.duties[k].to_bits() as f64 * DUTY_LSB).min(1.0))
             };
-            let clarke = |p: [f64; 3]| {
-                [
-                    (2.0 * p[0] - p[1] - p[2]) * (1.0 / 3.0),
-                    (p[1] - p[2]) * (1.0 / (2.0 * SQRT3_2)),
-                ]
-            };
-            let inv_r = p.inv_r;
-            let inv_ts = p.inv_ts;
-            // One constant-voltage segment of length dt (a = exp(−dt/τ), g = (1 − a)·τ/T,
-            // g2 = (1 − a²)·τ/(2T), f = dt/T): the exact solution and its integrals.
-            let mut segment =
-                |v: [f64; 2], f: f64, a: f64, g: f64, g2: f64, i_ab: &mut [f64; 2]| {
-                    for k in 0..2 {
-                        let u = (v[k] - e[k]) * inv_r;
-                        let dlt = i_ab[k] - u;
-                        i_ab[k] = u + dlt * a;
-                        let int_i = u * f + dlt * g; // ∫i dt / T
-                        i_avg[k] += int_i;
-                        i2_avg += u * u * f + 2.0 * u * dlt * g + dlt * dlt * g2;
-                        p_inv += 1.5 * v[k] * int_i;
-                    }
-                };
             if p.switched {
-                // Centre-aligned: phase k high over [T/2·(1 − d_k), T/2·(1 + d_k)].
-                let tau = p.tau;
-                let mut edges = [0.0; 8];
-                for k in 0..3 {
-                    edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
-                    edges[2 + 2 * k] = 0.5 * ts * (1.0 + d[k]);
-                }
-                edges[7] = ts;
-                edges.sort_by(|a, b| a.total_cmp(b));
-                for w in edges.windows(2) {
-                    let dt = w[1] - w[0];
-                    if dt <= 0.0 {
-                        continue;
-                    }
-                    let tm = 0.5 * (w[0] + w[1]);
-                    let ph: [f64; 3] = core::array::from_fn(|k| {
-                        if (tm - 0.5 * ts).abs() < 0.5 * ts * d[k] {
-                            vb0
-                        } else {
-                            0.0
-                        }
-                    });
-                    let a = (-dt / tau).exp();
-                    segment(
-                        clarke(ph),
-                        dt * inv_ts,
-                        a,
-                        (1.0 - a) * tau * inv_ts,
-                        (1.0 - a * a) * tau / 2.0 * inv_ts,
-                        &mut self.s.i_ab,
-                    );
-                }
+                switched_period(&mut el, &d, vb0, &e, p, ts, &mut self.s.i_ab);
             } else {
                 let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
-                segment(v, 1.0, p.decay, p.g_avg, p.g2_avg, &mut self.s.i_ab);
+                el.segment(
+                    &e,
+                    p.inv_r,
+                    v,
+                    1.0,
+                    p.decay,
+                    p.g_avg,
+                    p.g2_avg,
+                    &mut self.s.i_ab,
+                );
             }
         } else {
             // Gates off: the current collapses through the body diodes within the period
@@ -610,6 +553,11 @@ impl Sim {
             e_.dumped += p.magnetic * (a * a + b * b);
             self.s.i_ab = [0.0; 2];
         }
+        let Elec {
+            i_avg,
+            i2_avg,
+            p_inv,
+        } = el;
         e_.copper_loss += p.copper * i2_avg;
         let iq_avg = -sn * i_avg[0] + cs * i_avg[1];
         let f_e = p.force_per_iq * iq_avg; // −T/l, T = 3/2·K_e·i_q
@@ -674,13 +622,11 @@ impl Sim {
         // Friction f_d(x, ẋ) of eq. 13 at the mid-period estimate (as `Screw::friction`).
         let fd = {
             let sgn = (vm_est * p.inv_stick).clamp(-1.0, 1.0);
-            let mut ripple = 1.0;
-            if p.p3 != 0.0 {
-                ripple += p.p3 * self.rot_ripple[0].at(xm * p.inv_lead + p.p4).0;
-            }
-            if p.p5 != 0.0 {
-                ripple += p.p5 * self.rot_ripple[1].at(p.lambda2 * xm + p.p6).0;
-            }
+            let ripple = if p.p3 != 0.0 || p.p5 != 0.0 {
+                ripple(p, &mut self.rot_ripple, xm)
+            } else {
+                1.0
+            };
             p.coulomb * ripple * sgn + p.viscous * vm_est
         };
         match &self.rig.drive {
@@ -744,6 +690,132 @@ impl Sim {
 
 /// Value of the duty's least significant bit (`Duty` = U1F15).
 const DUTY_LSB: f64 = 1.0 / (1u32 << Duty::FRAC_NBITS) as f64;
+
+/// The position ripple factor of eq. 13's Coulomb term, 1 + p3·sin(x/l + p4) +
+/// p5·sin(2π/r·x + p6).
+#[inline(never)]
+fn ripple(p: &Pre, rot: &mut [SinCos; 2], x: f64) -> f64 {
+    let mut r = 1.0;
+    if p.p3 != 0.0 {
+        r += p.p3 * rot[0].at(x * p.inv_lead + p.p4).0;
+    }
+    if p.p5 != 0.0 {
+        r += p.p5 * rot[1].at(p.lambda2 * x + p.p6).0;
+    }
+    r
+}
+
+/// Amplitude-invariant Clarke transform of three phase quantities.
+#[inline(always)]
+fn clarke(p: [f64; 3]) -> [f64; 2] {
+    [
+        (2.0 * p[0] - p[1] - p[2]) * (1.0 / 3.0),
+        (p[1] - p[2]) * (1.0 / (2.0 * SQRT3_2)),
+    ]
+}
+
+/// One period's electrical sums: mean α/β currents (A), mean of i_α² + i_β² (A²), mean power
+/// from the bus into the machine (W).
+#[derive(Default)]
+struct Elec {
+    i_avg: [f64; 2],
+    i2_avg: f64,
+    p_inv: f64,
+}
+
+impl Elec {
+    /// One constant-voltage segment (αβ voltage `v` against the emf `e`) of length f·T,
+    /// with a = exp(−f·T/τ), g = (1 − a)·τ/T, g2 = (1 − a²)·τ/(2T): the exact solution of
+    /// `L di/dt = −R i + v − e` and its integrals.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn segment(
+        &mut self,
+        e: &[f64; 2],
+        inv_r: f64,
+        v: [f64; 2],
+        f: f64,
+        a: f64,
+        g: f64,
+        g2: f64,
+        i_ab: &mut [f64; 2],
+    ) {
+        for k in 0..2 {
+            let u = (v[k] - e[k]) * inv_r;
+            let dlt = i_ab[k] - u;
+            i_ab[k] = u + dlt * a;
+            let int_i = u * f + dlt * g; // ∫i dt / T
+            self.i_avg[k] += int_i;
+            self.i2_avg += u * u * f + 2.0 * u * dlt * g + dlt * dlt * g2;
+            self.p_inv += 1.5 * v[k] * int_i;
+        }
+    }
+}
+
+/// Duties with the dead time: a phase whose current flows out of the leg (i > 0) loses
+/// `dead` (fraction of the period) of high time, one whose current flows in gains it.
+/// Out of line (like the other options' code) so that the common period stays compact.
+#[inline(never)]
+fn dead_time_duties(act: &Actuation, dead: f64, i_ab: &[f64; 2]) -> [f64; 3] {
+    let [a, b] = *i_ab;
+    let i_ph = [a, -0.5 * a + SQRT3_2 * b, -0.5 * a - SQRT3_2 * b];
+    core::array::from_fn(|k| {
+        let d = act.duties[k].to_bits() as f64 * DUTY_LSB;
+        let d = if i_ph[k] != 0.0 {
+            d - dead * i_ph[k].signum()
+        } else {
+            d
+        };
+        d.clamp(0.0, 1.0)
+    })
+}
+
+/// The switched inverter: the centre-aligned pattern (phase k high over
+/// [T/2·(1 − d_k), T/2·(1 + d_k)]) resolved into its constant-voltage segments.
+#[inline(never)]
+fn switched_period(
+    el: &mut Elec,
+    d: &[f64; 3],
+    vb0: f64,
+    e: &[f64; 2],
+    p: &Pre,
+    ts: f64,
+    i_ab: &mut [f64; 2],
+) {
+    let tau = p.tau;
+    let mut edges = [0.0; 8];
+    for k in 0..3 {
+        edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
+        edges[2 + 2 * k] = 0.5 * ts * (1.0 + d[k]);
+    }
+    edges[7] = ts;
+    edges.sort_by(|a, b| a.total_cmp(b));
+    for w in edges.windows(2) {
+        let dt = w[1] - w[0];
+        if dt <= 0.0 {
+            continue;
+        }
+        let tm = 0.5 * (w[0] + w[1]);
+        let ph: [f64; 3] = core::array::from_fn(|k| {
+            if (tm - 0.5 * ts).abs() < 0.5 * ts * d[k] {
+                vb0
+            } else {
+                0.0
+            }
+        });
+        let a = (-dt / tau).exp();
+        el.segment(
+            e,
+            p.inv_r,
+            clarke(ph),
+            dt * p.inv_ts,
+            a,
+            (1.0 - a) * tau * p.inv_ts,
+            (1.0 - a * a) * tau / 2.0 * p.inv_ts,
+            i_ab,
+        );
+    }
+}
 
 /// The bus's per-period constants with the brake open ([0]) or closed ([1]).
 #[derive(Clone, Copy, Debug, Default)]
