@@ -79,7 +79,7 @@ impl SinCos {
     const REUSE: f64 = 1e-8;
 
     /// (sin θ, cos θ).
-    #[inline(always)]
+    #[inline]
     pub fn at(&mut self, arg: f64) -> (f64, f64) {
         let d = arg - self.arg;
         let e = d - self.step;
