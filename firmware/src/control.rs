@@ -202,9 +202,9 @@ impl Controller {
                     .copied()
                     .filter(|g| later & (1 << g.code()) != 0),
             ) {
-                if let Some(why) =
-                    self.prot
-                        .cause_present(g, &self.cfg, &tel, self.enc.implausible)
+                if let Some(why) = self
+                    .prot
+                    .cause_present(g, &self.cfg, &tel, self.enc.implausible)
                 {
                     return Err(why);
                 }
@@ -469,8 +469,7 @@ fn amps_of_code(g: &Gains, code: u16) -> Q {
 
 /// Bus voltage of an ADC code, V (telemetry and fault snapshots).
 fn volts_of_code(g: &Gains, code: u16) -> Q {
-    g.volts_per_count
-        .scale(Q::from_bits((code as i32) << 16))
+    g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
 /// The law's reference limited to i_max (zero unless running) and the feed-forward: back-emf

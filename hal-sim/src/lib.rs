@@ -18,6 +18,7 @@ pub mod analytic;
 pub mod cli;
 pub mod diagnose;
 pub mod drive;
+pub mod fastmath;
 pub mod faults;
 pub mod lqg;
 pub mod plant;

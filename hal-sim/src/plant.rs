@@ -5,6 +5,7 @@
 //! Every part is a plain parameter struct (serde, so scenario files can name every field) plus
 //! the few pure functions the simulation step needs. Units are SI throughout.
 
+use crate::fastmath::{Gauss, SinCos};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{PI, TAU};
 
@@ -129,6 +130,23 @@ pub enum Motion {
 }
 
 impl Motion {
+    /// [`Motion::at`] for a caller stepping through time: a sine's sin/cos is rotated from
+    /// the previous call's (`rot`, one per sequence of times; see [`SinCos`]).
+    #[inline]
+    pub fn at_tracked(&self, rot: &mut SinCos, t: f64) -> (f64, f64, f64) {
+        match self {
+            Motion::Sine {
+                amplitude_m: a,
+                freq_hz: f,
+            } => {
+                let w = TAU * f;
+                let (s, c) = rot.at(w * t);
+                (a * s, a * w * c, -a * w * w * s)
+            }
+            _ => self.at(t),
+        }
+    }
+
     /// (x, ẋ, ẍ) at time t.
     pub fn at(&self, t: f64) -> (f64, f64, f64) {
         match self {
@@ -236,12 +254,18 @@ pub fn read_series_csv(path: &std::path::Path) -> Result<(Vec<f64>, Vec<f64>), S
     Ok((t, v))
 }
 
-/// State of a noise excitation (filter and generator).
+/// State of an excitation: noise filter and generator, the sine's incremental sin/cos, the
+/// recorded series' cursor.
 #[derive(Clone, Debug, Default)]
 pub struct ExcitationState {
     rng: u64,
     xg: f64,
     vg: f64,
+    gauss: Gauss,
+    rot: SinCos,
+    /// (dt, √(π·s0/dt)) of the last Kanai–Tajimi step.
+    kt_scale: (f64, f64),
+    cursor: usize,
 }
 
 impl Excitation {
@@ -252,17 +276,27 @@ impl Excitation {
         };
         ExcitationState {
             rng: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1,
-            xg: 0.0,
-            vg: 0.0,
+            ..Default::default()
         }
     }
 
     /// Ground acceleration over the step [t, t+dt] (held constant over the step).
+    #[inline]
     pub fn next(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
         match self {
             Excitation::Sine { a0_m_s2, freq_hz } => {
-                a0_m_s2 * (TAU * freq_hz * (t + dt / 2.0)).sin()
+                a0_m_s2 * st.rot.at(TAU * freq_hz * (t + dt / 2.0)).0
             }
+            _ => self.next_other(st, t, dt),
+        }
+    }
+
+    /// [`Excitation::next`] for everything but the sine, out of line so that the common
+    /// period stays compact.
+    #[inline(never)]
+    fn next_other(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
+        match self {
+            Excitation::Sine { .. } => self.next(st, t, dt),
             Excitation::Triangle { a0_m_s2, freq_hz } => {
                 let ph = ((t + dt / 2.0) * freq_hz + 0.25).rem_euclid(1.0);
                 if ph < 0.5 {
@@ -279,7 +313,10 @@ impl Excitation {
             } => {
                 // White noise w of two-sided density s0/2 per rad/s held over dt: variance
                 // π·s0/dt. Filter: ẍg + 2ζω ẋg + ω² xg = −w; a = −(2ζω ẋg + ω² xg).
-                let g = gauss(&mut st.rng) * (PI * s0 / dt).sqrt();
+                if st.kt_scale.0 != dt {
+                    st.kt_scale = (dt, (PI * s0 / dt).sqrt());
+                }
+                let g = st.gauss.sample(&mut st.rng) * st.kt_scale.1;
                 let acc = -g - 2.0 * zeta_g * omega_g * st.vg - omega_g * omega_g * st.xg;
                 st.vg += acc * dt;
                 st.xg += st.vg * dt;
@@ -293,27 +330,24 @@ impl Excitation {
                 if n < 2 || tm < t_s[0] || tm > t_s[n - 1] {
                     return 0.0;
                 }
-                let k = t_s[..n]
-                    .partition_point(|p| *p <= tm)
-                    .saturating_sub(1)
-                    .min(n - 2);
+                // Runs step forward: try the last segment and the next before searching.
+                let c = st.cursor.min(n - 2);
+                let k = if t_s[c] <= tm && tm < t_s[c + 1] {
+                    c
+                } else if c + 2 < n && t_s[c + 1] <= tm && tm < t_s[c + 2] {
+                    c + 1
+                } else {
+                    t_s[..n]
+                        .partition_point(|p| *p <= tm)
+                        .saturating_sub(1)
+                        .min(n - 2)
+                };
+                st.cursor = k;
                 let f = (tm - t_s[k]) / (t_s[k + 1] - t_s[k]);
                 a_m_s2[k] + f * (a_m_s2[k + 1] - a_m_s2[k])
             }
         }
     }
-}
-
-/// A standard normal deviate (xorshift64* + Box–Muller).
-fn gauss(s: &mut u64) -> f64 {
-    let mut u = || {
-        *s ^= *s >> 12;
-        *s ^= *s << 25;
-        *s ^= *s >> 27;
-        ((s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    };
-    let (a, b) = (u(), u());
-    (-2.0 * a.ln()).sqrt() * (TAU * b).cos()
 }
 
 /// A single-degree-of-freedom structure (or TMD) with the device between mass and base:
@@ -436,9 +470,10 @@ impl Default for Sensors {
 }
 
 impl Sensors {
-    /// A normal deviate from the sensors' generator.
+    /// A normal deviate from the sensors' generator (xorshift64* state, ziggurat; see
+    /// [`crate::fastmath::Gauss`]).
     pub fn noise(state: &mut u64) -> f64 {
-        gauss(state)
+        Gauss::default().sample(state)
     }
 }
 
