@@ -469,6 +469,16 @@ mod tests {
             assert_eq!(*ctl.config(), before, "{bad}");
             assert_eq!(ctl.mode(), Mode::Idle);
         }
+        // Number text (numtext): the reason is in the reply; a value set reads back as typed.
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 1e99");
+        assert_eq!(s, "error: '1e99' is out of the f32 range\r\n");
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm nan");
+        assert_eq!(s, "error: 'nan' is not a number\r\n");
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 2.5e-3");
+        assert_eq!(s, "ok r_load_ohm = 0.0025 ohm\r\n");
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm inf");
+        assert_eq!(s, "ok r_load_ohm = inf ohm\r\n");
+        assert!(run(&mut con, &mut ctl, "set r_load_ohm 100").0.is_ok());
         assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
         let (r, _) = run(&mut con, &mut ctl, "set pwm_hz 10000");
         assert!(r.is_err());
@@ -513,6 +523,8 @@ mod tests {
         // 200 periods at 20 kHz = 10 ms at 1 kHz → 10 lines of 3 fields.
         assert_eq!(out.lines().count(), 10);
         assert!(out.lines().all(|l| l.split(',').count() == 3));
+        // First line at period 20 (1 kHz of 20 kHz): t = 20/20,000 s, six decimals.
+        assert!(out.starts_with("0.001000,"), "{out}");
     }
 
     #[test]

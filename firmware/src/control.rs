@@ -548,7 +548,8 @@ mod tests {
     fn extreme_config() -> impl Strategy<Value = Config> {
         (
             prop::sample::select(vec![1e-5f32, 0.0122, 0.5, 1.0]),
-            prop::sample::select(vec![1e-4f32, 0.0293, 1.0]),
+            // Smallest bus scale whose full scale (2 V) still admits the protection thresholds.
+            prop::sample::select(vec![5e-4f32, 0.0293, 1.0]),
             prop::sample::select(vec![1e-6f32, 6e-3, 1.0]),
             prop::sample::select(vec![1e-4f32, 0.943, 20.0]),
             prop::sample::select(vec![1u8, 5, 50]),
@@ -563,6 +564,9 @@ mod tests {
             .prop_map(
                 |(apc, vpc, l, ke, pp, cpr, pwm, m, imax, rl, law, (fe, fd, dc))| {
                     let d = Config::default();
+                    // Bus thresholds inside the ADC's full scale, in the order validation
+                    // requires (brake, then derate, then the over-voltage trip).
+                    let ov = (0.98 * vpc * 4095.0).min(2_000.0);
                     Config {
                         amps_per_count: apc,
                         volts_per_count: vpc,
@@ -576,10 +580,14 @@ mod tests {
                         m_max: m,
                         i_max_a: imax,
                         i_trip_a: 2_000.0,
-                        v_bus_ov: 2_000.0,
+                        v_bus_ov: ov,
                         v_bus_uv: 0.0,
-                        brake_on_v: 1_900.0,
-                        brake_off_v: 1_800.0,
+                        brake_on_v: 0.9 * ov,
+                        brake_off_v: 0.85 * ov,
+                        derate_start_v: 0.92 * ov,
+                        derate_end_v: 0.96 * ov,
+                        // Current-sum check above quantisation (validation: ≥ 4 counts).
+                        i_sum_tol_a: d.i_sum_tol_a.max(8.0 * apc),
                         // Infinite R_L: refused by the impedance law; the tracking law's
                         // constructor does not terminate on it (a separate defect, reported).
                         r_load_ohm: if matches!(law, LawKind::Impedance | LawKind::Tracking)

@@ -55,6 +55,7 @@ const POW10: [f64; 23] = [
 
 /// `x·10^n` by multiplications or divisions by exact powers of ten: one correctly rounded
 /// operation for |n| ≤ 22, at most ⌈|n|/22⌉ for larger |n| (the callers keep |n| ≤ 66).
+#[inline(never)] // one copy for the parser and both formatters (flash)
 fn scale(mut x: f64, n: i32) -> f64 {
     let mut m = n.unsigned_abs();
     while m > 0 {
@@ -201,6 +202,7 @@ impl Buf {
         }
     }
     /// The decimal digits of `v`, `width` of them at least (zero padded).
+    #[inline(never)]
     fn push_u64(&mut self, mut v: u64, width: usize) {
         let mut d = [0u8; 20];
         let mut n = 0;
@@ -256,16 +258,8 @@ fn shortest(x: f32) -> (u64, i32) {
         }
         s = scale(xd, 8 - k);
     }
-    let digits = |p: i32| -> (u64, i32) {
-        let mut d = round_u64(s / POW10[(9 - p) as usize]);
-        let mut e = k - p + 1;
-        if d >= POW10[p as usize] as u64 {
-            d /= 10; // 9.99… rounded up to 10.0…
-            e += 1;
-        }
-        (d, e)
-    };
     let good = |(d, e): (u64, i32)| decimal_to_f32(d, e) == Ok(x);
+    let digits = |p: i32| digits_p(s, k, p);
     // Fewest digits that round-trip: 9 always do for an f32 (half a unit of the 9th digit is
     // ≤ 5·10⁻⁹ relative, half an f32 ulp ≥ 2.98·10⁻⁸); a binary search over 1 … 8, each
     // candidate checked by converting it back.
@@ -281,6 +275,19 @@ fn shortest(x: f32) -> (u64, i32) {
     let (mut d, mut e) = digits(hi);
     while d.is_multiple_of(10) && d != 0 {
         d /= 10;
+        e += 1;
+    }
+    (d, e)
+}
+
+/// `s` (in [10^8 − 0.5, 10^9 − 0.5), the value times 10^(8−k)) rounded to `p` digits, as
+/// `d·10^e`.
+#[inline(never)]
+fn digits_p(s: f64, k: i32, p: i32) -> (u64, i32) {
+    let mut d = round_u64(s / POW10[(9 - p) as usize]);
+    let mut e = k - p + 1;
+    if d >= POW10[p as usize] as u64 {
+        d /= 10; // 9.99… rounded up to 10.0…
         e += 1;
     }
     (d, e)
