@@ -270,10 +270,10 @@ impl Console {
                 write_warnings(out, p.warnings);
                 let _ = write!(
                     out,
-                    " i2t={:.4} force_filt={:.0}N derate={:.3}\r\n",
-                    p.i2t(),
-                    p.force_n(),
-                    p.derate.to_num::<f32>()
+                    " i2t={} force_filt={}N derate={}\r\n",
+                    Fixed(p.i2t(), 4),
+                    Fixed(p.force_n(), 0),
+                    Fixed(p.derate.to_num::<f32>(), 3)
                 );
                 match ctl.fault() {
                     Some(f) => {
@@ -289,20 +289,20 @@ impl Console {
                             let s = &r.snap;
                             let _ = write!(
                                 out,
-                                "at t={} ms in mode {}: ia={:.3} ib={:.3} ic={:.3} A id={:.3} iq={:.3} A vbus={:.2} V w={:.2} rad/s x={:.4} m force={:.0} N i2t={:.4} derate={:.3}\r\n",
+                                "at t={} ms in mode {}: ia={} ib={} ic={} A id={} iq={} A vbus={} V w={} rad/s x={} m force={} N i2t={} derate={}\r\n",
                                 s.t_ms,
                                 s.mode.name(),
-                                s.i_abc[0].to_num::<f32>(),
-                                s.i_abc[1].to_num::<f32>(),
-                                s.i_abc[2].to_num::<f32>(),
-                                s.i_dq.d.to_num::<f32>(),
-                                s.i_dq.q.to_num::<f32>(),
-                                s.v_bus.to_num::<f32>(),
-                                s.omega_m.to_num::<f32>(),
-                                s.x.to_num::<f32>(),
-                                s.force_n,
-                                s.i2t,
-                                s.derate
+                                Fixed(s.i_abc[0].to_num::<f32>(), 3),
+                                Fixed(s.i_abc[1].to_num::<f32>(), 3),
+                                Fixed(s.i_abc[2].to_num::<f32>(), 3),
+                                Fixed(s.i_dq.d.to_num::<f32>(), 3),
+                                Fixed(s.i_dq.q.to_num::<f32>(), 3),
+                                Fixed(s.v_bus.to_num::<f32>(), 2),
+                                Fixed(s.omega_m.to_num::<f32>(), 2),
+                                Fixed(s.x.to_num::<f32>(), 4),
+                                Fixed(s.force_n, 0),
+                                Fixed(s.i2t, 4),
+                                Fixed(s.derate, 3)
                             );
                             for g in r.later() {
                                 let _ = write!(
