@@ -25,6 +25,13 @@ use crate::params::{self, PARAMS};
 pub trait ParamStore {
     fn save(&mut self, cfg: &Config) -> Result<(), &'static str>;
     fn load(&mut self) -> Result<Config, &'static str>;
+    /// What `defaults` restores: the factory configuration of this hardware. On the board
+    /// that is [`Config::default`] (its scalings are the board's); a simulated drive returns
+    /// its scenario's configuration, so that `defaults` never puts a board's ADC scalings on
+    /// other hardware (a wrong bus scaling makes the loop over-drive and motor the machine).
+    fn factory(&self) -> Config {
+        Config::default()
+    }
 }
 
 /// A store that refuses everything (no flash).
@@ -237,7 +244,7 @@ impl Console {
                         Err(e) => fail!("load failed: {}", e),
                     }
                 } else {
-                    Config::default()
+                    store.factory()
                 };
                 match ctl.set_config(&c) {
                     Ok(()) => ok!(" {}", cmd),

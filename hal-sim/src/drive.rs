@@ -22,18 +22,38 @@
 
 use crate::sim::Sim;
 use crate::Scenario;
-use regen_fw::console::{CmdResult, Console, Refused};
+use regen_fw::config::Config;
+use regen_fw::console::{CmdResult, Console, ParamStore, Refused};
 use regen_fw::store::{FlashStore, SimFlash};
 use std::fmt::Write;
 
 /// Words per flash sector: a 2 KiB page of the STM32G474.
 pub const SECTOR_WORDS: usize = 512;
 
+/// The simulated drive's store: the firmware's flash store on a simulated flash, whose
+/// factory configuration (`defaults`) is the scenario's, i.e. this simulated hardware's.
+struct SimStore {
+    flash: FlashStore<SimFlash<SECTOR_WORDS>>,
+    factory: Config,
+}
+
+impl ParamStore for SimStore {
+    fn save(&mut self, cfg: &Config) -> Result<(), &'static str> {
+        self.flash.save(cfg)
+    }
+    fn load(&mut self) -> Result<Config, &'static str> {
+        self.flash.load()
+    }
+    fn factory(&self) -> Config {
+        self.factory
+    }
+}
+
 /// The simulated drive.
 pub struct SimDrive {
     sim: Sim,
     console: Console,
-    store: FlashStore<SimFlash<SECTOR_WORDS>>,
+    store: SimStore,
     /// Plant energy into the inverter at the last `sim` command (for its interval average).
     mark: (f64, f64),
 }
@@ -41,10 +61,14 @@ pub struct SimDrive {
 impl SimDrive {
     /// Wrap a built simulation (its controller keeps its mode: `Sim::new` starts in `run`).
     pub fn new(sim: Sim) -> SimDrive {
+        let factory = *sim.controller().config();
         SimDrive {
             sim,
             console: Console::new(),
-            store: FlashStore(SimFlash::default()),
+            store: SimStore {
+                flash: FlashStore(SimFlash::default()),
+                factory,
+            },
             mark: (0.0, 0.0),
         }
     }
@@ -120,5 +144,32 @@ impl SimDrive {
             e.to_inverter,
             e.relative_residual()
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `defaults` restores the scenario's configuration (this hardware's scalings), not the
+    /// board's `Config::default()`: with the board's bus scaling on the scenario's bus the
+    /// loop would misread the bus voltage and motor the machine.
+    #[test]
+    fn defaults_restore_the_scenarios_hardware() {
+        let sc = Scenario::tmd(306.0);
+        let mut d = SimDrive::from_scenario(&sc).unwrap();
+        let factory = *d.sim().controller().config();
+        assert_ne!(
+            factory.volts_per_count,
+            Config::default().volts_per_count,
+            "the test needs a scenario whose bus scaling differs from the board's"
+        );
+        let mut out = String::new();
+        for line in ["mode idle", "set r_load_ohm 100", "defaults"] {
+            out.clear();
+            d.execute(line, &mut out)
+                .unwrap_or_else(|_| panic!("{line}: {out}"));
+        }
+        assert_eq!(*d.sim().controller().config(), factory);
     }
 }
