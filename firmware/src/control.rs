@@ -588,11 +588,8 @@ mod tests {
                         derate_end_v: 0.96 * ov,
                         // Current-sum check above quantisation (validation: ≥ 4 counts).
                         i_sum_tol_a: d.i_sum_tol_a.max(8.0 * apc),
-                        // Infinite R_L: refused by the impedance law; the tracking law's
-                        // constructor does not terminate on it (a separate defect, reported).
-                        r_load_ohm: if matches!(law, LawKind::Impedance | LawKind::Tracking)
-                            && !rl.is_finite()
-                        {
+                        // Infinite R_L: refused by the impedance law.
+                        r_load_ohm: if matches!(law, LawKind::Impedance) && !rl.is_finite() {
                             1.0
                         } else {
                             rl

@@ -74,6 +74,11 @@ fn log2_f32(x: f32) -> f32 {
     if x.is_nan() || x <= 0.0 {
         return -30.0;
     }
+    if x == f32::INFINITY {
+        // Open circuit (R_L = ∞ is a valid load): the top of the f32 range (log2 f32::MAX ≈ 128); the
+        // halving loop below would never end on it.
+        return 128.0;
+    }
     let mut y = 0.0f32;
     let mut m = x;
     while m >= 2.0 {
@@ -250,6 +255,17 @@ mod tests {
         for x in [0.3f32, 1.0, 2.41, 10.0, 306.0, 1000.0, 9999.0] {
             assert!((log2_f32(x) - x.log2()).abs() < 2e-6, "{x}");
         }
+        // Open circuit ends (it used to loop for ever) and sits at the top of the range.
+        assert!(log2_f32(f32::INFINITY) >= log2_f32(f32::MAX));
+        let open = Tracking::new(&TrackingParams {
+            r_start: f32::INFINITY,
+            ..params()
+        });
+        assert!(
+            (open.r_hat() - params().r_max).abs() < 0.01 * params().r_max,
+            "{}",
+            open.r_hat()
+        );
         let mut t = Tracking::new(&TrackingParams {
             dither: 0.0,
             r_start: 306.0,
