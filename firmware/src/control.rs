@@ -384,13 +384,14 @@ impl Controller {
                 // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
                 // loop) corrects what the hold leaves. The bus trips above still compare every
                 // sample. Other laws keep their own rates and run every period.
-                // The three groups of slow terms are refreshed on different periods of the
-                // SLOW_DIV cycle (law on tick 0, feed-forward on tick 1, bus on tick 2) so that
-                // no single period pays for more than one group; a refresh request
-                // (`REFRESH_ALL`: configuration, mode or law changed) and the laws other than
-                // the resistor refresh all three at once. The feed-forward's cross-coupling
-                // term then uses a reference one period old (50 µs at 20 kHz), well inside the
-                // hold of SLOW_DIV periods argued above.
+                // The four groups of slow terms are refreshed on different periods of the
+                // SLOW_DIV cycle (back-emf on tick 3, law on tick 0, feed-forward on tick 1,
+                // bus on tick 2) so that no single period pays for more than one group; a
+                // refresh request (`REFRESH_ALL`: configuration, mode or law changed) and the
+                // laws other than the resistor refresh all of them at once. The law then uses
+                // a back-emf one period old, and the feed-forward's cross-coupling a reference
+                // one period old (50 µs at 20 kHz): well inside the hold of SLOW_DIV periods
+                // argued above, and the PI corrects the difference as it corrects the hold.
                 let resistor = matches!(self.law, Law::Resistor(_));
                 let t = if resistor {
                     self.slow_tick
@@ -399,19 +400,21 @@ impl Controller {
                 };
                 // Bus: 4095·vpc < 30,000 V.
                 let vb12 = vb.min(CODE_MAX) as i32;
+                if t == SLOW_DIV - 1 || t == REFRESH_ALL {
+                    self.held.e_q = k.ke_per_vel.scale(vel);
+                }
                 if t == 0 || t == REFRESH_ALL {
                     let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    let (i_ref, e_q) = law_terms(
+                    self.held.i_ref = law_terms(
                         &mut self.law,
                         self.mode == Mode::Run,
                         &self.enc,
                         g,
+                        self.held.e_q,
                         i_dq,
                         v_bus,
                         self.prot.derate,
                     );
-                    self.held.i_ref = i_ref;
-                    self.held.e_q = e_q;
                 }
                 if t == 1 || t == REFRESH_ALL {
                     self.held.ff = feed_forward(g, vel, self.held.i_ref, self.held.e_q);
@@ -467,8 +470,8 @@ impl Controller {
     }
 }
 
-/// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 3: the
-/// three groups take ticks 0, 1 and 2).
+/// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 4: the
+/// four groups take ticks 3, 0, 1 and 2).
 const SLOW_DIV: u8 = 4;
 /// `slow_tick` value that refreshes every slow term at the next step.
 const REFRESH_ALL: u8 = SLOW_DIV;
@@ -477,7 +480,7 @@ const REFRESH_ALL: u8 = SLOW_DIV;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct HeldTerms {
     i_ref: Dq,
-    /// Back-emf `K_e·ω_e` at the last law refresh (the feed-forward's q term).
+    /// Back-emf `K_e·ω_e` (refreshed on tick 3; the law's input and the feed-forward's q term).
     e_q: Q,
     ff: Dq,
     v_max: Q,
@@ -495,8 +498,7 @@ fn volts_of_code(g: &Gains, code: u16) -> Q {
     g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
-/// The law's reference limited to i_max (zero unless running) and the back-emf `e_q` it was
-/// computed from.
+/// The law's reference limited to i_max (zero unless running), from the back-emf `e_q`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn law_terms(
@@ -504,13 +506,12 @@ fn law_terms(
     run: bool,
     enc: &Encoder,
     g: &Gains,
+    e_q: Q,
     i_dq: Dq,
     v_bus: Q,
     derate: Q,
-) -> (Dq, Q) {
-    let vel = enc.vel;
-    let e_q = g.k.ke_per_vel.scale(vel);
-    let i_ref = if run {
+) -> Dq {
+    if run {
         let r = match law {
             Law::Resistor(r) => Dq {
                 d: Q::ZERO,
@@ -523,8 +524,7 @@ fn law_terms(
         derate_regen(r, e_q, derate)
     } else {
         Dq::default()
-    };
-    (i_ref, e_q)
+    }
 }
 
 /// The feed-forward: back-emf on q, cross-coupling ∓ω_e·L·i (speed estimate `vel`).
