@@ -447,7 +447,11 @@ impl Controller {
                 let adv = ((vel.to_bits() as i64 * k.adv_per_vel as i64) >> 12) as u32;
                 let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
                 // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
-                let v_ab = inverse_park_bounded(out.v, s2, c2);
+                // `black_box` is a value barrier only (no effect on the result): without it
+                // the optimiser carries the limiter's 64-bit products through the branch and
+                // performs the inverse Park with full 64×64-bit multiplies (measured: more
+                // instructions on every path).
+                let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
                 let duties = modulate_limited(v_ab, inv_vbus);
                 (i_ref, out.v, duties, true, out.saturated)
             }
