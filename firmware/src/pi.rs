@@ -97,17 +97,18 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
 /// limited magnitude is within 1.3e-4 of `r` (the test below allows 2e-4).
 #[inline(always)]
 fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
-    // The OR of the magnitudes has the larger one's top bit; `| 1` keeps clz ≤ 31.
-    let m = d.unsigned_abs() | q.unsigned_abs() | 1;
-    // |d|, |q| < 2^(32−lz), so `x << (lz − 1)` < 2^31 in magnitude (fits, nothing is lost);
-    // lz = 0 only for a component of −2^31, then sh = 0 and `x >> 16` ∈ [−2^15, 2^15).
-    let sh = m.leading_zeros().saturating_sub(1); // 0 ..= 30
+    // `x ^ (x >> 31)` is x for x ≥ 0 and |x| − 1 for x < 0 (one instruction), < 2^31; their OR
+    // has the top bit of the larger, and `| 1` keeps it non-zero: 1 ≤ lz ≤ 31. Then x ≥ 0 has
+    // x < 2^(32−lz), and x < 0 has |x| ≤ 2^(32−lz), so `x << (lz − 1)` lies in [−2^31, 2^31)
+    // (fits, nothing is lost), and the larger component lands in [2^30, 2^31) or at −2^31.
+    let m = ((d ^ (d >> 31)) | (q ^ (q >> 31)) | 1) as u32;
+    let sh = m.leading_zeros() - 1; // 0 ..= 30
     let (ds, qs) = ((d << sh) >> 16, (q << sh) >> 16); // |.| ≤ 2^15, the larger ≥ 2^14
     let n = (ds * ds) as u32 + (qs * qs) as u32; // [2^28, 2^31]
     let mag = sqrt_norm(n).max(1); // ≥ 2^14 already: the max only proves it non-zero
     // |v| ≈ mag·2^(16−sh), so r/|v| in Q.30 is r·2^(sh+14)/mag, by two 32-bit divisions (no
-    // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·m <
-    // √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
+    // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
+    // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
     // 1.3e-4), the remainder (< mag < 2^16) times 2^14 fits too.
     let num = (r.max(0) as u32) << sh;
     let q1 = num / mag;
@@ -306,6 +307,41 @@ mod tests {
             let mut pi = CurrentPi::default();
             for _ in 0..3 {
                 let _ = pi.update(Dq { d: Q::from_bits(ed), q: Q::from_bits(eq) }, Dq { d: Q::MAX, q: Q::MIN }, &g, Q::from_bits(vm));
+            }
+        }
+    }
+
+    #[test]
+    fn limit_at_the_normalisation_edges() {
+        // Powers of two (negative ones are where `x ^ (x >> 31)` is |x| − 1 and the shift is
+        // one larger), their neighbours, −2^31 and zero, in every pairing, against radii from
+        // 1 LSB to 30,000 V: magnitude r within the limiter's 1.3e-4 (+ rounding; the bound
+        // of `limit_keeps_direction_and_radius`), same direction, never longer than the input.
+        let mut xs = std::vec![0i32, 1, -1, i32::MIN, i32::MAX, i32::MIN + 1];
+        for k in 0..31 {
+            let p = 1i32 << k;
+            xs.extend([p, -p, p - 1, -(p - 1), p + 1, -(p + 1)]);
+        }
+        for &d in &xs {
+            for &qq in &xs {
+                for r in [1i32, 3, 1 << 10, 1 << 16, 12_345_678, 30_000 << 16] {
+                    let v = Dq { d: Q::from_bits(d), q: Q::from_bits(qq) };
+                    let (fd, fq) = (d as f64, qq as f64);
+                    let vm = (fd * fd + fq * fq).sqrt();
+                    match limit_vector(v, Q::from_bits(r)) {
+                        None => assert!(vm <= r as f64 + 0.5, "{d} {qq} {r}"),
+                        Some(l) => {
+                            let (ld, lq) = (l.d.to_bits() as f64, l.q.to_bits() as f64);
+                            let m = (ld * ld + lq * lq).sqrt();
+                            let rf = r as f64;
+                            assert!(m <= rf * (1.0 + 2e-4) + 7.0, "{d} {qq} {r}: {m}");
+                            assert!(m >= rf * (1.0 - 2e-4) - 7.0, "{d} {qq} {r}: {m}");
+                            assert!(m <= vm + 1.0, "{d} {qq} {r}: longer");
+                            assert!((fd * lq - fq * ld).abs() <= vm * (m * 2e-4 + 7.0));
+                            assert!(fd * ld + fq * lq >= 0.0);
+                        }
+                    }
+                }
             }
         }
     }
