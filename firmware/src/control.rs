@@ -519,7 +519,9 @@ fn law_terms(
         let r = match law {
             Law::Resistor(r) => Dq {
                 d: Q::ZERO,
-                q: clamp_sym(r.conductance.scale(e_q).saturating_neg(), g.i_max),
+                // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
+                // 2^31 LSB, so the negation after the clamp needs no saturation.
+                q: -clamp_sym(r.conductance.scale(e_q), g.i_max),
             },
             law => other_law(law, enc, g, e_q, i_dq, v_bus),
         };
@@ -540,7 +542,10 @@ fn feed_forward(g: &Gains, vel: Q, i_ref: Dq, e_q: Q) -> Dq {
     };
     if g.ff_decouple {
         let wl = g.k.wl_per_vel.scale(vel);
-        ff.d = mul(wl, i_ref.q).saturating_neg();
+        // |i_ref.q| ≤ i_max·(1 + 2^-12) (limited by the law terms, then derated by a factor
+        // in [0, 1] that only protect.rs sets): its negation fits. (The product's floor then
+        // rounds the other way: 1 LSB, 15 µV.)
+        ff.d = mul(wl, -i_ref.q);
         if i_ref.d != Q::ZERO {
             ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
         }
