@@ -106,10 +106,10 @@ fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
     let (ds, qs) = ((d << sh) >> 16, (q << sh) >> 16); // |.| ≤ 2^15, the larger ≥ 2^14
     let n = (ds * ds) as u32 + (qs * qs) as u32; // [2^28, 2^31]
     let mag = sqrt_norm(n).max(1); // ≥ 2^14 already: the max only proves it non-zero
-    // |v| ≈ mag·2^(16−sh), so r/|v| in Q.30 is r·2^(sh+14)/mag, by two 32-bit divisions (no
-    // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
-    // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
-    // 1.3e-4), the remainder (< mag < 2^16) times 2^14 fits too.
+                                   // |v| ≈ mag·2^(16−sh), so r/|v| in Q.30 is r·2^(sh+14)/mag, by two 32-bit divisions (no
+                                   // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
+                                   // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
+                                   // 1.3e-4), the remainder (< mag < 2^16) times 2^14 fits too.
     let num = (r.max(0) as u32) << sh;
     let q1 = num / mag;
     let q2 = ((num % mag) << 14) / mag;
@@ -325,7 +325,10 @@ mod tests {
         for &d in &xs {
             for &qq in &xs {
                 for r in [1i32, 3, 1 << 10, 1 << 16, 12_345_678, 30_000 << 16] {
-                    let v = Dq { d: Q::from_bits(d), q: Q::from_bits(qq) };
+                    let v = Dq {
+                        d: Q::from_bits(d),
+                        q: Q::from_bits(qq),
+                    };
                     let (fd, fq) = (d as f64, qq as f64);
                     let vm = (fd * fd + fq * fq).sqrt();
                     match limit_vector(v, Q::from_bits(r)) {
