@@ -91,7 +91,7 @@ pub struct Controller {
     pi: CurrentPi,
     brake: bool,
     rec: StepRecord,
-    /// Slow terms and the period count to their next refresh (0 = refresh now).
+    /// Slow terms and the tick of their refresh cycle (`REFRESH_ALL` = all at the next step).
     held: HeldTerms,
     slow_tick: u8,
     /// Protection state (protect.rs): derate factor, supervision, fault record.
@@ -125,7 +125,7 @@ impl Controller {
                 v_saturated: false,
             },
             held: HeldTerms::default(),
-            slow_tick: 0,
+            slow_tick: REFRESH_ALL,
             prot: Protection::default(),
         })
     }
@@ -139,7 +139,7 @@ impl Controller {
         }
         self.cfg = *cfg;
         self.g = g;
-        self.slow_tick = 0;
+        self.slow_tick = REFRESH_ALL;
         Ok(())
     }
 
@@ -175,7 +175,7 @@ impl Controller {
         }
         if m != self.mode {
             self.pi.reset();
-            self.slow_tick = 0;
+            self.slow_tick = REFRESH_ALL;
         }
         self.mode = m;
         Ok(())
@@ -268,7 +268,7 @@ impl Controller {
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
-        self.slow_tick = 0; // the law may change: refresh its terms at the next step
+        self.slow_tick = REFRESH_ALL; // the law may change: refresh its terms at the next step
         &mut self.law
     }
 
@@ -289,7 +289,7 @@ impl Controller {
         }
         self.mode = if open { Mode::Idle } else { f.safe_mode() };
         self.pi.reset();
-        self.slow_tick = 0;
+        self.slow_tick = REFRESH_ALL;
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
@@ -384,34 +384,55 @@ impl Controller {
                 // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
                 // loop) corrects what the hold leaves. The bus trips above still compare every
                 // sample. Other laws keep their own rates and run every period.
+                // The four groups of slow terms are refreshed on different periods of the
+                // SLOW_DIV cycle (back-emf on tick 3, law on tick 0, feed-forward on tick 1,
+                // bus on tick 2) so that no single period pays for more than one group; a
+                // refresh request (`REFRESH_ALL`: configuration, mode or law changed) and the
+                // laws other than the resistor refresh all of them at once. The law then uses
+                // a back-emf one period old, and the feed-forward's cross-coupling a reference
+                // one period old (50 µs at 20 kHz): well inside the hold of SLOW_DIV periods
+                // argued above, and the PI corrects the difference as it corrects the hold.
                 let resistor = matches!(self.law, Law::Resistor(_));
-                if self.slow_tick == 0 || !resistor {
-                    // Bus: 4095·vpc < 30,000 V.
-                    let vb12 = vb.min(CODE_MAX) as i32;
+                let t = if resistor {
+                    self.slow_tick
+                } else {
+                    REFRESH_ALL
+                };
+                // Bus: 4095·vpc < 30,000 V.
+                let vb12 = vb.min(CODE_MAX) as i32;
+                if t == SLOW_DIV - 1 || t == REFRESH_ALL {
+                    self.held.e_q = k.ke_per_vel.scale(vel);
+                }
+                if t == 0 || t == REFRESH_ALL {
                     let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    let (i_ref, ff) = slow_terms(
+                    self.held.i_ref = law_terms(
                         &mut self.law,
                         self.mode == Mode::Run,
                         &self.enc,
                         g,
+                        self.held.e_q,
                         i_dq,
                         v_bus,
                         self.prot.derate,
                     );
-                    self.held = HeldTerms {
-                        i_ref,
-                        ff,
-                        // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
-                        v_max: Q::from_bits(k.v_max_per_code.apply(vb12)),
-                        inv_vbus: inv_bus(v_bus),
-                    };
                 }
-                self.slow_tick = (self.slow_tick + 1) & (SLOW_DIV - 1);
+                if t == 1 || t == REFRESH_ALL {
+                    self.held.ff = feed_forward(g, vel, self.held.i_ref, self.held.e_q);
+                }
+                if t == 2 || t == REFRESH_ALL {
+                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
+                    // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
+                    self.held.v_max = Q::from_bits(k.v_max_per_code.apply(vb12));
+                    self.held.inv_vbus = inv_bus(v_bus);
+                }
+                // REFRESH_ALL (4) continues with tick 1.
+                self.slow_tick = (t + 1) & (SLOW_DIV - 1);
                 let HeldTerms {
                     i_ref,
                     ff,
                     v_max,
                     inv_vbus,
+                    ..
                 } = self.held;
 
                 // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
@@ -426,7 +447,11 @@ impl Controller {
                 let adv = ((vel.to_bits() as i64 * k.adv_per_vel as i64) >> 12) as u32;
                 let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
                 // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
-                let v_ab = inverse_park_bounded(out.v, s2, c2);
+                // `black_box` is a value barrier only (no effect on the result): without it
+                // the optimiser carries the limiter's 64-bit products through the branch and
+                // performs the inverse Park with full 64×64-bit multiplies (measured: more
+                // instructions on every path).
+                let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
                 let duties = modulate_limited(v_ab, inv_vbus);
                 (i_ref, out.v, duties, true, out.saturated)
             }
@@ -449,13 +474,18 @@ impl Controller {
     }
 }
 
-/// Periods per refresh of the slow terms under the resistor law (a power of two).
+/// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 4: the
+/// four groups take ticks 3, 0, 1 and 2).
 const SLOW_DIV: u8 = 4;
+/// `slow_tick` value that refreshes every slow term at the next step.
+const REFRESH_ALL: u8 = SLOW_DIV;
 
 /// Current reference, feed-forward and bus terms, held between refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct HeldTerms {
     i_ref: Dq,
+    /// Back-emf `K_e·ω_e` (refreshed on tick 3; the law's input and the feed-forward's q term).
+    e_q: Q,
     ff: Dq,
     v_max: Q,
     inv_vbus: u32,
@@ -472,26 +502,26 @@ fn volts_of_code(g: &Gains, code: u16) -> Q {
     g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
-/// The law's reference limited to i_max (zero unless running) and the feed-forward: back-emf
-/// on q, cross-coupling ∓ω_e·L·i.
+/// The law's reference limited to i_max (zero unless running), from the back-emf `e_q`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn slow_terms(
+fn law_terms(
     law: &mut Law,
     run: bool,
     enc: &Encoder,
     g: &Gains,
+    e_q: Q,
     i_dq: Dq,
     v_bus: Q,
     derate: Q,
-) -> (Dq, Dq) {
-    let vel = enc.vel;
-    let e_q = g.k.ke_per_vel.scale(vel);
-    let i_ref = if run {
+) -> Dq {
+    if run {
         let r = match law {
             Law::Resistor(r) => Dq {
                 d: Q::ZERO,
-                q: clamp_sym(r.conductance.scale(e_q).saturating_neg(), g.i_max),
+                // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
+                // 2^31 LSB, so the negation after the clamp needs no saturation.
+                q: -clamp_sym(r.conductance.scale(e_q), g.i_max),
             },
             law => other_law(law, enc, g, e_q, i_dq, v_bus),
         };
@@ -500,19 +530,27 @@ fn slow_terms(
         derate_regen(r, e_q, derate)
     } else {
         Dq::default()
-    };
+    }
+}
+
+/// The feed-forward: back-emf on q, cross-coupling ∓ω_e·L·i (speed estimate `vel`).
+#[inline(always)]
+fn feed_forward(g: &Gains, vel: Q, i_ref: Dq, e_q: Q) -> Dq {
     let mut ff = Dq {
         d: Q::ZERO,
         q: if g.ff_emf { e_q } else { Q::ZERO },
     };
     if g.ff_decouple {
         let wl = g.k.wl_per_vel.scale(vel);
-        ff.d = mul(wl, i_ref.q).saturating_neg();
+        // |i_ref.q| ≤ i_max·(1 + 2^-12) (limited by the law terms, then derated by a factor
+        // in [0, 1] that only protect.rs sets): its negation fits. (The product's floor then
+        // rounds the other way: 1 LSB, 15 µV.)
+        ff.d = mul(wl, -i_ref.q);
         if i_ref.d != Q::ZERO {
             ff.q = ff.q.saturating_add(mul(wl, i_ref.d));
         }
     }
-    (i_ref, ff)
+    ff
 }
 
 /// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so

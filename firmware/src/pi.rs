@@ -86,34 +86,34 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
     Some(limit_slow(v.d.to_bits(), v.q.to_bits(), r as i32))
 }
 
-/// The scaling itself (out of line: taken only while limiting). Arguments as `i32` so the
-/// caller keeps no 64-bit copies of its vector.
-#[inline(never)]
+/// The scaling itself (taken only while limiting; inlined: it is short). Arguments as `i32`
+/// so the caller keeps no 64-bit copies of its vector.
+///
+/// Both components are shifted left together until the larger one has 31 bits, and their
+/// top 16 bits kept: the larger then has 15 bits (`|·| ∈ [2^14, 2^15]`), so `n = ds² + qs²`
+/// lies in `[2^28, 2^31]` and its square root comes from [`sqrt_norm`] on every path (no
+/// branch on the size). The truncation changes the larger component by less than 2^-14 of
+/// itself (6.1e-5 relative on |v|), `sqrt_norm` adds ≤ 6.2e-5, the Q.30 scale 2^-30: the
+/// limited magnitude is within 1.3e-4 of `r` (the test below allows 2e-4).
+#[inline(always)]
 fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
-    // Bring the larger component to 15 bits, keep the ratios, take the magnitude (all in
-    // 32 bits: |d|, |q| < 2^31).
-    let m = d.unsigned_abs().max(q.unsigned_abs()).max(1);
-    let sh = (32 - m.leading_zeros()).saturating_sub(15); // 0 ..= 17
-    let (ds, qs) = (d >> sh, q >> sh); // |.| < 2^15
-    let n = (ds * ds + qs * qs) as u32; // < 2^31
-    let mag = if sh > 0 {
-        sqrt_norm(n) // n ≥ 2^28: the larger component has 15 bits
-    } else {
-        isqrt(n)
-    }
-    .max(1);
-    // r/|v| in Q.30 (≤ 1) by two 32-bit divisions (no 64-bit division on a Cortex-M4):
-    // r ≤ |v| < 2^(15.5+sh), so r·2^(15−sh) < 2^30.5 fits, and so does the remainder
-    // (< mag < 2^16) times 2^15.
-    let r = r.max(0) as u32;
-    let num = if sh <= 15 {
-        r << (15 - sh)
-    } else {
-        r >> (sh - 15)
-    };
+    // `x ^ (x >> 31)` is x for x ≥ 0 and |x| − 1 for x < 0 (one instruction), < 2^31; their OR
+    // has the top bit of the larger, and `| 1` keeps it non-zero: 1 ≤ lz ≤ 31. Then x ≥ 0 has
+    // x < 2^(32−lz), and x < 0 has |x| ≤ 2^(32−lz), so `x << (lz − 1)` lies in [−2^31, 2^31)
+    // (fits, nothing is lost), and the larger component lands in [2^30, 2^31) or at −2^31.
+    let m = ((d ^ (d >> 31)) | (q ^ (q >> 31)) | 1) as u32;
+    let sh = m.leading_zeros() - 1; // 0 ..= 30
+    let (ds, qs) = ((d << sh) >> 16, (q << sh) >> 16); // |.| ≤ 2^15, the larger ≥ 2^14
+    let n = (ds * ds) as u32 + (qs * qs) as u32; // [2^28, 2^31]
+    let mag = sqrt_norm(n).max(1); // ≥ 2^14 already: the max only proves it non-zero
+                                   // |v| ≈ mag·2^(16−sh), so r/|v| in Q.30 is r·2^(sh+14)/mag, by two 32-bit divisions (no
+                                   // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
+                                   // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
+                                   // 1.3e-4), the remainder (< mag < 2^16) times 2^14 fits too.
+    let num = (r.max(0) as u32) << sh;
     let q1 = num / mag;
-    let q2 = ((num % mag) << 15) / mag;
-    let k = ((q1 << 15) + q2).min(1 << 30) as i64;
+    let q2 = ((num % mag) << 14) / mag;
+    let k = ((q1 << 14) + q2).min(1 << 30) as i64;
     // k ≤ 2^30: |d·k >> 30| ≤ |d|, which came from an i32.
     Dq {
         d: Q::from_bits(((d as i64 * k) >> 30) as i32),
@@ -121,7 +121,7 @@ fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
     }
 }
 
-/// √n for n in [2^28, 2^31): a seed from the top six bits (within 3 %), then two Newton
+/// √n for n in [2^28, 2^31]: a seed from the top six bits (within 3 %), then two Newton
 /// steps (error ≤ 3 %²/2 = 5e-4, then < 1e-7, plus the 1-LSB floor of the division: ≤ 6e-5
 /// relative at these sizes).
 #[inline(always)]
@@ -312,14 +312,55 @@ mod tests {
     }
 
     #[test]
+    fn limit_at_the_normalisation_edges() {
+        // Powers of two (negative ones are where `x ^ (x >> 31)` is |x| − 1 and the shift is
+        // one larger), their neighbours, −2^31 and zero, in every pairing, against radii from
+        // 1 LSB to 30,000 V: magnitude r within the limiter's 1.3e-4 (+ rounding; the bound
+        // of `limit_keeps_direction_and_radius`), same direction, never longer than the input.
+        let mut xs = std::vec![0i32, 1, -1, i32::MIN, i32::MAX, i32::MIN + 1];
+        for k in 0..31 {
+            let p = 1i32 << k;
+            xs.extend([p, -p, p - 1, -(p - 1), p + 1, -(p + 1)]);
+        }
+        for &d in &xs {
+            for &qq in &xs {
+                for r in [1i32, 3, 1 << 10, 1 << 16, 12_345_678, 30_000 << 16] {
+                    let v = Dq {
+                        d: Q::from_bits(d),
+                        q: Q::from_bits(qq),
+                    };
+                    let (fd, fq) = (d as f64, qq as f64);
+                    let vm = (fd * fd + fq * fq).sqrt();
+                    match limit_vector(v, Q::from_bits(r)) {
+                        None => assert!(vm <= r as f64 + 0.5, "{d} {qq} {r}"),
+                        Some(l) => {
+                            let (ld, lq) = (l.d.to_bits() as f64, l.q.to_bits() as f64);
+                            let m = (ld * ld + lq * lq).sqrt();
+                            let rf = r as f64;
+                            assert!(m <= rf * (1.0 + 2e-4) + 7.0, "{d} {qq} {r}: {m}");
+                            assert!(m >= rf * (1.0 - 2e-4) - 7.0, "{d} {qq} {r}: {m}");
+                            assert!(m <= vm + 1.0, "{d} {qq} {r}: longer");
+                            assert!((fd * lq - fq * ld).abs() <= vm * (m * 2e-4 + 7.0));
+                            assert!(fd * ld + fq * lq >= 0.0);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn sqrt_norm_is_accurate_over_its_range() {
         let mut worst = 0.0f64;
         let mut n = 1u32 << 28;
-        while n < 1 << 31 {
+        while n <= 1 << 31 {
             let e = (sqrt_norm(n) as f64 - (n as f64).sqrt()) / (n as f64).sqrt();
             worst = worst.max(e.abs());
             n += 997;
         }
+        let top = 1u32 << 31; // the end of the range (one component of −2^31)
+        let e = (sqrt_norm(top) as f64 - (top as f64).sqrt()) / (top as f64).sqrt();
+        worst = worst.max(e.abs());
         // Two Newton steps from a 3 % seed: < 1e-7, plus the division's floor (1 LSB of
         // ≥ 2^14): 6.2e-5.
         assert!(worst < 6.2e-5, "worst {worst}");
