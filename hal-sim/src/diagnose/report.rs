@@ -245,7 +245,7 @@ pub fn position_spectrum(rec: &Record, r: &[f64]) -> PositionSpectrum {
             moving += 1;
         }
     }
-    if moving < 64 || x1 <= x0 || !(dt > 0.0) {
+    if moving < 64 || x1 <= x0 || dt.is_nan() || dt <= 0.0 {
         return out;
     }
     // median travel per sample of the moving samples (strided to at most ~100k samples)
