@@ -159,3 +159,59 @@ fn clean_records_show_no_spatial_peak() {
     println!("clean records with a spatial peak: {with_peak}/10");
     assert_eq!(with_peak, 0);
 }
+
+#[test]
+fn short_wavelength_ripple_is_named_through_the_spatial_seeding() {
+    // A ripple of many periods over the stroke (λ 1.5-2.5 mm over ≈ 0.07 m: 30-45 periods)
+    // decorrelates from a wavelength a few % off, and the catalogue's log grid is ≈ 13 %
+    // apart: whether the coarse grid catches it depends on where λ falls. The baseline
+    // residual's spatial peaks seed the grid (as the 2.5 mm ripple on EMPS). Measured
+    // 2026-11-23: 12/12 named with the seeding, 10/12 without it (seeds 0 and 6, cogging at
+    // 2.01 and 1.99 mm, not named at all), so this test fails without the seeding. 12 seeds,
+    // cogging and position_periodic_friction alternately, 15-35 % of Coulomb.
+    let seeds = 12u64;
+    let mut named = 0;
+    for seed in 0..seeds {
+        let mut spec = SynthSpec::clean(9100 + seed, SAMPLES);
+        let mut rng = Rng::new(seed + 991);
+        let lambda = rng.range(0.0015, 0.0025);
+        let amp = rng.range(0.15, 0.35) * spec.coulomb;
+        let ph = rng.range(0.0, std::f64::consts::TAU);
+        let kind = if seed % 2 == 0 {
+            EffectKind::Cogging
+        } else {
+            EffectKind::PositionPeriodicFriction
+        };
+        spec.hidden.push((
+            Effect {
+                kind,
+                param: lambda,
+            },
+            vec![amp * ph.cos(), amp * ph.sin()],
+        ));
+        let rec = synth::generate(&spec);
+        let d = diagnose(&rec, &Options::default());
+        let got = d.effects.iter().find(|e| e.kind == kind);
+        println!(
+            "seed {seed}: hidden {} lambda {lambda:.5} m amp {amp:.2} N -> {:?}, held-out {:.2} % -> {:.2} %",
+            kind.name(),
+            d.effects
+                .iter()
+                .map(|e| (e.kind.name(), e.param))
+                .collect::<Vec<_>>(),
+            100.0 * d.baseline_holdout_rel_error,
+            100.0 * d.final_holdout_rel_error
+        );
+        // Tolerance 1 %: over ≈ 35 periods a 1 % wavelength error drifts the phase by a third
+        // of a period, which the fit would not accept as the best value; the refinement steps
+        // are 0.3 % (±3 % in 20 steps).
+        if let Some(e) = got {
+            if (e.param / lambda - 1.0).abs() < 0.01 {
+                named += 1;
+            }
+        }
+    }
+    println!("short-wavelength ripples named at their wavelength: {named}/{seeds}");
+    // Every record: the ripple carries ≥ 6 N against 0.5 N noise.
+    assert_eq!(named, seeds);
+}
