@@ -105,6 +105,10 @@ pub struct Context<'a> {
     /// stands 100× above its noise floor (median of the upper half band). The compliance scan
     /// stops there: a resonance is seen only where the motion has content.
     pub f_motion: f64,
+    /// Wavelengths of the peaks of the baseline residual's spectrum over position
+    /// (`report::position_spectrum`), added to the periodic candidates' grid: a ripple of many
+    /// periods over the stroke decorrelates from a log-grid value a few % off.
+    pub spatial_wavelengths: Vec<f64>,
 }
 
 /// Smoothed sign: exact sign outside ±v_eps, linear inside (v_eps = 0.2 % of the peak speed,
@@ -134,6 +138,7 @@ impl<'a> Context<'a> {
             lambda_min: 0.0,
             clip_levels: Vec::new(),
             f_motion: 0.0,
+            spatial_wavelengths: Vec::new(),
         };
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;
@@ -147,6 +152,13 @@ impl<'a> Context<'a> {
         let all = vec![false; rec.len()];
         let (tr, _) = super::normals(&refs, &rec.f, &all, 1);
         c.base_pred = predict(&cols, &tr.solve());
+        let r0: Vec<f64> = rec.f.iter().zip(&c.base_pred).map(|(f, p)| f - p).collect();
+        c.spatial_wavelengths = super::report::position_spectrum(rec, &r0)
+            .peaks
+            .iter()
+            .take(4)
+            .map(|p| p.wavelength_m)
+            .collect();
         let mut ab: Vec<f64> = c.base_pred.iter().map(|f| f.abs()).collect();
         let last = ab.len() - 1;
         // ascending quantiles: each selection only searches above the previous one
@@ -683,6 +695,11 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
                     if l > 0.0 && l < stroke {
                         g.push(mk(l));
                     }
+                }
+            }
+            for &l in &ctx.spatial_wavelengths {
+                if l >= ctx.lambda_min && l < stroke / 1.5 {
+                    g.push(mk(l));
                 }
             }
             g

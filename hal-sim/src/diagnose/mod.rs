@@ -381,6 +381,8 @@ pub struct Diagnosis {
     pub prediction: Vec<f64>,
     pub whiteness: report::Whiteness,
     pub spectrum_peaks: Vec<report::Peak>,
+    /// Spectrum of the final residual over position (binned per direction of motion).
+    pub position_spectrum: report::PositionSpectrum,
     /// Error of the final model on a second record (cross-test), when given.
     pub cross: Option<CrossCheck>,
 }
@@ -587,6 +589,29 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             holdout_rel_error_after: ho_rel,
         });
     }
+    let position_spectrum = report::position_spectrum(rec, &residual);
+    for pk in position_spectrum.peaks.iter().filter(|p| p.unexplained) {
+        let matches = if pk.matches.is_empty() {
+            String::new()
+        } else {
+            format!("; its wavelength matches {}", pk.matches)
+        };
+        findings.push(Finding {
+            effect: "unexplained".into(),
+            parameters: vec![
+                ("wavelength_m".into(), pk.wavelength_m),
+                ("cycles_per_m".into(), pk.cycles_per_m),
+                ("amplitude_N".into(), pk.amplitude),
+            ],
+            holdout_rss_drop: 0.0,
+            delta_bic: 0.0,
+            note: format!(
+                "residual periodic in position, wavelength {:.4e} m ({:.1}x the median level of the position spectrum){matches}, that no catalogue effect explains",
+                pk.wavelength_m, pk.ratio
+            ),
+            holdout_rel_error_after: ho_rel,
+        });
+    }
     Diagnosis {
         n,
         derivative_method: rec.derivative_method.clone(),
@@ -604,6 +629,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
         prediction: pred,
         whiteness,
         spectrum_peaks,
+        position_spectrum,
         cross: None,
     }
 }
