@@ -180,67 +180,6 @@ pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Nor
     (tr, ho)
 }
 
-/// Extend normal equations of base columns (already accumulated) with extra columns `z`:
-/// only the cross terms are computed (O(N·k·(p+k))).
-pub fn extend_normals(
-    base: &(Normal, Normal),
-    bcols: &[&[f64]],
-    z: &[&[f64]],
-    f: &[f64],
-    hold: &[bool],
-    stride: usize,
-) -> (Normal, Normal) {
-    let p = bcols.len();
-    let k = z.len();
-    let m = p + k;
-    let mut out = (Normal::new(m), Normal::new(m));
-    for (dst, src) in [(&mut out.0, &base.0), (&mut out.1, &base.1)] {
-        for i in 0..p {
-            for j in 0..p {
-                dst.g[i * m + j] = src.g[i * p + j];
-            }
-            dst.b[i] = src.b[i];
-        }
-        dst.ff = src.ff;
-        dst.n = src.n;
-    }
-    let n = f.len();
-    let mut i = 0;
-    let mut zr = vec![0.0; k];
-    while i < n {
-        for (c, col) in z.iter().enumerate() {
-            zr[c] = col[i];
-        }
-        let nm = if hold[i] { &mut out.1 } else { &mut out.0 };
-        for c in 0..k {
-            let zc = zr[c];
-            let row = (p + c) * m;
-            for (j, bc) in bcols.iter().enumerate() {
-                nm.g[row + j] += zc * bc[i];
-            }
-            for d in c..k {
-                nm.g[row + p + d] += zc * zr[d];
-            }
-            nm.b[p + c] += zc * f[i];
-        }
-        i += stride;
-    }
-    for nm in [&mut out.0, &mut out.1] {
-        for c in 0..k {
-            for j in 0..p + c {
-                let v = if j < p {
-                    nm.g[(p + c) * m + j]
-                } else {
-                    nm.g[j * m + p + c]
-                };
-                nm.g[(p + c) * m + j] = v;
-                nm.g[j * m + p + c] = v;
-            }
-        }
-    }
-    out
-}
-
 /// Training / held-out weights (1/0 and 0/1) of the samples, for branch-free sums.
 pub struct HoldWeights {
     pub train: Vec<f64>,
@@ -279,8 +218,21 @@ fn dot2(a: &[f64], b: &[f64], wt: &[f64], wh: &[f64]) -> (f64, f64) {
     ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
 }
 
-/// `extend_normals` over every sample, each new Gram entry one contiguous weighted dot
-/// product (training and held-out parts at once).
+/// Normal equations of `p` columns copied into the top-left block of `m`-column ones.
+fn embed(src: &Normal, p: usize, m: usize) -> Normal {
+    let mut dst = Normal::new(m);
+    for i in 0..p {
+        dst.g[i * m..i * m + p].copy_from_slice(&src.g[i * p..i * p + p]);
+        dst.b[i] = src.b[i];
+    }
+    dst.ff = src.ff;
+    dst.n = src.n;
+    dst
+}
+
+/// Extend normal equations of base columns (already accumulated) with extra columns `z` over
+/// every sample: only the cross terms are computed (O(N·k·(p+k))), each new Gram entry one
+/// contiguous weighted dot product (training and held-out parts at once).
 pub fn extend_normals_dense(
     base: &(Normal, Normal),
     bcols: &[&[f64]],
@@ -291,17 +243,7 @@ pub fn extend_normals_dense(
     let p = bcols.len();
     let k = z.len();
     let m = p + k;
-    let mut out = (Normal::new(m), Normal::new(m));
-    for (dst, src) in [(&mut out.0, &base.0), (&mut out.1, &base.1)] {
-        for i in 0..p {
-            for j in 0..p {
-                dst.g[i * m + j] = src.g[i * p + j];
-            }
-            dst.b[i] = src.b[i];
-        }
-        dst.ff = src.ff;
-        dst.n = src.n;
-    }
+    let mut out = (embed(&base.0, p, m), embed(&base.1, p, m));
     for c in 0..k {
         let row = p + c;
         for (j, bc) in bcols.iter().chain(z[..=c].iter()).enumerate() {
