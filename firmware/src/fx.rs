@@ -189,17 +189,7 @@ pub fn fixed_i32(v: f32, n: u8) -> i32 {
 
 /// `v·2^30` rounded, for a constant known to lie in (−2, 2) (Q2.30); saturates outside.
 pub fn q30(v: f32) -> i32 {
-    if !v.is_finite() {
-        return 0;
-    }
-    let s = v * pow2(30);
-    if s >= 2_147_483_647.0 {
-        i32::MAX
-    } else if s <= -2_147_483_648.0 {
-        i32::MIN
-    } else {
-        round_f32(s) as i32
-    }
+    fixed_i32(v, 30)
 }
 
 fn pow2(n: u8) -> f32 {
