@@ -106,11 +106,7 @@ fn main() {
         t.elapsed().as_secs_f64()
     });
     let plant_chained = best_of(reps, || {
-        let mut p = sc.build().expect("scenario");
-        for a in &acts[..n_settle] {
-            black_box(p.take_sample());
-            p.apply_and_advance(black_box(a));
-        }
+        let mut p = settled_plant(&sc, &acts[..n_settle]);
         let t = Instant::now();
         for a in &acts[n_settle..] {
             let s = p.take_sample();
@@ -124,11 +120,7 @@ fn main() {
     // Plant alone on the recorded actuations.
     let mut identical = true;
     let plant = best_of(reps, || {
-        let mut p = sc.build().expect("scenario");
-        for a in &acts[..n_settle] {
-            black_box(p.take_sample());
-            p.apply_and_advance(black_box(a));
-        }
+        let mut p = settled_plant(&sc, &acts[..n_settle]);
         let t = Instant::now();
         for a in &acts[n_settle..] {
             black_box(p.take_sample());
@@ -228,4 +220,14 @@ fn main() {
         dt / (n as f64 + 100.0 * 200.0) * 1e9,
         dt / 100.0 * 1e6
     );
+}
+
+/// A fresh simulation of `sc` advanced through the recorded settling actuations `acts`.
+fn settled_plant(sc: &Scenario, acts: &[Actuation]) -> hal_sim::sim::Sim {
+    let mut p = sc.build().expect("scenario");
+    for a in acts {
+        black_box(p.take_sample());
+        p.apply_and_advance(black_box(a));
+    }
+    p
 }
