@@ -30,20 +30,7 @@ fn hidden_position_periodic_force_shows_at_its_wavelength() {
         } else {
             rng.range(0.003, 0.03)
         };
-        let amp = rng.range(0.15, 0.35) * spec.coulomb;
-        let ph = rng.range(0.0, std::f64::consts::TAU);
-        let kind = if seed % 2 == 0 {
-            EffectKind::Cogging
-        } else {
-            EffectKind::PositionPeriodicFriction
-        };
-        spec.hidden.push((
-            Effect {
-                kind,
-                param: lambda,
-            },
-            vec![amp * ph.cos(), amp * ph.sin()],
-        ));
+        let (kind, amp) = hide_ripple(&mut spec, &mut rng, seed, lambda);
         let rec = synth::generate(&spec);
         let d = diagnose(&rec, &opt);
         let ps = &d.position_spectrum;
@@ -175,20 +162,7 @@ fn short_wavelength_ripple_is_named_through_the_spatial_seeding() {
         let mut spec = SynthSpec::clean(9100 + seed, SAMPLES);
         let mut rng = Rng::new(seed + 991);
         let lambda = rng.range(0.0015, 0.0025);
-        let amp = rng.range(0.15, 0.35) * spec.coulomb;
-        let ph = rng.range(0.0, std::f64::consts::TAU);
-        let kind = if seed % 2 == 0 {
-            EffectKind::Cogging
-        } else {
-            EffectKind::PositionPeriodicFriction
-        };
-        spec.hidden.push((
-            Effect {
-                kind,
-                param: lambda,
-            },
-            vec![amp * ph.cos(), amp * ph.sin()],
-        ));
+        let (kind, amp) = hide_ripple(&mut spec, &mut rng, seed, lambda);
         let rec = synth::generate(&spec);
         let d = diagnose(&rec, &Options::default());
         let got = d.effects.iter().find(|e| e.kind == kind);
@@ -214,4 +188,25 @@ fn short_wavelength_ripple_is_named_through_the_spatial_seeding() {
     println!("short-wavelength ripples named at their wavelength: {named}/{seeds}");
     // Every record: the ripple carries ≥ 6 N against 0.5 N noise.
     assert_eq!(named, seeds);
+}
+
+/// Hide a position ripple of wavelength `lambda` in `spec`: 15-35 % of the Coulomb force at a
+/// random phase, `cogging` on even seeds and `position_periodic_friction` on odd ones.
+/// Returns the kind and the amplitude, N.
+fn hide_ripple(spec: &mut SynthSpec, rng: &mut Rng, seed: u64, lambda: f64) -> (EffectKind, f64) {
+    let amp = rng.range(0.15, 0.35) * spec.coulomb;
+    let ph = rng.range(0.0, std::f64::consts::TAU);
+    let kind = if seed.is_multiple_of(2) {
+        EffectKind::Cogging
+    } else {
+        EffectKind::PositionPeriodicFriction
+    };
+    spec.hidden.push((
+        Effect {
+            kind,
+            param: lambda,
+        },
+        vec![amp * ph.cos(), amp * ph.sin()],
+    ));
+    (kind, amp)
 }
