@@ -1,85 +1,23 @@
 //! The new laws inside the full current-loop step (`Controller::step`: ADC codes, encoder PLL,
-//! PI loops, SVPWM) at a steady shaft speed, with the same minimal three-phase plant as
-//! `steady_speed.rs`: run-time switching between laws, and the one-way clip against a
+//! PI loops, SVPWM) at a steady shaft speed, on the minimal three-phase plant of
+//! `common/mod.rs`: run-time switching between laws, and the one-way clip against a
 //! controller that asks for motoring.
 
-use regen_fw::fx::Angle;
+mod common;
+
+use common::Plant;
 use regen_fw::laws::{LawKind, LtiParams};
-use regen_fw::{Config, Controller, Mode, RawSample};
-
-/// The plant's state carries over between runs (the encoder must not jump).
-struct Plant {
-    i: [f64; 3],
-    theta_m: f64,
-    pending: [f64; 3],
-}
-
-fn plant() -> Plant {
-    Plant {
-        i: [0.0; 3],
-        theta_m: 0.0,
-        pending: [0.5; 3],
-    }
-}
+use regen_fw::{Config, Controller, Mode};
 
 /// Runs `ctl` for `seconds` at ẋ; returns the mean terminal power over the second half, W
 /// (`−Σ e_x·i_x − R·Σ i_x²`, power out of the machine's terminals).
 fn run(ctl: &mut Controller, pl: &mut Plant, xdot: f64, seconds: f64) -> f64 {
-    let cfg = *ctl.config();
-    let (r, l, ke, p) = (
-        cfg.r_phase_ohm as f64,
-        cfg.l_phase_h as f64,
-        cfg.ke_v_s_per_rad as f64,
-        cfg.pole_pairs as f64,
-    );
-    let lead = cfg.lead_m_per_rad as f64;
-    let ts = 1.0 / cfg.pwm_hz as f64;
-    let w_m = xdot / lead;
-    let v_bus = 72.0;
-    let n = (seconds / ts) as usize;
+    let r = ctl.config().r_phase_ohm as f64;
     let (mut p_sum, mut count) = (0.0, 0usize);
-    let a = (-r / l * ts).exp();
-    for k in 0..n {
-        let code = |i: f64| {
-            ((i / cfg.amps_per_count as f64) + cfg.adc_zero_code as f64)
-                .round()
-                .clamp(0.0, 4095.0) as u16
-        };
-        let counts = (pl.theta_m / std::f64::consts::TAU * cfg.encoder_cpr as f64).floor() as i64;
-        let s = RawSample {
-            i_abc: [code(pl.i[0]), code(pl.i[1]), code(pl.i[2])],
-            v_bus: (v_bus / cfg.volts_per_count as f64).round() as u16,
-            encoder: counts as u16,
-        };
-        let out = ctl.step(&s);
-        let d = pl.pending;
-        pl.pending = if out.enable {
-            out.duties.map(|x| x.to_num::<f64>())
-        } else {
-            [0.5; 3]
-        };
-        let vx = d.map(|x| x * v_bus);
-        let mean = (vx[0] + vx[1] + vx[2]) / 3.0;
-        let th = p * (pl.theta_m + 0.5 * w_m * ts)
-            + Angle::from_radians(cfg.encoder_offset_rad as f64).radians();
-        let e = [
-            0.0,
-            -std::f64::consts::TAU / 3.0,
-            std::f64::consts::TAU / 3.0,
-        ]
-        .map(|s| -ke * w_m * (th + s).sin());
-        for x in 0..3 {
-            let u = vx[x] - mean - e[x];
-            pl.i[x] = a * pl.i[x] + (1.0 - a) * u / r;
-        }
-        pl.theta_m += w_m * ts;
-        if k > n / 2 {
-            p_sum += (0..3)
-                .map(|x| -e[x] * pl.i[x] - r * pl.i[x] * pl.i[x])
-                .sum::<f64>();
-            count += 1;
-        }
-    }
+    pl.run(ctl, xdot, seconds, |e, i| {
+        p_sum += (0..3).map(|x| -e[x] * i[x] - r * i[x] * i[x]).sum::<f64>();
+        count += 1;
+    });
     p_sum / count as f64
 }
 
@@ -102,7 +40,7 @@ fn laws_switch_at_run_time() {
     };
     let mut ctl = Controller::new(&base).unwrap();
     ctl.set_mode(Mode::Run).unwrap();
-    let mut pl = plant();
+    let mut pl = Plant::new();
     let want = p_resistor(&base, xdot);
     let p_res = run(&mut ctl, &mut pl, xdot, 0.2);
     // Impedance with neither L nor C is the resistor; tracking starts at r_load_ohm with the
@@ -159,7 +97,7 @@ fn one_way_clip_holds_in_the_current_loop() {
     };
     let mut ctl = Controller::new(&two).unwrap();
     ctl.set_mode(Mode::Run).unwrap();
-    let mut pl = plant();
+    let mut pl = Plant::new();
     let p_two = run(&mut ctl, &mut pl, xdot, 0.2);
     let mut ctl1 = Controller::new(&Config {
         law: LawKind::OneWay,
@@ -167,7 +105,7 @@ fn one_way_clip_holds_in_the_current_loop() {
     })
     .unwrap();
     ctl1.set_mode(Mode::Run).unwrap();
-    let p_one = run(&mut ctl1, &mut plant(), xdot, 0.2);
+    let p_one = run(&mut ctl1, &mut Plant::new(), xdot, 0.2);
     // Two-way motors: −3/2·(e·i + R·i²) with e = 18.5 V, i = 0.98 A ≈ −31 W.
     let e = two.ke_v_s_per_rad as f64 * xdot / two.lead_m_per_rad as f64;
     let i = 0.05 * xdot / two.lead_m_per_rad as f64;

@@ -2,86 +2,27 @@
 //! produces must equal `c_e·ẋ`, `c_e = 3/2·K_e²/(l²·(R+R_L))` (amplitude-invariant
 //! convention: per-phase peak `K_e`, `T = 3/2·K_e·i_q`, `f = T/l`).
 //!
-//! The plant here is deliberately minimal and independent of `hal-sim`: three star-connected
-//! phases `L·di/dt = v_xn − R·i − e_x`, averaged inverter `v_x = d_x·V_bus` applied one
-//! period after the sample, ideal 12-bit ADC codes and encoder counts.
+//! The plant is the minimal three-phase one in `common/mod.rs`, independent of `hal-sim`.
 
-use regen_fw::fx::Angle;
-use regen_fw::{Config, Controller, Mode, RawSample};
+mod common;
 
-struct Plant {
-    i: [f64; 3],
-    theta_m: f64,
-    pending: [f64; 3],
-}
+use regen_fw::{Config, Controller, Mode};
 
+/// Runs the resistor law at ẋ for `seconds`; returns the mean axial force over the second
+/// half and `c_e·ẋ`, N.
 fn run(cfg: &Config, xdot: f64, seconds: f64) -> (f64, f64) {
     let mut ctl = Controller::new(cfg).unwrap();
     ctl.set_mode(Mode::Run).unwrap();
-    let (r, l, ke, p) = (
-        cfg.r_phase_ohm as f64,
-        cfg.l_phase_h as f64,
-        cfg.ke_v_s_per_rad as f64,
-        cfg.pole_pairs as f64,
-    );
-    let lead = cfg.lead_m_per_rad as f64;
-    let ts = 1.0 / cfg.pwm_hz as f64;
-    let w_m = xdot / lead;
-    let v_bus = 72.0;
-    let mut pl = Plant {
-        i: [0.0; 3],
-        theta_m: 0.0,
-        pending: [0.5; 3],
-    };
-    let n = (seconds / ts) as usize;
     let (mut f_sum, mut count) = (0.0, 0usize);
-    let a = (-r / l * ts).exp();
-    for k in 0..n {
-        let code = |i: f64| {
-            ((i / cfg.amps_per_count as f64) + cfg.adc_zero_code as f64)
-                .round()
-                .clamp(0.0, 4095.0) as u16
-        };
-        let counts = (pl.theta_m / std::f64::consts::TAU * cfg.encoder_cpr as f64).floor() as i64;
-        let s = RawSample {
-            i_abc: [code(pl.i[0]), code(pl.i[1]), code(pl.i[2])],
-            v_bus: (v_bus / cfg.volts_per_count as f64).round() as u16,
-            encoder: counts as u16,
-        };
-        let out = ctl.step(&s);
-        // Apply the previous period's duties (one-period delay), then these become pending.
-        let d = pl.pending;
-        pl.pending = if out.enable {
-            out.duties.map(|x| x.to_num::<f64>())
-        } else {
-            [0.5; 3]
-        };
-        let vx = d.map(|x| x * v_bus);
-        let mean = (vx[0] + vx[1] + vx[2]) / 3.0;
-        // Back-emf at the middle of the period (speed constant, angle advances linearly).
-        let th = p * (pl.theta_m + 0.5 * w_m * ts);
-        let th = th + Angle::from_radians(cfg.encoder_offset_rad as f64).radians();
-        let e = [
-            0.0,
-            -std::f64::consts::TAU / 3.0,
-            std::f64::consts::TAU / 3.0,
-        ]
-        .map(|s| -ke * w_m * (th + s).sin());
-        for x in 0..3 {
-            // Exact solution of L di/dt = u − R i over the period with u held.
-            let u = vx[x] - mean - e[x];
-            pl.i[x] = a * pl.i[x] + (1.0 - a) * u / r;
-        }
-        pl.theta_m += w_m * ts;
-        if k > n / 2 {
-            // Electromagnetic force on the screw axis from the instantaneous power balance:
-            // f·ẋ = −Σ e_x·i_x (power into the machine's emf sources is −f·ẋ).
-            let p_emf: f64 = (0..3).map(|x| e[x] * pl.i[x]).sum();
-            f_sum -= p_emf / xdot;
-            count += 1;
-        }
-    }
-    let c_e = 1.5 * ke * ke / (lead * lead * (r + cfg.r_load_ohm as f64));
+    common::Plant::new().run(&mut ctl, xdot, seconds, |e, i| {
+        // Electromagnetic force on the screw axis from the instantaneous power balance:
+        // f·ẋ = −Σ e_x·i_x (power into the machine's emf sources is −f·ẋ).
+        let p_emf: f64 = (0..3).map(|x| e[x] * i[x]).sum();
+        f_sum -= p_emf / xdot;
+        count += 1;
+    });
+    let (ke, lead) = (cfg.ke_v_s_per_rad as f64, cfg.lead_m_per_rad as f64);
+    let c_e = 1.5 * ke * ke / (lead * lead * (cfg.r_phase_ohm as f64 + cfg.r_load_ohm as f64));
     (f_sum / count as f64, c_e * xdot)
 }
 
