@@ -12,8 +12,9 @@ use crate::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
 use crate::fx::{clamp_sym, mul, Angle, Duty, Q};
 use crate::io::{Actuation, RawSample};
 use crate::laws::{CommandLaw, Law, LawInput};
-use crate::pi::{limit_vector, CurrentPi};
-use crate::svpwm::{inv_bus, modulate_limited, CENTRED};
+use crate::frames::Rotation;
+use crate::pi::{limit_vector, CurrentPi, VLimit};
+use crate::svpwm::{inv_bus, modulate_scaled, CENTRED};
 
 /// Operating mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -139,7 +140,7 @@ impl Controller {
         }
         self.cfg = *cfg;
         self.g = g;
-        self.slow_tick = REFRESH_ALL;
+        self.refresh_now();
         Ok(())
     }
 
@@ -175,9 +176,9 @@ impl Controller {
         }
         if m != self.mode {
             self.pi.reset();
-            self.slow_tick = REFRESH_ALL;
+            self.mode = m;
+            self.refresh_now();
         }
-        self.mode = m;
         Ok(())
     }
 
@@ -331,11 +332,15 @@ impl Controller {
     /// `firmware/board/Cargo.toml`. The call costs a few cycles of the 8,500 of a period.
     #[inline(never)]
     pub fn step(&mut self, s: &RawSample) -> Actuation {
-        let g = &self.g;
-        let k = &g.k;
+        let k = &self.g.k;
 
         // ---- Measurements (scalings folded into constants; the zero code cancels) ----
-        let [ia, ib, ic] = s.i_abc.map(|c| c as i32);
+        let [ia, ib, ic] = s.i_abc.map(|c| c as u32);
+        // Phase over-current on the raw codes, while they are in registers (protection below).
+        let lo = k.i_lo;
+        let off = |c: u32| c.wrapping_sub(lo);
+        let over_i = off(ia).max(off(ib)).max(off(ic)) > k.i_span;
+        let [ia, ib, ic] = [ia as i32, ib as i32, ic as i32];
         // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
         // change nothing then and bound anything larger.
         let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
@@ -346,14 +351,13 @@ impl Controller {
             beta: Q::from_bits(k.beta_per_code.apply(s_beta)),
         };
         let vb = s.v_bus as u32;
-        let theta_e = self.enc.update(s.encoder, &g.enc);
+        let theta_e = self.enc.update(s.encoder, &self.g.enc);
 
         // ---- Protection (instantaneous, on raw codes) ----
-        // Phase over-current, bus over-/under-voltage, implausible encoder step. Further
-        // per-step protection hooks in here; the first fault found wins (see `trip_on`).
-        let lo = k.i_lo;
-        let off = |c: u16| (c as u32).wrapping_sub(lo);
-        let over_i = off(s.i_abc[0]).max(off(s.i_abc[1])).max(off(s.i_abc[2])) > k.i_span;
+        // Phase over-current (above), bus over-/under-voltage, implausible encoder step.
+        // Further per-step protection hooks in here; the first fault found wins (see
+        // `trip_on`).
+        let k = &self.g.k;
         let over_v = vb > k.ov;
         // Under-voltage is a fault only in Run: `trip_on` decides (keeps the test cheap).
         let under_v = vb < k.uv;
@@ -364,131 +368,171 @@ impl Controller {
         }
         // ---- End of protection ----
 
-        let g = &self.g;
-        let k = &g.k;
         let (sin, cos) = theta_e.sin_cos();
         let i_dq = park_bounded(i_ab, sin, cos);
+        // The record of this period, written as its values become known (after `trip_on`,
+        // whose snapshot reads the last period's).
+        self.rec.sample = *s;
+        self.rec.i_dq = i_dq;
+        self.rec.theta_e = theta_e;
 
         let (i_ref, v_dq, duties, enable, sat) = match self.mode {
             Mode::Idle => (Dq::default(), Dq::default(), CENTRED, false, false),
             Mode::Short => (Dq::default(), Dq::default(), [Duty::ZERO; 3], true, false),
             Mode::Run | Mode::Open => {
-                let vel = self.enc.vel;
-
-                // Slow terms: the law's current reference (limited to i_max), the
-                // feed-forward, and the bus terms (radius of the voltage circle, 1/V_bus). For
-                // the resistor law the first two depend on the speed estimate alone, which
-                // changes at the rate of the motion and the PLL (≤ speed_bw_hz), and the bus
-                // voltage moves slowly on its capacitor (a few amperes into millifarads: well
-                // under 1 % of the bus in 200 µs); so they are refreshed every SLOW_DIV periods
-                // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
-                // loop) corrects what the hold leaves. The bus trips above still compare every
-                // sample. Other laws keep their own rates and run every period.
-                // The four groups of slow terms are refreshed on different periods of the
-                // SLOW_DIV cycle (back-emf on tick 3, law on tick 0, feed-forward on tick 1,
-                // bus on tick 2) so that no single period pays for more than one group; a
-                // refresh request (`REFRESH_ALL`: configuration, mode or law changed) and the
-                // laws other than the resistor refresh all of them at once. The law then uses
-                // a back-emf one period old, and the feed-forward's cross-coupling a reference
-                // one period old (50 µs at 20 kHz): well inside the hold of SLOW_DIV periods
-                // argued above, and the PI corrects the difference as it corrects the hold.
-                let resistor = matches!(self.law, Law::Resistor(_));
-                let t = if resistor {
-                    self.slow_tick
-                } else {
-                    REFRESH_ALL
-                };
-                // Bus: 4095·vpc < 30,000 V.
-                let vb12 = vb.min(CODE_MAX) as i32;
-                if t == SLOW_DIV - 1 || t == REFRESH_ALL {
-                    self.held.e_q = k.ke_per_vel.scale(vel);
+                // Slow terms: the back-emf and the law's current reference (limited to
+                // i_max), the feed-forward, the bus terms (the voltage circle, 1/V_bus) and
+                // the output-angle advance. For the resistor law they depend on the speed
+                // estimate alone, which changes at the rate of the motion and the PLL (≤
+                // speed_bw_hz), and the bus voltage moves slowly on its capacitor (a few
+                // amperes into millifarads: well under 1 % of the bus in 200 µs); so they are
+                // refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between, and the
+                // PI (1 kHz bandwidth, inside the loop) corrects what the hold leaves. The bus
+                // trips above still compare every sample. Other laws keep their own rates and
+                // run every period (their `tick_or` keeps the tick at REFRESH_ALL).
+                // The four groups are refreshed on different periods of the cycle (back-emf
+                // and law on tick 0, feed-forward on tick 1, bus on tick 2, angle advance on
+                // tick 3) so that no single period pays for more than one group. A refresh
+                // request (configuration or mode change) is served where it is made
+                // (`refresh_now`, outside the step), so no period pays for all of them; only a
+                // trip or `law_mut` leaves it to the next step (`REFRESH_ALL`).
+                let t = self.slow_tick;
+                match t {
+                    0 => self.refresh_law(i_dq, vb),
+                    1 => self.refresh_ff(),
+                    2 => self.refresh_bus(vb),
+                    3 => self.refresh_advance(),
+                    _ => self.refresh_all(i_dq, vb),
                 }
-                if t == 0 || t == REFRESH_ALL {
-                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    self.held.i_ref = law_terms(
-                        &mut self.law,
-                        self.mode == Mode::Run,
-                        &self.enc,
-                        g,
-                        self.held.e_q,
-                        i_dq,
-                        v_bus,
-                        self.prot.derate,
-                    );
-                }
-                if t == 1 || t == REFRESH_ALL {
-                    self.held.ff = feed_forward(g, vel, self.held.i_ref, self.held.e_q);
-                }
-                if t == 2 || t == REFRESH_ALL {
-                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
-                    self.held.v_max = Q::from_bits(k.v_max_per_code.apply(vb12));
-                    self.held.inv_vbus = inv_bus(v_bus);
-                }
-                // REFRESH_ALL (4) continues with tick 1.
-                self.slow_tick = (t + 1) & (SLOW_DIV - 1);
-                let HeldTerms {
-                    i_ref,
-                    ff,
-                    v_max,
-                    inv_vbus,
-                    ..
-                } = self.held;
+                self.slow_tick = ((t + 1) & (SLOW_DIV - 1)) | self.held.tick_or;
+                let h = &self.held;
 
                 // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
                 let err = Dq {
-                    d: Q::from_bits(i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
-                    q: Q::from_bits(i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
+                    d: Q::from_bits(h.i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
+                    q: Q::from_bits(h.i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
                 };
-                let out = self.pi.update(err, ff, &g.pi, v_max);
+                let out = self.pi.update_within(err, h.ff, &self.g.pi, &h.v_lim);
 
-                // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay):
-                // |vel·adv_per_vel| < 2^62; the angle wraps (mod 2^32) by design.
-                let adv = ((vel.to_bits() as i64 * k.adv_per_vel as i64) >> 12) as u32;
-                let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
+                // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay): the
+                // held rotation (cos a, sin a) applied to (sin θ, cos θ) by the angle-sum
+                // formulas, in place of a second table look-up.
+                let (s2, c2) = h.advance.rotate(sin, cos);
                 // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
                 // `black_box` is a value barrier only (no effect on the result): without it
                 // the optimiser carries the limiter's 64-bit products through the branch and
                 // performs the inverse Park with full 64×64-bit multiplies (measured: more
                 // instructions on every path).
                 let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
-                let duties = modulate_limited(v_ab, inv_vbus);
-                (i_ref, out.v, duties, true, out.saturated)
+                let duties = modulate_scaled(v_ab, h.inv8);
+                (h.i_ref, out.v, duties, true, out.saturated)
             }
         };
 
-        self.rec = StepRecord {
-            sample: *s,
-            i_dq,
-            i_ref,
-            v_dq,
-            theta_e,
-            duties,
-            v_saturated: sat,
-        };
+        self.rec.i_ref = i_ref;
+        self.rec.v_dq = v_dq;
+        self.rec.duties = duties;
+        self.rec.v_saturated = sat;
         Actuation {
             duties,
             enable,
             brake: self.brake,
         }
     }
+
+    /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the law's reference from it.
+    #[inline(always)]
+    fn refresh_law(&mut self, i_dq: Dq, vb: u32) {
+        let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
+        self.held.e_q = e_q;
+        self.held.i_ref = law_terms(
+            &mut self.law,
+            self.mode == Mode::Run,
+            &self.enc,
+            &self.g,
+            e_q,
+            i_dq,
+            vb,
+            self.prot.derate,
+        );
+    }
+
+    /// Tick 1: the feed-forward from the held back-emf and reference.
+    #[inline(always)]
+    fn refresh_ff(&mut self) {
+        self.held.ff = feed_forward(&self.g, self.enc.vel, self.held.i_ref, self.held.e_q);
+    }
+
+    /// Tick 2: the bus terms, from this period's bus code (4095·vpc < 30,000 V).
+    #[inline(always)]
+    fn refresh_bus(&mut self, vb: u32) {
+        let k = &self.g.k;
+        let vb12 = vb.min(CODE_MAX) as i32;
+        let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
+        // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
+        self.held.v_lim = VLimit::new(Q::from_bits(k.v_max_per_code.apply(vb12)));
+        // inv_bus < 2^23: its 2^8 multiple fits an i32 (see `modulate_scaled`).
+        self.held.inv8 = (inv_bus(v_bus) << 8) as i32;
+    }
+
+    /// Tick 3: the output-angle advance, 1.5 periods of rotation at the speed estimate:
+    /// |vel·adv_per_vel| < 2^62; the angle wraps (mod 2^32) by design.
+    #[inline(always)]
+    fn refresh_advance(&mut self) {
+        let adv = ((self.enc.vel.to_bits() as i64 * self.g.k.adv_per_vel as i64) >> 12) as u32;
+        self.held.advance = Rotation::of(Angle(adv));
+    }
+
+    /// Every slow term at once (a trip or `law_mut` asked for it, or a law other than the
+    /// resistor, which runs every period); also sets the tick schedule for the law.
+    #[inline(never)]
+    fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
+        self.refresh_law(i_dq, vb);
+        self.refresh_ff();
+        self.refresh_bus(vb);
+        self.refresh_advance();
+        self.held.tick_or = if matches!(self.law, Law::Resistor(_)) {
+            0
+        } else {
+            REFRESH_ALL
+        };
+    }
+
+    /// Serve a refresh request (configuration or mode changed) now, between steps: under the
+    /// resistor law every slow term is recomputed from the last period's sample and speed,
+    /// and the next step starts the cycle with the bus terms from its own sample. Other laws
+    /// advance their state once per step, so they refresh at the next step.
+    fn refresh_now(&mut self) {
+        if matches!(self.law, Law::Resistor(_)) {
+            let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
+            self.refresh_all(i_dq, vb);
+            self.slow_tick = 2;
+        } else {
+            self.slow_tick = REFRESH_ALL;
+        }
+    }
 }
 
 /// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 4: the
-/// four groups take ticks 3, 0, 1 and 2).
+/// four groups take ticks 0 … 3).
 const SLOW_DIV: u8 = 4;
-/// `slow_tick` value that refreshes every slow term at the next step.
+/// `slow_tick` value that refreshes every slow term at the next step (any value ≥ 4 does).
 const REFRESH_ALL: u8 = SLOW_DIV;
 
-/// Current reference, feed-forward and bus terms, held between refreshes.
+/// Current reference, feed-forward, bus terms and angle advance, held between refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct HeldTerms {
     i_ref: Dq,
-    /// Back-emf `K_e·ω_e` (refreshed on tick 3; the law's input and the feed-forward's q term).
+    /// Back-emf `K_e·ω_e` (refreshed with the law; the feed-forward's q term).
     e_q: Q,
     ff: Dq,
-    v_max: Q,
-    inv_vbus: u32,
+    /// The voltage circle (radius m_max/√3·V_bus).
+    v_lim: VLimit,
+    /// `inv_bus(V_bus)·2^8`.
+    inv8: i32,
+    advance: Rotation,
+    /// 0 under the resistor law (tick cycle), REFRESH_ALL under the others (every period).
+    tick_or: u8,
 }
 
 /// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
@@ -512,7 +556,7 @@ fn law_terms(
     g: &Gains,
     e_q: Q,
     i_dq: Dq,
-    v_bus: Q,
+    vb: u32,
     derate: Q,
 ) -> Dq {
     if run {
@@ -523,11 +567,16 @@ fn law_terms(
                 // 2^31 LSB, so the negation after the clamp needs no saturation.
                 q: -clamp_sym(r.conductance.scale(e_q), g.i_max),
             },
-            law => other_law(law, enc, g, e_q, i_dq, v_bus),
+            law => other_law(law, enc, g, e_q, i_dq, vb),
         };
         // Protection hook (protect.rs): bus derating of a regenerative reference (e_q has
-        // the sign of the speed).
-        derate_regen(r, e_q, derate)
+        // the sign of the speed). At the factor 1 (no derating, the normal case) the product
+        // is the reference itself (Q16.16 `x·1 = x` exactly), so it is skipped.
+        if derate != Q::ONE {
+            derate_regen(r, e_q, derate)
+        } else {
+            r
+        }
     } else {
         Dq::default()
     }
@@ -556,7 +605,9 @@ fn feed_forward(g: &Gains, vel: Q, i_ref: Dq, e_q: Q) -> Dq {
 /// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so
 /// the step's common path stays small; the reference limited to `i_max`.
 #[inline(never)]
-fn other_law(law: &mut Law, enc: &Encoder, g: &Gains, e_q: Q, i_dq: Dq, v_bus: Q) -> Dq {
+fn other_law(law: &mut Law, enc: &Encoder, g: &Gains, e_q: Q, i_dq: Dq, vb: u32) -> Dq {
+    // Bus: 4095·vpc < 30,000 V.
+    let v_bus = Q::from_bits(g.k.volts_per_code.apply(vb.min(CODE_MAX) as i32));
     let r = law.command(&LawInput {
         omega_m: enc.omega_m(&g.enc),
         e_q,

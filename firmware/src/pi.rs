@@ -33,11 +33,52 @@ pub struct PiOutput {
     pub saturated: bool,
 }
 
+/// The allowed voltage circle: radius `r ≥ 0` (LSB of [`Q`]) and `r²`, so the per-period
+/// test is two products and a compare (the loop holds it between bus refreshes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct VLimit {
+    r: i32,
+    r2: u64,
+}
+
+impl VLimit {
+    /// The circle of radius `v_max` (negative radii count as zero).
+    pub fn new(v_max: Q) -> VLimit {
+        let r = v_max.to_bits().max(0);
+        VLimit {
+            r,
+            r2: (r as i64 * r as i64) as u64,
+        }
+    }
+
+    /// The radius.
+    pub fn radius(&self) -> Q {
+        Q::from_bits(self.r)
+    }
+
+    /// `v` scaled onto the circle when it lies outside; `None` when inside.
+    #[inline(always)]
+    pub fn limit(&self, v: Dq) -> Option<Dq> {
+        let (d, q) = (v.d.to_bits() as i64, v.q.to_bits() as i64);
+        // Each square ≤ 2^62: the sum fits a u64.
+        if (d * d) as u64 + (q * q) as u64 <= self.r2 {
+            return None;
+        }
+        Some(limit_slow(v.d.to_bits(), v.q.to_bits(), self.r))
+    }
+}
+
 impl CurrentPi {
     /// One update. `err` = reference − measurement (A); `ff` = feed-forward voltages (V);
     /// `v_max` ≥ 0 the radius of the allowed voltage circle (V).
     #[inline(always)]
     pub fn update(&mut self, err: Dq, ff: Dq, g: &PiGains, v_max: Q) -> PiOutput {
+        self.update_within(err, ff, g, &VLimit::new(v_max))
+    }
+
+    /// [`CurrentPi::update`] with the voltage circle given as a [`VLimit`].
+    #[inline(always)]
+    pub fn update_within(&mut self, err: Dq, ff: Dq, g: &PiGains, lim: &VLimit) -> PiOutput {
         let next = Dq {
             d: self.integ.d.saturating_add(g.ki_ts.scale(err.d)),
             q: self.integ.q.saturating_add(g.ki_ts.scale(err.q)),
@@ -48,7 +89,7 @@ impl CurrentPi {
             d: pd.saturating_add(next.d),
             q: pq.saturating_add(next.q),
         };
-        match limit_vector(raw, v_max) {
+        match lim.limit(raw) {
             None => {
                 self.integ = next;
                 PiOutput {
@@ -59,10 +100,10 @@ impl CurrentPi {
             Some(v) => {
                 // Anti-windup by conditional integration: while the output is limited the
                 // integrators hold (they do not integrate), and they never exceed the limit.
-                let lim = v_max.max(Q::ZERO);
+                let r = lim.radius();
                 self.integ = Dq {
-                    d: clamp_sym(self.integ.d, lim),
-                    q: clamp_sym(self.integ.q, lim),
+                    d: clamp_sym(self.integ.d, r),
+                    q: clamp_sym(self.integ.q, r),
                 };
                 PiOutput { v, saturated: true }
             }
@@ -78,12 +119,7 @@ impl CurrentPi {
 /// Scale `v` onto the circle of radius `r` when it lies outside; `None` when inside.
 #[inline]
 pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
-    let (d, q) = (v.d.to_bits() as i64, v.q.to_bits() as i64);
-    let r = r.to_bits().max(0) as i64;
-    if (d * d) as u64 + (q * q) as u64 <= (r * r) as u64 {
-        return None;
-    }
-    Some(limit_slow(v.d.to_bits(), v.q.to_bits(), r as i32))
+    VLimit::new(r).limit(v)
 }
 
 /// The scaling itself (taken only while limiting; inlined: it is short). Arguments as `i32`
