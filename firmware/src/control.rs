@@ -8,11 +8,11 @@
 
 use crate::config::{Config, ConfigError, Gains, CODE_MAX};
 use crate::encoder::Encoder;
+use crate::frames::Rotation;
 use crate::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
-use crate::fx::{clamp_sym, mul, Angle, Duty, Q};
+use crate::fx::{clamp_sym, mul, Angle, Duty, Gain, Q};
 use crate::io::{Actuation, RawSample};
 use crate::laws::{CommandLaw, Law, LawInput};
-use crate::frames::Rotation;
 use crate::pi::{limit_vector, CurrentPi, VLimit};
 use crate::svpwm::{inv_bus, modulate_scaled, CENTRED};
 
@@ -376,63 +376,79 @@ impl Controller {
         self.rec.i_dq = i_dq;
         self.rec.theta_e = theta_e;
 
-        let (i_ref, v_dq, duties, enable, sat) = match self.mode {
-            Mode::Idle => (Dq::default(), Dq::default(), CENTRED, false, false),
-            Mode::Short => (Dq::default(), Dq::default(), [Duty::ZERO; 3], true, false),
-            Mode::Run | Mode::Open => {
-                // Slow terms: the back-emf and the law's current reference (limited to
-                // i_max), the feed-forward, the bus terms (the voltage circle, 1/V_bus) and
-                // the output-angle advance. For the resistor law they depend on the speed
-                // estimate alone, which changes at the rate of the motion and the PLL (≤
-                // speed_bw_hz), and the bus voltage moves slowly on its capacitor (a few
-                // amperes into millifarads: well under 1 % of the bus in 200 µs); so they are
-                // refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between, and the
-                // PI (1 kHz bandwidth, inside the loop) corrects what the hold leaves. The bus
-                // trips above still compare every sample. Other laws keep their own rates and
-                // run every period (their `tick_or` keeps the tick at REFRESH_ALL).
-                // The four groups are refreshed on different periods of the cycle (back-emf
-                // and law on tick 0, feed-forward on tick 1, bus on tick 2, angle advance on
-                // tick 3) so that no single period pays for more than one group. A refresh
-                // request (configuration or mode change) is served where it is made
-                // (`refresh_now`, outside the step), so no period pays for all of them; only a
-                // trip or `law_mut` leaves it to the next step (`REFRESH_ALL`).
-                let t = self.slow_tick;
-                match t {
-                    0 => self.refresh_law(i_dq, vb),
-                    1 => self.refresh_ff(),
-                    2 => self.refresh_bus(vb),
-                    3 => self.refresh_advance(),
-                    _ => self.refresh_all(i_dq, vb),
-                }
-                self.slow_tick = ((t + 1) & (SLOW_DIV - 1)) | self.held.tick_or;
-                let h = &self.held;
+        if !matches!(self.mode, Mode::Run | Mode::Open) {
+            return self.step_off();
+        }
+        // Slow terms: the back-emf and the law's current reference (limited to
+        // i_max), the feed-forward, the bus terms (the voltage circle, 1/V_bus) and
+        // the output-angle advance. For the resistor law they depend on the speed
+        // estimate alone, which changes at the rate of the motion and the PLL (≤
+        // speed_bw_hz), and the bus voltage moves slowly on its capacitor (a few
+        // amperes into millifarads: well under 1 % of the bus in 200 µs); so they are
+        // refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between, and the
+        // PI (1 kHz bandwidth, inside the loop) corrects what the hold leaves. The bus
+        // trips above still compare every sample. Other laws keep their own rates and
+        // run every period (their `tick_or` keeps the tick at REFRESH_ALL).
+        // The four groups are refreshed on different periods of the cycle (back-emf
+        // and law on tick 0, feed-forward on tick 1, bus on tick 2, angle advance on
+        // tick 3) so that no single period pays for more than one group. A refresh
+        // request (configuration or mode change) is served where it is made
+        // (`refresh_now`, outside the step), so no period pays for all of them; only a
+        // trip or `law_mut` leaves it to the next step (`REFRESH_ALL`).
+        let t = self.slow_tick;
+        match t {
+            0 => self.refresh_law(),
+            1 => self.refresh_ff(),
+            2 => self.refresh_bus(vb),
+            3 => self.refresh_advance(),
+            _ => self.refresh_all(i_dq, vb),
+        }
+        self.slow_tick = ((t + 1) & (SLOW_DIV - 1)) | self.held.tick_or;
+        let h = &self.held;
 
-                // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
-                let err = Dq {
-                    d: Q::from_bits(h.i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
-                    q: Q::from_bits(h.i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
-                };
-                let out = self.pi.update_within(err, h.ff, &self.g.pi, &h.v_lim);
-
-                // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay): the
-                // held rotation (cos a, sin a) applied to (sin θ, cos θ) by the angle-sum
-                // formulas, in place of a second table look-up.
-                let (s2, c2) = h.advance.rotate(sin, cos);
-                // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
-                // `black_box` is a value barrier only (no effect on the result): without it
-                // the optimiser carries the limiter's 64-bit products through the branch and
-                // performs the inverse Park with full 64×64-bit multiplies (measured: more
-                // instructions on every path).
-                let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
-                let duties = modulate_scaled(v_ab, h.inv8);
-                (h.i_ref, out.v, duties, true, out.saturated)
-            }
+        // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
+        let err = Dq {
+            d: Q::from_bits(h.i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
+            q: Q::from_bits(h.i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
         };
+        let out = self.pi.update_within(err, h.ff, &self.g.pi, &h.v_lim);
+        self.rec.i_ref = h.i_ref;
+        self.rec.v_dq = out.v;
+        self.rec.v_saturated = out.saturated;
+        let h = &self.held;
 
-        self.rec.i_ref = i_ref;
-        self.rec.v_dq = v_dq;
+        // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay): the
+        // held rotation (cos a, sin a) applied to (sin θ, cos θ) by the angle-sum
+        // formulas, in place of a second table look-up.
+        let (s2, c2) = h.advance.rotate(sin, cos);
+        // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
+        // `black_box` is a value barrier only (no effect on the result): without it
+        // the optimiser carries the limiter's 64-bit products through the branch and
+        // performs the inverse Park with full 64×64-bit multiplies (measured: more
+        // instructions on every path).
+        let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
+        let duties = modulate_scaled(v_ab, h.inv8);
         self.rec.duties = duties;
-        self.rec.v_saturated = sat;
+        Actuation {
+            duties,
+            enable: true,
+            brake: self.brake,
+        }
+    }
+
+    /// The end of a period in Idle or Short: no control, the record says so.
+    #[cold]
+    #[inline(never)]
+    fn step_off(&mut self) -> Actuation {
+        let (duties, enable) = if self.mode == Mode::Short {
+            ([Duty::ZERO; 3], true)
+        } else {
+            (CENTRED, false)
+        };
+        self.rec.i_ref = Dq::default();
+        self.rec.v_dq = Dq::default();
+        self.rec.duties = duties;
+        self.rec.v_saturated = false;
         Actuation {
             duties,
             enable,
@@ -440,21 +456,23 @@ impl Controller {
         }
     }
 
-    /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the law's reference from it.
+    /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the resistor law's reference
+    /// from it: `i_q* = −clamp(G·e_q, i_max)` with the held conductance `g_law` (the law's
+    /// `1/(R + R_L)` in Run, zero in Open), derated. Ticks 0 … 3 run only under the resistor
+    /// law (`tick_or` = 0, set by [`Controller::refresh_all`] together with `g_law`; every
+    /// change of law, law parameter or mode passes through `refresh_all` first).
     #[inline(always)]
-    fn refresh_law(&mut self, i_dq: Dq, vb: u32) {
-        let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
+    fn refresh_law(&mut self) {
+        let g = &self.g;
+        let e_q = g.k.ke_per_vel.scale(self.enc.vel);
         self.held.e_q = e_q;
-        self.held.i_ref = law_terms(
-            &mut self.law,
-            self.mode == Mode::Run,
-            &self.enc,
-            &self.g,
-            e_q,
-            i_dq,
-            vb,
-            self.prot.derate,
-        );
+        let r = Dq {
+            d: Q::ZERO,
+            // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
+            // 2^31 LSB, so the negation after the clamp needs no saturation.
+            q: -clamp_sym(self.held.g_law.scale(e_q), g.i_max),
+        };
+        self.held.i_ref = derated(r, e_q, self.prot.derate);
     }
 
     /// Tick 1: the feed-forward from the held back-emf and reference.
@@ -484,18 +502,33 @@ impl Controller {
     }
 
     /// Every slow term at once (a trip or `law_mut` asked for it, or a law other than the
-    /// resistor, which runs every period); also sets the tick schedule for the law.
+    /// resistor, which runs every period); also sets the tick schedule and the held
+    /// conductance for the law and mode in force.
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
-        self.refresh_law(i_dq, vb);
+        if let Law::Resistor(r) = &self.law {
+            self.held.g_law = if self.mode == Mode::Run {
+                r.conductance
+            } else {
+                Gain::ZERO
+            };
+            self.held.tick_or = 0;
+            self.refresh_law();
+        } else {
+            self.held.g_law = Gain::ZERO;
+            self.held.tick_or = REFRESH_ALL;
+            let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
+            self.held.e_q = e_q;
+            self.held.i_ref = if self.mode == Mode::Run {
+                let r = other_law(&mut self.law, &self.enc, &self.g, e_q, i_dq, vb);
+                derated(r, e_q, self.prot.derate)
+            } else {
+                Dq::default()
+            };
+        }
         self.refresh_ff();
         self.refresh_bus(vb);
         self.refresh_advance();
-        self.held.tick_or = if matches!(self.law, Law::Resistor(_)) {
-            0
-        } else {
-            REFRESH_ALL
-        };
     }
 
     /// Serve a refresh request (configuration or mode changed) now, between steps: under the
@@ -531,6 +564,8 @@ struct HeldTerms {
     /// `inv_bus(V_bus)·2^8`.
     inv8: i32,
     advance: Rotation,
+    /// The resistor law's conductance in Run, zero otherwise (see `refresh_law`).
+    g_law: Gain,
     /// 0 under the resistor law (tick cycle), REFRESH_ALL under the others (every period).
     tick_or: u8,
 }
@@ -546,39 +581,15 @@ fn volts_of_code(g: &Gains, code: u16) -> Q {
     g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
-/// The law's reference limited to i_max (zero unless running), from the back-emf `e_q`.
+/// Protection hook (protect.rs): bus derating of a regenerative reference (`e_q` has the
+/// sign of the speed). At the factor 1 (no derating, the normal case) the product is the
+/// reference itself (Q16.16 `x·1 = x` exactly), so it is skipped.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn law_terms(
-    law: &mut Law,
-    run: bool,
-    enc: &Encoder,
-    g: &Gains,
-    e_q: Q,
-    i_dq: Dq,
-    vb: u32,
-    derate: Q,
-) -> Dq {
-    if run {
-        let r = match law {
-            Law::Resistor(r) => Dq {
-                d: Q::ZERO,
-                // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
-                // 2^31 LSB, so the negation after the clamp needs no saturation.
-                q: -clamp_sym(r.conductance.scale(e_q), g.i_max),
-            },
-            law => other_law(law, enc, g, e_q, i_dq, vb),
-        };
-        // Protection hook (protect.rs): bus derating of a regenerative reference (e_q has
-        // the sign of the speed). At the factor 1 (no derating, the normal case) the product
-        // is the reference itself (Q16.16 `x·1 = x` exactly), so it is skipped.
-        if derate != Q::ONE {
-            derate_regen(r, e_q, derate)
-        } else {
-            r
-        }
+fn derated(r: Dq, e_q: Q, derate: Q) -> Dq {
+    if derate != Q::ONE {
+        derate_regen(r, e_q, derate)
     } else {
-        Dq::default()
+        r
     }
 }
 

@@ -75,13 +75,20 @@ impl Encoder {
         self.implausible = delta.unsigned_abs() > g.max_step_counts as u32;
         self.position = self.position.saturating_add(delta);
         // Count within the turn, kept by wrap-around. in_turn < cpr ≤ 16384 and |delta| ≤
-        // 32768: the sum cannot overflow. One unsigned compare covers both directions;
-        // the reduction runs only on a wrap.
+        // 32768: the sums cannot overflow. One unsigned compare covers both directions; on a
+        // wrap, one turn added or taken away is enough for any step below a turn (the usual
+        // case), and the full reduction runs only for larger ones.
         let t = self.in_turn as i32 + delta;
         self.in_turn = if (t as u32) < g.cpr {
             t as u32
         } else {
-            wrap_turn(t, g.cpr)
+            let cpr = g.cpr as i32;
+            let u = if t < 0 { t + cpr } else { t - cpr };
+            if (u as u32) < g.cpr {
+                u as u32
+            } else {
+                wrap_turn(t, g.cpr)
+            }
         };
         let theta_e = Angle(
             self.in_turn
