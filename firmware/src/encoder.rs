@@ -36,8 +36,9 @@ pub struct EncoderGains {
 /// Encoder and speed-observer state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Encoder {
-    last_raw: u16,
-    primed: bool,
+    /// The last raw count in the low half, and 0xFFFF in the high half once an update has
+    /// been seen (0 before): the high half masks the first change to zero without a branch.
+    last: u32,
     /// Multi-turn position, counts.
     pub position: i32,
     /// Count within the revolution, 0 … cpr−1.
@@ -66,12 +67,8 @@ impl Encoder {
     /// One step with the raw hardware counter; returns the electrical angle of the d axis.
     #[inline(always)]
     pub fn update(&mut self, raw: u16, g: &EncoderGains) -> Angle {
-        if !self.primed {
-            self.primed = true;
-            self.last_raw = raw;
-        }
-        let delta = raw.wrapping_sub(self.last_raw) as i16 as i32;
-        self.last_raw = raw;
+        let delta = ((raw as u32).wrapping_sub(self.last) & (self.last >> 16)) as u16 as i16 as i32;
+        self.last = raw as u32 | 0xFFFF_0000;
         self.implausible = delta.unsigned_abs() > g.max_step_counts as u32;
         self.position = self.position.saturating_add(delta);
         // Count within the turn, kept by wrap-around. in_turn < cpr ≤ 16384 and |delta| ≤

@@ -6,7 +6,7 @@
 //! first-order `ωc/(s + ωc)`. In discrete time the integral gain per step is `Ki·Ts`.
 
 use crate::frames::Dq;
-use crate::fx::{clamp_sym, mulhs, Gain, Q};
+use crate::fx::{clamp_sym, Gain, Q};
 
 /// Gains of one axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -152,11 +152,20 @@ fn limit_slow(d: i32, q: i32, r: u32) -> Dq {
     let q1 = num / mag;
     let q2 = ((num % mag) << 15) / mag;
     let k = ((q1 << 15) + q2).min(i32::MAX as u32) as i32;
-    // k < 2^31: |x·k/2^32| ≤ |x|/2, so its double fits (at x = −2^31: exactly −2^31).
+    // x·k/2^32 rounded to nearest (one `SMMULR`), doubled: the even integer nearest x·k/2^31,
+    // which is never longer than x (k < 2^31, so |x·k/2^31| < |x|: an even integer within 1
+    // of it has at most |x|'s magnitude), and fits an i32 (at x = −2^31 it is −2^31 + 2).
     Dq {
-        d: Q::from_bits(mulhs(d, k) << 1),
-        q: Q::from_bits(mulhs(q, k) << 1),
+        d: Q::from_bits(mulhs_round(d, k) << 1),
+        q: Q::from_bits(mulhs_round(q, k) << 1),
     }
+}
+
+/// `a·b/2^32` rounded to nearest (half up), one `SMMULR` on a Cortex-M4: |a·b| ≤ 2^62, so
+/// the sum cannot overflow.
+#[inline(always)]
+fn mulhs_round(a: i32, b: i32) -> i32 {
+    ((a as i64 * b as i64 + (1 << 31)) >> 32) as i32
 }
 
 /// √n for n in [2^28, 2^31]: a seed from the top six bits (within 3 %), then two Newton
