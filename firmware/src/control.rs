@@ -752,6 +752,69 @@ mod tests {
         }
     }
 
+    /// Steps at a steady encoder speed (zero currents, 72 V), `n` periods from count `c0`.
+    fn spin(ctl: &mut Controller, c0: u16, n: u16) -> u16 {
+        let z = ctl.config().adc_zero_code;
+        for k in 0..n {
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: 2458,
+                encoder: c0.wrapping_add(3 * k),
+            });
+        }
+        c0.wrapping_add(3 * n)
+    }
+
+    #[test]
+    fn refresh_requests_are_served_at_once() {
+        // A configuration change (R_L 306 → 2 Ω) is served by `set_config` itself: the very
+        // next step commands the new law's reference, −clamp(G·e_q, i_max) with the speed as
+        // it was at the request, and refreshes the bus terms from its own sample (50 V here).
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        ctl.set_mode(Mode::Run).unwrap();
+        let c = spin(&mut ctl, 0, 400);
+        let vel = ctl.enc.vel;
+        let new = Config {
+            r_load_ohm: 2.0,
+            ..cfg
+        };
+        ctl.set_config(&new).unwrap();
+        let z = cfg.adc_zero_code;
+        ctl.step(&RawSample {
+            i_abc: [z; 3],
+            v_bus: 1707, // 50 V
+            encoder: c,
+        });
+        let g = Gains::new(&new).unwrap();
+        let e_q = g.k.ke_per_vel.scale(vel);
+        let cond = crate::laws::Resistor::new(new.r_phase_ohm, 2.0).conductance;
+        let want = -clamp_sym(cond.scale(e_q), g.i_max);
+        assert!(want != Q::ZERO);
+        assert_eq!(ctl.telemetry().i_ref.q, want);
+        let r = ctl.held.v_lim.radius().to_num::<f64>();
+        let v = 1707.0 * new.volts_per_count as f64 * new.m_max as f64 / 3f64.sqrt();
+        assert!((r - v).abs() < 1e-3, "{r} V vs {v} V");
+        // A request the step serves itself (`law_mut`): the next step's reference is the
+        // law's for the speed of that step, and the tick cycle resumes.
+        let c = spin(&mut ctl, c + 3, 40);
+        if let Law::Resistor(r) = ctl.law_mut() {
+            r.conductance = cond;
+        }
+        assert_eq!(ctl.slow_tick, REFRESH_ALL);
+        spin(&mut ctl, c, 1);
+        let e_q = g.k.ke_per_vel.scale(ctl.enc.vel);
+        assert_eq!(
+            ctl.telemetry().i_ref.q,
+            -clamp_sym(cond.scale(e_q), g.i_max)
+        );
+        assert!(ctl.slow_tick < SLOW_DIV);
+        // Open mode: zero reference from the request on.
+        ctl.set_mode(Mode::Open).unwrap();
+        spin(&mut ctl, c, 1);
+        assert_eq!(ctl.telemetry().i_ref, Dq::default());
+    }
+
     #[test]
     fn trips_on_raw_code_thresholds() {
         // Over-current at |code − zero| > i_trip/amps_per_count = 20/(50/4096) = 1638.4.

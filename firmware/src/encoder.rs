@@ -122,3 +122,43 @@ impl Encoder {
         g.rad_s_per_count_step.scale(self.vel)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::vec;
+
+    fn gains(cpr: u32) -> EncoderGains {
+        EncoderGains {
+            cpr,
+            max_step_counts: 1000,
+            ..EncoderGains::default()
+        }
+    }
+
+    proptest! {
+        /// The first update defines count 0 whatever the counter reads; after it the
+        /// multi-turn position follows the counter's wrapping changes, and the count within
+        /// the turn is that position modulo cpr, on the one-turn wrap path and on the full
+        /// reduction alike (changes up to ±32,767 counts against turns of 16 … 16,384).
+        #[test]
+        fn position_and_count_within_the_turn(cpr in prop::sample::select(vec![16u32, 100, 10_000, 16_384]),
+                                              first in any::<u16>(),
+                                              steps in prop::collection::vec(-32_767i32..=32_767, 1..60)) {
+            let g = gains(cpr);
+            let mut e = Encoder::default();
+            e.update(first, &g);
+            prop_assert_eq!((e.position, e.in_turn, e.implausible), (0, 0, false));
+            let (mut raw, mut pos) = (first, 0i64);
+            for d in steps {
+                raw = raw.wrapping_add(d as u16);
+                pos += d as i64;
+                e.update(raw, &g);
+                prop_assert_eq!(e.position as i64, pos);
+                prop_assert_eq!(e.in_turn as i64, pos.rem_euclid(cpr as i64));
+                prop_assert_eq!(e.implausible, d.abs() > 1000);
+            }
+        }
+    }
+}

@@ -228,6 +228,22 @@ mod tests {
         }
 
         #[test]
+        fn rotation_is_the_angle_sum(th in any::<u32>(), a in any::<u32>()) {
+            // Each table value is within ε = 1.9e-5 + 2^-15 of the exact (the bound of
+            // `sin_cos_table_accuracy`); each of the two products per output then errs by at
+            // most ε·(|x| + |y|), and |sin| + |cos| ≤ √2 for both angles: 2√2·ε in all, plus
+            // the two floors (2 LSB = 3.1e-5): 1.8e-4.
+            let (s, c) = Angle(th).sin_cos();
+            let (s2, c2) = Rotation::of(Angle(a)).rotate(s, c);
+            let x = Angle(th.wrapping_add(a)).radians();
+            prop_assert!((f(s2) - x.sin()).abs() < 1.8e-4, "{} vs {}", f(s2), x.sin());
+            prop_assert!((f(c2) - x.cos()).abs() < 1.8e-4, "{} vs {}", f(c2), x.cos());
+            // The identity leaves the pair exactly as it was.
+            prop_assert_eq!(Rotation::default().rotate(s, c), (s, c));
+            prop_assert_eq!(Rotation::of(Angle(0)), Rotation::default());
+        }
+
+        #[test]
         fn extreme_inputs_saturate(a in any::<i32>(), b in any::<i32>(), c in any::<i32>(), th in any::<u32>()) {
             // Must not panic (overflow checks are on in tests) for any bits at all.
             let ab = clarke(Q::from_bits(a), Q::from_bits(b), Q::from_bits(c));
