@@ -290,7 +290,7 @@ impl Controller {
         }
         self.mode = if open { Mode::Idle } else { f.safe_mode() };
         self.pi.reset();
-        self.slow_tick = REFRESH_ALL;
+        self.refresh_now();
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
@@ -392,9 +392,10 @@ impl Controller {
         // The four groups are refreshed on different periods of the cycle (back-emf
         // and law on tick 0, feed-forward on tick 1, bus on tick 2, angle advance on
         // tick 3) so that no single period pays for more than one group. A refresh
-        // request (configuration or mode change) is served where it is made
-        // (`refresh_now`, outside the step), so no period pays for all of them; only a
-        // trip or `law_mut` leaves it to the next step (`REFRESH_ALL`).
+        // request (configuration or mode change, trip) is served where it is made
+        // (`refresh_now`, outside the step's normal path), so no period pays for all of
+        // them; only `law_mut` leaves it to the next step (`REFRESH_ALL`: the law's terms,
+        // see `refresh_all`).
         let t = self.slow_tick;
         match t {
             0 => self.refresh_law(),
@@ -501,11 +502,10 @@ impl Controller {
         self.held.advance = Rotation::of(Angle(adv));
     }
 
-    /// Every slow term at once (a trip or `law_mut` asked for it, or a law other than the
-    /// resistor, which runs every period); also sets the tick schedule and the held
-    /// conductance for the law and mode in force.
-    #[inline(never)]
-    fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
+    /// The held conductance and the tick schedule for the law and mode in force; true under
+    /// the resistor law.
+    #[inline(always)]
+    fn setup_law(&mut self) -> bool {
         if let Law::Resistor(r) = &self.law {
             self.held.g_law = if self.mode == Mode::Run {
                 r.conductance
@@ -513,32 +513,57 @@ impl Controller {
                 Gain::ZERO
             };
             self.held.tick_or = 0;
-            self.refresh_law();
+            true
         } else {
             self.held.g_law = Gain::ZERO;
             self.held.tick_or = REFRESH_ALL;
-            let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
-            self.held.e_q = e_q;
-            self.held.i_ref = if self.mode == Mode::Run {
-                let r = other_law(&mut self.law, &self.enc, &self.g, e_q, i_dq, vb);
-                derated(r, e_q, self.prot.derate)
-            } else {
-                Dq::default()
-            };
+            false
         }
+    }
+
+    /// `REFRESH_ALL` in the step: a request the step serves itself (`law_mut`), or a law
+    /// other than the resistor (all its terms every period). Under the resistor law only the
+    /// law's terms depend on what `law_mut` may change: its reference is refreshed now, the
+    /// feed-forward on the next tick (as after every law refresh), and the bus and advance
+    /// terms stay (they depend on the configuration and the measurements only, and were
+    /// refreshed under this configuration: `set_config` and `set_mode` refresh everything).
+    #[inline(never)]
+    fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
+        if self.setup_law() {
+            self.refresh_law();
+        } else {
+            self.refresh_other(i_dq, vb);
+        }
+    }
+
+    /// Every slow term, under a law other than the resistor (out of line: the laws that take
+    /// this path run far longer anyway).
+    #[inline(never)]
+    fn refresh_other(&mut self, i_dq: Dq, vb: u32) {
+        let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
+        self.held.e_q = e_q;
+        self.held.i_ref = if self.mode == Mode::Run {
+            let r = other_law(&mut self.law, &self.enc, &self.g, e_q, i_dq, vb);
+            derated(r, e_q, self.prot.derate)
+        } else {
+            Dq::default()
+        };
         self.refresh_ff();
         self.refresh_bus(vb);
         self.refresh_advance();
     }
 
-    /// Serve a refresh request (configuration or mode changed) now, between steps: under the
-    /// resistor law every slow term is recomputed from the last period's sample and speed,
-    /// and the next step starts the cycle with the bus terms from its own sample. Other laws
-    /// advance their state once per step, so they refresh at the next step.
+    /// Serve a refresh request (configuration or mode changed, or a trip) now, outside the
+    /// step's normal path: under the resistor law every slow term is recomputed from the last
+    /// period's sample and speed, and the next step starts the cycle with the bus terms from
+    /// its own sample. Other laws advance their state once per step, so they refresh at the
+    /// next step.
     fn refresh_now(&mut self) {
-        if matches!(self.law, Law::Resistor(_)) {
-            let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
-            self.refresh_all(i_dq, vb);
+        if self.setup_law() {
+            self.refresh_law();
+            self.refresh_ff();
+            self.refresh_bus(self.rec.sample.v_bus as u32);
+            self.refresh_advance();
             self.slow_tick = 2;
         } else {
             self.slow_tick = REFRESH_ALL;
