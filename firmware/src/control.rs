@@ -269,7 +269,7 @@ impl Controller {
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
-        self.slow_tick = REFRESH_ALL; // the law may change: refresh its terms at the next step
+        self.slow_tick = 0; // the law may change: its terms at the next step (tick 0)
         &mut self.law
     }
 
@@ -398,7 +398,7 @@ impl Controller {
         // see `refresh_all`).
         let t = self.slow_tick;
         match t {
-            0 => self.refresh_law(),
+            0 => self.refresh_law(i_dq, vb),
             1 => self.refresh_ff(),
             2 => self.refresh_bus(vb),
             3 => self.refresh_advance(),
@@ -458,12 +458,17 @@ impl Controller {
     }
 
     /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the resistor law's reference
-    /// from it: `i_q* = −clamp(G·e_q, i_max)` with the held conductance `g_law` (the law's
-    /// `1/(R + R_L)` in Run, zero in Open), derated. Ticks 0 … 3 run only under the resistor
-    /// law (`tick_or` = 0, set by [`Controller::refresh_all`] together with `g_law`; every
-    /// change of law, law parameter or mode passes through `refresh_all` first).
+    /// from it: `i_q* = −clamp(G·e_q, i_max)` with the law's conductance `G = 1/(R + R_L)` in
+    /// Run (zero in Open), derated. Ticks 0 … 3 run under the resistor law (`tick_or` = 0);
+    /// should `law_mut` have put another law in its place, every term is refreshed instead,
+    /// and from then on every period.
     #[inline(always)]
-    fn refresh_law(&mut self) {
+    fn refresh_law(&mut self, i_dq: Dq, vb: u32) {
+        let g_law = match &self.law {
+            Law::Resistor(r) if self.mode == Mode::Run => r.conductance,
+            Law::Resistor(_) => Gain::ZERO,
+            _ => return self.refresh_all(i_dq, vb),
+        };
         let g = &self.g;
         let e_q = g.k.ke_per_vel.scale(self.enc.vel);
         self.held.e_q = e_q;
@@ -471,7 +476,7 @@ impl Controller {
             d: Q::ZERO,
             // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
             // 2^31 LSB, so the negation after the clamp needs no saturation.
-            q: -clamp_sym(self.held.g_law.scale(e_q), g.i_max),
+            q: -clamp_sym(g_law.scale(e_q), g.i_max),
         };
         self.held.i_ref = derated(r, e_q, self.prot.derate);
     }
@@ -502,35 +507,21 @@ impl Controller {
         self.held.advance = Rotation::of(Angle(adv));
     }
 
-    /// The held conductance and the tick schedule for the law and mode in force; true under
-    /// the resistor law.
+    /// The tick schedule for the law in force; true under the resistor law.
     #[inline(always)]
     fn setup_law(&mut self) -> bool {
-        if let Law::Resistor(r) = &self.law {
-            self.held.g_law = if self.mode == Mode::Run {
-                r.conductance
-            } else {
-                Gain::ZERO
-            };
-            self.held.tick_or = 0;
-            true
-        } else {
-            self.held.g_law = Gain::ZERO;
-            self.held.tick_or = REFRESH_ALL;
-            false
-        }
+        let resistor = matches!(self.law, Law::Resistor(_));
+        self.held.tick_or = if resistor { 0 } else { REFRESH_ALL };
+        resistor
     }
 
-    /// `REFRESH_ALL` in the step: a request the step serves itself (`law_mut`), or a law
-    /// other than the resistor (all its terms every period). Under the resistor law only the
-    /// law's terms depend on what `law_mut` may change: its reference is refreshed now, the
-    /// feed-forward on the next tick (as after every law refresh), and the bus and advance
-    /// terms stay (they depend on the configuration and the measurements only, and were
-    /// refreshed under this configuration: `set_config` and `set_mode` refresh everything).
+    /// `REFRESH_ALL`: a law other than the resistor (all its terms every period), or the
+    /// first step after `new`, or the resistor law put back by `law_mut` (its reference now,
+    /// the cycle from then on).
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
         if self.setup_law() {
-            self.refresh_law();
+            self.refresh_law(i_dq, vb);
         } else {
             self.refresh_other(i_dq, vb);
         }
@@ -560,9 +551,10 @@ impl Controller {
     /// next step.
     fn refresh_now(&mut self) {
         if self.setup_law() {
-            self.refresh_law();
+            let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
+            self.refresh_law(i_dq, vb);
             self.refresh_ff();
-            self.refresh_bus(self.rec.sample.v_bus as u32);
+            self.refresh_bus(vb);
             self.refresh_advance();
             self.slow_tick = 2;
         } else {
@@ -589,8 +581,6 @@ struct HeldTerms {
     /// `inv_bus(V_bus)·2^8`.
     inv8: i32,
     advance: Rotation,
-    /// The resistor law's conductance in Run, zero otherwise (see `refresh_law`).
-    g_law: Gain,
     /// 0 under the resistor law (tick cycle), REFRESH_ALL under the others (every period).
     tick_or: u8,
 }
@@ -820,13 +810,13 @@ mod tests {
         let r = ctl.held.v_lim.radius().to_num::<f64>();
         let v = 1707.0 * new.volts_per_count as f64 * new.m_max as f64 / 3f64.sqrt();
         assert!((r - v).abs() < 1e-3, "{r} V vs {v} V");
-        // A request the step serves itself (`law_mut`): the next step's reference is the
-        // law's for the speed of that step, and the tick cycle resumes.
+        // A request the step serves itself (`law_mut`): the next step is the law's tick, its
+        // reference the law's for the speed of that step, and the tick cycle resumes.
         let c = spin(&mut ctl, c + 3, 40);
         if let Law::Resistor(r) = ctl.law_mut() {
             r.conductance = cond;
         }
-        assert_eq!(ctl.slow_tick, REFRESH_ALL);
+        assert_eq!(ctl.slow_tick, 0);
         spin(&mut ctl, c, 1);
         let e_q = g.k.ke_per_vel.scale(ctl.enc.vel);
         assert_eq!(
