@@ -46,7 +46,7 @@ pub fn clarke(a: Q, b: Q, c: Q) -> AlphaBeta {
 /// Inverse Clarke: phase quantities (a, b, c) with zero sum.
 #[inline(always)]
 pub fn inverse_clarke(v: AlphaBeta) -> [Q; 3] {
-    let half_a = v.alpha / 2;
+    let half_a = Q::from_bits(v.alpha.to_bits() >> 1); // α/2, floored
     let sb = mulk(v.beta.to_bits() as i64, SQRT3_2);
     [
         v.alpha,

@@ -58,7 +58,7 @@ pub fn modulate_scaled(v: AlphaBeta, inv8: i32) -> [Duty; 3] {
     debug_assert!((al as i64).pow(2) + (be as i64).pow(2) < (17_330i64 << 16).pow(2));
     // Inverse Clarke: a = α, b = −α/2 + (√3/2)β, c = −α/2 − (√3/2)β.
     let sb = crate::fx::mul_shr::<30>(be, 929_887_697); // √3/2, Q2.30
-    let half_a = al / 2; // as `inverse_clarke` (toward zero)
+    let half_a = al >> 1; // as `inverse_clarke` (floor)
     let (a, b, c) = (al, sb - half_a, -half_a - sb);
     let max = a.max(b).max(c);
     let min = a.min(b).min(c);
