@@ -394,8 +394,7 @@ impl Controller {
         // tick 3) so that no single period pays for more than one group. A refresh
         // request (configuration or mode change, trip) is served where it is made
         // (`refresh_now`, outside the step's normal path), so no period pays for all of
-        // them; only `law_mut` leaves it to the next step (`REFRESH_ALL`: the law's terms,
-        // see `refresh_all`).
+        // them; `law_mut` makes the next step the law's tick (tick 0).
         let t = self.slow_tick;
         match t {
             0 => self.refresh_law(i_dq, vb),
@@ -516,8 +515,9 @@ impl Controller {
     }
 
     /// `REFRESH_ALL`: a law other than the resistor (all its terms every period), or the
-    /// first step after `new`, or the resistor law put back by `law_mut` (its reference now,
-    /// the cycle from then on).
+    /// resistor law put back by `law_mut` in place of another (its reference now, the cycle
+    /// from then on). (`new` starts with it too, in Idle; `set_mode` serves the request before
+    /// any step runs the loop.)
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
         if self.setup_law() {

@@ -129,9 +129,9 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
 /// top 16 bits kept: the larger then has 15 bits (`|·| ∈ [2^14, 2^15]`), so `n = ds² + qs²`
 /// lies in `[2^28, 2^31]` and its square root comes from [`sqrt_norm`] on every path (no
 /// branch on the size). The truncation changes the larger component by less than 2^-14 of
-/// itself (6.1e-5 relative on |v|), `sqrt_norm` adds ≤ 6.2e-5, the Q1.31 scale and the
-/// final doubling 2 LSB: the limited magnitude is within 1.3e-4 (+ 3 LSB) of `r` (the
-/// tests below allow 2e-4).
+/// itself (6.1e-5 relative on |v|), `sqrt_norm` adds ≤ 6.2e-5 (its odd result included), the
+/// Q1.31 scale and the rounded doubling ≤ 1 LSB per component: the limited magnitude is within
+/// 1.3e-4 (+ 2 LSB) of `r` (the tests below allow 2e-4).
 #[inline(always)]
 fn limit_slow(d: i32, q: i32, r: u32) -> Dq {
     // `x ^ (x >> 31)` is x for x ≥ 0 and |x| − 1 for x < 0 (one instruction), < 2^31; their OR
