@@ -515,22 +515,16 @@ impl Controller {
     }
 
     /// `REFRESH_ALL`: a law other than the resistor (all its terms every period), or the
-    /// resistor law put back by `law_mut` in place of another (its reference now, the cycle
-    /// from then on). (`new` starts with it too, in Idle; `set_mode` serves the request before
-    /// any step runs the loop.)
+    /// resistor law put back by `law_mut` in place of another, or a request served by
+    /// `refresh_now` (the law's reference now). (`new` starts with it too, in Idle; `set_mode`
+    /// serves the request before any step runs the loop.)
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
         if self.setup_law() {
             self.refresh_law(i_dq, vb);
-        } else {
-            self.refresh_other(i_dq, vb);
+            return;
         }
-    }
-
-    /// Every slow term, under a law other than the resistor (out of line: the laws that take
-    /// this path run far longer anyway).
-    #[inline(never)]
-    fn refresh_other(&mut self, i_dq: Dq, vb: u32) {
+        // Out of line from here: the laws that take this path run far longer anyway.
         let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
         self.held.e_q = e_q;
         self.held.i_ref = if self.mode == Mode::Run {
@@ -539,25 +533,31 @@ impl Controller {
         } else {
             Dq::default()
         };
+        self.refresh_rest(vb);
+    }
+
+    /// The feed-forward, bus and advance groups (out of line: one copy besides the step's own
+    /// for `refresh_all` and `refresh_now`).
+    #[inline(never)]
+    fn refresh_rest(&mut self, vb: u32) {
         self.refresh_ff();
         self.refresh_bus(vb);
         self.refresh_advance();
     }
 
-    /// Serve a refresh request (configuration or mode changed, or a trip) now, outside the
-    /// step's normal path: under the resistor law every slow term is recomputed from the last
-    /// period's sample and speed, and the next step starts the cycle with the bus terms from
-    /// its own sample. Other laws advance their state once per step, so they refresh at the
-    /// next step.
+    /// Serve a refresh request (configuration or mode changed, or a trip) at once, outside
+    /// the step's normal path: under the resistor law every slow term is recomputed from the
+    /// last period's sample and speed, and the next step starts the cycle with the bus terms
+    /// from its own sample. Other laws advance their state once per step, so they refresh at
+    /// the next step (and every step).
     fn refresh_now(&mut self) {
-        if self.setup_law() {
+        if matches!(self.law, Law::Resistor(_)) {
             let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
-            self.refresh_law(i_dq, vb);
-            self.refresh_ff();
-            self.refresh_bus(vb);
-            self.refresh_advance();
+            self.refresh_all(i_dq, vb);
+            self.refresh_rest(vb);
             self.slow_tick = 2;
         } else {
+            self.held.tick_or = REFRESH_ALL;
             self.slow_tick = REFRESH_ALL;
         }
     }
