@@ -143,11 +143,12 @@ fn limit_slow(d: i32, q: i32, r: u32) -> Dq {
     let (ds, qs) = ((d << sh) >> 16, (q << sh) >> 16); // |.| ≤ 2^15, the larger ≥ 2^14
     let n = (ds * ds) as u32 + (qs * qs) as u32; // [2^28, 2^31]
     let mag = sqrt_norm(n); // ≥ 2^14 (non-zero: see `sqrt_norm`)
-                            // |v| ≈ mag·2^(16−sh), so r/|v| in Q1.31 is r·2^(sh+15)/mag, by two 32-bit divisions (no
-                            // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
-                            // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
-                            // 1.3e-4), so its 2^15 multiple fits a u32, and the remainder (< mag < 2^15.5) times 2^15
-                            // fits too.
+
+    // |v| ≈ mag·2^(16−sh), so r/|v| in Q1.31 is r·2^(sh+15)/mag, by two 32-bit divisions (no
+    // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
+    // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
+    // 1.3e-4), so its 2^15 multiple fits a u32, and the remainder (< mag < 2^15.5) times 2^15
+    // fits too.
     let num = r << sh;
     let q1 = num / mag;
     let q2 = ((num % mag) << 15) / mag;

@@ -1,6 +1,8 @@
 //! Replays `vectors.bin` through the controller on a Cortex-M4 (QEMU `mps2-an386`), prints
-//! the digest of all outputs, and exits with status 0. `regen_step` is the one function
-//! `../../shared/tools/qemu-insn/count.sh` counts: one full current-loop period.
+//! the digest of all outputs, and exits with status 0. `regen_step` is the function
+//! `../../shared/tools/qemu-insn/count.sh` counts for the target: one full current-loop
+//! period. `run.sh` also counts the supervision tick, the configuration change, a step after
+//! `law_mut` and the pieces below.
 #![no_std]
 #![no_main]
 
@@ -25,8 +27,9 @@ pub fn regen_step(ctl: &mut Controller, s: &RawSample) -> Actuation {
     ctl.step(s)
 }
 
-/// A step right after a refresh request the step serves itself (`law_mut`), counted on copies of the controller every 1,000 steps; the recorded
-/// run itself has none (its configuration change is served by `set_config`).
+/// A step right after a refresh request the step serves itself (`law_mut`), counted on
+/// copies of the controller every 1,000 steps; the recorded run itself has none (its
+/// configuration change is served by `set_config`).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
