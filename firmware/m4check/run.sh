@@ -32,6 +32,10 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   max=$(echo "$line" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
   min=$(echo "$line" | sed -n 's/.*min=\([0-9]*\).*/\1/p')
   echo "instructions per current-loop step: min $min, max $max (target: at most 400)"
+  rline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_refresh 2>&1 | grep insnwin | tail -n1)
+  echo "instructions on a step serving a refresh request itself (law_mut; none in the recorded run, counted on copies): min $(echo "$rline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$rline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  cline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_set_config 2>&1 | grep insnwin | tail -n1)
+  echo "instructions of the run's configuration change (set_config between two steps: validation, gains, slow terms): $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   sline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_supervise 2>&1 | grep insnwin | tail -n1)
   echo "$sline"
   echo "instructions per protection supervision tick (1 kHz, outside the step): min $(echo "$sline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$sline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
@@ -45,7 +49,7 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
     awk '/insnwin: #/ {print $3}' | sort -n |
     awk '{a[NR]=$1} END {printf "distribution over %d steps: p10 %d, median %d, p90 %d\n", NR, a[int(NR*0.1)], a[int(NR/2)], a[int(NR*0.9)]}'
   # Pieces, each counted alone on the same run (a call and its arguments included).
-  for f in piece_encoder piece_sin_cos piece_park piece_inverse_park piece_pi piece_svpwm piece_gain; do
+  for f in piece_encoder piece_sin_cos piece_rotate piece_park piece_inverse_park piece_pi piece_svpwm piece_gain; do
     p=$(timeout 300 sh "$tools/count.sh" "$elf" "$f" 2>&1 | grep insnwin | tail -n1 |
       sed -n 's/.*min=\([0-9]*\) max=\([0-9]*\).*/\1–\2/p')
     echo "  $f: $p"

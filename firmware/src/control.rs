@@ -8,12 +8,13 @@
 
 use crate::config::{Config, ConfigError, Gains, CODE_MAX};
 use crate::encoder::Encoder;
+use crate::frames::Rotation;
 use crate::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
-use crate::fx::{clamp_sym, mul, Angle, Duty, Q};
+use crate::fx::{clamp_sym, mul, Angle, Duty, Gain, Q};
 use crate::io::{Actuation, RawSample};
 use crate::laws::{CommandLaw, Law, LawInput};
-use crate::pi::{limit_vector, CurrentPi};
-use crate::svpwm::{inv_bus, modulate_limited, CENTRED};
+use crate::pi::{limit_vector, CurrentPi, VLimit};
+use crate::svpwm::{inv_bus, modulate_scaled, CENTRED};
 
 /// Operating mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -139,7 +140,7 @@ impl Controller {
         }
         self.cfg = *cfg;
         self.g = g;
-        self.slow_tick = REFRESH_ALL;
+        self.refresh_now();
         Ok(())
     }
 
@@ -175,9 +176,9 @@ impl Controller {
         }
         if m != self.mode {
             self.pi.reset();
-            self.slow_tick = REFRESH_ALL;
+            self.mode = m;
+            self.refresh_now();
         }
-        self.mode = m;
         Ok(())
     }
 
@@ -268,7 +269,7 @@ impl Controller {
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
-        self.slow_tick = REFRESH_ALL; // the law may change: refresh its terms at the next step
+        self.slow_tick = 0; // the law may change: its terms at the next step (tick 0)
         &mut self.law
     }
 
@@ -289,7 +290,7 @@ impl Controller {
         }
         self.mode = if open { Mode::Idle } else { f.safe_mode() };
         self.pi.reset();
-        self.slow_tick = REFRESH_ALL;
+        self.refresh_now();
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
@@ -331,11 +332,15 @@ impl Controller {
     /// `firmware/board/Cargo.toml`. The call costs a few cycles of the 8,500 of a period.
     #[inline(never)]
     pub fn step(&mut self, s: &RawSample) -> Actuation {
-        let g = &self.g;
-        let k = &g.k;
+        let k = &self.g.k;
 
         // ---- Measurements (scalings folded into constants; the zero code cancels) ----
-        let [ia, ib, ic] = s.i_abc.map(|c| c as i32);
+        let [ia, ib, ic] = s.i_abc.map(|c| c as u32);
+        // Phase over-current on the raw codes, while they are in registers (protection below).
+        let lo = k.i_lo;
+        let off = |c: u32| c.wrapping_sub(lo);
+        let over_i = off(ia).max(off(ib)).max(off(ic)) > k.i_span;
+        let [ia, ib, ic] = [ia as i32, ib as i32, ic as i32];
         // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
         // change nothing then and bound anything larger.
         let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
@@ -346,14 +351,13 @@ impl Controller {
             beta: Q::from_bits(k.beta_per_code.apply(s_beta)),
         };
         let vb = s.v_bus as u32;
-        let theta_e = self.enc.update(s.encoder, &g.enc);
+        let theta_e = self.enc.update(s.encoder, &self.g.enc);
 
         // ---- Protection (instantaneous, on raw codes) ----
-        // Phase over-current, bus over-/under-voltage, implausible encoder step. Further
-        // per-step protection hooks in here; the first fault found wins (see `trip_on`).
-        let lo = k.i_lo;
-        let off = |c: u16| (c as u32).wrapping_sub(lo);
-        let over_i = off(s.i_abc[0]).max(off(s.i_abc[1])).max(off(s.i_abc[2])) > k.i_span;
+        // Phase over-current (above), bus over-/under-voltage, implausible encoder step.
+        // Further per-step protection hooks in here; the first fault found wins (see
+        // `trip_on`).
+        let k = &self.g.k;
         let over_v = vb > k.ov;
         // Under-voltage is a fault only in Run: `trip_on` decides (keeps the test cheap).
         let under_v = vb < k.uv;
@@ -364,131 +368,221 @@ impl Controller {
         }
         // ---- End of protection ----
 
-        let g = &self.g;
-        let k = &g.k;
         let (sin, cos) = theta_e.sin_cos();
         let i_dq = park_bounded(i_ab, sin, cos);
+        // The record of this period, written as its values become known (after `trip_on`,
+        // whose snapshot reads the last period's).
+        self.rec.sample = *s;
+        self.rec.i_dq = i_dq;
+        self.rec.theta_e = theta_e;
 
-        let (i_ref, v_dq, duties, enable, sat) = match self.mode {
-            Mode::Idle => (Dq::default(), Dq::default(), CENTRED, false, false),
-            Mode::Short => (Dq::default(), Dq::default(), [Duty::ZERO; 3], true, false),
-            Mode::Run | Mode::Open => {
-                let vel = self.enc.vel;
+        if !matches!(self.mode, Mode::Run | Mode::Open) {
+            return self.step_off();
+        }
+        // Slow terms: the back-emf and the law's current reference (limited to
+        // i_max), the feed-forward, the bus terms (the voltage circle, 1/V_bus) and
+        // the output-angle advance. For the resistor law they depend on the speed
+        // estimate alone, which changes at the rate of the motion and the PLL (≤
+        // speed_bw_hz), and the bus voltage moves slowly on its capacitor (a few
+        // amperes into millifarads: well under 1 % of the bus in 200 µs); so they are
+        // refreshed every SLOW_DIV periods (5 kHz at 20 kHz) and held between, and the
+        // PI (1 kHz bandwidth, inside the loop) corrects what the hold leaves. The bus
+        // trips above still compare every sample. Other laws keep their own rates and
+        // run every period (their `tick_or` keeps the tick at REFRESH_ALL).
+        // The four groups are refreshed on different periods of the cycle (back-emf
+        // and law on tick 0, feed-forward on tick 1, bus on tick 2, angle advance on
+        // tick 3) so that no single period pays for more than one group. A refresh
+        // request (configuration or mode change, trip) is served where it is made
+        // (`refresh_now`, outside the step's normal path), so no period pays for all of
+        // them; `law_mut` makes the next step the law's tick (tick 0).
+        let t = self.slow_tick;
+        match t {
+            0 => self.refresh_law(i_dq, vb),
+            1 => self.refresh_ff(),
+            2 => self.refresh_bus(vb),
+            3 => self.refresh_advance(),
+            _ => self.refresh_all(i_dq, vb),
+        }
+        self.slow_tick = ((t + 1) & (SLOW_DIV - 1)) | self.held.tick_or;
+        let h = &self.held;
 
-                // Slow terms: the law's current reference (limited to i_max), the
-                // feed-forward, and the bus terms (radius of the voltage circle, 1/V_bus). For
-                // the resistor law the first two depend on the speed estimate alone, which
-                // changes at the rate of the motion and the PLL (≤ speed_bw_hz), and the bus
-                // voltage moves slowly on its capacitor (a few amperes into millifarads: well
-                // under 1 % of the bus in 200 µs); so they are refreshed every SLOW_DIV periods
-                // (5 kHz at 20 kHz) and held between, and the PI (1 kHz bandwidth, inside the
-                // loop) corrects what the hold leaves. The bus trips above still compare every
-                // sample. Other laws keep their own rates and run every period.
-                // The four groups of slow terms are refreshed on different periods of the
-                // SLOW_DIV cycle (back-emf on tick 3, law on tick 0, feed-forward on tick 1,
-                // bus on tick 2) so that no single period pays for more than one group; a
-                // refresh request (`REFRESH_ALL`: configuration, mode or law changed) and the
-                // laws other than the resistor refresh all of them at once. The law then uses
-                // a back-emf one period old, and the feed-forward's cross-coupling a reference
-                // one period old (50 µs at 20 kHz): well inside the hold of SLOW_DIV periods
-                // argued above, and the PI corrects the difference as it corrects the hold.
-                let resistor = matches!(self.law, Law::Resistor(_));
-                let t = if resistor {
-                    self.slow_tick
-                } else {
-                    REFRESH_ALL
-                };
-                // Bus: 4095·vpc < 30,000 V.
-                let vb12 = vb.min(CODE_MAX) as i32;
-                if t == SLOW_DIV - 1 || t == REFRESH_ALL {
-                    self.held.e_q = k.ke_per_vel.scale(vel);
-                }
-                if t == 0 || t == REFRESH_ALL {
-                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    self.held.i_ref = law_terms(
-                        &mut self.law,
-                        self.mode == Mode::Run,
-                        &self.enc,
-                        g,
-                        self.held.e_q,
-                        i_dq,
-                        v_bus,
-                        self.prot.derate,
-                    );
-                }
-                if t == 1 || t == REFRESH_ALL {
-                    self.held.ff = feed_forward(g, vel, self.held.i_ref, self.held.e_q);
-                }
-                if t == 2 || t == REFRESH_ALL {
-                    let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
-                    // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
-                    self.held.v_max = Q::from_bits(k.v_max_per_code.apply(vb12));
-                    self.held.inv_vbus = inv_bus(v_bus);
-                }
-                // REFRESH_ALL (4) continues with tick 1.
-                self.slow_tick = (t + 1) & (SLOW_DIV - 1);
-                let HeldTerms {
-                    i_ref,
-                    ff,
-                    v_max,
-                    inv_vbus,
-                    ..
-                } = self.held;
-
-                // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
-                let err = Dq {
-                    d: Q::from_bits(i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
-                    q: Q::from_bits(i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
-                };
-                let out = self.pi.update(err, ff, &g.pi, v_max);
-
-                // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay):
-                // |vel·adv_per_vel| < 2^62; the angle wraps (mod 2^32) by design.
-                let adv = ((vel.to_bits() as i64 * k.adv_per_vel as i64) >> 12) as u32;
-                let (s2, c2) = Angle(theta_e.0.wrapping_add(adv)).sin_cos();
-                // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
-                // `black_box` is a value barrier only (no effect on the result): without it
-                // the optimiser carries the limiter's 64-bit products through the branch and
-                // performs the inverse Park with full 64×64-bit multiplies (measured: more
-                // instructions on every path).
-                let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
-                let duties = modulate_limited(v_ab, inv_vbus);
-                (i_ref, out.v, duties, true, out.saturated)
-            }
+        // |i_ref| ≤ 1,001 A and |i_dq| < 3,614 A: the differences fit.
+        let err = Dq {
+            d: Q::from_bits(h.i_ref.d.to_bits().wrapping_sub(i_dq.d.to_bits())),
+            q: Q::from_bits(h.i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
         };
+        let out = self.pi.update_within(err, h.ff, &self.g.pi, &h.v_lim);
+        self.rec.i_ref = h.i_ref;
+        self.rec.v_dq = out.v;
+        self.rec.v_saturated = out.saturated;
+        let h = &self.held;
 
-        self.rec = StepRecord {
-            sample: *s,
-            i_dq,
-            i_ref,
-            v_dq,
-            theta_e,
+        // Output angle advanced by 1.5 periods of rotation (sample-to-PWM delay): the
+        // held rotation (cos a, sin a) applied to (sin θ, cos θ) by the angle-sum
+        // formulas, in place of a second table look-up.
+        let (s2, c2) = h.advance.rotate(sin, cos);
+        // |out.v| ≤ v_max·(1 + 2^-12) < 2^30 LSB (v_max < 0.58·30,000 V).
+        // `black_box` is a value barrier only (no effect on the result): without it
+        // the optimiser carries the limiter's 64-bit products through the branch and
+        // performs the inverse Park with full 64×64-bit multiplies (measured: more
+        // instructions on every path).
+        let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
+        let duties = modulate_scaled(v_ab, h.inv8);
+        self.rec.duties = duties;
+        Actuation {
             duties,
-            v_saturated: sat,
+            enable: true,
+            brake: self.brake,
+        }
+    }
+
+    /// The end of a period in Idle or Short: no control, the record says so.
+    #[cold]
+    #[inline(never)]
+    fn step_off(&mut self) -> Actuation {
+        let (duties, enable) = if self.mode == Mode::Short {
+            ([Duty::ZERO; 3], true)
+        } else {
+            (CENTRED, false)
         };
+        self.rec.i_ref = Dq::default();
+        self.rec.v_dq = Dq::default();
+        self.rec.duties = duties;
+        self.rec.v_saturated = false;
         Actuation {
             duties,
             enable,
             brake: self.brake,
         }
     }
+
+    /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the resistor law's reference
+    /// from it: `i_q* = −clamp(G·e_q, i_max)` with the law's conductance `G = 1/(R + R_L)` in
+    /// Run (zero in Open), derated. Ticks 0 … 3 run under the resistor law (`tick_or` = 0);
+    /// should `law_mut` have put another law in its place, every term is refreshed instead,
+    /// and from then on every period.
+    #[inline(always)]
+    fn refresh_law(&mut self, i_dq: Dq, vb: u32) {
+        let g_law = match &self.law {
+            Law::Resistor(r) if self.mode == Mode::Run => r.conductance,
+            Law::Resistor(_) => Gain::ZERO,
+            _ => return self.refresh_all(i_dq, vb),
+        };
+        let g = &self.g;
+        let e_q = g.k.ke_per_vel.scale(self.enc.vel);
+        self.held.e_q = e_q;
+        let r = Dq {
+            d: Q::ZERO,
+            // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
+            // 2^31 LSB, so the negation after the clamp needs no saturation.
+            q: -clamp_sym(g_law.scale(e_q), g.i_max),
+        };
+        self.held.i_ref = derated(r, e_q, self.prot.derate);
+    }
+
+    /// Tick 1: the feed-forward from the held back-emf and reference.
+    #[inline(always)]
+    fn refresh_ff(&mut self) {
+        self.held.ff = feed_forward(&self.g, self.enc.vel, self.held.i_ref, self.held.e_q);
+    }
+
+    /// Tick 2: the bus terms, from this period's bus code (4095·vpc < 30,000 V).
+    #[inline(always)]
+    fn refresh_bus(&mut self, vb: u32) {
+        let k = &self.g.k;
+        let vb12 = vb.min(CODE_MAX) as i32;
+        let v_bus = Q::from_bits(k.volts_per_code.apply(vb12));
+        // v_max = m_max/√3·v_bus < 17,321 V, from the same code.
+        self.held.v_lim = VLimit::new(Q::from_bits(k.v_max_per_code.apply(vb12)));
+        // inv_bus < 2^23: its 2^8 multiple fits an i32 (see `modulate_scaled`).
+        self.held.inv8 = (inv_bus(v_bus) << 8) as i32;
+    }
+
+    /// Tick 3: the output-angle advance, 1.5 periods of rotation at the speed estimate:
+    /// |vel·adv_per_vel| < 2^62; the angle wraps (mod 2^32) by design.
+    #[inline(always)]
+    fn refresh_advance(&mut self) {
+        let adv = ((self.enc.vel.to_bits() as i64 * self.g.k.adv_per_vel as i64) >> 12) as u32;
+        self.held.advance = Rotation::of(Angle(adv));
+    }
+
+    /// The tick schedule for the law in force; true under the resistor law.
+    #[inline(always)]
+    fn setup_law(&mut self) -> bool {
+        let resistor = matches!(self.law, Law::Resistor(_));
+        self.held.tick_or = if resistor { 0 } else { REFRESH_ALL };
+        resistor
+    }
+
+    /// `REFRESH_ALL`: a law other than the resistor (all its terms every period), or the
+    /// resistor law put back by `law_mut` in place of another, or a request served by
+    /// `refresh_now` (the law's reference now). (`new` starts with it too, in Idle; `set_mode`
+    /// serves the request before any step runs the loop.)
+    #[inline(never)]
+    fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
+        if self.setup_law() {
+            self.refresh_law(i_dq, vb);
+            return;
+        }
+        // Out of line from here: the laws that take this path run far longer anyway.
+        let e_q = self.g.k.ke_per_vel.scale(self.enc.vel);
+        self.held.e_q = e_q;
+        self.held.i_ref = if self.mode == Mode::Run {
+            let r = other_law(&mut self.law, &self.enc, &self.g, e_q, i_dq, vb);
+            derated(r, e_q, self.prot.derate)
+        } else {
+            Dq::default()
+        };
+        self.refresh_rest(vb);
+    }
+
+    /// The feed-forward, bus and advance groups (out of line: one copy besides the step's own
+    /// for `refresh_all` and `refresh_now`).
+    #[inline(never)]
+    fn refresh_rest(&mut self, vb: u32) {
+        self.refresh_ff();
+        self.refresh_bus(vb);
+        self.refresh_advance();
+    }
+
+    /// Serve a refresh request (configuration or mode changed, or a trip) at once, outside
+    /// the step's normal path: under the resistor law every slow term is recomputed from the
+    /// last period's sample and speed, and the next step starts the cycle with the bus terms
+    /// from its own sample. Other laws advance their state once per step, so they refresh at
+    /// the next step (and every step).
+    fn refresh_now(&mut self) {
+        if matches!(self.law, Law::Resistor(_)) {
+            let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
+            self.refresh_all(i_dq, vb);
+            self.refresh_rest(vb);
+            self.slow_tick = 2;
+        } else {
+            self.held.tick_or = REFRESH_ALL;
+            self.slow_tick = REFRESH_ALL;
+        }
+    }
 }
 
 /// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 4: the
-/// four groups take ticks 3, 0, 1 and 2).
+/// four groups take ticks 0 … 3).
 const SLOW_DIV: u8 = 4;
-/// `slow_tick` value that refreshes every slow term at the next step.
+/// `slow_tick` value that refreshes every slow term at the next step (any value ≥ 4 does).
 const REFRESH_ALL: u8 = SLOW_DIV;
 
-/// Current reference, feed-forward and bus terms, held between refreshes.
+/// Current reference, feed-forward, bus terms and angle advance, held between refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct HeldTerms {
     i_ref: Dq,
-    /// Back-emf `K_e·ω_e` (refreshed on tick 3; the law's input and the feed-forward's q term).
+    /// Back-emf `K_e·ω_e` (refreshed with the law; the feed-forward's q term).
     e_q: Q,
     ff: Dq,
-    v_max: Q,
-    inv_vbus: u32,
+    /// The voltage circle (radius m_max/√3·V_bus).
+    v_lim: VLimit,
+    /// `inv_bus(V_bus)·2^8`.
+    inv8: i32,
+    advance: Rotation,
+    /// 0 under the resistor law (tick cycle), REFRESH_ALL under the others (every period).
+    tick_or: u8,
 }
 
 /// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
@@ -502,34 +596,15 @@ fn volts_of_code(g: &Gains, code: u16) -> Q {
     g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
-/// The law's reference limited to i_max (zero unless running), from the back-emf `e_q`.
+/// Protection hook (protect.rs): bus derating of a regenerative reference (`e_q` has the
+/// sign of the speed). At the factor 1 (no derating, the normal case) the product is the
+/// reference itself (Q16.16 `x·1 = x` exactly), so it is skipped.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn law_terms(
-    law: &mut Law,
-    run: bool,
-    enc: &Encoder,
-    g: &Gains,
-    e_q: Q,
-    i_dq: Dq,
-    v_bus: Q,
-    derate: Q,
-) -> Dq {
-    if run {
-        let r = match law {
-            Law::Resistor(r) => Dq {
-                d: Q::ZERO,
-                // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
-                // 2^31 LSB, so the negation after the clamp needs no saturation.
-                q: -clamp_sym(r.conductance.scale(e_q), g.i_max),
-            },
-            law => other_law(law, enc, g, e_q, i_dq, v_bus),
-        };
-        // Protection hook (protect.rs): bus derating of a regenerative reference (e_q has
-        // the sign of the speed).
+fn derated(r: Dq, e_q: Q, derate: Q) -> Dq {
+    if derate != Q::ONE {
         derate_regen(r, e_q, derate)
     } else {
-        Dq::default()
+        r
     }
 }
 
@@ -556,7 +631,9 @@ fn feed_forward(g: &Gains, vel: Q, i_ref: Dq, e_q: Q) -> Dq {
 /// The laws other than the resistor (dynamic laws, decimated inside), kept out of line so
 /// the step's common path stays small; the reference limited to `i_max`.
 #[inline(never)]
-fn other_law(law: &mut Law, enc: &Encoder, g: &Gains, e_q: Q, i_dq: Dq, v_bus: Q) -> Dq {
+fn other_law(law: &mut Law, enc: &Encoder, g: &Gains, e_q: Q, i_dq: Dq, vb: u32) -> Dq {
+    // Bus: 4095·vpc < 30,000 V.
+    let v_bus = Q::from_bits(g.k.volts_per_code.apply(vb.min(CODE_MAX) as i32));
     let r = law.command(&LawInput {
         omega_m: enc.omega_m(&g.enc),
         e_q,
@@ -688,6 +765,69 @@ mod tests {
             prop_assert!((t.i_dq.d.to_num::<f64>() - alpha).abs() < 1e-4);
             prop_assert!((t.i_dq.q.to_num::<f64>() - beta).abs() < 1e-4);
         }
+    }
+
+    /// Steps at a steady encoder speed (zero currents, 72 V), `n` periods from count `c0`.
+    fn spin(ctl: &mut Controller, c0: u16, n: u16) -> u16 {
+        let z = ctl.config().adc_zero_code;
+        for k in 0..n {
+            ctl.step(&RawSample {
+                i_abc: [z; 3],
+                v_bus: 2458,
+                encoder: c0.wrapping_add(3 * k),
+            });
+        }
+        c0.wrapping_add(3 * n)
+    }
+
+    #[test]
+    fn refresh_requests_are_served_at_once() {
+        // A configuration change (R_L 306 → 2 Ω) is served by `set_config` itself: the very
+        // next step commands the new law's reference, −clamp(G·e_q, i_max) with the speed as
+        // it was at the request, and refreshes the bus terms from its own sample (50 V here).
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        ctl.set_mode(Mode::Run).unwrap();
+        let c = spin(&mut ctl, 0, 400);
+        let vel = ctl.enc.vel;
+        let new = Config {
+            r_load_ohm: 2.0,
+            ..cfg
+        };
+        ctl.set_config(&new).unwrap();
+        let z = cfg.adc_zero_code;
+        ctl.step(&RawSample {
+            i_abc: [z; 3],
+            v_bus: 1707, // 50 V
+            encoder: c,
+        });
+        let g = Gains::new(&new).unwrap();
+        let e_q = g.k.ke_per_vel.scale(vel);
+        let cond = crate::laws::Resistor::new(new.r_phase_ohm, 2.0).conductance;
+        let want = -clamp_sym(cond.scale(e_q), g.i_max);
+        assert!(want != Q::ZERO);
+        assert_eq!(ctl.telemetry().i_ref.q, want);
+        let r = ctl.held.v_lim.radius().to_num::<f64>();
+        let v = 1707.0 * new.volts_per_count as f64 * new.m_max as f64 / 3f64.sqrt();
+        assert!((r - v).abs() < 1e-3, "{r} V vs {v} V");
+        // A request the step serves itself (`law_mut`): the next step is the law's tick, its
+        // reference the law's for the speed of that step, and the tick cycle resumes.
+        let c = spin(&mut ctl, c + 3, 40);
+        if let Law::Resistor(r) = ctl.law_mut() {
+            r.conductance = cond;
+        }
+        assert_eq!(ctl.slow_tick, 0);
+        spin(&mut ctl, c, 1);
+        let e_q = g.k.ke_per_vel.scale(ctl.enc.vel);
+        assert_eq!(
+            ctl.telemetry().i_ref.q,
+            -clamp_sym(cond.scale(e_q), g.i_max)
+        );
+        assert!(ctl.slow_tick < SLOW_DIV);
+        // Open mode: zero reference from the request on.
+        ctl.set_mode(Mode::Open).unwrap();
+        spin(&mut ctl, c, 1);
+        assert_eq!(ctl.telemetry().i_ref, Dq::default());
     }
 
     #[test]

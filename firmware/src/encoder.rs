@@ -36,8 +36,9 @@ pub struct EncoderGains {
 /// Encoder and speed-observer state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Encoder {
-    last_raw: u16,
-    primed: bool,
+    /// The last raw count in the low half, and 0xFFFF in the high half once an update has
+    /// been seen (0 before): the high half masks the first change to zero without a branch.
+    last: u32,
     /// Multi-turn position, counts.
     pub position: i32,
     /// Count within the revolution, 0 … cpr−1.
@@ -66,22 +67,25 @@ impl Encoder {
     /// One step with the raw hardware counter; returns the electrical angle of the d axis.
     #[inline(always)]
     pub fn update(&mut self, raw: u16, g: &EncoderGains) -> Angle {
-        if !self.primed {
-            self.primed = true;
-            self.last_raw = raw;
-        }
-        let delta = raw.wrapping_sub(self.last_raw) as i16 as i32;
-        self.last_raw = raw;
+        let delta = ((raw as u32).wrapping_sub(self.last) & (self.last >> 16)) as u16 as i16 as i32;
+        self.last = raw as u32 | 0xFFFF_0000;
         self.implausible = delta.unsigned_abs() > g.max_step_counts as u32;
         self.position = self.position.saturating_add(delta);
         // Count within the turn, kept by wrap-around. in_turn < cpr ≤ 16384 and |delta| ≤
-        // 32768: the sum cannot overflow. One unsigned compare covers both directions;
-        // the reduction runs only on a wrap.
+        // 32768: the sums cannot overflow. One unsigned compare covers both directions; on a
+        // wrap, one turn added or taken away is enough for any step below a turn (the usual
+        // case), and the full reduction runs only for larger ones.
         let t = self.in_turn as i32 + delta;
         self.in_turn = if (t as u32) < g.cpr {
             t as u32
         } else {
-            wrap_turn(t, g.cpr)
+            let cpr = g.cpr as i32;
+            let u = if t < 0 { t + cpr } else { t - cpr };
+            if (u as u32) < g.cpr {
+                u as u32
+            } else {
+                wrap_turn(t, g.cpr)
+            }
         };
         let theta_e = Angle(
             self.in_turn
@@ -116,5 +120,45 @@ impl Encoder {
     /// Mechanical speed, rad/s.
     pub fn omega_m(&self, g: &EncoderGains) -> Q {
         g.rad_s_per_count_step.scale(self.vel)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::vec;
+
+    fn gains(cpr: u32) -> EncoderGains {
+        EncoderGains {
+            cpr,
+            max_step_counts: 1000,
+            ..EncoderGains::default()
+        }
+    }
+
+    proptest! {
+        /// The first update defines count 0 whatever the counter reads; after it the
+        /// multi-turn position follows the counter's wrapping changes, and the count within
+        /// the turn is that position modulo cpr, on the one-turn wrap path and on the full
+        /// reduction alike (changes up to ±32,767 counts against turns of 16 … 16,384).
+        #[test]
+        fn position_and_count_within_the_turn(cpr in prop::sample::select(vec![16u32, 100, 10_000, 16_384]),
+                                              first in any::<u16>(),
+                                              steps in prop::collection::vec(-32_767i32..=32_767, 1..60)) {
+            let g = gains(cpr);
+            let mut e = Encoder::default();
+            e.update(first, &g);
+            prop_assert_eq!((e.position, e.in_turn, e.implausible), (0, 0, false));
+            let (mut raw, mut pos) = (first, 0i64);
+            for d in steps {
+                raw = raw.wrapping_add(d as u16);
+                pos += d as i64;
+                e.update(raw, &g);
+                prop_assert_eq!(e.position as i64, pos);
+                prop_assert_eq!(e.in_turn as i64, pos.rem_euclid(cpr as i64));
+                prop_assert_eq!(e.implausible, d.abs() > 1000);
+            }
+        }
     }
 }

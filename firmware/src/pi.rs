@@ -33,11 +33,52 @@ pub struct PiOutput {
     pub saturated: bool,
 }
 
+/// The allowed voltage circle: radius `r ≥ 0` (LSB of [`Q`]) and `r²`, so the per-period
+/// test is two products and a compare (the loop holds it between bus refreshes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct VLimit {
+    r: u32,
+    r2: u64,
+}
+
+impl VLimit {
+    /// The circle of radius `v_max` (negative radii count as zero).
+    pub fn new(v_max: Q) -> VLimit {
+        let r = v_max.to_bits().max(0) as u32;
+        VLimit {
+            r,
+            r2: r as u64 * r as u64,
+        }
+    }
+
+    /// The radius.
+    pub fn radius(&self) -> Q {
+        Q::from_bits(self.r as i32)
+    }
+
+    /// `v` scaled onto the circle when it lies outside; `None` when inside.
+    #[inline(always)]
+    pub fn limit(&self, v: Dq) -> Option<Dq> {
+        let (d, q) = (v.d.to_bits() as i64, v.q.to_bits() as i64);
+        // Each square ≤ 2^62: the sum fits a u64.
+        if (d * d) as u64 + (q * q) as u64 <= self.r2 {
+            return None;
+        }
+        Some(limit_slow(v.d.to_bits(), v.q.to_bits(), self.r))
+    }
+}
+
 impl CurrentPi {
     /// One update. `err` = reference − measurement (A); `ff` = feed-forward voltages (V);
     /// `v_max` ≥ 0 the radius of the allowed voltage circle (V).
     #[inline(always)]
     pub fn update(&mut self, err: Dq, ff: Dq, g: &PiGains, v_max: Q) -> PiOutput {
+        self.update_within(err, ff, g, &VLimit::new(v_max))
+    }
+
+    /// [`CurrentPi::update`] with the voltage circle given as a [`VLimit`].
+    #[inline(always)]
+    pub fn update_within(&mut self, err: Dq, ff: Dq, g: &PiGains, lim: &VLimit) -> PiOutput {
         let next = Dq {
             d: self.integ.d.saturating_add(g.ki_ts.scale(err.d)),
             q: self.integ.q.saturating_add(g.ki_ts.scale(err.q)),
@@ -48,7 +89,7 @@ impl CurrentPi {
             d: pd.saturating_add(next.d),
             q: pq.saturating_add(next.q),
         };
-        match limit_vector(raw, v_max) {
+        match lim.limit(raw) {
             None => {
                 self.integ = next;
                 PiOutput {
@@ -59,10 +100,10 @@ impl CurrentPi {
             Some(v) => {
                 // Anti-windup by conditional integration: while the output is limited the
                 // integrators hold (they do not integrate), and they never exceed the limit.
-                let lim = v_max.max(Q::ZERO);
+                let r = lim.radius();
                 self.integ = Dq {
-                    d: clamp_sym(self.integ.d, lim),
-                    q: clamp_sym(self.integ.q, lim),
+                    d: clamp_sym(self.integ.d, r),
+                    q: clamp_sym(self.integ.q, r),
                 };
                 PiOutput { v, saturated: true }
             }
@@ -78,12 +119,7 @@ impl CurrentPi {
 /// Scale `v` onto the circle of radius `r` when it lies outside; `None` when inside.
 #[inline]
 pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
-    let (d, q) = (v.d.to_bits() as i64, v.q.to_bits() as i64);
-    let r = r.to_bits().max(0) as i64;
-    if (d * d) as u64 + (q * q) as u64 <= (r * r) as u64 {
-        return None;
-    }
-    Some(limit_slow(v.d.to_bits(), v.q.to_bits(), r as i32))
+    VLimit::new(r).limit(v)
 }
 
 /// The scaling itself (taken only while limiting; inlined: it is short). Arguments as `i32`
@@ -93,10 +129,11 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
 /// top 16 bits kept: the larger then has 15 bits (`|·| ∈ [2^14, 2^15]`), so `n = ds² + qs²`
 /// lies in `[2^28, 2^31]` and its square root comes from [`sqrt_norm`] on every path (no
 /// branch on the size). The truncation changes the larger component by less than 2^-14 of
-/// itself (6.1e-5 relative on |v|), `sqrt_norm` adds ≤ 6.2e-5, the Q.30 scale 2^-30: the
-/// limited magnitude is within 1.3e-4 of `r` (the test below allows 2e-4).
+/// itself (6.1e-5 relative on |v|), `sqrt_norm` adds ≤ 6.2e-5 (its odd result included), the
+/// Q1.31 scale and the rounded doubling ≤ 1 LSB per component: the limited magnitude is within
+/// 1.3e-4 (+ 2 LSB) of `r` (the tests below allow 2e-4).
 #[inline(always)]
-fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
+fn limit_slow(d: i32, q: i32, r: u32) -> Dq {
     // `x ^ (x >> 31)` is x for x ≥ 0 and |x| − 1 for x < 0 (one instruction), < 2^31; their OR
     // has the top bit of the larger, and `| 1` keeps it non-zero: 1 ≤ lz ≤ 31. Then x ≥ 0 has
     // x < 2^(32−lz), and x < 0 has |x| ≤ 2^(32−lz), so `x << (lz − 1)` lies in [−2^31, 2^31)
@@ -105,30 +142,42 @@ fn limit_slow(d: i32, q: i32, r: i32) -> Dq {
     let sh = m.leading_zeros() - 1; // 0 ..= 30
     let (ds, qs) = ((d << sh) >> 16, (q << sh) >> 16); // |.| ≤ 2^15, the larger ≥ 2^14
     let n = (ds * ds) as u32 + (qs * qs) as u32; // [2^28, 2^31]
-    let mag = sqrt_norm(n).max(1); // ≥ 2^14 already: the max only proves it non-zero
-                                   // |v| ≈ mag·2^(16−sh), so r/|v| in Q.30 is r·2^(sh+14)/mag, by two 32-bit divisions (no
-                                   // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
-                                   // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
-                                   // 1.3e-4), the remainder (< mag < 2^16) times 2^14 fits too.
-    let num = (r.max(0) as u32) << sh;
+    let mag = sqrt_norm(n); // ≥ 2^14 (non-zero: see `sqrt_norm`)
+
+    // |v| ≈ mag·2^(16−sh), so r/|v| in Q1.31 is r·2^(sh+15)/mag, by two 32-bit divisions (no
+    // 64-bit division on a Cortex-M4). r < |v| here (the caller checked), and |v| ≤ √2·max|x|
+    // ≤ √2·2^(32−lz), so r·2^sh < 2^31.5 fits a u32; the first quotient is ≈ k·2^16 ≤ 2^16(1 +
+    // 1.3e-4), so its 2^15 multiple fits a u32, and the remainder (< mag < 2^15.5) times 2^15
+    // fits too.
+    let num = r << sh;
     let q1 = num / mag;
-    let q2 = ((num % mag) << 14) / mag;
-    let k = ((q1 << 14) + q2).min(1 << 30) as i64;
-    // k ≤ 2^30: |d·k >> 30| ≤ |d|, which came from an i32.
+    let q2 = ((num % mag) << 15) / mag;
+    let k = ((q1 << 15) + q2).min(i32::MAX as u32) as i32;
+    // x·k/2^32 rounded to nearest (one `SMMULR`), doubled: the even integer nearest x·k/2^31,
+    // which is never longer than x (k < 2^31, so |x·k/2^31| < |x|: an even integer within 1
+    // of it has at most |x|'s magnitude), and fits an i32 (at x = −2^31 it is −2^31 + 2).
     Dq {
-        d: Q::from_bits(((d as i64 * k) >> 30) as i32),
-        q: Q::from_bits(((q as i64 * k) >> 30) as i32),
+        d: Q::from_bits(mulhs_round(d, k) << 1),
+        q: Q::from_bits(mulhs_round(q, k) << 1),
     }
+}
+
+/// `a·b/2^32` rounded to nearest (half up), one `SMMULR` on a Cortex-M4: |a·b| ≤ 2^62, so
+/// the sum cannot overflow.
+#[inline(always)]
+fn mulhs_round(a: i32, b: i32) -> i32 {
+    ((a as i64 * b as i64 + (1 << 31)) >> 32) as i32
 }
 
 /// √n for n in [2^28, 2^31]: a seed from the top six bits (within 3 %), then two Newton
 /// steps (error ≤ 3 %²/2 = 5e-4, then < 1e-7, plus the 1-LSB floor of the division: ≤ 6e-5
-/// relative at these sizes).
+/// relative at these sizes). The result is made odd (`| 1`, +1 LSB at most: 6e-5), which
+/// proves it non-zero to the divisions that follow without a test.
 #[inline(always)]
 fn sqrt_norm(n: u32) -> u32 {
     let mut x = SQRT_SEED[(n >> 25) as usize] as u32; // ≥ 2^14
-    x = (x + n / x) >> 1;
-    (x + n / x) >> 1
+    x = ((x + n / x) >> 1) | 1;
+    ((x + n / x) >> 1) | 1
 }
 
 /// √((i + ½)·2^25), for the seed of [`sqrt_norm`] (entries below 8 and above 63 are not

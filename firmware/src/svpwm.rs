@@ -47,16 +47,22 @@ pub fn modulate(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
 /// The final clamp (one SSAT) stays: it covers a bus below the floor of [`inv_bus`].
 #[inline(always)]
 pub fn modulate_limited(v: AlphaBeta, inv_vbus: u32) -> [Duty; 3] {
+    modulate_scaled(v, (inv_vbus << 8) as i32) // < 2^31 (inv_bus < 2^23)
+}
+
+/// [`modulate_limited`] with the reciprocal already in the form its multiplies use,
+/// `inv8 = inv_bus(V_bus)·2^8` (the current loop holds it between bus refreshes).
+#[inline(always)]
+pub fn modulate_scaled(v: AlphaBeta, inv8: i32) -> [Duty; 3] {
     let (al, be) = (v.alpha.to_bits(), v.beta.to_bits());
     debug_assert!((al as i64).pow(2) + (be as i64).pow(2) < (17_330i64 << 16).pow(2));
     // Inverse Clarke: a = α, b = −α/2 + (√3/2)β, c = −α/2 − (√3/2)β.
     let sb = crate::fx::mul_shr::<30>(be, 929_887_697); // √3/2, Q2.30
-    let half_a = al / 2; // as `inverse_clarke` (toward zero)
+    let half_a = al >> 1; // as `inverse_clarke` (floor)
     let (a, b, c) = (al, sb - half_a, -half_a - sb);
     let max = a.max(b).max(c);
     let min = a.min(b).min(c);
     let off = (max + min) >> 1; // |max + min| < 2^31
-    let inv8 = (inv_vbus << 8) as i32; // < 2^31 (inv_bus < 2^23)
     let d = |x: i32| {
         let centred = x - off;
         // centred·inv >> 24 as one high-word multiply.

@@ -1,6 +1,8 @@
 //! Replays `vectors.bin` through the controller on a Cortex-M4 (QEMU `mps2-an386`), prints
-//! the digest of all outputs, and exits with status 0. `regen_step` is the one function
-//! `../../shared/tools/qemu-insn/count.sh` counts: one full current-loop period.
+//! the digest of all outputs, and exits with status 0. `regen_step` is the function
+//! `../../shared/tools/qemu-insn/count.sh` counts for the target: one full current-loop
+//! period. `run.sh` also counts the supervision tick, the configuration change, a step after
+//! `law_mut` and the pieces below.
 #![no_std]
 #![no_main]
 
@@ -8,7 +10,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
 use regen_fw::encoder::{Encoder, EncoderGains};
-use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
+use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq, Rotation};
 use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
@@ -23,6 +25,25 @@ static VECTORS: &[u8] = include_bytes!("../vectors.bin");
 #[inline(never)]
 pub fn regen_step(ctl: &mut Controller, s: &RawSample) -> Actuation {
     ctl.step(s)
+}
+
+/// A step right after a refresh request the step serves itself (`law_mut`), counted on
+/// copies of the controller every 1,000 steps; the recorded run itself has none (its
+/// configuration change is served by `set_config`).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
+    // (`black_box`: keeps this function distinct from `regen_step`, which the linker would
+    // otherwise fold into one.)
+    ctl.step(black_box(s))
+}
+
+/// The configuration change of the recorded run (R_L 306 → 2 Ω halfway): validation, the
+/// gains, and the slow terms refreshed at once, between two steps.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_set_config(ctl: &mut Controller, cfg: &Config) -> bool {
+    ctl.set_config(cfg).is_ok()
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -46,6 +67,12 @@ pub fn piece_encoder(e: &mut Encoder, raw: u16, g: &EncoderGains) -> Angle {
 #[inline(never)]
 pub fn piece_sin_cos(a: Angle) -> (Q, Q) {
     a.sin_cos()
+}
+
+#[no_mangle]
+#[inline(never)]
+pub fn piece_rotate(r: &Rotation, s: Q, c: Q) -> (Q, Q) {
+    r.rotate(s, c)
 }
 
 #[no_mangle]
@@ -84,6 +111,7 @@ fn pieces(ctl: &Controller, s: &RawSample, enc: &mut Encoder, pi: &mut CurrentPi
     let t = ctl.telemetry();
     let th = black_box(piece_encoder(enc, s.encoder, &g.enc));
     let (sn, cs) = piece_sin_cos(t.theta_e);
+    black_box(piece_rotate(&Rotation::of(Angle(th.0 >> 12)), sn, cs));
     let i_ab = AlphaBeta {
         alpha: t.i_abc[0],
         beta: t.i_abc[1],
@@ -122,13 +150,20 @@ fn main() -> ! {
     let mut pi = CurrentPi::default();
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half
-            && c.set_config(&Config {
-                r_load_ohm: 2.0,
-                ..cfg
-            })
-            .is_err()
+            && !regen_set_config(
+                c,
+                &Config {
+                    r_load_ohm: 2.0,
+                    ..cfg
+                },
+            )
         {
             bad_cfg = true;
+        }
+        if k % 1000 == 500 {
+            let mut copy = c.clone();
+            let _ = copy.law_mut();
+            black_box(regen_step_refresh(&mut copy, s));
         }
         k += 1;
         let a = regen_step(c, s);
