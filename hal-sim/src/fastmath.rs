@@ -79,7 +79,10 @@ impl SinCos {
     const REUSE: f64 = 1e-8;
 
     /// (sin θ, cos θ).
-    #[inline]
+    ///
+    /// The two common cases (a step within [`SinCos::REUSE`] of the cached one, and a short
+    /// step) are inline; the long series and the exact re-anchoring are out of line.
+    #[inline(always)]
     pub fn at(&mut self, arg: f64) -> (f64, f64) {
         let d = arg - self.arg;
         let e = d - self.step;
@@ -87,26 +90,35 @@ impl SinCos {
             let sd = self.s_step + self.c_step * e;
             let cd = self.c_step - self.s_step * e;
             self.rotate(sd, cd);
-        } else if self.n < Self::REANCHOR && d.abs() <= Self::MAX_STEP {
+        } else if self.n < Self::REANCHOR && d.abs() <= Self::SHORT_STEP {
             let d2 = d * d;
-            // Horner forms of the Taylor series, coefficients as constants so that no
-            // division is left at run time.
-            let (sd, cd) = if d.abs() <= Self::SHORT_STEP {
-                // Estrin's scheme: shorter dependency chains than Horner (the angle is on
-                // the period's critical path).
-                let d4 = d2 * d2;
-                (
-                    d * ((1.0 + d2 * S[0]) + d4 * (S[1] + d2 * S[2])),
-                    (1.0 + d2 * C[0]) + d4 * ((C[1] + d2 * C[2]) + d4 * C[3]),
-                )
-            } else {
-                (
-                    d * (1.0 + d2 * (S[0] + d2 * (S[1] + d2 * (S[2] + d2 * (S[3] + d2 * S[4]))))),
-                    1.0 + d2
-                        * (C[0]
-                            + d2 * (C[1] + d2 * (C[2] + d2 * (C[3] + d2 * (C[4] + d2 * C[5]))))),
-                )
-            };
+            let d4 = d2 * d2;
+            // Estrin's scheme: shorter dependency chains than Horner (the angle is on the
+            // period's critical path); coefficients as constants, no division at run time.
+            let sd = d * ((1.0 + d2 * S[0]) + d4 * (S[1] + d2 * S[2]));
+            let cd = (1.0 + d2 * C[0]) + d4 * ((C[1] + d2 * C[2]) + d4 * C[3]);
+            self.step = d;
+            self.s_step = sd;
+            self.c_step = cd;
+            self.rotate(sd, cd);
+        } else {
+            self.at_far(arg, d);
+        }
+        self.arg = arg;
+        (self.s, self.c)
+    }
+
+    /// [`SinCos::at`] for a step beyond [`SinCos::SHORT_STEP`] (long series) or beyond
+    /// [`SinCos::MAX_STEP`] or after [`SinCos::REANCHOR`] rotations (exact).
+    #[cold]
+    #[inline(never)]
+    fn at_far(&mut self, arg: f64, d: f64) {
+        if self.n < Self::REANCHOR && d.abs() <= Self::MAX_STEP {
+            let d2 = d * d;
+            // Horner forms of the Taylor series.
+            let sd = d * (1.0 + d2 * (S[0] + d2 * (S[1] + d2 * (S[2] + d2 * (S[3] + d2 * S[4])))));
+            let cd = 1.0
+                + d2 * (C[0] + d2 * (C[1] + d2 * (C[2] + d2 * (C[3] + d2 * (C[4] + d2 * C[5])))));
             self.step = d;
             self.s_step = sd;
             self.c_step = cd;
@@ -117,8 +129,6 @@ impl SinCos {
             self.c = c;
             self.n = 0;
         }
-        self.arg = arg;
-        (self.s, self.c)
     }
 
     #[inline(always)]
