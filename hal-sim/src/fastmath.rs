@@ -152,6 +152,18 @@ pub fn floor_i64(x: f64) -> i64 {
     }
 }
 
+/// ⌊x⌋ modulo 2¹⁶ (two's complement, as a 16-bit hardware counter wraps) for |x| < 2⁵¹,
+/// without a libcall or a saturating conversion: adding 1.5·2⁵² rounds x to the nearest
+/// integer n in the low mantissa bits (every double in [2⁵², 2⁵³) is an integer), and n − 1
+/// is taken when n > x. Beyond 2⁵¹ (or NaN) the result is meaningless but defined.
+#[inline(always)]
+pub fn floor_wrap_u16(x: f64) -> u16 {
+    const M: f64 = 6_755_399_441_055_744.0; // 1.5·2⁵²
+    let t = x + M;
+    let n = t - M;
+    (t.to_bits() as u16).wrapping_sub((n > x) as u16)
+}
+
 /// xorshift64* (Vigna 2016): 64-bit state, never zero.
 #[inline]
 pub fn next_u64(s: &mut u64) -> u64 {
@@ -293,6 +305,26 @@ mod tests {
     }
 
     #[test]
+    fn floor_wrap_matches_std_over_the_counter_range() {
+        // Both sides of every integer within a few counter wraps, ties (n + ½, where
+        // round-to-nearest-even goes either way) and the largest exact fractions.
+        for k in -200_000i64..200_000 {
+            for x in [
+                k as f64,
+                k as f64 + 0.5,
+                k as f64 - 1e-9,
+                k as f64 + 1e-9,
+                k as f64 + 0.999_999_9,
+            ] {
+                assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
+            }
+        }
+        for x in [2f64.powi(50) + 0.5, -(2f64.powi(50)) - 0.5, 1e15 + 0.25] {
+            assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
+        }
+    }
+
+    #[test]
     fn floor_matches_std() {
         for x in [
             -2.5,
@@ -307,6 +339,7 @@ mod tests {
             1e15 + 0.5,
         ] {
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
         }
     }
 

@@ -14,7 +14,7 @@
 //! amplitude-invariant Clarke, so one period costs two exponentials' worth of arithmetic
 //! (the factor `exp(−RT/L)` is computed once).
 
-use crate::fastmath::{floor_i64, Gauss, SinCos};
+use crate::fastmath::{floor_wrap_u16, Gauss, SinCos};
 use crate::plant::{
     Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
 };
@@ -600,13 +600,11 @@ impl Sim {
         }
         // Code = (i + offset)/(A per count) + zero code, rounded to nearest in the positive
         // code domain (the cast truncates; below 0 it clamps anyway).
-        let codes = c.map(|c| c.clamp(0.0, 4095.0) as u16);
-        let vcode = vc.clamp(0.0, 4095.0) as u16;
-        let count = floor_i64(self.s.x * self.pre.counts_per_m);
         RawSample {
-            i_abc: codes,
-            v_bus: vcode,
-            encoder: count as u16, // wraps at 2^16 like the hardware counter
+            i_abc: [adc_code(c[0]), adc_code(c[1]), adc_code(c[2])],
+            v_bus: adc_code(vc),
+            // Wraps at 2^16 like the hardware counter.
+            encoder: floor_wrap_u16(self.s.x * self.pre.counts_per_m),
         }
     }
 
@@ -634,8 +632,8 @@ impl Sim {
                 motion.at_tracked(&mut self.rot_motion[0], self.s.t + ts / 2.0)
             }
             Drive::Structure { .. } => (
-                x0 + v0 * ts / 2.0 + self.s.a_prev * ts * ts / 8.0,
-                v0 + self.s.a_prev * ts / 2.0,
+                x0 + v0 * p.half_ts + self.s.a_prev * p.ts2_8,
+                v0 + self.s.a_prev * p.half_ts,
                 0.0,
             ),
         };
@@ -783,6 +781,16 @@ impl Sim {
         self.s.p_inv = -p_inv;
         self.s.t = t0 + ts;
     }
+}
+
+/// A 12-bit converter's code for the value `c` (counts + ½): `c` clamped to [0, 4095] and
+/// truncated (NaN reads 0). The comparisons map to one `maxsd` and one `minsd`, and the
+/// truncation needs no saturation code.
+#[inline(always)]
+fn adc_code(c: f64) -> u16 {
+    let c = if c > 0.0 { c } else { 0.0 };
+    let c = if c < 4095.0 { c } else { 4095.0 };
+    c as i32 as u16
 }
 
 /// Value of the duty's least significant bit (`Duty` = U1F15).
@@ -997,6 +1005,9 @@ struct Pre {
     vcode_base: f64,
     noise_v_counts: f64,
     counts_per_m: f64,
+    // T/2 and T²/8 (the mid-period estimate).
+    half_ts: f64,
+    ts2_8: f64,
     // Machine and inverter.
     inv_ts: f64,
     inv_lead: f64,
@@ -1113,6 +1124,8 @@ impl Pre {
             vcode_base: sn.vbus_offset_v * counts_per_volt + 0.5,
             noise_v_counts: sn.vbus_noise_v.max(0.0) * counts_per_volt,
             counts_per_m: cfg.encoder_cpr as f64 / (l * TAU),
+            half_ts: ts / 2.0,
+            ts2_8: ts * ts / 8.0,
             inv_ts: 1.0 / ts,
             inv_lead: 1.0 / l,
             theta_per_m: m.pole_pairs as f64 / l,
