@@ -104,13 +104,20 @@ impl Energy {
 /// mean power over its period, W, scaled by the period `T` only when the ledger is read
 /// ([`Sim::energy`]). Copper and conduction losses share one sum (of the mean of
 /// i_α² + i_β²), and the logic supply is its constant power times the number of periods.
+/// The mechanical flows are kept as the few products they are made of: with the device force
+/// f = h·inner + f_d (`inner` = electromagnetic + viscous + inertial force, h ∈ {h_in, h_out}),
+/// f·v̄ = h·inner·v̄ + f_d·v̄ and the screw's loss is (h − 1)·inner·v̄, so one sum of inner·v̄
+/// per value of h gives both; the rotary viscosity and the structure's damping are both a
+/// constant times v̂·v̄ (v̂ the mid-period estimate, v̄ the period's mean velocity).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Flows {
+    /// Base excitation's work (structure: m·a_g·v̄); an imposed motion's is the device's.
     external_work: f64,
-    device_work: f64,
     friction_loss: f64,
-    viscous_b_loss: f64,
-    screw_loss: f64,
+    /// Σ inner·v̄ with h = h_in ([0]) and h = h_out ([1]), N·m/s.
+    inner: [f64; 2],
+    /// Σ v̂·v̄, m²/s².
+    vv: f64,
     electromechanical: f64,
     /// Σ mean(i_α² + i_β²), A² (copper loss = 3/2·R·T·Σ, conduction = 3/2·R_on·T·Σ).
     i2: f64,
@@ -119,7 +126,6 @@ struct Flows {
     brake: f64,
     source_r_loss: f64,
     sink: f64,
-    structure_damping: f64,
     /// Inductive energy dumped when the gates are disabled, J (not scaled).
     dumped_j: f64,
 }
@@ -416,12 +422,17 @@ impl Sim {
         let f = &self.flows;
         let p = &self.pre;
         let ts = self.ts;
+        let device = (p.h_in * f.inner[0] + p.h_out * f.inner[1] + f.friction_loss) * ts;
         Energy {
-            external_work: f.external_work * ts,
-            device_work: f.device_work * ts,
+            external_work: if matches!(self.rig.drive, Drive::Imposed { .. }) {
+                device
+            } else {
+                f.external_work * ts
+            },
+            device_work: device,
             friction_loss: f.friction_loss * ts,
-            viscous_b_loss: f.viscous_b_loss * ts,
-            screw_loss: f.screw_loss * ts,
+            viscous_b_loss: p.br * ts * f.vv,
+            screw_loss: ((p.h_in - 1.0) * f.inner[0] + (p.h_out - 1.0) * f.inner[1]) * ts,
             electromechanical: f.electromechanical * ts,
             copper_loss: p.copper * f.i2,
             to_inverter: f.to_inverter * ts,
@@ -432,7 +443,7 @@ impl Sim {
             brake: f.brake * ts,
             source_r_loss: f.source_r_loss * ts,
             sink: f.sink * ts,
-            structure_damping: f.structure_damping * ts,
+            structure_damping: p.damping * ts * f.vv,
             stored_start: self.stored_start,
             stored_now: self.stored(),
         }
@@ -700,7 +711,8 @@ impl Sim {
             let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
             if let Some(vs) = p.source_v {
                 // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
-                // with V − vs = δ + d0·(decay) so that nothing cancels.
+                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
+                // the mean of (V − vs)² involves no cancellation of large terms.
                 let dl = vinf - vs;
                 fl.sink += vs * (dl + d0k) * p.g_source;
                 fl.source_r_loss += (dl * dl + 2.0 * dl * d0k + d0k2) * p.g_source;
@@ -732,17 +744,12 @@ impl Sim {
                 let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
                 let vm = vm_est;
                 let inner = f_e + jr * am_imposed + br * vm;
-                let h = if (inner + fd) * vm >= 0.0 {
-                    p.h_in
-                } else {
-                    p.h_out
-                };
+                let out = ((inner + fd) * vm < 0.0) as usize;
+                let h = if out == 0 { p.h_in } else { p.h_out };
                 let f = h * inner + fd;
-                fl.external_work += f * vm;
-                fl.device_work += f * vm;
                 fl.friction_loss += fd * vm;
-                fl.viscous_b_loss += br * vm * vm;
-                fl.screw_loss += (h - 1.0) * inner * vm;
+                fl.vv += vm * vm;
+                fl.inner[out] += inner * vm;
                 fl.electromechanical += f_e * vm;
                 self.s.x = x1;
                 self.s.v = v1m;
@@ -756,10 +763,12 @@ impl Sim {
                 let mut h = p.h_in;
                 let mut a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[0];
                 let mut inner = f_eb + jr * a;
+                let mut out = 0;
                 if p.lossy_screw && (h * inner + fd) * vm_est < 0.0 {
                     h = p.h_out;
                     a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[1];
                     inner = f_eb + jr * a;
+                    out = 1;
                 }
                 let f = h * inner + fd;
                 let v1s = v0 + a * ts;
@@ -768,11 +777,9 @@ impl Sim {
                 self.s.v = v1s;
                 self.s.a_prev = a;
                 fl.external_work += mag * vm;
-                fl.structure_damping += p.damping * vm_est * vm;
-                fl.device_work += f * vm;
                 fl.friction_loss += fd * vm;
-                fl.viscous_b_loss += br * vm_est * vm;
-                fl.screw_loss += (h - 1.0) * inner * vm;
+                fl.vv += vm_est * vm;
+                fl.inner[out] += inner * vm;
                 fl.electromechanical += f_e * vm;
                 self.s.force = f;
             }
@@ -1105,6 +1112,8 @@ impl Pre {
             }
         };
         let jr = sc.reflected_mass();
+        // The dead-time correction applies when `dead` > 0 (as `other_period` tests it).
+        let dead_time = rig.inverter.dead_time_s / ts > 0.0;
         let st = match &rig.drive {
             Drive::Structure { structure, .. } => *structure,
             Drive::Imposed { .. } => crate::plant::Structure {
@@ -1153,7 +1162,7 @@ impl Pre {
             damping: st.damping_n_s_per_m,
             stiffness: st.stiffness_n_per_m,
             noisy: sn.current_noise_a > 0.0 || sn.vbus_noise_v > 0.0,
-            plain_average: !rig.inverter.switched && !(rig.inverter.dead_time_s / ts > 0.0),
+            plain_average: !rig.inverter.switched && !dead_time,
             ripple: sc.p3 != 0.0 || sc.p5 != 0.0,
             jr,
             br: sc.reflected_viscosity(),
