@@ -79,7 +79,10 @@ impl SinCos {
     const REUSE: f64 = 1e-8;
 
     /// (sin θ, cos θ).
-    #[inline]
+    ///
+    /// The two common cases (a step within [`SinCos::REUSE`] of the cached one, and a short
+    /// step) are inline; the long series and the exact re-anchoring are out of line.
+    #[inline(always)]
     pub fn at(&mut self, arg: f64) -> (f64, f64) {
         let d = arg - self.arg;
         let e = d - self.step;
@@ -87,26 +90,35 @@ impl SinCos {
             let sd = self.s_step + self.c_step * e;
             let cd = self.c_step - self.s_step * e;
             self.rotate(sd, cd);
-        } else if self.n < Self::REANCHOR && d.abs() <= Self::MAX_STEP {
+        } else if self.n < Self::REANCHOR && d.abs() <= Self::SHORT_STEP {
             let d2 = d * d;
-            // Horner forms of the Taylor series, coefficients as constants so that no
-            // division is left at run time.
-            let (sd, cd) = if d.abs() <= Self::SHORT_STEP {
-                // Estrin's scheme: shorter dependency chains than Horner (the angle is on
-                // the period's critical path).
-                let d4 = d2 * d2;
-                (
-                    d * ((1.0 + d2 * S[0]) + d4 * (S[1] + d2 * S[2])),
-                    (1.0 + d2 * C[0]) + d4 * ((C[1] + d2 * C[2]) + d4 * C[3]),
-                )
-            } else {
-                (
-                    d * (1.0 + d2 * (S[0] + d2 * (S[1] + d2 * (S[2] + d2 * (S[3] + d2 * S[4]))))),
-                    1.0 + d2
-                        * (C[0]
-                            + d2 * (C[1] + d2 * (C[2] + d2 * (C[3] + d2 * (C[4] + d2 * C[5]))))),
-                )
-            };
+            let d4 = d2 * d2;
+            // Estrin's scheme: shorter dependency chains than Horner (the angle is on the
+            // period's critical path); coefficients as constants, no division at run time.
+            let sd = d * ((1.0 + d2 * S[0]) + d4 * (S[1] + d2 * S[2]));
+            let cd = (1.0 + d2 * C[0]) + d4 * ((C[1] + d2 * C[2]) + d4 * C[3]);
+            self.step = d;
+            self.s_step = sd;
+            self.c_step = cd;
+            self.rotate(sd, cd);
+        } else {
+            self.at_far(arg, d);
+        }
+        self.arg = arg;
+        (self.s, self.c)
+    }
+
+    /// [`SinCos::at`] for a step beyond [`SinCos::SHORT_STEP`] (long series) or beyond
+    /// [`SinCos::MAX_STEP`] or after [`SinCos::REANCHOR`] rotations (exact).
+    #[cold]
+    #[inline(never)]
+    fn at_far(&mut self, arg: f64, d: f64) {
+        if self.n < Self::REANCHOR && d.abs() <= Self::MAX_STEP {
+            let d2 = d * d;
+            // Horner forms of the Taylor series.
+            let sd = d * (1.0 + d2 * (S[0] + d2 * (S[1] + d2 * (S[2] + d2 * (S[3] + d2 * S[4])))));
+            let cd = 1.0
+                + d2 * (C[0] + d2 * (C[1] + d2 * (C[2] + d2 * (C[3] + d2 * (C[4] + d2 * C[5])))));
             self.step = d;
             self.s_step = sd;
             self.c_step = cd;
@@ -117,8 +129,6 @@ impl SinCos {
             self.c = c;
             self.n = 0;
         }
-        self.arg = arg;
-        (self.s, self.c)
     }
 
     #[inline(always)]
@@ -140,6 +150,18 @@ pub fn floor_i64(x: f64) -> i64 {
     } else {
         i
     }
+}
+
+/// ⌊x⌋ modulo 2¹⁶ (two's complement, as a 16-bit hardware counter wraps) for |x| < 2⁵¹,
+/// without a libcall or a saturating conversion: adding 1.5·2⁵² rounds x to the nearest
+/// integer n in the low mantissa bits (every double in [2⁵², 2⁵³) is an integer), and n − 1
+/// is taken when n > x. Beyond 2⁵¹ (or NaN) the result is meaningless but defined.
+#[inline(always)]
+pub fn floor_wrap_u16(x: f64) -> u16 {
+    const M: f64 = 6_755_399_441_055_744.0; // 1.5·2⁵²
+    let t = x + M;
+    let n = t - M;
+    (t.to_bits() as u16).wrapping_sub((n > x) as u16)
 }
 
 /// xorshift64* (Vigna 2016): 64-bit state, never zero.
@@ -283,6 +305,26 @@ mod tests {
     }
 
     #[test]
+    fn floor_wrap_matches_std_over_the_counter_range() {
+        // Both sides of every integer within a few counter wraps, ties (n + ½, where
+        // round-to-nearest-even goes either way) and the largest exact fractions.
+        for k in -200_000i64..200_000 {
+            for x in [
+                k as f64,
+                k as f64 + 0.5,
+                k as f64 - 1e-9,
+                k as f64 + 1e-9,
+                k as f64 + 0.999_999_9,
+            ] {
+                assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
+            }
+        }
+        for x in [2f64.powi(50) + 0.5, -(2f64.powi(50)) - 0.5, 1e15 + 0.25] {
+            assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
+        }
+    }
+
+    #[test]
     fn floor_matches_std() {
         for x in [
             -2.5,
@@ -297,6 +339,7 @@ mod tests {
             1e15 + 0.5,
         ] {
             assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
         }
     }
 

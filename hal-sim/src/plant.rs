@@ -281,7 +281,7 @@ impl Excitation {
     }
 
     /// Ground acceleration over the step [t, t+dt] (held constant over the step).
-    #[inline]
+    #[inline(always)]
     pub fn next(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
         match self {
             Excitation::Sine { a0_m_s2, freq_hz } => {

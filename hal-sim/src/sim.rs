@@ -14,7 +14,7 @@
 //! amplitude-invariant Clarke, so one period costs two exponentials' worth of arithmetic
 //! (the factor `exp(−RT/L)` is computed once).
 
-use crate::fastmath::{floor_i64, Gauss, SinCos};
+use crate::fastmath::{floor_wrap_u16, Gauss, SinCos};
 use crate::plant::{
     Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
 };
@@ -98,6 +98,36 @@ impl Energy {
         .fold(1e-12, f64::max);
         self.residual() / scale
     }
+}
+
+/// The ledger's flows as the period accumulates them: sums over periods of each flow's
+/// mean power over its period, W, scaled by the period `T` only when the ledger is read
+/// ([`Sim::energy`]). Copper and conduction losses share one sum (of the mean of
+/// i_α² + i_β²), and the logic supply is its constant power times the number of periods.
+/// The mechanical flows are kept as the few products they are made of: with the device force
+/// f = h·inner + f_d (`inner` = electromagnetic + viscous + inertial force, h ∈ {h_in, h_out}),
+/// f·v̄ = h·inner·v̄ + f_d·v̄ and the screw's loss is (h − 1)·inner·v̄, so one sum of inner·v̄
+/// per value of h gives both; the rotary viscosity and the structure's damping are both a
+/// constant times v̂·v̄ (v̂ the mid-period estimate, v̄ the period's mean velocity).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Flows {
+    /// Base excitation's work (structure: m·a_g·v̄); an imposed motion's is the device's.
+    external_work: f64,
+    friction_loss: f64,
+    /// Σ inner·v̄ with h = h_in ([0]) and h = h_out ([1]), N·m/s.
+    inner: [f64; 2],
+    /// Σ v̂·v̄, m²/s².
+    vv: f64,
+    electromechanical: f64,
+    /// Σ mean(i_α² + i_β²), A² (copper loss = 3/2·R·T·Σ, conduction = 3/2·R_on·T·Σ).
+    i2: f64,
+    to_inverter: f64,
+    switching_loss: f64,
+    brake: f64,
+    source_r_loss: f64,
+    sink: f64,
+    /// Inductive energy dumped when the gates are disabled, J (not scaled).
+    dumped_j: f64,
 }
 
 /// A channel the recorder can keep.
@@ -238,15 +268,19 @@ pub struct Sim {
     rot_theta: SinCos,
     rot_motion: [SinCos; 2],
     rot_ripple: [SinCos; 2],
-    /// The ledger's flows; its stored energies are evaluated when it is read.
-    energy: Energy,
+    /// The ledger's flows (see [`Flows`]); the stored energies are evaluated when it is read.
+    flows: Flows,
+    stored_start: f64,
     steps: u64,
     rec: Option<Recorder>,
     /// Periods until the recorder keeps the next row.
     rec_countdown: u64,
     ts: f64,
-    /// Periods per protection supervision tick (`Controller::supervise`, 1 kHz).
+    /// Periods per protection supervision tick (`Controller::supervise`, 1 kHz), and the
+    /// periods until the step count is next a multiple of it (a countdown instead of a
+    /// 64-bit modulo per period).
     sup_every: u64,
+    sup_countdown: u64,
 }
 
 impl Sim {
@@ -305,14 +339,16 @@ impl Sim {
             active: Actuation::OFF,
             pending: Actuation::OFF,
             exc,
-            energy: Energy::default(),
+            flows: Flows::default(),
+            stored_start: 0.0,
             steps: 0,
             rec: None,
             ts,
             sup_every: 1,
+            sup_countdown: 0,
         };
-        sim.sup_every = sim.ctl.supervise_every() as u64;
-        sim.energy.stored_start = sim.stored();
+        sim.sup_every = (sim.ctl.supervise_every() as u64).max(1);
+        sim.stored_start = sim.stored();
         Ok(sim)
     }
 
@@ -383,9 +419,33 @@ impl Sim {
     }
     /// The energy ledger now (its stored energies evaluated from the state).
     pub fn energy(&self) -> Energy {
+        let f = &self.flows;
+        let p = &self.pre;
+        let ts = self.ts;
+        let device = (p.h_in * f.inner[0] + p.h_out * f.inner[1] + f.friction_loss) * ts;
         Energy {
+            external_work: if matches!(self.rig.drive, Drive::Imposed { .. }) {
+                device
+            } else {
+                f.external_work * ts
+            },
+            device_work: device,
+            friction_loss: f.friction_loss * ts,
+            viscous_b_loss: p.br * ts * f.vv,
+            screw_loss: ((p.h_in - 1.0) * f.inner[0] + (p.h_out - 1.0) * f.inner[1]) * ts,
+            electromechanical: f.electromechanical * ts,
+            copper_loss: p.copper * f.i2,
+            to_inverter: f.to_inverter * ts,
+            switching_loss: f.switching_loss * ts,
+            conduction_loss: p.r_on_15 * ts * f.i2,
+            logic_loss: p.logic_w * ts * self.steps as f64,
+            dumped: f.dumped_j,
+            brake: f.brake * ts,
+            source_r_loss: f.source_r_loss * ts,
+            sink: f.sink * ts,
+            structure_damping: p.damping * ts * f.vv,
+            stored_start: self.stored_start,
             stored_now: self.stored(),
-            ..self.energy
         }
     }
     pub fn time(&self) -> f64 {
@@ -460,7 +520,7 @@ impl Sim {
         on_sample(&mut sample);
         let mut out = self.ctl.step(&sample);
         // Protection supervision at 1 kHz, between loop periods (as on the board).
-        if self.steps.is_multiple_of(self.sup_every) {
+        if self.sup_countdown == 0 {
             self.ctl.supervise();
         }
         on_actuation(&mut out);
@@ -488,6 +548,12 @@ impl Sim {
         self.advance(&act);
         self.active = self.pending;
         self.steps += 1;
+        // Periods until `steps` is next a multiple of `sup_every`.
+        self.sup_countdown = if self.sup_countdown == 0 {
+            self.sup_every - 1
+        } else {
+            self.sup_countdown - 1
+        };
         if self.rec.is_some() {
             self.rec_countdown -= 1;
             if self.rec_countdown == 0 {
@@ -538,26 +604,32 @@ impl Sim {
     fn sample_now(&mut self) -> RawSample {
         let p = &self.pre;
         let i = self.currents();
-        let mut codes = [0u16; 3];
-        for k in 0..3 {
-            // Code = (i + offset)/(A per count) + zero code, rounded to nearest in the
-            // positive code domain (the cast truncates; below 0 it clamps anyway).
-            let mut c = i[k] * p.counts_per_amp + p.code_base[k];
-            if p.noise_i_counts > 0.0 {
-                c += p.noise_i_counts * self.gauss.sample(&mut self.noise);
-            }
-            codes[k] = c.clamp(0.0, 4095.0) as u16;
-        }
+        let mut c: [f64; 3] = core::array::from_fn(|k| i[k] * p.counts_per_amp + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
-        if p.noise_v_counts > 0.0 {
-            vc += p.noise_v_counts * self.gauss.sample(&mut self.noise);
+        if p.noisy {
+            self.add_noise(&mut c, &mut vc);
         }
-        let vcode = vc.clamp(0.0, 4095.0) as u16;
-        let count = floor_i64(self.s.x * p.counts_per_m);
+        // Code = (i + offset)/(A per count) + zero code, rounded to nearest in the positive
+        // code domain (the cast truncates; below 0 it clamps anyway).
         RawSample {
-            i_abc: codes,
-            v_bus: vcode,
-            encoder: count as u16, // wraps at 2^16 like the hardware counter
+            i_abc: [adc_code(c[0]), adc_code(c[1]), adc_code(c[2])],
+            v_bus: adc_code(vc),
+            // Wraps at 2^16 like the hardware counter.
+            encoder: floor_wrap_u16(self.s.x * self.pre.counts_per_m),
+        }
+    }
+
+    /// The sensors' noise (in counts) on the three current codes, then on the bus code.
+    #[inline(never)]
+    fn add_noise(&mut self, c: &mut [f64; 3], vc: &mut f64) {
+        let p = &self.pre;
+        if p.noise_i_counts > 0.0 {
+            for c in c.iter_mut() {
+                *c += p.noise_i_counts * self.gauss.sample(&mut self.noise);
+            }
+        }
+        if p.noise_v_counts > 0.0 {
+            *vc += p.noise_v_counts * self.gauss.sample(&mut self.noise);
         }
     }
 
@@ -571,58 +643,36 @@ impl Sim {
                 motion.at_tracked(&mut self.rot_motion[0], self.s.t + ts / 2.0)
             }
             Drive::Structure { .. } => (
-                x0 + v0 * ts / 2.0 + self.s.a_prev * ts * ts / 8.0,
-                v0 + self.s.a_prev * ts / 2.0,
+                x0 + v0 * p.half_ts + self.s.a_prev * p.ts2_8,
+                v0 + self.s.a_prev * p.half_ts,
                 0.0,
             ),
         };
         let w = vm_est * p.inv_lead;
         let (sn, cs) = self.rot_theta.at(xm * p.theta_per_m + p.theta_offset);
-        let e = [-p.ke * w * sn, p.ke * w * cs];
+        let kw = p.ke * w;
+        let e = [-kw * sn, kw * cs];
 
-        // Electrical period.
+        // Electrical period: the averaged inverter inline, everything else out of line.
         let vb0 = self.s.v_bus;
-        let e_ = &mut self.energy;
-        let mut el = Elec::default();
-        if act.enable {
-            let d: [f64; 3] = if p.dead > 0.0 {
-                dead_time_duties(act, p.dead, &self.s.i_ab)
-            } else {
-                // U1F15 duties are ≥ 0; clamp the top as before.
-                core::array::from_fn(|k| (act.duties[k].to_bits() as f64 * DUTY_LSB).min(1.0))
-            };
-            if p.switched {
-                switched_period(&mut el, &d, vb0, &e, p, ts, &mut self.s.i_ab);
-            } else {
-                let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
-                el.segment(
-                    &e,
-                    p.inv_r,
-                    v,
-                    1.0,
-                    p.decay,
-                    p.g_avg,
-                    p.g2_avg,
-                    &mut self.s.i_ab,
-                );
-            }
-        } else {
-            // Gates off: the current collapses through the body diodes within the period
-            // (diode rectification of an emf above the bus is not modelled); its magnetic
-            // energy goes to the drive.
-            let [a, b] = self.s.i_ab;
-            e_.dumped += p.magnetic * (a * a + b * b);
-            self.s.i_ab = [0.0; 2];
-        }
+        let fl = &mut self.flows;
         let Elec {
             i_avg,
             i2_avg,
             p_inv,
-        } = el;
-        e_.copper_loss += p.copper * i2_avg;
+        } = if act.enable && p.plain_average {
+            // U1F15 duties are ≥ 0; clamp the top as before.
+            let d: [f64; 3] =
+                core::array::from_fn(|k| (act.duties[k].to_bits() as f64 * DUTY_LSB).min(1.0));
+            let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
+            averaged_period(&e, v, p, &mut self.s.i_ab)
+        } else {
+            other_period(act, vb0, &e, p, ts, &mut self.s.i_ab, &mut fl.dumped_j)
+        };
+        fl.i2 += i2_avg;
         let iq_avg = -sn * i_avg[0] + cs * i_avg[1];
         let f_e = p.force_per_iq * iq_avg; // −T/l, T = 3/2·K_e·i_q
-        e_.to_inverter -= p_inv * ts;
+        fl.to_inverter -= p_inv;
 
         // Drive losses and bus.
         let (p_sw, p_cond) = if act.enable {
@@ -638,43 +688,42 @@ impl Sim {
         } else {
             (0.0, 0.0)
         };
-        e_.switching_loss += p_sw * ts;
-        e_.conduction_loss += p_cond * ts;
-        e_.logic_loss += p.logic_w * ts;
+        fl.switching_loss += p_sw;
         let p_draw = p_inv + p_sw + p_cond + p.logic_w;
         let bk = &p.bus[act.brake as usize];
-        let (is, c) = (p.i_source, p.capacitance);
-        let solve = |i_inj: f64| -> (f64, f64, f64) {
-            if bk.gt > 0.0 {
-                let vinf = (i_inj + is) * bk.inv_gt;
-                let d0 = vb0 - vinf;
-                let v1 = vinf + d0 * bk.k;
-                let iv = vinf * ts + d0 * bk.ak;
-                let iv2 = vinf * vinf * ts + 2.0 * vinf * d0 * bk.ak + d0 * d0 * bk.ak2;
-                (v1, iv, iv2)
-            } else {
-                let v1 = vb0 + i_inj * ts / c;
-                (
-                    v1,
-                    (vb0 + v1) / 2.0 * ts,
-                    ts * (vb0 * vb0 + vb0 * v1 + v1 * v1) / 3.0,
-                )
-            }
-        };
         // Injection current such that ∫V·i_inj dt equals the energy the inverter drew, by one
         // fixed-point step from the guess i₀ = −p/max(V, 1) (the rest, second order, shows in
-        // the ledger's residual): ∫V dt = α + β·i is linear in the injection, so
-        // i = −p·T/max(α + β·i₀, T) = −p·T·V_ref/max(α·V_ref − β·p, T·V_ref), one division.
+        // the ledger's residual): the mean of V over the period is α + β·i, linear in the
+        // injection, so i = −p/max(α + β·i₀, 1) = −p·V_ref/max(α·V_ref − β·p, V_ref), one
+        // division.
         let vref = vb0.max(1.0);
         let alpha = bk.iv_c + bk.iv_a * vb0;
-        let den = (alpha * vref - bk.iv_b * p_draw).max(ts * vref);
-        let i_inj = -p_draw * ts * vref / den;
-        let (v1, iv, iv2) = solve(i_inj);
-        if let Some(vs) = p.source_v {
-            e_.sink += vs * (iv - vs * ts) * p.g_source;
-            e_.source_r_loss += (vs * vs * ts - 2.0 * vs * iv + iv2) * p.g_source;
-        }
-        e_.brake += bk.g_brake * iv2;
+        let den = (alpha * vref - bk.iv_b * p_draw).max(vref);
+        let i_inj = -p_draw * vref / den;
+        // The bus over the period (exact for the held injection): end voltage, mean of V
+        // and of V², and the source/sink's part.
+        let v1 = if bk.gt > 0.0 {
+            let vinf = (i_inj + p.i_source) * bk.inv_gt;
+            let d0 = vb0 - vinf;
+            let v1 = vinf + d0 * bk.k;
+            let d0k = d0 * bk.ak;
+            let d0k2 = d0 * d0 * bk.ak2;
+            let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
+            if let Some(vs) = p.source_v {
+                // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
+                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
+                // the mean of (V − vs)² involves no cancellation of large terms.
+                let dl = vinf - vs;
+                fl.sink += vs * (dl + d0k) * p.g_source;
+                fl.source_r_loss += (dl * dl + 2.0 * dl * d0k + d0k2) * p.g_source;
+            }
+            fl.brake += bk.g_brake * v2_mean;
+            v1
+        } else {
+            let v1 = vb0 + i_inj * p.ts_per_c;
+            fl.brake += bk.g_brake * (vb0 * vb0 + vb0 * v1 + v1 * v1) / 3.0;
+            v1
+        };
         self.s.v_bus = v1;
 
         // Mechanics.
@@ -683,49 +732,43 @@ impl Sim {
         // Friction f_d(x, ẋ) of eq. 13 at the mid-period estimate (as `Screw::friction`).
         let fd = {
             let sgn = (vm_est * p.inv_stick).clamp(-1.0, 1.0);
-            let ripple = if p.p3 != 0.0 || p.p5 != 0.0 {
-                ripple(p, &mut self.rot_ripple, xm)
+            let c = if p.ripple {
+                p.coulomb * ripple(p, &mut self.rot_ripple, xm)
             } else {
-                1.0
+                p.coulomb
             };
-            p.coulomb * ripple * sgn + p.viscous * vm_est
+            c * sgn + p.viscous * vm_est
         };
         match &self.rig.drive {
             Drive::Imposed { motion } => {
                 let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
                 let vm = vm_est;
                 let inner = f_e + jr * am_imposed + br * vm;
-                let h = if (inner + fd) * vm >= 0.0 {
-                    p.h_in
-                } else {
-                    p.h_out
-                };
+                let out = ((inner + fd) * vm < 0.0) as usize;
+                let h = if out == 0 { p.h_in } else { p.h_out };
                 let f = h * inner + fd;
-                e_.external_work += f * vm * ts;
-                e_.device_work += f * vm * ts;
-                e_.friction_loss += fd * vm * ts;
-                e_.viscous_b_loss += br * vm * vm * ts;
-                e_.screw_loss += (h - 1.0) * inner * vm * ts;
-                e_.electromechanical += f_e * vm * ts;
+                fl.friction_loss += fd * vm;
+                fl.vv += vm * vm;
+                fl.inner[out] += inner * vm;
+                fl.electromechanical += f_e * vm;
                 self.s.x = x1;
                 self.s.v = v1m;
                 self.s.force = f;
             }
-            Drive::Structure {
-                structure: st,
-                excitation,
-            } => {
+            Drive::Structure { excitation, .. } => {
                 let ag = excitation.next(&mut self.exc, t0, ts);
-                let rhs0 =
-                    st.mass_kg * ag - st.damping_n_s_per_m * vm_est - st.stiffness_n_per_m * xm;
+                let mag = p.mass * ag;
+                let rhs0 = mag - p.damping * vm_est - p.stiffness * xm;
                 let f_eb = f_e + br * vm_est;
                 let mut h = p.h_in;
                 let mut a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[0];
                 let mut inner = f_eb + jr * a;
-                if (h * inner + fd) * vm_est < 0.0 && p.lossy_screw {
+                let mut out = 0;
+                if p.lossy_screw && (h * inner + fd) * vm_est < 0.0 {
                     h = p.h_out;
                     a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[1];
                     inner = f_eb + jr * a;
+                    out = 1;
                 }
                 let f = h * inner + fd;
                 let v1s = v0 + a * ts;
@@ -733,13 +776,11 @@ impl Sim {
                 self.s.x = x0 + vm * ts;
                 self.s.v = v1s;
                 self.s.a_prev = a;
-                e_.external_work += st.mass_kg * ag * vm * ts;
-                e_.structure_damping += st.damping_n_s_per_m * vm_est * vm * ts;
-                e_.device_work += f * vm * ts;
-                e_.friction_loss += fd * vm * ts;
-                e_.viscous_b_loss += br * vm_est * vm * ts;
-                e_.screw_loss += (h - 1.0) * inner * vm * ts;
-                e_.electromechanical += f_e * vm * ts;
+                fl.external_work += mag * vm;
+                fl.friction_loss += fd * vm;
+                fl.vv += vm_est * vm;
+                fl.inner[out] += inner * vm;
+                fl.electromechanical += f_e * vm;
                 self.s.force = f;
             }
         }
@@ -747,6 +788,16 @@ impl Sim {
         self.s.p_inv = -p_inv;
         self.s.t = t0 + ts;
     }
+}
+
+/// A 12-bit converter's code for the value `c` (counts + ½): `c` clamped to [0, 4095] and
+/// truncated (NaN reads 0). The comparisons map to one `maxsd` and one `minsd`, and the
+/// truncation needs no saturation code.
+#[inline(always)]
+fn adc_code(c: f64) -> u16 {
+    let c = if c > 0.0 { c } else { 0.0 };
+    let c = if c < 4095.0 { c } else { 4095.0 };
+    c as i32 as u16
 }
 
 /// Value of the duty's least significant bit (`Duty` = U1F15).
@@ -813,10 +864,62 @@ impl Elec {
     }
 }
 
+/// The averaged inverter's period (phase voltages `v`, αβ, held over the whole period): the
+/// exact solution of [`Elec::segment`] with f = 1 written out for the one segment, so that
+/// nothing is accumulated from zero.
+#[inline(always)]
+fn averaged_period(e: &[f64; 2], v: [f64; 2], p: &Pre, i_ab: &mut [f64; 2]) -> Elec {
+    let u = [(v[0] - e[0]) * p.inv_r, (v[1] - e[1]) * p.inv_r];
+    let dlt = [i_ab[0] - u[0], i_ab[1] - u[1]];
+    *i_ab = [u[0] + dlt[0] * p.decay, u[1] + dlt[1] * p.decay];
+    let i_avg = [u[0] + dlt[0] * p.g_avg, u[1] + dlt[1] * p.g_avg];
+    Elec {
+        i_avg,
+        i2_avg: (u[0] * u[0] + u[1] * u[1])
+            + 2.0 * p.g_avg * (u[0] * dlt[0] + u[1] * dlt[1])
+            + p.g2_avg * (dlt[0] * dlt[0] + dlt[1] * dlt[1]),
+        p_inv: 1.5 * (v[0] * i_avg[0] + v[1] * i_avg[1]),
+    }
+}
+
+/// Every electrical period but the plain averaged one: gates disabled, dead time, the
+/// switched inverter. Out of line so that the common period stays compact.
+#[inline(never)]
+fn other_period(
+    act: &Actuation,
+    vb0: f64,
+    e: &[f64; 2],
+    p: &Pre,
+    ts: f64,
+    i_ab: &mut [f64; 2],
+    dumped_j: &mut f64,
+) -> Elec {
+    let mut el = Elec::default();
+    if act.enable {
+        let d: [f64; 3] = if p.dead > 0.0 {
+            dead_time_duties(act, p.dead, i_ab)
+        } else {
+            core::array::from_fn(|k| (act.duties[k].to_bits() as f64 * DUTY_LSB).min(1.0))
+        };
+        if p.switched {
+            switched_period(&mut el, &d, vb0, e, p, ts, i_ab);
+        } else {
+            let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
+            el = averaged_period(e, v, p, i_ab);
+        }
+    } else {
+        // Gates off: the current collapses through the body diodes within the period
+        // (diode rectification of an emf above the bus is not modelled); its magnetic
+        // energy goes to the drive.
+        let [a, b] = *i_ab;
+        *dumped_j += p.magnetic * (a * a + b * b);
+        *i_ab = [0.0; 2];
+    }
+    el
+}
+
 /// Duties with the dead time: a phase whose current flows out of the leg (i > 0) loses
 /// `dead` (fraction of the period) of high time, one whose current flows in gains it.
-/// Out of line (like the other options' code) so that the common period stays compact.
-#[inline(never)]
 fn dead_time_duties(act: &Actuation, dead: f64, i_ab: &[f64; 2]) -> [f64; 3] {
     let [a, b] = *i_ab;
     let i_ph = [a, -0.5 * a + SQRT3_2 * b, -0.5 * a - SQRT3_2 * b];
@@ -884,12 +987,14 @@ struct BusK {
     /// Total conductance (source + brake), S, and its inverse (0 if none).
     gt: f64,
     inv_gt: f64,
-    /// k = exp(−gt·T/C), ak = (1 − k)·C/gt, ak2 = (1 − k²)·C/(2·gt).
+    /// k = exp(−gt·T/C), ak = (1 − k)·C/(gt·T), ak2 = (1 − k²)·C/(2·gt·T): with
+    /// V(t) = V∞ + d0·exp(−gt·t/C), the means over the period of V − V∞ and (V − V∞)² are
+    /// d0·ak and d0²·ak2.
     k: f64,
     ak: f64,
     ak2: f64,
     g_brake: f64,
-    /// ∫V dt over the period = iv_c + iv_a·V(start) + iv_b·i_injected.
+    /// Mean of V over the period = iv_c + iv_a·V(start) + iv_b·i_injected.
     iv_a: f64,
     iv_b: f64,
     iv_c: f64,
@@ -907,6 +1012,9 @@ struct Pre {
     vcode_base: f64,
     noise_v_counts: f64,
     counts_per_m: f64,
+    // T/2 and T²/8 (the mid-period estimate).
+    half_ts: f64,
+    ts2_8: f64,
     // Machine and inverter.
     inv_ts: f64,
     inv_lead: f64,
@@ -932,7 +1040,8 @@ struct Pre {
     i_source: f64,
     g_source: f64,
     source_v: Option<f64>,
-    capacitance: f64,
+    /// T/C (the bus without any conductance).
+    ts_per_c: f64,
     // Screw.
     jr: f64,
     br: f64,
@@ -948,6 +1057,15 @@ struct Pre {
     h_out: f64,
     lossy_screw: bool,
     inv_mass_h: [f64; 2],
+    // Structure (zero for an imposed motion).
+    mass: f64,
+    damping: f64,
+    stiffness: f64,
+    // Options: sensor noise on; the plain averaged inverter (no dead time, not switched);
+    // friction ripple.
+    noisy: bool,
+    plain_average: bool,
+    ripple: bool,
 }
 
 impl Pre {
@@ -972,32 +1090,39 @@ impl Pre {
             if gt > 0.0 {
                 let tc = b.capacitance_f / gt;
                 let k = (-gt * ts / b.capacitance_f).exp();
-                let ak = (1.0 - k) * tc;
+                let ak = (1.0 - k) * tc / ts;
                 BusK {
                     gt,
                     inv_gt: 1.0 / gt,
                     k,
                     ak,
-                    ak2: (1.0 - k * k) * tc / 2.0,
+                    ak2: (1.0 - k * k) * tc / 2.0 / ts,
                     g_brake: gb,
                     iv_a: ak,
-                    iv_b: (ts - ak) / gt,
-                    iv_c: i_source / gt * (ts - ak),
+                    iv_b: (1.0 - ak) / gt,
+                    iv_c: i_source / gt * (1.0 - ak),
                 }
             } else {
                 BusK {
                     k: 1.0,
-                    iv_a: ts,
-                    iv_b: ts * ts / (2.0 * b.capacitance_f),
+                    iv_a: 1.0,
+                    iv_b: ts / (2.0 * b.capacitance_f),
                     ..Default::default()
                 }
             }
         };
         let jr = sc.reflected_mass();
-        let mass = match &rig.drive {
-            Drive::Structure { structure, .. } => structure.mass_kg,
-            Drive::Imposed { .. } => 0.0,
+        // The dead-time correction applies when `dead` > 0 (as `other_period` tests it).
+        let dead_time = rig.inverter.dead_time_s / ts > 0.0;
+        let st = match &rig.drive {
+            Drive::Structure { structure, .. } => *structure,
+            Drive::Imposed { .. } => crate::plant::Structure {
+                mass_kg: 0.0,
+                stiffness_n_per_m: 0.0,
+                damping_n_s_per_m: 0.0,
+            },
         };
+        let mass = st.mass_kg;
         Pre {
             counts_per_amp,
             code_base: core::array::from_fn(|k| {
@@ -1008,6 +1133,8 @@ impl Pre {
             vcode_base: sn.vbus_offset_v * counts_per_volt + 0.5,
             noise_v_counts: sn.vbus_noise_v.max(0.0) * counts_per_volt,
             counts_per_m: cfg.encoder_cpr as f64 / (l * TAU),
+            half_ts: ts / 2.0,
+            ts2_8: ts * ts / 8.0,
             inv_ts: 1.0 / ts,
             inv_lead: 1.0 / l,
             theta_per_m: m.pole_pairs as f64 / l,
@@ -1030,7 +1157,13 @@ impl Pre {
             i_source,
             g_source: gs,
             source_v: b.source_v,
-            capacitance: b.capacitance_f,
+            ts_per_c: ts / b.capacitance_f,
+            mass,
+            damping: st.damping_n_s_per_m,
+            stiffness: st.stiffness_n_per_m,
+            noisy: sn.current_noise_a > 0.0 || sn.vbus_noise_v > 0.0,
+            plain_average: !rig.inverter.switched && !dead_time,
+            ripple: sc.p3 != 0.0 || sc.p5 != 0.0,
             jr,
             br: sc.reflected_viscosity(),
             inv_stick: 1.0 / sc.stick_velocity,
