@@ -43,12 +43,11 @@ pub struct Energy {
     pub copper_loss: f64,
     /// Delivered by the machine to the inverter, ∫−v·i dt (the emulated load's energy).
     pub to_inverter: f64,
-    /// Drive losses: switching, conduction, logic supply, and inductive energy dumped when
-    /// the gates are disabled.
+    /// Drive losses: switching, conduction, logic supply. (With the gates off the winding's
+    /// current flows through the body diodes into the bus: `to_inverter`.)
     pub switching_loss: f64,
     pub conduction_loss: f64,
     pub logic_loss: f64,
-    pub dumped: f64,
     /// Brake resistor, source resistance, and the energy into the source/sink EMF (negative
     /// when the source supplies).
     pub brake: f64,
@@ -72,7 +71,6 @@ impl Energy {
             + self.switching_loss
             + self.conduction_loss
             + self.logic_loss
-            + self.dumped
             + self.brake
             + self.source_r_loss
             + self.sink
@@ -126,8 +124,6 @@ struct Flows {
     brake: f64,
     source_r_loss: f64,
     sink: f64,
-    /// Inductive energy dumped when the gates are disabled, J (not scaled).
-    dumped_j: f64,
 }
 
 /// A channel the recorder can keep.
@@ -439,7 +435,6 @@ impl Sim {
             switching_loss: f.switching_loss * ts,
             conduction_loss: p.r_on_15 * ts * f.i2,
             logic_loss: p.logic_w * ts * self.steps as f64,
-            dumped: f.dumped_j,
             brake: f.brake * ts,
             source_r_loss: f.source_r_loss * ts,
             sink: f.sink * ts,
@@ -667,7 +662,7 @@ impl Sim {
             let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
             averaged_period(&e, v, p, &mut self.s.i_ab)
         } else {
-            other_period(act, vb0, &e, p, ts, &mut self.s.i_ab, &mut fl.dumped_j)
+            other_period(act, vb0, &e, p, ts, &mut self.s.i_ab)
         };
         fl.i2 += i2_avg;
         let iq_avg = -sn * i_avg[0] + cs * i_avg[1];
@@ -892,7 +887,6 @@ fn other_period(
     p: &Pre,
     ts: f64,
     i_ab: &mut [f64; 2],
-    dumped_j: &mut f64,
 ) -> Elec {
     let mut el = Elec::default();
     if act.enable {
@@ -908,14 +902,146 @@ fn other_period(
             el = averaged_period(e, v, p, i_ab);
         }
     } else {
-        // Gates off: the current collapses through the body diodes within the period
-        // (diode rectification of an emf above the bus is not modelled); its magnetic
-        // energy goes to the drive.
-        let [a, b] = *i_ab;
-        *dumped_j += p.magnetic * (a * a + b * b);
-        *i_ab = [0.0; 2];
+        el = diode_period(vb0, e, p, ts, i_ab);
     }
     el
+}
+
+/// Most conduction-set changes one period of the gates-off model resolves (each is a
+/// current reaching zero); the rest of a period that needed more keeps the last set.
+const DIODE_EVENTS: usize = 12;
+
+/// Gates off: the six body diodes are an uncontrolled three-phase bridge. A phase carrying
+/// current is tied to the rail its diode conducts to (to the bus when its current flows out
+/// of the machine, i < 0; to the negative rail when it flows in), the star point floats where
+/// the conducting phases put it, and an open phase starts to conduct when its open-circuit
+/// terminal voltage (star point + its emf) leaves [0, V_bus]. So a current left in the
+/// machine when the gates open returns its energy to the bus through the diodes, and an emf
+/// whose line-to-line peak exceeds the bus drives a rectified current into the bus (braking
+/// the shaft), with no current at all below that.
+///
+/// With the emf and the bus held over the period (as in the averaged model), the conduction
+/// set changes only when a current reaches zero, and between those events each current is
+/// the exact exponential solution of `L di/dt = v_x − v_n − R·i − e_x`: the period is
+/// integrated event to event, with the zero crossings found in closed form. Diode drops are
+/// neglected.
+#[inline(never)]
+fn diode_period(vb: f64, e: &[f64; 2], p: &Pre, ts: f64, i_ab: &mut [f64; 2]) -> Elec {
+    let e_ph = [
+        e[0],
+        -0.5 * e[0] + SQRT3_2 * e[1],
+        -0.5 * e[0] - SQRT3_2 * e[1],
+    ];
+    let [ia, ib] = *i_ab;
+    let mut i = [ia, -0.5 * ia + SQRT3_2 * ib, -0.5 * ia - SQRT3_2 * ib];
+    let emax = e_ph[0].max(e_ph[1]).max(e_ph[2]);
+    let emin = e_ph[0].min(e_ph[1]).min(e_ph[2]);
+    if i == [0.0; 3] && emax - emin <= vb {
+        return Elec::default(); // blocked: no current flows.
+    }
+    let tau = p.tau;
+    let (mut i_int, mut i2_int, mut p_int) = ([0.0f64; 3], 0.0f64, 0.0f64);
+    let mut left = ts;
+    for _ in 0..DIODE_EVENTS {
+        // The conducting phases, each with the direction of its current (−1: out of the
+        // machine into the upper diode, terminal at the bus; +1: in through the lower diode,
+        // terminal at 0).
+        let mut dir = i.map(|c| {
+            if c > 0.0 {
+                1.0
+            } else if c < 0.0 {
+                -1.0
+            } else {
+                0.0
+            }
+        });
+        if dir == [0.0; 3] {
+            if emax - emin <= vb {
+                break;
+            }
+            // Conduction starts between the highest emf (into the bus) and the lowest.
+            let hi = (0..3).fold(0, |m, x| if e_ph[x] > e_ph[m] { x } else { m });
+            let lo = (0..3).fold(0, |m, x| if e_ph[x] < e_ph[m] { x } else { m });
+            dir[hi] = -1.0;
+            dir[lo] = 1.0;
+        }
+        let term = |d: f64| if d < 0.0 { vb } else { 0.0 };
+        // Star point from the conducting phases (their currents sum to zero); an open phase
+        // whose terminal would leave the rails joins them.
+        let mut vn = 0.0;
+        for _ in 0..2 {
+            let on = (0..3).filter(|&x| dir[x] != 0.0);
+            let n = on.clone().count() as f64;
+            vn = on.map(|x| term(dir[x]) - e_ph[x]).sum::<f64>() / n;
+            let mut joined = false;
+            for x in 0..3 {
+                let vt = vn + e_ph[x];
+                if dir[x] == 0.0 && (vt > vb || vt < 0.0) {
+                    dir[x] = if vt > vb { -1.0 } else { 1.0 };
+                    joined = true;
+                }
+            }
+            if !joined {
+                break;
+            }
+        }
+        // Each conducting current i(t) = u + d·e^(−t/τ); the first to reach zero ends the
+        // segment (e^(−t/τ) = −u/d, when u is of the other sign).
+        let u = core::array::from_fn::<f64, 3, _>(|x| {
+            if dir[x] != 0.0 {
+                (term(dir[x]) - vn - e_ph[x]) * p.inv_r
+            } else {
+                0.0
+            }
+        });
+        let d = core::array::from_fn::<f64, 3, _>(|x| i[x] - u[x]);
+        let mut t = left;
+        let mut ends = None;
+        for x in 0..3 {
+            if dir[x] != 0.0 && u[x] * dir[x] < 0.0 {
+                let tx = -tau * (-u[x] / d[x]).ln();
+                if tx < t {
+                    t = tx.max(0.0);
+                    ends = Some(x);
+                }
+            }
+        }
+        let a = (-t / tau).exp();
+        let (g, g2) = (tau * (1.0 - a), 0.5 * tau * (1.0 - a * a));
+        for x in 0..3 {
+            if dir[x] == 0.0 {
+                continue;
+            }
+            i[x] = u[x] + d[x] * a;
+            let int = u[x] * t + d[x] * g;
+            i_int[x] += int;
+            i2_int += u[x] * u[x] * t + 2.0 * u[x] * d[x] * g + d[x] * d[x] * g2;
+            p_int += term(dir[x]) * int;
+        }
+        left -= t;
+        match ends {
+            Some(x) => {
+                // Exactly zero; the others sum to zero with it (Σu = Σd = 0 over the set).
+                i[x] = 0.0;
+                let live = i.iter().filter(|&&c| c != 0.0).count();
+                if live < 2 {
+                    i = [0.0; 3];
+                }
+            }
+            None => break,
+        }
+        if left <= 0.0 {
+            break;
+        }
+    }
+    *i_ab = [i[0], (i[1] - i[2]) / (2.0 * SQRT3_2)];
+    // Σi² = 3/2·(i_α² + i_β²) for currents that sum to zero.
+    let inv_ts = 1.0 / ts;
+    Elec {
+        i_avg: clarke(i_int.map(|v| v * inv_ts)),
+        i2_avg: i2_int * (2.0 / 3.0) * inv_ts,
+        p_inv: p_int * inv_ts,
+    }
 }
 
 /// Duties with the dead time: a phase whose current flows out of the leg (i > 0) loses
@@ -1027,7 +1153,6 @@ struct Pre {
     g_avg: f64,
     g2_avg: f64,
     copper: f64,
-    magnetic: f64,
     force_per_iq: f64,
     switched: bool,
     dead: f64,
@@ -1146,7 +1271,6 @@ impl Pre {
             g_avg: (1.0 - decay) * tau / ts,
             g2_avg: (1.0 - decay * decay) * tau / 2.0 / ts,
             copper: 1.5 * m.r_ohm * ts,
-            magnetic: 0.75 * m.l_h,
             force_per_iq: -1.5 * m.ke_v_s_per_rad / l,
             switched: rig.inverter.switched,
             dead: rig.inverter.dead_time_s / ts,
