@@ -38,12 +38,19 @@ pub enum NumError {
     Overflow,
 }
 
-impl fmt::Display for NumError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
+impl NumError {
+    /// The reason, as the console writes it after the refused text.
+    pub fn as_str(self) -> &'static str {
+        match self {
             NumError::NotANumber => "is not a number",
             NumError::Overflow => "is out of the f32 range",
-        })
+        }
+    }
+}
+
+impl fmt::Display for NumError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
     }
 }
 
@@ -221,10 +228,28 @@ impl Buf {
             self.push(c);
         }
     }
-    fn out(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    fn as_str(&self) -> &str {
         // Only ASCII is ever pushed.
-        f.write_str(core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?"))
+        core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?")
     }
+}
+
+/// A number's text, built on the stack: [`Num::text`], [`Fixed::text`], [`uint`]. Writing it
+/// with `write_str` keeps `core::fmt`'s formatting machinery (`write!`, `Formatter`) out of
+/// the board image.
+pub struct Text(Buf);
+
+impl Text {
+    pub fn as_str(&self) -> &str {
+        self.0.as_str()
+    }
+}
+
+/// The decimal text of an unsigned integer.
+pub fn uint(v: u64) -> Text {
+    let mut buf = Buf::new();
+    buf.push_u64(v, 0);
+    Text(buf)
 }
 
 /// Round a non-negative `f64` below 2^63 to the nearest integer (ties away from zero; the
@@ -352,11 +377,18 @@ fn write_num(v: f32, buf: &mut Buf) {
 #[derive(Clone, Copy, Debug)]
 pub struct Num(pub f32);
 
-impl fmt::Display for Num {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl Num {
+    /// The text, without `core::fmt` (see [`Text`]).
+    pub fn text(self) -> Text {
         let mut buf = Buf::new();
         write_num(self.0, &mut buf);
-        buf.out(f)
+        Text(buf)
+    }
+}
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 
@@ -364,8 +396,9 @@ impl fmt::Display for Num {
 #[derive(Clone, Copy, Debug)]
 pub struct Fixed(pub f32, pub u8);
 
-impl fmt::Display for Fixed {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl Fixed {
+    /// The text, without `core::fmt` (see [`Text`]).
+    pub fn text(self) -> Text {
         let mut buf = Buf::new();
         let n = self.1.min(9) as i32;
         let s = scale(self.0.abs() as f64, n);
@@ -389,7 +422,13 @@ impl fmt::Display for Fixed {
                 buf.push_u64(q % p, n as usize);
             }
         }
-        buf.out(f)
+        Text(buf)
+    }
+}
+
+impl fmt::Display for Fixed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 

@@ -51,18 +51,29 @@ pub enum ParamError {
     Invalid(&'static str, &'static str),
 }
 
+impl ParamError {
+    /// The message as up to four pieces of text, written one after the other (the console
+    /// writes them without `core::fmt`).
+    pub fn parts(self) -> [&'static str; 4] {
+        match self {
+            ParamError::UnknownName => ["unknown parameter", "", "", ""],
+            ParamError::NotFinite => ["value is not a finite number", "", "", ""],
+            ParamError::NotInteger => ["value must be an integer", "", "", ""],
+            ParamError::OutOfRange => ["value out of range", "", "", ""],
+            ParamError::NotWhileRunning => [
+                "parameter may not change while running (mode idle first)",
+                "",
+                "",
+                "",
+            ],
+            ParamError::Invalid(field, why) => ["config refused: ", field, ": ", why],
+        }
+    }
+}
+
 impl core::fmt::Display for ParamError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            ParamError::UnknownName => f.write_str("unknown parameter"),
-            ParamError::NotFinite => f.write_str("value is not a finite number"),
-            ParamError::NotInteger => f.write_str("value must be an integer"),
-            ParamError::OutOfRange => f.write_str("value out of range"),
-            ParamError::NotWhileRunning => {
-                f.write_str("parameter may not change while running (mode idle first)")
-            }
-            ParamError::Invalid(field, why) => write!(f, "config refused: {field}: {why}"),
-        }
+        self.parts().iter().try_for_each(|p| f.write_str(p))
     }
 }
 

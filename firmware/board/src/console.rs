@@ -168,7 +168,9 @@ pub async fn console_task(
                     }
                     reply.clear();
                     if too_long {
-                        let _ = write!(reply, "error: line longer than {LINE_MAX} characters\r\n");
+                        let _ = reply.write_str("error: line longer than ");
+                        let _ = reply.write_str(regen_fw::numtext::uint(LINE_MAX as u64).as_str());
+                        let _ = reply.write_str(" characters\r\n");
                     } else if let Ok(text) = core::str::from_utf8(&line) {
                         match drive::snapshot() {
                             Some(before) => {

@@ -142,7 +142,9 @@ impl Lti {
     }
 
     /// Output for input `u` at the current state (no state change).
-    #[inline]
+    /// Out of line (as `advance`): one copy shared by the impedance and optimal laws, which
+    /// run at the decimated law rate (flash: each inlined copy is over 1 KB on the M4).
+    #[inline(never)]
     pub fn output(&self, u: &[Q; M]) -> Q {
         let mut y: i64 = 0;
         for i in 0..N {
@@ -155,7 +157,7 @@ impl Lti {
     }
 
     /// Advance the state with input `u`.
-    #[inline]
+    #[inline(never)]
     pub fn advance(&mut self, u: &[Q; M]) {
         let us = [q_to_state(u[0]), q_to_state(u[1]), q_to_state(u[2])];
         let mut nx = [0i64; N];
