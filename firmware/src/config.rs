@@ -546,7 +546,7 @@ impl Gains {
                 turn_per_count,
                 pole_pairs: c.pole_pairs as u32,
                 e_per_count: turn_per_count.wrapping_mul(c.pole_pairs as u32),
-                offset: Angle::from_radians(c.encoder_offset_rad as f64),
+                offset: angle_of_radians(c.encoder_offset_rad),
                 kp31: crate::fx::fixed_i32(2.0 * wb, 31),
                 ki34: crate::fx::fixed_i32(wb * wb, 34),
                 rad_s_per_count_step: Gain::from_f32(rad_s_per_count_step),
@@ -580,9 +580,31 @@ impl Gains {
 /// 1/√3, correctly rounded to `f32` (`f32::sqrt` is not in `core`).
 const INV_SQRT3: f32 = 0.577_350_26;
 
+/// The angle of `r` radians (|r| ≤ 2π, validated), in integers: `r·2^32` is exact in `f32`
+/// (power-of-two scaling) and fits an `i64`; times 2^64/2π (rounded) and shifted back gives
+/// `r/2π` turns in 2^-32 units, wrapped mod one turn. The same angle as
+/// `Angle::from_radians(r as f64)` to within 1 LSB (2^-32 turn), without soft-float `f64`.
+fn angle_of_radians(r: f32) -> Angle {
+    const TURNS_PER_RAD_Q64: i128 = 2_935_890_503_282_001_226; // 2^64/2π
+    let r_q32 = (r * 4_294_967_296.0) as i64;
+    Angle(((r_q32 as i128 * TURNS_PER_RAD_Q64) >> 64) as u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn encoder_offset_angle_matches_the_f64_conversion() {
+        // Every 1/1000 of the validated range ±2π (and its ends): within 1 LSB (2^-32 turn,
+        // 1.5 nrad) of the f64 conversion, which rounds r/2π once more before truncating.
+        for k in -1000..=1000 {
+            let r = k as f32 * core::f32::consts::TAU / 1000.0;
+            let a = angle_of_radians(r).0;
+            let b = Angle::from_radians(r as f64).0;
+            assert!(a.wrapping_sub(b).wrapping_add(1) <= 2, "{r}: {a} vs {b}");
+        }
+    }
 
     #[test]
     fn defaults_are_valid() {

@@ -3,27 +3,28 @@
 //! core's `str::parse::<f64>` (Eisel–Lemire with a 10 KiB power-of-five table and a big-decimal
 //! fallback) and `{}` on floats (Grisu with a Dragon fallback) cost about 25 KiB of flash on the
 //! Cortex-M4; the console needs neither their full precision nor their range (everything it
-//! reads or writes is an `f32`). This module does both with `f64` arithmetic (already linked
-//! for the command laws' design code) and a 23-entry table of exact powers of ten.
+//! reads or writes is an `f32`). This module does both in integer arithmetic only (a 128-bit
+//! binary mantissa scaled by ten step by step, see `Big`): no soft-float `f64` is linked for
+//! it on the board.
 //!
 //! * [`parse_f32`] accepts what `str::parse::<f64>` accepted on the console: an optional sign,
 //!   digits with an optional `.` (at least one digit, `1.` and `.5` included), an optional
 //!   exponent `e`/`E` with optional sign and at least one digit. Anything else (`nan`, `inf`,
 //!   `0x10`, `1_000`, `1e`, spaces) is [`NumError::NotANumber`]; a value beyond `f32::MAX` is
 //!   [`NumError::Overflow`]; a value below the smallest subnormal rounds to zero as in core.
-//!   **Precision**: the result is the `f32` nearest the decimal (ties to even), except when
-//!   the decimal lies within about 4·10⁻¹⁶ (relative) of the midpoint between two `f32`
-//!   values, where it may be the other neighbour: always within 1 ulp of the correctly
-//!   rounded value (tested against core's correctly rounded parser). Digits past the 19th
-//!   significant one are ignored (a relative change below 10⁻¹⁸).
+//!   **Precision**: the result is the `f32` nearest the decimal (ties to even) — the
+//!   scaling carries 128 bits and a sticky bit, exact on ties, within 2⁻¹²⁰ (relative)
+//!   otherwise — tested bit for bit against core's correctly rounded parser. Digits past the
+//!   19th significant one are ignored (a relative change below 10⁻¹⁸: the result is then
+//!   within 1 ulp of the correctly rounded value).
 //! * [`Num`] displays an `f32` with the fewest significant digits (1 … 9) that parse back
 //!   ([`parse_f32`] and core's parser both) to the same `f32`, like core's `{}`; positional
 //!   for 10⁻⁵ ≤ |v| < 10¹⁰ (`0.0122`, `100`, `-2.5`), otherwise with an exponent (`1e-7`,
 //!   `3.4028235e38`), where core's `{}` wrote every zero. `inf`, `-inf`, `NaN`, `0` and `-0`
 //!   as core writes them.
 //! * [`Fixed`] displays with a fixed number of decimals (≤ 9), like core's `{:.N}`, rounded to
-//!   nearest (a tie within 10⁻¹⁶ relative may round either way); beyond 10¹⁸ units of the
-//!   last decimal it falls back to [`Num`].
+//!   nearest, ties to even, from the same 128-bit scaling (exact on ties); beyond 10¹⁸ units
+//!   of the last decimal it falls back to [`Num`].
 //!
 //! Nothing here panics or allocates.
 
@@ -54,24 +55,114 @@ impl fmt::Display for NumError {
     }
 }
 
-/// 10^0 … 10^22: every one exact in `f64`.
-const POW10: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-];
-
-/// `x·10^n` by multiplications or divisions by exact powers of ten: one correctly rounded
-/// operation for |n| ≤ 22, at most ⌈|n|/22⌉ for larger |n| (the callers keep |n| ≤ 66).
-#[inline(never)] // one copy for the parser and both formatters (flash)
-fn scale(mut x: f64, n: i32) -> f64 {
-    let mut m = n.unsigned_abs();
-    while m > 0 {
-        let step = m.min(22);
-        let p = POW10[step as usize];
-        x = if n > 0 { x * p } else { x / p };
-        m -= step;
+/// 10^0 … 10^19.
+const POW10: [u64; 20] = {
+    let mut t = [1u64; 20];
+    let mut i = 1;
+    while i < 20 {
+        t[i] = t[i - 1] * 10;
+        i += 1;
     }
-    x
+    t
+};
+
+/// A positive binary floating-point value `m·2^e` with a 128-bit mantissa (normalised: bit
+/// 127 set) and a sticky flag: `true` when bits below the mantissa were dropped (the exact
+/// value is then a little *above* `m·2^e`). Multiplying or dividing by ten loses at most one
+/// unit of the 128th bit per step; the callers take at most 84 steps, so the result is within
+/// 2⁻¹²⁰ (relative) of the exact value and *exact*, sticky clear, whenever the exact value
+/// fits the mantissa (e.g. every tie between two `f32` or two decimals). Integers only: no
+/// soft-float `f64` in the image.
+#[derive(Clone, Copy)]
+struct Big {
+    m: u128,
+    e: i32,
+    sticky: bool,
+}
+
+impl Big {
+    /// `v·2^e` (`v > 0`).
+    fn new(v: u64, e: i32) -> Big {
+        let z = (v as u128).leading_zeros();
+        Big {
+            m: (v as u128) << z,
+            e: e - z as i32,
+            sticky: false,
+        }
+    }
+
+    fn mul10(&mut self) {
+        let lo = (self.m as u64) as u128 * 10;
+        let hi = (self.m >> 64) * 10 + (lo >> 64); // < 2^68
+        let sh = 64 - hi.leading_zeros(); // 3 or 4: bits above the 128 kept
+        let low64 = lo as u64 as u128;
+        self.sticky |= low64 & ((1 << sh) - 1) != 0;
+        self.m = (hi << (128 - 64 - sh)) | (low64 >> sh);
+        self.e += sh as i32;
+    }
+
+    fn div10(&mut self) {
+        let (q, r) = div_small(self.m, 10);
+        let z = q.leading_zeros(); // 3 or 4
+        let r = (r as u64) << z;
+        self.sticky |= r % 10 != 0;
+        self.m = (q << z) | (r / 10) as u128;
+        self.e -= z as i32;
+    }
+
+    /// `self·10^n`.
+    #[inline(never)]
+    fn scale10(mut self, n: i32) -> Big {
+        for _ in 0..n.unsigned_abs() {
+            if n > 0 {
+                self.mul10()
+            } else {
+                self.div10()
+            }
+        }
+        self
+    }
+
+    /// The value in fixed point with 64 fraction bits (`None` if it is 2^63 or more), and
+    /// whether bits were dropped below those 64.
+    fn fixed64(self) -> Option<(u128, bool)> {
+        let sh = -(self.e + 64); // value·2^64 = m >> sh
+        if sh < 1 {
+            return None;
+        }
+        if sh >= 128 {
+            return Some((0, true));
+        }
+        let lost = self.m & ((1u128 << sh) - 1) != 0;
+        Some((self.m >> sh, self.sticky || lost))
+    }
+
+    /// Round to nearest, ties to even, at bit `sh` of the mantissa (`1 ≤ sh ≤ 128`): the
+    /// mantissa kept, as an integer.
+    fn round_at(self, sh: u32) -> u128 {
+        let kept = if sh >= 128 { 0 } else { self.m >> sh };
+        let rest = if sh >= 128 {
+            self.m
+        } else {
+            self.m & ((1u128 << sh) - 1)
+        };
+        let half = 1u128 << (sh - 1);
+        let up = rest > half || (rest == half && (self.sticky || kept & 1 == 1));
+        kept + up as u128
+    }
+}
+
+/// `x / d` and `x % d` for a small divisor (`d < 2^32`), by 32-bit limbs (no 128-bit
+/// division routine).
+fn div_small(x: u128, d: u32) -> (u128, u32) {
+    let mut q: u128 = 0;
+    let mut r: u64 = 0;
+    for k in (0..4).rev() {
+        let cur = (r << 32) | ((x >> (32 * k)) as u32 as u64);
+        q |= ((cur / d as u64) as u128) << (32 * k);
+        r = cur % d as u64;
+    }
+    (q, r as u32)
 }
 
 fn n_digits(mut v: u64) -> i32 {
@@ -100,8 +191,26 @@ fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
     if top <= -46 {
         return Ok(0.0); // ≤ 1e-46, below half the smallest subnormal (7.0e-46)
     }
-    // Here −65 ≤ e10 ≤ 38 and mant < 10^19: no intermediate leaves f64's normal range.
-    let v = scale(mant as f64, e10) as f32;
+    // Here −65 ≤ e10 ≤ 38 and mant < 10^19.
+    let b = Big::new(mant, 0).scale10(e10);
+    // The value is in [2^(127+e), 2^(128+e)): its f32 exponent, and where the 24-bit
+    // significand ends (lower for a subnormal).
+    let exp = 127 + b.e;
+    if exp > 127 {
+        return Err(NumError::Overflow);
+    }
+    let bits = if exp >= -126 {
+        let sig = b.round_at(104) as u32; // 2^23 … 2^24 (carry into the exponent)
+        (((exp + 126) as u32) << 23) + sig
+    } else {
+        let sh = 104 + (-126 - exp) as u32;
+        if sh > 128 {
+            0 // below 2^-150: half the smallest subnormal
+        } else {
+            b.round_at(sh) as u32
+        }
+    };
+    let v = f32::from_bits(bits);
     if v.is_finite() {
         Ok(v)
     } else {
@@ -252,36 +361,32 @@ pub fn uint(v: u64) -> Text {
     Text(buf)
 }
 
-/// Round a non-negative `f64` below 2^63 to the nearest integer (ties away from zero; the
-/// shortest-digit search checks its candidates, so the tie rule does not matter there).
-fn round_u64(x: f64) -> u64 {
-    (x + 0.5) as u64
-}
-
 /// The shortest decimal `d·10^e` (d with 1 … 9 digits) that converts back to `x`
 /// (finite, > 0).
 fn shortest(x: f32) -> (u64, i32) {
-    let xd = x as f64;
     let bits = x.to_bits();
     let be = ((bits >> 23) & 0xff) as i32;
-    let e2 = if be == 0 {
-        31 - (bits & 0x7f_ffff).leading_zeros() as i32 - 149 // subnormal
+    let frac = (bits & 0x7f_ffff) as u64;
+    // x = b exactly; e2 = floor(log2 x).
+    let (b, e2) = if be == 0 {
+        (Big::new(frac, -149), 63 - frac.leading_zeros() as i32 - 149) // subnormal
     } else {
-        be - 127
+        (Big::new(frac | 1 << 23, be - 150), be - 127)
     };
     // k ≈ floor(log10 x) (1233/4096 ≈ log10 2), then made exact so that
-    // s = x·10^(8−k) rounds to a 9-digit integer.
+    // s = x·10^(8−k) rounds to a 9-digit integer (s in 64-bit fixed point).
+    let s_of = |k: i32| b.scale10(8 - k).fixed64().map_or(u128::MAX, |(s, _)| s);
     let mut k = (e2 * 1233) >> 12;
-    let mut s = scale(xd, 8 - k);
+    let mut s = s_of(k);
     for _ in 0..4 {
-        if s >= 999_999_999.5 {
-            k += 1;
-        } else if s < 99_999_999.5 {
-            k -= 1;
+        if s >= 1_999_999_999u128 << 63 {
+            k += 1; // s ≥ 999,999,999.5
+        } else if s < 199_999_999u128 << 63 {
+            k -= 1; // s < 99,999,999.5
         } else {
             break;
         }
-        s = scale(xd, 8 - k);
+        s = s_of(k);
     }
     let good = |(d, e): (u64, i32)| decimal_to_f32(d, e) == Ok(x);
     let digits = |p: i32| digits_p(s, k, p);
@@ -305,13 +410,15 @@ fn shortest(x: f32) -> (u64, i32) {
     (d, e)
 }
 
-/// `s` (in [10^8 − 0.5, 10^9 − 0.5), the value times 10^(8−k)) rounded to `p` digits, as
-/// `d·10^e`.
+/// `s` (the value times 10^(8−k), in [10^8 − 0.5, 10^9 − 0.5), fixed point with 64 fraction
+/// bits) rounded to `p` digits (ties away from zero: the candidates are checked by converting
+/// them back, so the tie rule does not matter), as `d·10^e`.
 #[inline(never)]
-fn digits_p(s: f64, k: i32, p: i32) -> (u64, i32) {
-    let mut d = round_u64(s / POW10[(9 - p) as usize]);
+fn digits_p(s: u128, k: i32, p: i32) -> (u64, i32) {
+    let (q, _) = div_small(s, POW10[(9 - p) as usize] as u32);
+    let mut d = ((q + (1 << 63)) >> 64) as u64;
     let mut e = k - p + 1;
-    if d >= POW10[p as usize] as u64 {
+    if d >= POW10[p as usize] {
         d /= 10; // 9.99… rounded up to 10.0…
         e += 1;
     }
@@ -401,26 +508,38 @@ impl Fixed {
     pub fn text(self) -> Text {
         let mut buf = Buf::new();
         let n = self.1.min(9) as i32;
-        let s = scale(self.0.abs() as f64, n);
-        if !self.0.is_finite() || s >= 1e18 {
-            write_num(self.0, &mut buf);
+        let a = self.0.abs();
+        let bits = a.to_bits();
+        let (be, frac) = (((bits >> 23) & 0xff) as i32, (bits & 0x7f_ffff) as u64);
+        // |v|·10^n exactly (to 2^-120), in 64-bit fixed point.
+        let s = if !a.is_finite() {
+            None
+        } else if a == 0.0 {
+            Some((0, false))
+        } else if be == 0 {
+            Big::new(frac, -149).scale10(n).fixed64()
         } else {
-            // Ties to even, as core: `s` is exact here for the console's values (an f32 times
-            // 10^n ≤ 10^9 fits f64's 53 bits whenever the f32 has few fraction bits).
-            let mut q = s as u64;
-            let r = s - q as f64;
-            if r > 0.5 || (r == 0.5 && q % 2 == 1) {
-                q += 1;
+            Big::new(frac | 1 << 23, be - 150).scale10(n).fixed64()
+        };
+        // Ties to even, as core (a tie is exact here: `sticky` is clear only then).
+        let q = s.map(|(s, lost)| {
+            let (q, r) = ((s >> 64) as u64, s as u64);
+            let half = 1u64 << 63;
+            q + (r > half || (r == half && (lost || q % 2 == 1))) as u64
+        });
+        match q {
+            Some(q) if q < POW10[18] => {
+                if self.0.is_sign_negative() {
+                    buf.push(b'-');
+                }
+                let p = POW10[n as usize];
+                buf.push_u64(q / p, 0);
+                if n > 0 {
+                    buf.push(b'.');
+                    buf.push_u64(q % p, n as usize);
+                }
             }
-            if self.0.is_sign_negative() {
-                buf.push(b'-');
-            }
-            let p = POW10[n as usize] as u64;
-            buf.push_u64(q / p, 0);
-            if n > 0 {
-                buf.push(b'.');
-                buf.push_u64(q % p, n as usize);
-            }
+            _ => write_num(self.0, &mut buf),
         }
         Text(buf)
     }
@@ -584,7 +703,8 @@ mod tests {
         }
 
         /// Decimal texts of every accepted shape: accepted exactly when core accepted them, and
-        /// within 1 ulp of core's correctly rounded `f32` parse.
+        /// within 1 ulp of core's correctly rounded `f32` parse, and equal to it when no
+        /// digit is dropped (≤ 19 significant digits).
         #[test]
         fn parse_agrees_with_core(s in "[-+]?[0-9]{0,22}(\\.[0-9]{0,22})?([eE][-+]?[0-9]{1,3})?") {
             let ours = parse_f32(&s);
@@ -594,6 +714,12 @@ mod tests {
                     let exact: f32 = s.parse().unwrap();
                     let v = ours.unwrap();
                     prop_assert!(ulps(v, exact) <= 1, "{} -> {:e} vs {:e}", s, v, exact);
+                    // Up to 19 significant digits nothing is dropped: correctly rounded.
+                    let m = s.split(['e', 'E']).next().unwrap_or("");
+                    let digits: String = m.chars().filter(|c| c.is_ascii_digit()).collect();
+                    if digits.trim_matches('0').len() <= 19 {
+                        prop_assert_eq!(v.to_bits(), exact.to_bits(), "{}", s);
+                    }
                 }
             }
         }
@@ -612,6 +738,20 @@ mod tests {
         #[test]
         fn fixed_matches_core(raw in any::<i32>(), n in 0u8..=6) {
             let v = raw as f32 / 4096.0;
+            let ours = format!("{}", Fixed(v, n));
+            let core_s = format!("{:.*}", n as usize, v);
+            prop_assert_eq!(ours, core_s);
+        }
+
+        /// Any finite `f32` (subnormals and ties included) and up to 9 decimals: identical text
+        /// to core's `{:.N}` while the result has at most 17 digits (then `Fixed` is positional).
+        #[test]
+        fn fixed_matches_core_any_f32(m in 0u32..1 << 24, eu in any::<u32>(), n in 0u8..=9, neg in any::<bool>()) {
+            // v = ±m·2^e, exact in f32 for e ≥ −149; e up to 32 − 4n keeps |v|·10^n < 2^56.
+            let e = -149 + (eu % (182 - 4 * n as u32)) as i32;
+            let v = (m as f64 * 2f64.powi(e)) as f32;
+            let v = if neg { -v } else { v };
+            prop_assert_eq!(v as f64, if neg { -1.0 } else { 1.0 } * m as f64 * 2f64.powi(e));
             let ours = format!("{}", Fixed(v, n));
             let core_s = format!("{:.*}", n as usize, v);
             prop_assert_eq!(ours, core_s);

@@ -29,7 +29,29 @@ impl Coef {
     /// Nearest coefficient to `v` (saturating; non-finite → 0). Uses only `+ − × ÷`, so the
     /// board and the host get the same bits.
     pub fn from_f32(v: f32) -> Coef {
-        Coef::from_f64(v as f64)
+        // In f32 (no soft-float f64 on the board), bit-identical to `from_f64(v as f64)`:
+        // `v·2^40` is exact (a power-of-two scaling), an f32 of magnitude ≥ 2^23 is an
+        // integer, and below that `s − trunc(s)` is exact, so the half-away rounding sees the
+        // exact fraction.
+        if !v.is_finite() {
+            return Coef(0);
+        }
+        let s = v * (1u64 << COEF_FRAC) as f32;
+        if s >= 9.2e18 {
+            Coef(i64::MAX)
+        } else if s <= -9.2e18 {
+            Coef(i64::MIN)
+        } else {
+            let t = s as i64; // toward zero
+            let f = s - t as f32;
+            Coef(if f >= 0.5 {
+                t + 1
+            } else if f <= -0.5 {
+                t - 1
+            } else {
+                t
+            })
+        }
     }
 
     /// As [`Coef::from_f32`], from `f64`.
@@ -285,6 +307,17 @@ mod tests {
             let n1 = -0.01 * x0 + 0.998 * x1;
             x0 = n0;
             x1 = n1;
+        }
+    }
+
+    proptest::proptest! {
+        /// The f32 path gives the bits of the f64 one for every finite f32 in the range the
+        /// filters accept (and saturates the same way beyond it).
+        #[test]
+        fn coef_from_f32_is_the_f64_rounding(bits in proptest::prelude::any::<u32>()) {
+            let v = f32::from_bits(bits);
+            proptest::prop_assume!(v.is_finite() && v.abs() <= 8.3e6);
+            proptest::prop_assert_eq!(Coef::from_f32(v), Coef::from_f64(v as f64));
         }
     }
 

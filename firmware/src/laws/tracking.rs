@@ -116,7 +116,8 @@ impl Tracking {
         let theta_min = q_of(log2_f32(p.r_min));
         let theta_max = q_of(log2_f32(p.r_max));
         let mut t = Tracking {
-            r_q32: (p.r_phase as f64 * 4_294_967_296.0) as i64,
+            // f32·2^32 is exact (power-of-two scaling): no f64 needed.
+            r_q32: (p.r_phase * 4_294_967_296.0) as i64,
             r_gain: Gain::from_f32(p.r_phase),
             half_len,
             settle_len: half_len / 2,
@@ -131,7 +132,7 @@ impl Tracking {
             step_max: q_of(p.step_max * LOG2_E),
             theta_min,
             theta_max,
-            p_min: (p.p_min_w as f64 * 65536.0) as i64,
+            p_min: (p.p_min_w * 65536.0) as i64,
             theta: Q::ZERO,
             plus: true,
             count: 0,
