@@ -17,7 +17,7 @@
 use core::fmt::Write;
 
 use crate::config::Config;
-use crate::control::{Controller, Mode};
+use crate::control::{Controller, Mode, Telemetry};
 use crate::numtext::{self, Fixed, Num, NumError};
 use crate::params::{self, PARAMS};
 
@@ -45,25 +45,46 @@ impl ParamStore for NoStore {
     }
 }
 
-/// Telemetry channels: name, unit, reader.
-/// A telemetry channel: name, unit, reader.
-pub type Channel = (&'static str, &'static str, fn(&Controller) -> f32);
+/// A telemetry channel: name and unit; its value is [`channel_value`] of its index.
+pub type Channel = (&'static str, &'static str);
 
 pub static CHANNELS: &[Channel] = &[
-    ("ia", "A", |c| c.telemetry().i_abc[0].to_num()),
-    ("ib", "A", |c| c.telemetry().i_abc[1].to_num()),
-    ("ic", "A", |c| c.telemetry().i_abc[2].to_num()),
-    ("id", "A", |c| c.telemetry().i_dq.d.to_num()),
-    ("iq", "A", |c| c.telemetry().i_dq.q.to_num()),
-    ("id_ref", "A", |c| c.telemetry().i_ref.d.to_num()),
-    ("iq_ref", "A", |c| c.telemetry().i_ref.q.to_num()),
-    ("vd", "V", |c| c.telemetry().v_dq.d.to_num()),
-    ("vq", "V", |c| c.telemetry().v_dq.q.to_num()),
-    ("vbus", "V", |c| c.telemetry().v_bus.to_num()),
-    ("w", "rad/s", |c| c.telemetry().omega_m.to_num()),
-    ("x", "m", |c| c.telemetry().x.to_num()),
-    ("p", "W", |c| c.telemetry().p_elec.to_num()),
+    ("ia", "A"),
+    ("ib", "A"),
+    ("ic", "A"),
+    ("id", "A"),
+    ("iq", "A"),
+    ("id_ref", "A"),
+    ("iq_ref", "A"),
+    ("vd", "V"),
+    ("vq", "V"),
+    ("vbus", "V"),
+    ("w", "rad/s"),
+    ("x", "m"),
+    ("p", "W"),
 ];
+
+/// The value of channel `i` (an index into [`CHANNELS`]) in telemetry `t`. One function
+/// over one `Telemetry` per line, not a reader per channel each deriving the whole
+/// telemetry (flash, and time per line).
+pub fn channel_value(t: &Telemetry, i: usize) -> f32 {
+    let v = match i {
+        0 => t.i_abc[0],
+        1 => t.i_abc[1],
+        2 => t.i_abc[2],
+        3 => t.i_dq.d,
+        4 => t.i_dq.q,
+        5 => t.i_ref.d,
+        6 => t.i_ref.q,
+        7 => t.v_dq.d,
+        8 => t.v_dq.q,
+        9 => t.v_bus,
+        10 => t.omega_m,
+        11 => t.x,
+        _ => t.p_elec,
+    };
+    v.to_num()
+}
 
 const MAX_CH: usize = 8;
 
@@ -112,7 +133,8 @@ impl Console {
     /// telemetry line when one is due.
     pub fn tick<W: Write>(&mut self, ctl: &Controller, out: &mut W) {
         let ts = ctl.config().ts();
-        let p: f32 = ctl.telemetry().p_elec.to_num();
+        let t = ctl.telemetry();
+        let p: f32 = t.p_elec.to_num();
         self.energy_j += p * ts;
         self.p_avg_w += (p - self.p_avg_w) * ts.min(1.0);
         if self.tel_every == 0 {
@@ -124,9 +146,7 @@ impl Console {
             self.tel_count = 0;
             out.fixed(self.tel_periods as f32 * ts, 6);
             for &i in &self.tel[..self.n_tel] {
-                if let Some(ch) = CHANNELS.get(i as usize) {
-                    out.s(",").num((ch.2)(ctl));
-                }
+                out.s(",").num(channel_value(&t, i as usize));
             }
             out.s("\r\n");
         }
