@@ -226,6 +226,14 @@ pub fn law_period(pwm_hz: f32, law_rate_hz: f32) -> f32 {
     decimation(pwm_hz, law_rate_hz) as f32 / pwm_hz
 }
 
+/// `a / b` (truncating, `b ≠ 0`), one out-of-line copy: a 32-bit target has no 128-bit
+/// division routine, so the compiler expands every `i128` division in place (≈ 0.5–1 KB of
+/// flash each); the laws share this one. Same result as `/`.
+#[inline(never)]
+pub fn div_i128(a: i128, b: i128) -> i128 {
+    a / b
+}
+
 /// `2^x` for `x` in Q16.16 (|x| < 30), as a [`Coef`] bit pattern scaled by 2^-40 … computed in
 /// integers only: the fractional part by a degree-14 Taylor series of `e^(f·ln 2)` in 62-bit
 /// fixed point (relative error < 1e-12 for f ∈ [0, 1)). Returns the value in Q32.32 (i64),
@@ -240,9 +248,9 @@ pub fn exp2_q(x: Q) -> i64 {
     let one: i128 = 1 << 62;
     let mut term = one;
     let mut sum = one;
-    let mut k = 1;
+    let mut k: i128 = 1;
     while k <= 14 {
-        term = ((term * y) >> 62) / k;
+        term = div_i128((term * y) >> 62, k);
         sum += term;
         k += 1;
     }

@@ -22,7 +22,7 @@
 //! Everything runs in integers: `R_L = 2^θ` with `θ` in Q16.16 (see [`super::lti::exp2_q`]),
 //! the conductance `1/(R + R_L)` is one i128 division per half-cycle.
 
-use super::lti::{exp2_q, q_to_state, state_to_q, Coef};
+use super::lti::{div_i128, exp2_q, q_to_state, state_to_q, Coef};
 use super::{CommandLaw, LawInput};
 use crate::frames::Dq;
 use crate::fx::{Gain, Q};
@@ -165,12 +165,12 @@ impl Tracking {
         };
         let total = exp2_q(th).saturating_add(self.r_q32).max(1);
         // 1/total in Coef (2^-40) from a Q32.32 total: 2^72 / total.
-        self.g = Coef(((1i128 << 72) / total as i128) as i64);
+        self.g = Coef(div_i128(1i128 << 72, total as i128) as i64);
     }
 
     fn end_half(&mut self) {
         let mean = if self.w_acc > 0 {
-            (self.acc / self.w_acc) as i64
+            div_i128(self.acc, self.w_acc) as i64
         } else {
             0
         };
@@ -181,7 +181,7 @@ impl Tracking {
             let sum = pp.saturating_add(pm);
             if sum > 2 * self.p_min {
                 // ratio in Q16.16
-                let ratio = (((pp - pm) as i128) << 16) / sum as i128;
+                let ratio = div_i128(((pp - pm) as i128) << 16, sum as i128);
                 let ratio = Q::from_bits(crate::fx::sat_i32(ratio as i64));
                 let step = self
                     .k_step
