@@ -134,6 +134,9 @@ pub struct Config {
 }
 
 impl Default for Config {
+    /// Out of line: called from several places on the board (boot, `defaults`, `list`), each
+    /// inlined copy of the ≈ 50 stores costs ≈ 250 bytes of flash.
+    #[inline(never)]
     fn default() -> Self {
         Config {
             r_phase_ohm: 2.41,

@@ -409,7 +409,9 @@ impl Console {
                 self.tel_periods = 0;
                 out.s("# tel t");
                 for &i in &sel[..n] {
-                    out.s(",").s(CHANNELS[i as usize].0);
+                    if let Some(ch) = CHANNELS.get(i as usize) {
+                        out.s(",").s(ch.0);
+                    }
                 }
                 out.s("\r\n");
                 ok!(.s(" tel ").num(pwm / self.tel_every as f32).s(" Hz"))
