@@ -226,12 +226,34 @@ pub fn law_period(pwm_hz: f32, law_rate_hz: f32) -> f32 {
     decimation(pwm_hz, law_rate_hz) as f32 / pwm_hz
 }
 
-/// `a / b` (truncating, `b ≠ 0`), one out-of-line copy: a 32-bit target has no 128-bit
-/// division routine, so the compiler expands every `i128` division in place (≈ 0.5–1 KB of
-/// flash each); the laws share this one. Same result as `/`.
+/// `a / b`, truncating toward zero like `/` (`b ≠ 0`; `b = 0` gives 0 instead of a panic),
+/// by shift and subtract over the significant bits of `|a|`. A 32-bit target has no 128-bit
+/// division routine: the compiler expands each `i128` `/` in place (≈ 1 KB of flash on the
+/// M4); this one copy is ≈ 0.1 KB. The laws divide rarely (the tracking law once per dither
+/// half-period, ≤ 3 divisions of ≤ 81-bit dividends: ≈ 81 iterations each).
 #[inline(never)]
 pub fn div_i128(a: i128, b: i128) -> i128 {
-    a / b
+    let (n, d) = (a.unsigned_abs(), b.unsigned_abs());
+    if d == 0 {
+        return 0;
+    }
+    let (mut q, mut r) = (0u128, 0u128);
+    let mut i = 128 - n.leading_zeros();
+    while i > 0 {
+        i -= 1;
+        // r < d before the shift; for d > 2^127 the shifted-out bit means r ≥ d.
+        let top = r >> 127;
+        r = (r << 1) | ((n >> i) & 1);
+        if top != 0 || r >= d {
+            r = r.wrapping_sub(d);
+            q |= 1 << i;
+        }
+    }
+    if (a < 0) != (b < 0) {
+        (q as i128).wrapping_neg()
+    } else {
+        q as i128
+    }
 }
 
 /// `2^x` for `x` in Q16.16 (|x| < 30), as a [`Coef`] bit pattern scaled by 2^-40 … computed in
@@ -248,9 +270,11 @@ pub fn exp2_q(x: Q) -> i64 {
     let one: i128 = 1 << 62;
     let mut term = one;
     let mut sum = one;
-    let mut k: i128 = 1;
+    let mut k: u64 = 1;
     while k <= 14 {
-        term = div_i128((term * y) >> 62, k);
+        // term < 2^62 and y < 2^62 (y = f·ln 2 < 1 in Q1.62): the shifted product fits a
+        // u64, and a u64 division by k is the same truncation (both non-negative).
+        term = (((term * y) >> 62) as u64 / k) as i128;
         sum += term;
         k += 1;
     }
@@ -326,6 +350,19 @@ mod tests {
             let v = f32::from_bits(bits);
             proptest::prop_assume!(v.is_finite() && v.abs() <= 8.3e6);
             proptest::prop_assert_eq!(Coef::from_f32(v), Coef::from_f64(v as f64));
+        }
+    }
+
+    proptest::proptest! {
+        /// The shift-and-subtract division is `/` (any signs, divisors of any size).
+        #[test]
+        fn div_i128_is_the_division(a in proptest::prelude::any::<i128>(),
+                                    b in proptest::prelude::any::<i128>(),
+                                    shift in 0u32..128) {
+            let b = b >> shift; // small divisors as often as large ones
+            proptest::prop_assume!(b != 0 && !(a == i128::MIN && b == -1));
+            proptest::prop_assert_eq!(div_i128(a, b), a / b);
+            proptest::prop_assert_eq!(div_i128(a >> shift, b), (a >> shift) / b);
         }
     }
 
