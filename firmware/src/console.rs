@@ -18,7 +18,7 @@ use core::fmt::Write;
 
 use crate::config::Config;
 use crate::control::{Controller, Mode, Telemetry};
-use crate::numtext::{self, Fixed, Num, NumError};
+use crate::numtext::{self, q_f32, Fixed, Num, NumError};
 use crate::params::{self, PARAMS};
 
 /// The persistent store as the console sees it.
@@ -83,8 +83,9 @@ pub fn channel_value(t: &Telemetry, i: usize) -> f32 {
         11 => t.x,
         _ => t.p_elec,
     };
-    v.to_num()
+    q_f32(v)
 }
+
 
 const MAX_CH: usize = 8;
 
@@ -134,7 +135,7 @@ impl Console {
     pub fn tick<W: Write>(&mut self, ctl: &Controller, out: &mut W) {
         let ts = ctl.config().ts();
         let t = ctl.telemetry();
-        let p: f32 = t.p_elec.to_num();
+        let p = q_f32(t.p_elec);
         self.energy_j += p * ts;
         self.p_avg_w += (p - self.p_avg_w) * ts.min(1.0);
         if self.tel_every == 0 {
@@ -281,17 +282,17 @@ impl Console {
                     .s(" fault=")
                     .s(ctl.fault().map(|f| f.name()).unwrap_or("none"))
                     .s(" vbus=")
-                    .num(t.v_bus.to_num())
+                    .num(q_f32(t.v_bus))
                     .s("V w=")
-                    .num(t.omega_m.to_num())
+                    .num(q_f32(t.omega_m))
                     .s("rad/s x=")
-                    .num(t.x.to_num())
+                    .num(q_f32(t.x))
                     .s("m id=")
-                    .num(t.i_dq.d.to_num())
+                    .num(q_f32(t.i_dq.d))
                     .s("A iq=")
-                    .num(t.i_dq.q.to_num())
+                    .num(q_f32(t.i_dq.q))
                     .s("A p=")
-                    .num(t.p_elec.to_num())
+                    .num(q_f32(t.p_elec))
                     .s("W p_avg=")
                     .num(self.p_avg_w)
                     .s("W energy=")
@@ -310,7 +311,7 @@ impl Console {
                     .s(" force_filt=")
                     .fixed(p.force_n(), 0)
                     .s("N derate=")
-                    .fixed(p.derate.to_num::<f32>(), 3)
+                    .fixed(q_f32(p.derate), 3)
                     .s("\r\n");
                 match ctl.fault() {
                     Some(f) => {
@@ -323,21 +324,21 @@ impl Console {
                                 .s(" ms in mode ")
                                 .s(s.mode.name())
                                 .s(": ia=")
-                                .fixed(s.i_abc[0].to_num::<f32>(), 3)
+                                .fixed(q_f32(s.i_abc[0]), 3)
                                 .s(" ib=")
-                                .fixed(s.i_abc[1].to_num::<f32>(), 3)
+                                .fixed(q_f32(s.i_abc[1]), 3)
                                 .s(" ic=")
-                                .fixed(s.i_abc[2].to_num::<f32>(), 3)
+                                .fixed(q_f32(s.i_abc[2]), 3)
                                 .s(" A id=")
-                                .fixed(s.i_dq.d.to_num::<f32>(), 3)
+                                .fixed(q_f32(s.i_dq.d), 3)
                                 .s(" iq=")
-                                .fixed(s.i_dq.q.to_num::<f32>(), 3)
+                                .fixed(q_f32(s.i_dq.q), 3)
                                 .s(" A vbus=")
-                                .fixed(s.v_bus.to_num::<f32>(), 2)
+                                .fixed(q_f32(s.v_bus), 2)
                                 .s(" V w=")
-                                .fixed(s.omega_m.to_num::<f32>(), 2)
+                                .fixed(q_f32(s.omega_m), 2)
                                 .s(" rad/s x=")
-                                .fixed(s.x.to_num::<f32>(), 4)
+                                .fixed(q_f32(s.x), 4)
                                 .s(" m force=")
                                 .fixed(s.force_n, 0)
                                 .s(" N i2t=")

@@ -30,6 +30,14 @@
 
 use core::fmt;
 
+/// A Q16.16 value as `f32`: the same value as `to_num::<f32>()` (the `i32` rounds to nearest,
+/// ties to even, then the power-of-two scaling is exact), in two instructions instead of
+/// `fixed`'s generic float conversion (≈ 0.5 KB of flash).
+#[inline]
+pub fn q_f32(x: crate::fx::Q) -> f32 {
+    x.to_bits() as f32 * (1.0 / 65536.0)
+}
+
 /// Why [`parse_f32`] refused a text.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NumError {
@@ -668,6 +676,14 @@ mod tests {
         let digits: String = m.chars().filter(|c| c.is_ascii_digit()).collect();
         let t = digits.trim_start_matches('0').trim_end_matches('0');
         t.len().max(1)
+    }
+
+    proptest! {
+        #[test]
+        fn q_f32_is_to_num(bits in any::<i32>()) {
+            let x = crate::fx::Q::from_bits(bits);
+            prop_assert_eq!(q_f32(x).to_bits(), x.to_num::<f32>().to_bits());
+        }
     }
 
     proptest! {
