@@ -7,7 +7,8 @@
 use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
-use crate::fx::{q, Angle, Gain, Scale32, Q};
+use crate::fx::{Angle, Gain, Scale32, Q};
+use crate::numtext::q_of;
 use crate::laws::{LawKind, LtiParams};
 use crate::params::{ParamError, PARAMS};
 use crate::pi::PiGains;
@@ -509,16 +510,16 @@ impl Gains {
             pole_pairs: c.pole_pairs as i32,
             advance: Gain::from_f32(advance),
             v_lim_per_bus: Gain::from_f32(c.m_max * INV_SQRT3),
-            i_max: q(c.i_max_a),
+            i_max: q_of(c.i_max_a),
             // A trip above the ADC's range could never fire: clamp it to the last code below
             // the nearer rail, so that an over-range reading trips.
-            i_trip: q(c.i_trip_a.min(
+            i_trip: q_of(c.i_trip_a.min(
                 c.amps_per_count * (c.adc_zero_code.min(4095 - c.adc_zero_code) as f32 - 1.0),
             )),
-            v_ov: q(c.v_bus_ov),
-            v_uv: q(c.v_bus_uv),
-            brake_on: q(c.brake_on_v),
-            brake_off: q(c.brake_off_v),
+            v_ov: q_of(c.v_bus_ov),
+            v_uv: q_of(c.v_bus_uv),
+            brake_on: q_of(c.brake_on_v),
+            brake_off: q_of(c.brake_off_v),
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
             k,

@@ -406,7 +406,7 @@ impl Protection {
         } else {
             0.0
         };
-        self.derate = Q::from_num(k);
+        self.derate = crate::numtext::q_of(k);
 
         // I²t: dθ/dt = ((|i|/I_cont)² − θ)/τ (first-order winding temperature rise, per unit
         // of the rise at the continuous current), forward Euler at 1 kHz (τ ≥ 0.1 s ≫ 1 ms).

@@ -104,7 +104,7 @@ fn log2_f32(x: f32) -> f32 {
 }
 
 fn q_of(v: f32) -> Q {
-    crate::fx::q(v)
+    crate::numtext::q_of(v)
 }
 
 impl Tracking {
