@@ -3,7 +3,7 @@
 //! core's `str::parse::<f64>` (Eisel–Lemire with a 10 KiB power-of-five table and a big-decimal
 //! fallback) and `{}` on floats (Grisu with a Dragon fallback) cost about 25 KiB of flash on the
 //! Cortex-M4; the console needs neither their full precision nor their range (everything it
-//! reads or writes is an `f32`). This module does both in integer arithmetic only (a 128-bit
+//! reads or writes is an `f32`). This module does both in integer arithmetic only (a 64-bit
 //! binary mantissa scaled by ten step by step, see `Big`): no soft-float `f64` is linked for
 //! it on the board.
 //!
@@ -13,8 +13,10 @@
 //!   `0x10`, `1_000`, `1e`, spaces) is [`NumError::NotANumber`]; a value beyond `f32::MAX` is
 //!   [`NumError::Overflow`]; a value below the smallest subnormal rounds to zero as in core.
 //!   **Precision**: the result is the `f32` nearest the decimal (ties to even) — the
-//!   scaling carries 128 bits and a sticky bit, exact on ties, within 2⁻¹²⁰ (relative)
-//!   otherwise — tested bit for bit against core's correctly rounded parser. Digits past the
+//!   scaling carries 64 bits and a sticky bit, exact on ties, within 2⁻⁵⁶ (relative)
+//!   otherwise, so only a decimal within 2⁻⁵⁶ of the midpoint between two `f32` (none of
+//!   the console's short numbers) could round the other way — tested bit for bit against
+//!   core's correctly rounded parser. Digits past the
 //!   19th significant one are ignored (a relative change below 10⁻¹⁸: the result is then
 //!   within 1 ulp of the correctly rounded value).
 //! * [`Num`] displays an `f32` with the fewest significant digits (1 … 9) that parse back
@@ -23,7 +25,7 @@
 //!   `3.4028235e38`), where core's `{}` wrote every zero. `inf`, `-inf`, `NaN`, `0` and `-0`
 //!   as core writes them.
 //! * [`Fixed`] displays with a fixed number of decimals (≤ 9), like core's `{:.N}`, rounded to
-//!   nearest, ties to even, from the same 128-bit scaling (exact on ties); beyond 10¹⁸ units
+//!   nearest, ties to even, from the same scaling (exact: an `f32` times 10⁹ fits 64 bits); beyond 10¹⁸ units
 //!   of the last decimal it falls back to [`Num`].
 //!
 //! Nothing here panics or allocates.
@@ -100,47 +102,55 @@ const POW10: [u64; 20] = {
     t
 };
 
-/// A positive binary floating-point value `m·2^e` with a 128-bit mantissa (normalised: bit
-/// 127 set) and a sticky flag: `true` when bits below the mantissa were dropped (the exact
-/// value is then a little *above* `m·2^e`). Multiplying or dividing by ten loses at most one
-/// unit of the 128th bit per step; the callers take at most 84 steps, so the result is within
-/// 2⁻¹²⁰ (relative) of the exact value and *exact*, sticky clear, whenever the exact value
-/// fits the mantissa (e.g. every tie between two `f32` or two decimals). Integers only: no
-/// soft-float `f64` in the image.
+/// A positive binary floating-point value `m·2^e` with a 64-bit mantissa (normalised: bit
+/// 63 set) and a sticky flag: `true` when bits below the mantissa were dropped (the exact
+/// value is then a little *above* `m·2^e`). Multiplying or dividing by ten loses less than
+/// one unit of the 64th bit per step; the callers take at most 84 steps, so the result is
+/// within 2⁻⁵⁶ (relative) of the exact value, and *exact*, sticky clear, whenever the exact
+/// value fits the mantissa — every tie between two `f32` or two decimals does (≤ 25 and
+/// ≤ 54 significant bits). Integers only: no soft-float `f64` in the image; 64-bit words
+/// (two registers on the Cortex-M4) keep the code small.
 #[derive(Clone, Copy)]
 struct Big {
-    m: u128,
+    m: u64,
     e: i32,
     sticky: bool,
+}
+
+/// A non-negative value as integer part, 64 fraction bits, and whether bits below those
+/// were dropped.
+struct Split {
+    int: u64,
+    frac: u64,
+    lost: bool,
 }
 
 impl Big {
     /// `v·2^e` (`v > 0`).
     fn new(v: u64, e: i32) -> Big {
-        let z = (v as u128).leading_zeros();
+        let z = v.leading_zeros();
         Big {
-            m: (v as u128) << z,
+            m: v << z,
             e: e - z as i32,
             sticky: false,
         }
     }
 
     fn mul10(&mut self) {
-        let lo = (self.m as u64) as u128 * 10;
-        let hi = (self.m >> 64) * 10 + (lo >> 64); // < 2^68
-        let sh = 64 - hi.leading_zeros(); // 3 or 4: bits above the 128 kept
-        let low64 = lo as u64 as u128;
-        self.sticky |= low64 & ((1 << sh) - 1) != 0;
-        self.m = (hi << (128 - 64 - sh)) | (low64 >> sh);
+        let p = self.m as u128 * 10;
+        let (hi, lo) = ((p >> 64) as u64, p as u64); // hi < 10
+        let sh = 64 - hi.leading_zeros(); // 3 or 4: bits above the 64 kept
+        self.sticky |= lo & ((1 << sh) - 1) != 0;
+        self.m = (hi << (64 - sh)) | (lo >> sh);
         self.e += sh as i32;
     }
 
     fn div10(&mut self) {
-        let (q, r) = div_small(self.m, 10);
+        let (q, r) = (self.m / 10, self.m % 10);
         let z = q.leading_zeros(); // 3 or 4
-        let r = (r as u64) << z;
+        let r = r << z;
         self.sticky |= r % 10 != 0;
-        self.m = (q << z) | (r / 10) as u128;
+        self.m = (q << z) | (r / 10);
         self.e -= z as i32;
     }
 
@@ -157,46 +167,43 @@ impl Big {
         self
     }
 
-    /// The value in fixed point with 64 fraction bits (`None` if it is 2^63 or more), and
-    /// whether bits were dropped below those 64.
-    fn fixed64(self) -> Option<(u128, bool)> {
-        let sh = -(self.e + 64); // value·2^64 = m >> sh
-        if sh < 1 {
+    /// Integer part and fraction (`None` if the value is 2^64 or more).
+    fn split(self) -> Option<Split> {
+        let sh = -self.e; // value = m / 2^sh
+        if sh <= 0 {
             return None;
         }
-        if sh >= 128 {
-            return Some((0, true));
-        }
-        let lost = self.m & ((1u128 << sh) - 1) != 0;
-        Some((self.m >> sh, self.sticky || lost))
-    }
-
-    /// Round to nearest, ties to even, at bit `sh` of the mantissa (`1 ≤ sh ≤ 128`): the
-    /// mantissa kept, as an integer.
-    fn round_at(self, sh: u32) -> u128 {
-        let kept = if sh >= 128 { 0 } else { self.m >> sh };
-        let rest = if sh >= 128 {
-            self.m
+        Some(if sh < 64 {
+            Split {
+                int: self.m >> sh,
+                frac: self.m << (64 - sh),
+                lost: self.sticky,
+            }
+        } else if sh < 128 {
+            let t = sh - 64;
+            Split {
+                int: 0,
+                frac: self.m.checked_shr(t as u32).unwrap_or(0),
+                lost: self.sticky || self.m & ((1u64 << t) - 1) != 0,
+            }
         } else {
-            self.m & ((1u128 << sh) - 1)
-        };
-        let half = 1u128 << (sh - 1);
-        let up = rest > half || (rest == half && (self.sticky || kept & 1 == 1));
-        kept + up as u128
+            Split {
+                int: 0,
+                frac: 0,
+                lost: true,
+            }
+        })
     }
-}
 
-/// `x / d` and `x % d` for a small divisor (`d < 2^32`), by 32-bit limbs (no 128-bit
-/// division routine).
-fn div_small(x: u128, d: u32) -> (u128, u32) {
-    let mut q: u128 = 0;
-    let mut r: u64 = 0;
-    for k in (0..4).rev() {
-        let cur = (r << 32) | ((x >> (32 * k)) as u32 as u64);
-        q |= ((cur / d as u64) as u128) << (32 * k);
-        r = cur % d as u64;
+    /// Round to nearest, ties to even, at bit `sh` of the mantissa (`1 ≤ sh ≤ 64`): the
+    /// mantissa kept, as an integer.
+    fn round_at(self, sh: u32) -> u64 {
+        let kept = self.m.checked_shr(sh).unwrap_or(0);
+        let rest = self.m & (u64::MAX >> (64 - sh));
+        let half = 1u64 << (sh - 1);
+        let up = rest > half || (rest == half && (self.sticky || kept & 1 == 1));
+        kept + up as u64
     }
-    (q, r as u32)
 }
 
 fn n_digits(mut v: u64) -> i32 {
@@ -227,18 +234,18 @@ fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
     }
     // Here −65 ≤ e10 ≤ 38 and mant < 10^19.
     let b = Big::new(mant, 0).scale10(e10);
-    // The value is in [2^(127+e), 2^(128+e)): its f32 exponent, and where the 24-bit
+    // The value is in [2^(63+e), 2^(64+e)): its f32 exponent, and where the 24-bit
     // significand ends (lower for a subnormal).
-    let exp = 127 + b.e;
+    let exp = 63 + b.e;
     if exp > 127 {
         return Err(NumError::Overflow);
     }
     let bits = if exp >= -126 {
-        let sig = b.round_at(104) as u32; // 2^23 … 2^24 (carry into the exponent)
+        let sig = b.round_at(40) as u32; // 2^23 … 2^24 (carry into the exponent)
         (((exp + 126) as u32) << 23) + sig
     } else {
-        let sh = 104 + (-126 - exp) as u32;
-        if sh > 128 {
+        let sh = 40 + (-126 - exp) as u32;
+        if sh > 64 {
             0 // below 2^-150: half the smallest subnormal
         } else {
             b.round_at(sh) as u32
@@ -408,14 +415,21 @@ fn shortest(x: f32) -> (u64, i32) {
         (Big::new(frac | 1 << 23, be - 150), be - 127)
     };
     // k ≈ floor(log10 x) (1233/4096 ≈ log10 2), then made exact so that
-    // s = x·10^(8−k) rounds to a 9-digit integer (s in 64-bit fixed point).
-    let s_of = |k: i32| b.scale10(8 - k).fixed64().map_or(u128::MAX, |(s, _)| s);
+    // s = x·10^(8−k) rounds to a 9-digit integer.
+    let s_of = |k: i32| {
+        b.scale10(8 - k).split().unwrap_or(Split {
+            int: u64::MAX,
+            frac: 0,
+            lost: false,
+        })
+    };
     let mut k = (e2 * 1233) >> 12;
     let mut s = s_of(k);
     for _ in 0..4 {
-        if s >= 1_999_999_999u128 << 63 {
+        let half = s.frac >= 1 << 63;
+        if s.int > 999_999_999 || (s.int == 999_999_999 && half) {
             k += 1; // s ≥ 999,999,999.5
-        } else if s < 199_999_999u128 << 63 {
+        } else if s.int < 99_999_999 || (s.int == 99_999_999 && !half) {
             k -= 1; // s < 99,999,999.5
         } else {
             break;
@@ -423,7 +437,7 @@ fn shortest(x: f32) -> (u64, i32) {
         s = s_of(k);
     }
     let good = |(d, e): (u64, i32)| decimal_to_f32(d, e) == Ok(x);
-    let digits = |p: i32| digits_p(s, k, p);
+    let digits = |p: i32| digits_p(&s, k, p);
     // Fewest digits that round-trip: 9 always do for an f32 (half a unit of the 9th digit is
     // ≤ 5·10⁻⁹ relative, half an f32 ulp ≥ 2.98·10⁻⁸); a binary search over 1 … 8, each
     // candidate checked by converting it back.
@@ -444,13 +458,17 @@ fn shortest(x: f32) -> (u64, i32) {
     (d, e)
 }
 
-/// `s` (the value times 10^(8−k), in [10^8 − 0.5, 10^9 − 0.5), fixed point with 64 fraction
-/// bits) rounded to `p` digits (ties away from zero: the candidates are checked by converting
-/// them back, so the tie rule does not matter), as `d·10^e`.
+/// `s` (the value times 10^(8−k), in [10^8 − 0.5, 10^9 − 0.5)) rounded to `p` digits (ties
+/// away from zero: the candidates are checked by converting them back, so the tie rule does
+/// not matter), as `d·10^e`.
 #[inline(never)]
-fn digits_p(s: u128, k: i32, p: i32) -> (u64, i32) {
-    let (q, _) = div_small(s, POW10[(9 - p) as usize] as u32);
-    let mut d = ((q + (1 << 63)) >> 64) as u64;
+fn digits_p(s: &Split, k: i32, p: i32) -> (u64, i32) {
+    let div = POW10[(9 - p) as usize];
+    // s/div = q + (r + frac)/div; for div ≥ 10, div/2 is an integer, so the rest reaches
+    // one half exactly when r ≥ div/2.
+    let (q, r) = (s.int / div, s.int % div);
+    let up = if div == 1 { s.frac >= 1 << 63 } else { r >= div / 2 };
+    let mut d = q + up as u64;
     let mut e = k - p + 1;
     if d >= POW10[p as usize] {
         d /= 10; // 9.99… rounded up to 10.0…
@@ -545,21 +563,25 @@ impl Fixed {
         let a = self.0.abs();
         let bits = a.to_bits();
         let (be, frac) = (((bits >> 23) & 0xff) as i32, (bits & 0x7f_ffff) as u64);
-        // |v|·10^n exactly (to 2^-120), in 64-bit fixed point.
+        // |v|·10^n, exact (24 + 30 bits fit the mantissa), split at the point.
         let s = if !a.is_finite() {
             None
         } else if a == 0.0 {
-            Some((0, false))
+            Some(Split {
+                int: 0,
+                frac: 0,
+                lost: false,
+            })
         } else if be == 0 {
-            Big::new(frac, -149).scale10(n).fixed64()
+            Big::new(frac, -149).scale10(n).split()
         } else {
-            Big::new(frac | 1 << 23, be - 150).scale10(n).fixed64()
+            Big::new(frac | 1 << 23, be - 150).scale10(n).split()
         };
-        // Ties to even, as core (a tie is exact here: `sticky` is clear only then).
-        let q = s.map(|(s, lost)| {
-            let (q, r) = ((s >> 64) as u64, s as u64);
+        // Ties to even, as core (a tie is exact here: `lost` is clear only then).
+        let q = s.map(|s| {
             let half = 1u64 << 63;
-            q + (r > half || (r == half && (lost || q % 2 == 1))) as u64
+            let up = s.frac > half || (s.frac == half && (s.lost || s.int % 2 == 1));
+            s.int.saturating_add(up as u64)
         });
         match q {
             Some(q) if q < POW10[18] => {
