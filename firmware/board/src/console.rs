@@ -102,20 +102,13 @@ async fn wait_applied() {
     defmt::warn!("console change not taken by the loop within 5 ms");
 }
 
-/// `a != b`, one out-of-line copy (the derived comparison of ≈ 50 fields inlined here cost
-/// ≈ 0.9 KB of flash).
-#[inline(never)]
-fn config_changed(a: &regen_fw::Config, b: &regen_fw::Config) -> bool {
-    a != b
-}
-
 /// Post the differences between the copy before and after a command; `true` if any.
 fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
     let mut p = Pending::default();
     if before.fault().is_some() && after.fault().is_none() {
         p.clear = before.fault();
     }
-    if config_changed(before.config(), after.config()) {
+    if after.config().differs(before.config()) {
         p.cfg = Some(*after.config());
     }
     if after.mode() != before.mode() {
