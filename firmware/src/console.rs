@@ -462,24 +462,31 @@ impl<W: Write> Put for W {
     }
     #[inline(never)] // one copy per sink type: these are called from ~150 places
     fn clip(&mut self, s: &str) -> &mut Self {
-        let (head, more) = clip24(s);
-        let mut buf = [0u8; 4];
-        for ch in head.chars() {
-            let ch = if ch.is_control() { '?' } else { ch };
-            self.s(ch.encode_utf8(&mut buf));
+        // By bytes (no UTF-8 decoding): a character starts at every byte that is not a
+        // continuation byte (0b10xx_xxxx); the control characters are the bytes < 0x20 and
+        // 0x7f, and U+0080 … U+009F, encoded C2 80 … C2 9F. Runs of other text are written
+        // as they are (whole characters: runs end at character starts), controls as `?`.
+        let b = s.as_bytes();
+        let (mut start, mut chars, mut i) = (0, 0, 0);
+        while i < b.len() {
+            let c = b[i];
+            if c & 0xc0 != 0x80 {
+                if chars == 24 {
+                    self.s(s.get(start..i).unwrap_or("")).s("…");
+                    return self;
+                }
+                chars += 1;
+            }
+            let c1 = c == 0xc2 && matches!(b.get(i + 1), Some(0x80..=0x9f));
+            if c < 0x20 || c == 0x7f || c1 {
+                self.s(s.get(start..i).unwrap_or("")).s("?");
+                i += 1 + c1 as usize;
+                start = i;
+            } else {
+                i += 1;
+            }
         }
-        if more {
-            self.s("…");
-        }
-        self
-    }
-}
-
-/// The first 24 characters of `s`, and whether there were more.
-fn clip24(s: &str) -> (&str, bool) {
-    match s.char_indices().nth(24) {
-        Some((i, _)) => (s.get(..i).unwrap_or(""), true),
-        None => (s, false),
+        self.s(s.get(start..).unwrap_or(""))
     }
 }
 
@@ -694,6 +701,26 @@ mod tests {
         // Current still high in the last telemetry: clear refused on the later fault.
         let (r, s) = run(&mut con, &mut ctl, "clear");
         assert!(r.is_err() && s.contains("i_trip_a"), "{s}");
+    }
+
+    proptest::proptest! {
+        /// The byte-wise clip writes what the char-wise definition says: the first 24
+        /// characters, control characters (Unicode Cc) as `?`, `…` when more followed.
+        #[test]
+        fn clip_is_the_char_definition(chars in proptest::collection::vec(proptest::prelude::any::<char>(), 0..40)) {
+            let s: String = chars.iter().collect();
+            let mut want = String::new();
+            for (i, ch) in s.chars().enumerate() {
+                if i == 24 {
+                    want.push('…');
+                    break;
+                }
+                want.push(if ch.is_control() { '?' } else { ch });
+            }
+            let mut got = String::new();
+            got.clip(&s);
+            proptest::prop_assert_eq!(got, want);
+        }
     }
 
     proptest::proptest! {
