@@ -8,8 +8,8 @@ use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
 use crate::fx::{Angle, Gain, Scale32, Q};
-use crate::numtext::q_of;
 use crate::laws::{LawKind, LtiParams};
+use crate::numtext::q_of;
 use crate::params::{ParamError, PARAMS};
 use crate::pi::PiGains;
 
@@ -577,7 +577,11 @@ mod tests {
         // Just outside each end of each entry's range (NaN for the real ones too): refused,
         // naming that field; the range ends themselves are not refused for being out of range.
         for p in PARAMS.iter().filter(|p| p.kind == Kind::Real) {
-            for v in [p.min - 1.0 - p.min.abs(), p.max + 1.0 + p.max.abs(), f32::NAN] {
+            for v in [
+                p.min - 1.0 - p.min.abs(),
+                p.max + 1.0 + p.max.abs(),
+                f32::NAN,
+            ] {
                 if v.is_infinite() {
                     continue; // an infinite maximum admits everything above the minimum
                 }

@@ -86,7 +86,6 @@ pub fn channel_value(t: &Telemetry, i: usize) -> f32 {
     q_f32(v)
 }
 
-
 const MAX_CH: usize = 8;
 
 /// Console state (telemetry selection, energy integrator).
@@ -161,29 +160,42 @@ impl Console {
         store: &mut S,
         out: &mut W,
     ) -> CmdResult {
+        match self.command(line, ctl, store, out) {
+            None => Ok(()), // empty line: nothing
+            Some(r) => {
+                out.s("\r\n"); // the end of the `ok`/`error:` line, in one place (flash)
+                r
+            }
+        }
+    }
+
+    /// [`Console::execute`] but the last line's end; `None` for an empty line.
+    fn command<W: Write, S: ParamStore>(
+        &mut self,
+        line: &str,
+        ctl: &mut Controller,
+        store: &mut S,
+        out: &mut W,
+    ) -> Option<CmdResult> {
         let mut it = line.split_ascii_whitespace();
-        let cmd = match it.next() {
-            Some(c) => c,
-            None => return Ok(()), // empty line: nothing
-        };
+        let cmd = it.next()?;
         let a1 = it.next();
         let a2 = it.next();
         let extra = it.next().is_some();
         let running = ctl.mode() == Mode::Run;
-        // `fail!(.s("…").num(v)…)`: one `error: …` line, refused. `ok!(…)`: one `ok…` line.
+        // `fail!(.s("…").num(v)…)`: one `error: …` line, refused. `ok!(…)`: one `ok…` line
+        // (its line end is written by `execute`).
         // The text is written piece by piece (`Put`), not through `write!`.
         macro_rules! fail {
             ($($t:tt)*) => {{
                 out.s("error: ") $($t)*;
-                out.s("\r\n");
-                return Err(Refused);
+                return Some(Err(Refused));
             }};
         }
         macro_rules! ok {
             ($($t:tt)*) => {{
                 out.s("ok") $($t)*;
-                out.s("\r\n");
-                return Ok(());
+                return Some(Ok(()));
             }};
         }
         let nargs = a1.is_some() as usize + a2.is_some() as usize + extra as usize;
@@ -224,7 +236,9 @@ impl Console {
             "get" if want(1) => {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
-                    Some(p) => ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit)),
+                    Some(p) => {
+                        ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                    }
                     None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
                 }
             }

@@ -467,7 +467,11 @@ fn digits_p(s: &Split, k: i32, p: i32) -> (u64, i32) {
     // s/div = q + (r + frac)/div; for div ≥ 10, div/2 is an integer, so the rest reaches
     // one half exactly when r ≥ div/2.
     let (q, r) = (s.int / div, s.int % div);
-    let up = if div == 1 { s.frac >= 1 << 63 } else { r >= div / 2 };
+    let up = if div == 1 {
+        s.frac >= 1 << 63
+    } else {
+        r >= div / 2
+    };
     let mut d = q + up as u64;
     let mut e = k - p + 1;
     if d >= POW10[p as usize] {

@@ -418,8 +418,7 @@ impl Protection {
         }
 
         // Phase-current consistency: the star point floats, so i_a + i_b + i_c = 0.
-        let s: f32 =
-            q_f32(t.i_abc[0]) + q_f32(t.i_abc[1]) + q_f32(t.i_abc[2]);
+        let s: f32 = q_f32(t.i_abc[0]) + q_f32(t.i_abc[1]) + q_f32(t.i_abc[2]);
         self.isum_now = s > cfg.i_sum_tol_a || s < -cfg.i_sum_tol_a;
         self.isum_count = leaky(self.isum_count, self.isum_now);
         if self.isum_count >= ISUM_TICKS {

@@ -266,8 +266,8 @@ pub fn exp2_q(x: Q) -> i64 {
     let f = bits & 0xFFFF; // [0, 1) in 1/65536
                            // y = f·ln2 in Q1.62
     const LN2_Q62: u64 = 3_196_577_161_300_663_914; // ln 2 · 2^62
-    // Everything below 2^63 (y < ln 2 in Q1.62, terms ≤ 1, sum < 2): u64, with one u64×u64
-    // product per term (cheaper on the M4 than i128 arithmetic; the same bits).
+                                                    // Everything below 2^63 (y < ln 2 in Q1.62, terms ≤ 1, sum < 2): u64, with one u64×u64
+                                                    // product per term (cheaper on the M4 than i128 arithmetic; the same bits).
     let y = ((f as u128 * LN2_Q62 as u128) >> 16) as u64;
     let one: u64 = 1 << 62;
     let mut term = one;
