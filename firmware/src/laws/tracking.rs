@@ -165,12 +165,14 @@ impl Tracking {
         };
         let total = exp2_q(th).saturating_add(self.r_q32).max(1);
         // 1/total in Coef (2^-40) from a Q32.32 total: 2^72 / total.
-        self.g = Coef(div_i128(1i128 << 72, total as i128) as i64);
+        // total ≥ 1.
+        self.g = Coef(div_i128(1i128 << 72, total as u64) as i64);
     }
 
     fn end_half(&mut self) {
         let mean = if self.w_acc > 0 {
-            div_i128(self.acc, self.w_acc) as i64
+            // 0 < w_acc ≤ span² < 2^63 (span < 2^31 periods).
+            div_i128(self.acc, self.w_acc as u64) as i64
         } else {
             0
         };
@@ -181,7 +183,7 @@ impl Tracking {
             let sum = pp.saturating_add(pm);
             if sum > 2 * self.p_min {
                 // ratio in Q16.16
-                let ratio = div_i128(((pp - pm) as i128) << 16, sum as i128);
+                let ratio = div_i128(((pp - pm) as i128) << 16, sum as u64); // sum > 0
                 let ratio = Q::from_bits(crate::fx::sat_i32(ratio as i64));
                 let step = self
                     .k_step
