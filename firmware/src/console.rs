@@ -395,7 +395,13 @@ impl Console {
             "tel" if want(2) => {
                 let mut sel = [0u8; MAX_CH];
                 let mut n = 0;
-                for name in a1.unwrap_or("").split(',') {
+                // The names between commas (as `split(',')`, by bytes: no pattern search code
+                // in the image).
+                let mut rest = Some(a1.unwrap_or(""));
+                while let Some(list) = rest {
+                    let comma = list.bytes().position(|b| b == b',');
+                    let name = list.get(..comma.unwrap_or(list.len())).unwrap_or("");
+                    rest = comma.and_then(|c| list.get(c + 1..));
                     let Some(i) = CHANNELS.iter().position(|c| c.0 == name) else {
                         fail!(.s("unknown channel '").clip(name).s("' (see help)"))
                     };
