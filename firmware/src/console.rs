@@ -19,7 +19,7 @@ use core::fmt::Write;
 use crate::config::Config;
 use crate::control::{Controller, Mode, Telemetry};
 use crate::numtext::{self, q_f32, Fixed, Num, NumError};
-use crate::params::{self, PARAMS};
+use crate::params::{self, ParamError, PARAMS};
 
 /// The persistent store as the console sees it.
 pub trait ParamStore {
@@ -252,9 +252,12 @@ impl Console {
                     Err(e) => fail!(.s("'").clip(a2.unwrap_or("")).s("' ").s(e.as_str())),
                 };
                 let mut c = *ctl.config();
-                if let Err(e) = p.apply(&mut c, v, running) {
-                    let [a, b, c, d] = e.parts();
-                    fail!(.s(p.name).s(": ").s(a).s(b).s(c).s(d))
+                match p.apply(&mut c, v, running) {
+                    Ok(()) => {}
+                    Err(ParamError::Invalid(field, why)) => {
+                        fail!(.s(p.name).s(": config refused: ").s(field).s(": ").s(why))
+                    }
+                    Err(e) => fail!(.s(p.name).s(": ").s(e.message())),
                 }
                 if let Err(e) = ctl.set_config(&c) {
                     fail!(.s(e.field).s(": ").s(e.reason))

@@ -52,28 +52,28 @@ pub enum ParamError {
 }
 
 impl ParamError {
-    /// The message as up to four pieces of text, written one after the other (the console
-    /// writes them without `core::fmt`).
-    pub fn parts(self) -> [&'static str; 4] {
+    /// The message; for [`ParamError::Invalid`] its start, followed by `: field: reason`.
+    pub fn message(self) -> &'static str {
         match self {
-            ParamError::UnknownName => ["unknown parameter", "", "", ""],
-            ParamError::NotFinite => ["value is not a finite number", "", "", ""],
-            ParamError::NotInteger => ["value must be an integer", "", "", ""],
-            ParamError::OutOfRange => ["value out of range", "", "", ""],
-            ParamError::NotWhileRunning => [
-                "parameter may not change while running (mode idle first)",
-                "",
-                "",
-                "",
-            ],
-            ParamError::Invalid(field, why) => ["config refused: ", field, ": ", why],
+            ParamError::UnknownName => "unknown parameter",
+            ParamError::NotFinite => "value is not a finite number",
+            ParamError::NotInteger => "value must be an integer",
+            ParamError::OutOfRange => "value out of range",
+            ParamError::NotWhileRunning => {
+                "parameter may not change while running (mode idle first)"
+            }
+            ParamError::Invalid(..) => "config refused",
         }
     }
 }
 
 impl core::fmt::Display for ParamError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        self.parts().iter().try_for_each(|p| f.write_str(p))
+        f.write_str(self.message())?;
+        match self {
+            ParamError::Invalid(field, why) => write!(f, ": {field}: {why}"),
+            _ => Ok(()),
+        }
     }
 }
 

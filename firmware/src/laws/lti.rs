@@ -125,12 +125,8 @@ pub struct LtiParams {
 impl LtiParams {
     /// All coefficients finite and within the [`Coef`] range.
     pub fn is_valid(&self) -> bool {
-        self.a
-            .iter()
-            .chain(self.b.iter())
-            .chain(self.c.iter())
-            .chain(self.d.iter())
-            .all(|v| v.is_finite() && *v <= COEF_MAX && *v >= -COEF_MAX)
+        let ok = |m: &[f32]| m.iter().all(|v| v.is_finite() && v.abs() <= COEF_MAX);
+        ok(&self.a) && ok(&self.b) && ok(&self.c) && ok(&self.d)
     }
 }
 
