@@ -19,11 +19,11 @@ mod pwm;
 mod store;
 mod supervisor;
 
+use defmt_rtt as _;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::{interrupt, pac};
 use regen_fw::store::{boot, FlashStore, StoreFault};
 use regen_fw::{Config, Controller};
-use defmt_rtt as _;
 
 /// The current-loop interrupt: ADC1 and ADC2 share this vector; only ADC2's end of injected
 /// sequence is enabled, so it fires once per PWM period.
