@@ -146,7 +146,7 @@ async fn main(spawner: embassy_executor::Spawner) {
     );
 
     critical_section::with(|cs| {
-        drive::LOOP.borrow_ref_mut(cs).replace(drive::LoopState {
+        *drive::LOOP.borrow_ref_mut(cs) = drive::Slot::Full(drive::LoopState {
             ctl,
             io: drive::BoardIo {
                 adc1: parts.adc1,
