@@ -80,16 +80,11 @@ pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot:
 /// `Option<LoopState>` and the mailbox's `Option<Config>` put 1.6 KB of initial values in
 /// flash (`.data`).
 #[repr(C, u8)]
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub enum Slot<T> {
+    #[default]
     Empty,
     Full(T),
-}
-
-impl<T> Default for Slot<T> {
-    fn default() -> Self {
-        Slot::Empty
-    }
 }
 
 impl<T> Slot<T> {
