@@ -1,6 +1,7 @@
 //! The serial console: a line parser and command executor over a [`Controller`] and a
 //! [`ParamStore`]. No alloc: output goes to any `core::fmt::Write` sink (a UART buffer on the
-//! board, a pty on the host). Every command answers with `ok …` or one line `error: …`; a
+//! board, a pty on the host), through `write_str` only — no `write!`, so the board image
+//! links none of `core::fmt`'s formatting machinery for it (see `Put`). Every command answers with `ok …` or one line `error: …`; a
 //! refused command changes nothing. The executor never panics (fuzzed, see
 //! `examples/console_fuzz.rs`).
 //!
