@@ -7,8 +7,10 @@
 use core::f32::consts::{PI, TAU};
 
 use crate::encoder::EncoderGains;
-use crate::fx::{q, Angle, Gain, Scale32, Q};
+use crate::fx::{Angle, Gain, Scale32, Q};
 use crate::laws::{LawKind, LtiParams};
+use crate::numtext::q_of;
+use crate::params::{ParamError, PARAMS};
 use crate::pi::PiGains;
 
 /// The drive's configuration (SI units). Defaults describe the reference device (Kollmorgen
@@ -133,6 +135,9 @@ pub struct Config {
 }
 
 impl Default for Config {
+    /// Out of line: called from several places on the board (boot, `defaults`, `list`), each
+    /// inlined copy of the ≈ 50 stores costs ≈ 250 bytes of flash.
+    #[inline(never)]
     fn default() -> Self {
         Config {
             r_phase_ohm: 2.41,
@@ -208,68 +213,48 @@ fn check(ok: bool, field: &'static str, reason: &'static str) -> Result<(), Conf
     }
 }
 
-fn in_range(v: f32, lo: f32, hi: f32, field: &'static str) -> Result<(), ConfigError> {
-    check(v.is_finite(), field, "not a finite number")?;
-    check(v >= lo && v <= hi, field, "out of range")
-}
-
 impl Config {
     /// Check every field and the relations between them.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        in_range(self.r_phase_ohm, 1e-3, 100.0, "r_phase_ohm")?;
-        in_range(self.l_phase_h, 1e-6, 1.0, "l_phase_h")?;
-        in_range(self.ke_v_s_per_rad, 1e-4, 20.0, "ke_v_s_per_rad")?;
-        check(
-            self.pole_pairs >= 1 && self.pole_pairs <= 50,
-            "pole_pairs",
-            "out of range",
-        )?;
-        in_range(self.lead_m_per_rad, 1e-5, 1.0, "lead_m_per_rad")?;
-        check(
-            self.encoder_cpr >= 16 && self.encoder_cpr <= 16_384,
-            "encoder_cpr",
-            "out of range",
-        )?;
-        in_range(self.encoder_offset_rad, -TAU, TAU, "encoder_offset_rad")?;
-        in_range(self.amps_per_count, 1e-5, 1.0, "amps_per_count")?;
-        // Both current signs need codes: at least 512 on either side of zero.
-        check(
-            (512..=3583).contains(&self.adc_zero_code),
-            "adc_zero_code",
-            "out of range (512 .. 3583)",
-        )?;
-        in_range(self.volts_per_count, 1e-4, 1.0, "volts_per_count")?;
-        in_range(self.pwm_hz, 5_000.0, 100_000.0, "pwm_hz")?;
-        in_range(self.current_bw_hz, 10.0, 5_000.0, "current_bw_hz")?;
+        // Each field against its range in the parameter registry (`params::PARAMS`, the one
+        // place ranges are written; one loop instead of a check per field keeps the board
+        // image small), then the relations between fields.
+        for p in PARAMS {
+            let reason = match (p.name, p.check((p.get)(self))) {
+                (_, Ok(())) => continue,
+                ("r_load_ohm", _) => "must be ≥ 0 (inf = open)",
+                ("f_trip_n", _) => "must be ≥ 1 N (inf = off)",
+                // Both current signs need codes: at least 512 on either side of zero.
+                ("adc_zero_code", _) => "out of range (512 .. 3583)",
+                (_, Err(ParamError::NotFinite)) => "not a finite number",
+                _ => "out of range",
+            };
+            return Err(ConfigError {
+                field: p.name,
+                reason,
+            });
+        }
         // A discrete PI with one period of delay loses its margin as ωc·Ts approaches 1.
         check(
             self.current_bw_hz * TAU / self.pwm_hz <= 0.6,
             "current_bw_hz",
             "too high for pwm_hz (ωc·Ts > 0.6)",
         )?;
-        in_range(self.speed_bw_hz, 1.0, 2_000.0, "speed_bw_hz")?;
         check(
             self.speed_bw_hz * TAU / self.pwm_hz <= 0.3,
             "speed_bw_hz",
             "too high for pwm_hz",
         )?;
-        in_range(self.m_max, 0.1, 1.0, "m_max")?;
-        in_range(self.i_max_a, 0.0, 1_000.0, "i_max_a")?;
-        in_range(self.i_trip_a, 0.1, 2_000.0, "i_trip_a")?;
         check(
             self.i_trip_a > self.i_max_a,
             "i_trip_a",
             "must exceed i_max_a",
         )?;
-        in_range(self.v_bus_ov, 1.0, 2_000.0, "v_bus_ov")?;
-        in_range(self.v_bus_uv, 0.0, 2_000.0, "v_bus_uv")?;
         check(
             self.v_bus_uv < self.v_bus_ov,
             "v_bus_uv",
             "must be below v_bus_ov",
         )?;
-        in_range(self.brake_on_v, 1.0, 2_000.0, "brake_on_v")?;
-        in_range(self.brake_off_v, 0.0, 2_000.0, "brake_off_v")?;
         check(
             self.brake_off_v < self.brake_on_v,
             "brake_off_v",
@@ -291,8 +276,6 @@ impl Config {
             "brake_off_v",
             "must exceed v_bus_uv (the chopper would drain the bus into an under-voltage trip)",
         )?;
-        in_range(self.derate_start_v, 1.0, 2_000.0, "derate_start_v")?;
-        in_range(self.derate_end_v, 1.0, 2_000.0, "derate_end_v")?;
         check(
             self.derate_start_v >= self.brake_on_v,
             "derate_start_v",
@@ -309,23 +292,10 @@ impl Config {
             "must not exceed v_bus_ov",
         )?;
         check(
-            !self.f_trip_n.is_nan() && self.f_trip_n >= 1.0,
-            "f_trip_n",
-            "must be ≥ 1 N (inf = off)",
-        )?;
-        in_range(self.f_filter_s, 1e-3, 10.0, "f_filter_s")?;
-        in_range(self.i2t_cont_a, 0.01, 1_000.0, "i2t_cont_a")?;
-        in_range(self.i2t_tau_s, 0.1, 1.0e5, "i2t_tau_s")?;
-        in_range(self.omega_max_rad_s, 1.0, 2_000.0, "omega_max_rad_s")?;
-        in_range(self.enc_emf_tol_v, 0.1, 2_000.0, "enc_emf_tol_v")?;
-        in_range(self.x_min_m, -1_000.0, 1_000.0, "x_min_m")?;
-        in_range(self.x_max_m, -1_000.0, 1_000.0, "x_max_m")?;
-        check(
             self.x_min_m < self.x_max_m,
             "x_min_m",
             "must be below x_max_m",
         )?;
-        in_range(self.i_sum_tol_a, 0.0, 1_000.0, "i_sum_tol_a")?;
         // Three readings each rounded by half an LSB, plus a count of noise each.
         check(
             self.i_sum_tol_a >= 4.0 * self.amps_per_count,
@@ -333,45 +303,25 @@ impl Config {
             "below 4 ADC counts (quantisation alone would trip it)",
         )?;
         check(
-            self.overrun_max >= 1 && self.overrun_max <= 10_000,
-            "overrun_max",
-            "out of range",
-        )?;
-        check(
-            !self.r_load_ohm.is_nan() && self.r_load_ohm >= 0.0,
-            "r_load_ohm",
-            "must be ≥ 0 (inf = open)",
-        )?;
-        in_range(self.law_rate_hz, 50.0, 100_000.0, "law_rate_hz")?;
-        check(
             self.law_rate_hz <= self.pwm_hz,
             "law_rate_hz",
             "must not exceed pwm_hz",
         )?;
-        in_range(self.l_load_h, 0.0, 10_000.0, "l_load_h")?;
-        in_range(self.c_load_f, 0.0, 100.0, "c_load_f")?;
         check(
             self.law != LawKind::Impedance || self.r_load_ohm.is_finite(),
             "r_load_ohm",
             "must be finite for the impedance law",
         )?;
-        in_range(self.trk_dither, 0.01, 1.0, "trk_dither")?;
-        in_range(self.trk_period_s, 0.05, 3_600.0, "trk_period_s")?;
         check(
             self.trk_period_s * self.pwm_hz >= 8.0,
             "trk_period_s",
             "shorter than 8 loop periods",
         )?;
-        in_range(self.trk_gain, 0.0, 100.0, "trk_gain")?;
-        in_range(self.trk_step_max, 0.0, 5.0, "trk_step_max")?;
-        in_range(self.trk_r_min_ohm, 0.01, 1.0e6, "trk_r_min_ohm")?;
-        in_range(self.trk_r_max_ohm, 0.01, 1.0e6, "trk_r_max_ohm")?;
         check(
             self.trk_r_min_ohm < self.trk_r_max_ohm,
             "trk_r_min_ohm",
             "must be below trk_r_max_ohm",
         )?;
-        in_range(self.trk_p_min_w, 0.0, 1.0e6, "trk_p_min_w")?;
         check(
             self.opt.is_valid(),
             "opt",
@@ -389,6 +339,16 @@ impl Config {
             "full scale too large",
         )?;
         Ok(())
+    }
+
+    /// `self != other` for configurations without NaN (every validated one): through the
+    /// parameter registry's readers (every field but `opt` has an entry, see the tests) and
+    /// `opt`. One small loop instead of the derived comparison of 48 fields, which costs
+    /// ≈ 0.8 KB of flash wherever it is inlined. (Integer fields compare as `f32`: exact
+    /// within their validated ranges.)
+    #[inline(never)]
+    pub fn differs(&self, other: &Config) -> bool {
+        self.opt != other.opt || PARAMS.iter().any(|p| (p.get)(self) != (p.get)(other))
     }
 
     /// Sampling period, s.
@@ -546,7 +506,7 @@ impl Gains {
                 turn_per_count,
                 pole_pairs: c.pole_pairs as u32,
                 e_per_count: turn_per_count.wrapping_mul(c.pole_pairs as u32),
-                offset: Angle::from_radians(c.encoder_offset_rad as f64),
+                offset: angle_of_radians(c.encoder_offset_rad),
                 kp31: crate::fx::fixed_i32(2.0 * wb, 31),
                 ki34: crate::fx::fixed_i32(wb * wb, 34),
                 rad_s_per_count_step: Gain::from_f32(rad_s_per_count_step),
@@ -560,16 +520,16 @@ impl Gains {
             pole_pairs: c.pole_pairs as i32,
             advance: Gain::from_f32(advance),
             v_lim_per_bus: Gain::from_f32(c.m_max * INV_SQRT3),
-            i_max: q(c.i_max_a),
+            i_max: q_of(c.i_max_a),
             // A trip above the ADC's range could never fire: clamp it to the last code below
             // the nearer rail, so that an over-range reading trips.
-            i_trip: q(c.i_trip_a.min(
+            i_trip: q_of(c.i_trip_a.min(
                 c.amps_per_count * (c.adc_zero_code.min(4095 - c.adc_zero_code) as f32 - 1.0),
             )),
-            v_ov: q(c.v_bus_ov),
-            v_uv: q(c.v_bus_uv),
-            brake_on: q(c.brake_on_v),
-            brake_off: q(c.brake_off_v),
+            v_ov: q_of(c.v_bus_ov),
+            v_uv: q_of(c.v_bus_uv),
+            brake_on: q_of(c.brake_on_v),
+            brake_off: q_of(c.brake_off_v),
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
             k,
@@ -580,13 +540,108 @@ impl Gains {
 /// 1/√3, correctly rounded to `f32` (`f32::sqrt` is not in `core`).
 const INV_SQRT3: f32 = 0.577_350_26;
 
+/// The angle of `r` radians (|r| ≤ 2π, validated), in integers: `r·2^32` is exact in `f32`
+/// (power-of-two scaling) and fits an `i64`; times 2^64/2π (rounded) and shifted back gives
+/// `r/2π` turns in 2^-32 units, wrapped mod one turn. The same angle as
+/// `Angle::from_radians(r as f64)` to within 1 LSB (2^-32 turn), without soft-float `f64`.
+fn angle_of_radians(r: f32) -> Angle {
+    const TURNS_PER_RAD_Q64: i128 = 2_935_890_503_282_001_226; // 2^64/2π
+    let r_q32 = (r * 4_294_967_296.0) as i64;
+    Angle(((r_q32 as i128 * TURNS_PER_RAD_Q64) >> 64) as u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
+    fn encoder_offset_angle_matches_the_f64_conversion() {
+        // Every 1/1000 of the validated range ±2π (and its ends): within 1 LSB (2^-32 turn,
+        // 1.5 nrad) of the f64 conversion, which rounds r/2π once more before truncating.
+        for k in -1000..=1000 {
+            let r = k as f32 * core::f32::consts::TAU / 1000.0;
+            let a = angle_of_radians(r).0;
+            let b = Angle::from_radians(r as f64).0;
+            assert!(a.wrapping_sub(b).wrapping_add(1) <= 2, "{r}: {a} vs {b}");
+        }
+    }
+
+    #[test]
     fn defaults_are_valid() {
         Gains::new(&Config::default()).unwrap();
+    }
+
+    #[test]
+    fn every_registry_range_is_enforced_by_validate() {
+        use crate::params::Kind;
+        // Just outside each end of each entry's range (NaN for the real ones too): refused,
+        // naming that field; the range ends themselves are not refused for being out of range.
+        for p in PARAMS.iter().filter(|p| p.kind == Kind::Real) {
+            for v in [
+                p.min - 1.0 - p.min.abs(),
+                p.max + 1.0 + p.max.abs(),
+                f32::NAN,
+            ] {
+                if v.is_infinite() {
+                    continue; // an infinite maximum admits everything above the minimum
+                }
+                let mut c = Config::default();
+                (p.set)(&mut c, v);
+                let e = c.validate().unwrap_err();
+                assert_eq!(e.field, p.name, "{} = {v}: {e:?}", p.name);
+            }
+        }
+        for p in PARAMS.iter().filter(|p| p.kind == Kind::Int) {
+            let mut c = Config::default();
+            (p.set)(&mut c, p.max + 1.0);
+            assert_eq!(c.validate().unwrap_err().field, p.name);
+        }
+    }
+
+    /// The top-level field names of `Config`, from its `Debug` text.
+    fn field_names() -> std::vec::Vec<std::string::String> {
+        let text = std::format!("{:?}", Config::default());
+        let (mut depth, mut word, mut names) = (0, std::string::String::new(), std::vec![]);
+        for ch in text.chars() {
+            match ch {
+                '{' | '[' | '(' => depth += 1,
+                '}' | ']' | ')' => depth -= 1,
+                ':' if depth == 1 => names.push(word.clone()),
+                _ => {}
+            }
+            if ch.is_alphanumeric() || ch == '_' {
+                word.push(ch);
+            } else if ch != ':' {
+                word.clear();
+            }
+        }
+        names
+    }
+
+    #[test]
+    fn differs_covers_every_field() {
+        let names = field_names();
+        assert_eq!(names.len(), 48, "{names:?}");
+        for n in &names {
+            assert!(
+                n == "opt" || PARAMS.iter().any(|p| p.name == n.as_str()),
+                "field {n} has no registry entry: Config::differs would miss it"
+            );
+        }
+        let d = Config::default();
+        assert!(!d.differs(&d));
+        // Each entry changed to another valid value, and `opt`: a difference, as `!=` says.
+        for p in PARAMS {
+            for v in [p.min, p.max, (p.get)(&d) + 1.0] {
+                let mut c = d;
+                if p.apply(&mut c, v, false).is_ok() && c != d {
+                    assert!(c.differs(&d) && d.differs(&c), "{}", p.name);
+                }
+            }
+        }
+        let mut c = d;
+        c.opt.c[3] = 1.0;
+        assert!(c.differs(&d));
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The serial console: a line parser and command executor over a [`Controller`] and a
 //! [`ParamStore`]. No alloc: output goes to any `core::fmt::Write` sink (a UART buffer on the
-//! board, a pty on the host). Every command answers with `ok …` or one line `error: …`; a
+//! board, a pty on the host), through `write_str` only — no `write!`, so the board image
+//! links none of `core::fmt`'s formatting machinery for it (see `Put`). Every command answers with `ok …` or one line `error: …`; a
 //! refused command changes nothing. The executor never panics (fuzzed, see
 //! `examples/console_fuzz.rs`).
 //!
@@ -17,9 +18,9 @@
 use core::fmt::Write;
 
 use crate::config::Config;
-use crate::control::{Controller, Mode};
-use crate::numtext::{self, Fixed, Num, NumError};
-use crate::params::{self, PARAMS};
+use crate::control::{Controller, Mode, Telemetry};
+use crate::numtext::{self, q_f32, Fixed, Num, NumError};
+use crate::params::{self, ParamError, PARAMS};
 
 /// The persistent store as the console sees it.
 pub trait ParamStore {
@@ -45,25 +46,46 @@ impl ParamStore for NoStore {
     }
 }
 
-/// Telemetry channels: name, unit, reader.
-/// A telemetry channel: name, unit, reader.
-pub type Channel = (&'static str, &'static str, fn(&Controller) -> f32);
+/// A telemetry channel: name and unit; its value is [`channel_value`] of its index.
+pub type Channel = (&'static str, &'static str);
 
 pub static CHANNELS: &[Channel] = &[
-    ("ia", "A", |c| c.telemetry().i_abc[0].to_num()),
-    ("ib", "A", |c| c.telemetry().i_abc[1].to_num()),
-    ("ic", "A", |c| c.telemetry().i_abc[2].to_num()),
-    ("id", "A", |c| c.telemetry().i_dq.d.to_num()),
-    ("iq", "A", |c| c.telemetry().i_dq.q.to_num()),
-    ("id_ref", "A", |c| c.telemetry().i_ref.d.to_num()),
-    ("iq_ref", "A", |c| c.telemetry().i_ref.q.to_num()),
-    ("vd", "V", |c| c.telemetry().v_dq.d.to_num()),
-    ("vq", "V", |c| c.telemetry().v_dq.q.to_num()),
-    ("vbus", "V", |c| c.telemetry().v_bus.to_num()),
-    ("w", "rad/s", |c| c.telemetry().omega_m.to_num()),
-    ("x", "m", |c| c.telemetry().x.to_num()),
-    ("p", "W", |c| c.telemetry().p_elec.to_num()),
+    ("ia", "A"),
+    ("ib", "A"),
+    ("ic", "A"),
+    ("id", "A"),
+    ("iq", "A"),
+    ("id_ref", "A"),
+    ("iq_ref", "A"),
+    ("vd", "V"),
+    ("vq", "V"),
+    ("vbus", "V"),
+    ("w", "rad/s"),
+    ("x", "m"),
+    ("p", "W"),
 ];
+
+/// The value of channel `i` (an index into [`CHANNELS`]) in telemetry `t`. One function
+/// over one `Telemetry` per line, not a reader per channel each deriving the whole
+/// telemetry (flash, and time per line).
+pub fn channel_value(t: &Telemetry, i: usize) -> f32 {
+    let v = match i {
+        0 => t.i_abc[0],
+        1 => t.i_abc[1],
+        2 => t.i_abc[2],
+        3 => t.i_dq.d,
+        4 => t.i_dq.q,
+        5 => t.i_ref.d,
+        6 => t.i_ref.q,
+        7 => t.v_dq.d,
+        8 => t.v_dq.q,
+        9 => t.v_bus,
+        10 => t.omega_m,
+        11 => t.x,
+        _ => t.p_elec,
+    };
+    q_f32(v)
+}
 
 const MAX_CH: usize = 8;
 
@@ -112,7 +134,8 @@ impl Console {
     /// telemetry line when one is due.
     pub fn tick<W: Write>(&mut self, ctl: &Controller, out: &mut W) {
         let ts = ctl.config().ts();
-        let p: f32 = ctl.telemetry().p_elec.to_num();
+        let t = ctl.telemetry();
+        let p = q_f32(t.p_elec);
         self.energy_j += p * ts;
         self.p_avg_w += (p - self.p_avg_w) * ts.min(1.0);
         if self.tel_every == 0 {
@@ -122,13 +145,11 @@ impl Console {
         self.tel_count += 1;
         if self.tel_count >= self.tel_every {
             self.tel_count = 0;
-            let _ = write!(out, "{}", Fixed(self.tel_periods as f32 * ts, 6));
+            out.fixed(self.tel_periods as f32 * ts, 6);
             for &i in &self.tel[..self.n_tel] {
-                if let Some(ch) = CHANNELS.get(i as usize) {
-                    let _ = write!(out, ",{}", Num((ch.2)(ctl)));
-                }
+                out.s(",").num(channel_value(&t, i as usize));
             }
-            let _ = out.write_str("\r\n");
+            out.s("\r\n");
         }
     }
 
@@ -140,197 +161,223 @@ impl Console {
         store: &mut S,
         out: &mut W,
     ) -> CmdResult {
+        match self.command(line, ctl, store, out) {
+            None => Ok(()), // empty line: nothing
+            Some(r) => {
+                out.s("\r\n"); // the end of the `ok`/`error:` line, in one place (flash)
+                r
+            }
+        }
+    }
+
+    /// [`Console::execute`] but the last line's end; `None` for an empty line.
+    fn command<W: Write, S: ParamStore>(
+        &mut self,
+        line: &str,
+        ctl: &mut Controller,
+        store: &mut S,
+        out: &mut W,
+    ) -> Option<CmdResult> {
         let mut it = line.split_ascii_whitespace();
-        let cmd = match it.next() {
-            Some(c) => c,
-            None => return Ok(()), // empty line: nothing
-        };
+        let cmd = it.next()?;
         let a1 = it.next();
         let a2 = it.next();
         let extra = it.next().is_some();
         let running = ctl.mode() == Mode::Run;
+        // `fail!(.s("…").num(v)…)`: one `error: …` line, refused. `ok!(…)`: one `ok…` line
+        // (its line end is written by `execute`).
+        // The text is written piece by piece (`Put`), not through `write!`.
         macro_rules! fail {
             ($($t:tt)*) => {{
-                let _ = out.write_str("error: ");
-                let _ = write!(out, $($t)*);
-                let _ = out.write_str("\r\n");
-                return Err(Refused);
+                out.s("error: ") $($t)*;
+                return Some(Err(Refused));
             }};
         }
         macro_rules! ok {
             ($($t:tt)*) => {{
-                let _ = out.write_str("ok");
-                let _ = write!(out, $($t)*);
-                let _ = out.write_str("\r\n");
-                return Ok(());
+                out.s("ok") $($t)*;
+                return Some(Ok(()));
             }};
         }
         let nargs = a1.is_some() as usize + a2.is_some() as usize + extra as usize;
         let want = |n: usize| nargs == n;
         match cmd {
             "help" if want(0) => {
-                let _ = out.write_str(
+                out.s(
                     "commands: help | list | get NAME | set NAME VALUE | save | load | defaults\r\n\
                      | status | faults | clear | mode idle|run|short|open | tel CH[,CH..] HZ | tel off\r\n",
                 );
-                let _ = out.write_str("tel channels:");
+                out.s("tel channels:");
                 for ch in CHANNELS {
-                    let _ = write!(out, " {}[{}]", ch.0, ch.1);
+                    out.s(" ").s(ch.0).s("[").s(ch.1).s("]");
                 }
-                let _ = out.write_str("\r\n");
-                ok!("")
+                out.s("\r\n");
+                ok!()
             }
             "list" if want(0) => {
                 let c = ctl.config();
                 for p in PARAMS {
-                    let _ = write!(
-                        out,
-                        "{} = {} {} [{} .. {}] default {} {} - {}\r\n",
-                        p.name,
-                        Num((p.get)(c)),
-                        p.unit,
-                        Num(p.min),
-                        Num(p.max),
-                        Num(p.default_value()),
-                        if p.runtime { "rt" } else { "idle-only" },
-                        p.desc
-                    );
+                    out.s(p.name)
+                        .s(" = ")
+                        .num((p.get)(c))
+                        .s(" ")
+                        .s(p.unit)
+                        .s(" [")
+                        .num(p.min)
+                        .s(" .. ")
+                        .num(p.max)
+                        .s("] default ")
+                        .num(p.default_value())
+                        .s(if p.runtime { " rt - " } else { " idle-only - " })
+                        .s(p.desc)
+                        .s("\r\n");
                 }
-                ok!("")
+                ok!()
             }
             "get" if want(1) => {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
-                    Some(p) => ok!(" {} = {} {}", p.name, Num((p.get)(ctl.config())), p.unit),
-                    None => fail!("unknown parameter '{}' (try list)", Clip(n)),
+                    Some(p) => {
+                        ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                    }
+                    None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
                 }
             }
             "set" if want(2) => {
                 let n = a1.unwrap_or("");
                 let Some(p) = params::find(n) else {
-                    fail!("unknown parameter '{}' (try list)", Clip(n))
+                    fail!(.s("unknown parameter '").clip(n).s("' (try list)"))
                 };
                 let v = match parse_f32(a2.unwrap_or("")) {
                     Ok(v) => v,
-                    Err(e) => fail!("'{}' {}", Clip(a2.unwrap_or("")), e),
+                    Err(e) => fail!(.s("'").clip(a2.unwrap_or("")).s("' ").s(e.as_str())),
                 };
                 let mut c = *ctl.config();
-                if let Err(e) = p.apply(&mut c, v, running) {
-                    fail!("{}: {}", p.name, e)
+                match p.apply(&mut c, v, running) {
+                    Ok(()) => {}
+                    Err(ParamError::Invalid(field, why)) => {
+                        fail!(.s(p.name).s(": config refused: ").s(field).s(": ").s(why))
+                    }
+                    Err(e) => fail!(.s(p.name).s(": ").s(e.message())),
                 }
                 if let Err(e) = ctl.set_config(&c) {
-                    fail!("{}", e)
+                    fail!(.s(e.field).s(": ").s(e.reason))
                 }
-                ok!(" {} = {} {}", p.name, Num((p.get)(ctl.config())), p.unit)
+                ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
             }
             "save" if want(0) => {
                 if running {
-                    fail!(
+                    fail!(.s(
                         "save refused while running (mode idle first): flash erase stalls the loop"
-                    )
+                    ))
                 }
                 match store.save(ctl.config()) {
-                    Ok(()) => ok!(" saved"),
-                    Err(e) => fail!("save failed: {}", e),
+                    Ok(()) => ok!(.s(" saved")),
+                    Err(e) => fail!(.s("save failed: ").s(e)),
                 }
             }
             "load" | "defaults" if want(0) => {
                 if running {
-                    fail!("{} refused while running (mode idle first)", cmd)
+                    fail!(.s(cmd).s(" refused while running (mode idle first)"))
                 }
                 let c = if cmd == "load" {
                     match store.load() {
                         Ok(c) => c,
-                        Err(e) => fail!("load failed: {}", e),
+                        Err(e) => fail!(.s("load failed: ").s(e)),
                     }
                 } else {
                     store.factory()
                 };
                 match ctl.set_config(&c) {
-                    Ok(()) => ok!(" {}", cmd),
-                    Err(e) => fail!("{}", e),
+                    Ok(()) => ok!(.s(" ").s(cmd)),
+                    Err(e) => fail!(.s(e.field).s(": ").s(e.reason)),
                 }
             }
             "status" if want(0) => {
                 let t = ctl.telemetry();
-                let _ = write!(
-                    out,
-                    "mode={} fault={} vbus={}V w={}rad/s x={}m id={}A iq={}A p={}W p_avg={}W energy={}J warnings=",
-                    ctl.mode().name(),
-                    ctl.fault().map(|f| f.name()).unwrap_or("none"),
-                    Num(t.v_bus.to_num()),
-                    Num(t.omega_m.to_num()),
-                    Num(t.x.to_num()),
-                    Num(t.i_dq.d.to_num()),
-                    Num(t.i_dq.q.to_num()),
-                    Num(t.p_elec.to_num()),
-                    Num(self.p_avg_w),
-                    Num(self.energy_j)
-                );
+                out.s("mode=")
+                    .s(ctl.mode().name())
+                    .s(" fault=")
+                    .s(ctl.fault().map(|f| f.name()).unwrap_or("none"))
+                    .s(" vbus=")
+                    .num(q_f32(t.v_bus))
+                    .s("V w=")
+                    .num(q_f32(t.omega_m))
+                    .s("rad/s x=")
+                    .num(q_f32(t.x))
+                    .s("m id=")
+                    .num(q_f32(t.i_dq.d))
+                    .s("A iq=")
+                    .num(q_f32(t.i_dq.q))
+                    .s("A p=")
+                    .num(q_f32(t.p_elec))
+                    .s("W p_avg=")
+                    .num(self.p_avg_w)
+                    .s("W energy=")
+                    .num(self.energy_j)
+                    .s("J warnings=");
                 write_warnings(out, ctl.protection().warnings);
-                let _ = out.write_str("\r\n");
-                ok!("")
+                out.s("\r\n");
+                ok!()
             }
             "faults" if want(0) => {
                 let p = ctl.protection();
-                let _ = write!(out, "warnings: ");
+                out.s("warnings: ");
                 write_warnings(out, p.warnings);
-                let _ = write!(
-                    out,
-                    " i2t={} force_filt={}N derate={}\r\n",
-                    Fixed(p.i2t(), 4),
-                    Fixed(p.force_n(), 0),
-                    Fixed(p.derate.to_num::<f32>(), 3)
-                );
+                out.s(" i2t=")
+                    .fixed(p.i2t(), 4)
+                    .s(" force_filt=")
+                    .fixed(p.force_n(), 0)
+                    .s("N derate=")
+                    .fixed(q_f32(p.derate), 3)
+                    .s("\r\n");
                 match ctl.fault() {
                     Some(f) => {
-                        let _ = write!(
-                            out,
-                            "fault {} {}: {}\r\nsafe state: {}\r\n",
-                            f.code(),
-                            f.name(),
-                            f.describe(),
-                            safe_words(f.safe_mode())
-                        );
+                        write_fault(out, "fault ", f);
+                        out.s("safe state: ").s(safe_words(f.safe_mode())).s("\r\n");
                         if let Some(r) = p.record() {
                             let s = &r.snap;
-                            let _ = write!(
-                                out,
-                                "at t={} ms in mode {}: ia={} ib={} ic={} A id={} iq={} A vbus={} V w={} rad/s x={} m force={} N i2t={} derate={}\r\n",
-                                s.t_ms,
-                                s.mode.name(),
-                                Fixed(s.i_abc[0].to_num::<f32>(), 3),
-                                Fixed(s.i_abc[1].to_num::<f32>(), 3),
-                                Fixed(s.i_abc[2].to_num::<f32>(), 3),
-                                Fixed(s.i_dq.d.to_num::<f32>(), 3),
-                                Fixed(s.i_dq.q.to_num::<f32>(), 3),
-                                Fixed(s.v_bus.to_num::<f32>(), 2),
-                                Fixed(s.omega_m.to_num::<f32>(), 2),
-                                Fixed(s.x.to_num::<f32>(), 4),
-                                Fixed(s.force_n, 0),
-                                Fixed(s.i2t, 4),
-                                Fixed(s.derate, 3)
-                            );
+                            out.s("at t=")
+                                .uint(s.t_ms)
+                                .s(" ms in mode ")
+                                .s(s.mode.name())
+                                .s(": ia=")
+                                .fixed(q_f32(s.i_abc[0]), 3)
+                                .s(" ib=")
+                                .fixed(q_f32(s.i_abc[1]), 3)
+                                .s(" ic=")
+                                .fixed(q_f32(s.i_abc[2]), 3)
+                                .s(" A id=")
+                                .fixed(q_f32(s.i_dq.d), 3)
+                                .s(" iq=")
+                                .fixed(q_f32(s.i_dq.q), 3)
+                                .s(" A vbus=")
+                                .fixed(q_f32(s.v_bus), 2)
+                                .s(" V w=")
+                                .fixed(q_f32(s.omega_m), 2)
+                                .s(" rad/s x=")
+                                .fixed(q_f32(s.x), 4)
+                                .s(" m force=")
+                                .fixed(s.force_n, 0)
+                                .s(" N i2t=")
+                                .fixed(s.i2t, 4)
+                                .s(" derate=")
+                                .fixed(s.derate, 3)
+                                .s("\r\n");
                             for g in r.later() {
-                                let _ = write!(
-                                    out,
-                                    "later: {} {}: {}\r\n",
-                                    g.code(),
-                                    g.name(),
-                                    g.describe()
-                                );
+                                write_fault(out, "later: ", g);
                             }
                         }
-                        let _ = write!(out, "now in mode {}\r\n", ctl.mode().name());
-                        ok!(" fault {} (safe mode {})", f.name(), f.safe_mode().name())
+                        out.s("now in mode ").s(ctl.mode().name()).s("\r\n");
+                        ok!(.s(" fault ").s(f.name()).s(" (safe mode ").s(f.safe_mode().name()).s(")"))
                     }
-                    None => ok!(" no fault"),
+                    None => ok!(.s(" no fault")),
                 }
             }
             "clear" if want(0) => match (ctl.fault(), ctl.clear_fault()) {
-                (None, _) => ok!(" no fault"),
-                (Some(f), Ok(())) => ok!(" cleared {}", f.name()),
-                (Some(f), Err(why)) => fail!("{} not cleared: {}", f.name(), why),
+                (None, _) => ok!(.s(" no fault")),
+                (Some(f), Ok(())) => ok!(.s(" cleared ").s(f.name())),
+                (Some(f), Err(why)) => fail!(.s(f.name()).s(" not cleared: ").s(why)),
             },
             "mode" if want(1) => {
                 let m = match a1.unwrap_or("") {
@@ -338,72 +385,155 @@ impl Console {
                     "run" => Mode::Run,
                     "short" | "brake" => Mode::Short,
                     "open" => Mode::Open,
-                    o => fail!("unknown mode '{}' (idle|run|short|open)", Clip(o)),
+                    o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open)")),
                 };
                 match ctl.set_mode(m) {
-                    Ok(()) => ok!(" mode {}", m.name()),
-                    Err(f) => fail!("fault {} latched: clear it first", f.name()),
+                    Ok(()) => ok!(.s(" mode ").s(m.name())),
+                    Err(f) => fail!(.s("fault ").s(f.name()).s(" latched: clear it first")),
                 }
             }
             "tel" if want(1) && a1 == Some("off") => {
                 self.tel_every = 0;
-                ok!(" tel off")
+                ok!(.s(" tel off"))
             }
             "tel" if want(2) => {
                 let mut sel = [0u8; MAX_CH];
                 let mut n = 0;
-                for name in a1.unwrap_or("").split(',') {
+                // The names between commas (as `split(',')`, by bytes: no pattern search code
+                // in the image).
+                let mut rest = Some(a1.unwrap_or(""));
+                while let Some(list) = rest {
+                    let comma = list.bytes().position(|b| b == b',');
+                    let name = list.get(..comma.unwrap_or(list.len())).unwrap_or("");
+                    rest = comma.and_then(|c| list.get(c + 1..));
                     let Some(i) = CHANNELS.iter().position(|c| c.0 == name) else {
-                        fail!("unknown channel '{}' (see help)", Clip(name))
+                        fail!(.s("unknown channel '").clip(name).s("' (see help)"))
                     };
                     if n == MAX_CH {
-                        fail!("at most {} channels", MAX_CH)
+                        fail!(.s("at most ").uint(MAX_CH as u32).s(" channels"))
                     }
                     sel[n] = i as u8;
                     n += 1;
                 }
                 let rate = match parse_f32(a2.unwrap_or("")) {
                     Ok(r) if r.is_finite() && r > 0.0 => r,
-                    _ => fail!("rate must be a positive number of Hz"),
+                    _ => fail!(.s("rate must be a positive number of Hz")),
                 };
                 let pwm = ctl.config().pwm_hz;
                 if rate > pwm.min(2_000.0) {
-                    fail!("rate must be <= {} Hz", Num(pwm.min(2_000.0)))
+                    fail!(.s("rate must be <= ").num(pwm.min(2_000.0)).s(" Hz"))
                 }
                 let every = pwm / rate;
                 if every > 1.0e8 {
-                    fail!("rate too low")
+                    fail!(.s("rate too low"))
                 }
                 self.tel = sel;
                 self.n_tel = n;
                 self.tel_every = (every as u32).max(1);
                 self.tel_count = 0;
                 self.tel_periods = 0;
-                let _ = out.write_str("# tel t");
+                out.s("# tel t");
                 for &i in &sel[..n] {
-                    let _ = write!(out, ",{}", CHANNELS[i as usize].0);
+                    if let Some(ch) = CHANNELS.get(i as usize) {
+                        out.s(",").s(ch.0);
+                    }
                 }
-                let _ = out.write_str("\r\n");
-                ok!(" tel {} Hz", Num(pwm / self.tel_every as f32))
+                out.s("\r\n");
+                ok!(.s(" tel ").num(pwm / self.tel_every as f32).s(" Hz"))
             }
             "help" | "list" | "get" | "set" | "save" | "load" | "defaults" | "status"
             | "faults" | "clear" | "mode" | "tel" => {
-                fail!("wrong arguments for '{}' (see help)", cmd)
+                fail!(.s("wrong arguments for '").s(cmd).s("' (see help)"))
             }
-            _ => fail!("unknown command '{}' (see help)", Clip(cmd)),
+            _ => fail!(.s("unknown command '").clip(cmd).s("' (see help)")),
         }
     }
 }
 
+/// Text output without `core::fmt`'s formatting machinery (`write!` would link `fmt::write`,
+/// `Formatter` and its padding, ≈ 3 KB on the board, and spill every argument list on the
+/// stack): strings written as they are, numbers through `numtext`. Errors of the sink are
+/// ignored here, as `let _ = write!(…)` did (the board's reply buffer records overflow).
+trait Put {
+    fn s(&mut self, s: &str) -> &mut Self;
+    /// A number with the fewest digits that read back ([`Num`]).
+    fn num(&mut self, v: f32) -> &mut Self;
+    /// A number with `decimals` decimals ([`Fixed`]).
+    fn fixed(&mut self, v: f32, decimals: u8) -> &mut Self;
+    fn uint(&mut self, v: u32) -> &mut Self;
+    /// At most 24 characters of user input (keeps errors one short line), control
+    /// characters as `?`.
+    fn clip(&mut self, s: &str) -> &mut Self;
+}
+
+impl<W: Write> Put for W {
+    #[inline(never)] // one copy per sink type: these are called from ~150 places
+    fn s(&mut self, s: &str) -> &mut Self {
+        let _ = self.write_str(s);
+        self
+    }
+    #[inline(never)] // one copy per sink type: these are called from ~150 places
+    fn num(&mut self, v: f32) -> &mut Self {
+        self.s(Num(v).text().as_str())
+    }
+    #[inline(never)] // one copy per sink type: these are called from ~150 places
+    fn fixed(&mut self, v: f32, decimals: u8) -> &mut Self {
+        self.s(Fixed(v, decimals).text().as_str())
+    }
+    #[inline(never)] // one copy per sink type: these are called from ~150 places
+    fn uint(&mut self, v: u32) -> &mut Self {
+        self.s(numtext::uint(v as u64).as_str())
+    }
+    #[inline(never)] // one copy per sink type: these are called from ~150 places
+    fn clip(&mut self, s: &str) -> &mut Self {
+        // By bytes (no UTF-8 decoding): a character starts at every byte that is not a
+        // continuation byte (0b10xx_xxxx); the control characters are the bytes < 0x20 and
+        // 0x7f, and U+0080 … U+009F, encoded C2 80 … C2 9F. Runs of other text are written
+        // as they are (whole characters: runs end at character starts), controls as `?`.
+        let b = s.as_bytes();
+        let (mut start, mut chars, mut i) = (0, 0, 0);
+        while i < b.len() {
+            let c = b[i];
+            if c & 0xc0 != 0x80 {
+                if chars == 24 {
+                    self.s(s.get(start..i).unwrap_or("")).s("…");
+                    return self;
+                }
+                chars += 1;
+            }
+            let c1 = c == 0xc2 && matches!(b.get(i + 1), Some(0x80..=0x9f));
+            if c < 0x20 || c == 0x7f || c1 {
+                self.s(s.get(start..i).unwrap_or("")).s("?");
+                i += 1 + c1 as usize;
+                start = i;
+            } else {
+                i += 1;
+            }
+        }
+        self.s(s.get(start..).unwrap_or(""))
+    }
+}
+
+/// `<lead><code> <name>: <description>` and a line end.
+fn write_fault<W: Write>(out: &mut W, lead: &str, f: crate::protect::Fault) {
+    out.s(lead)
+        .uint(f.code() as u32)
+        .s(" ")
+        .s(f.name())
+        .s(": ")
+        .s(f.describe())
+        .s("\r\n");
+}
+
 fn write_warnings<W: Write>(out: &mut W, w: u8) {
     if w == 0 {
-        let _ = out.write_str("none");
+        out.s("none");
         return;
     }
     let mut first = true;
     for (bit, name) in crate::protect::warn::NAMES {
         if w & bit != 0 {
-            let _ = write!(out, "{}{}", if first { "" } else { "," }, name);
+            out.s(if first { "" } else { "," }).s(name);
             first = false;
         }
     }
@@ -413,21 +543,6 @@ fn safe_words(m: Mode) -> &'static str {
     match m {
         Mode::Short => "short (low-side switches on: phases shorted, no power to the bus)",
         _ => "open (gates off: no current through the bridge)",
-    }
-}
-
-/// Echo at most 24 characters of user input (keeps errors one short line).
-struct Clip<'a>(&'a str);
-impl core::fmt::Display for Clip<'_> {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        for (i, ch) in self.0.chars().enumerate() {
-            if i == 24 {
-                return f.write_str("…");
-            }
-            let ch = if ch.is_control() { '?' } else { ch };
-            f.write_char(ch)?;
-        }
-        Ok(())
     }
 }
 
@@ -610,6 +725,26 @@ mod tests {
         // Current still high in the last telemetry: clear refused on the later fault.
         let (r, s) = run(&mut con, &mut ctl, "clear");
         assert!(r.is_err() && s.contains("i_trip_a"), "{s}");
+    }
+
+    proptest::proptest! {
+        /// The byte-wise clip writes what the char-wise definition says: the first 24
+        /// characters, control characters (Unicode Cc) as `?`, `…` when more followed.
+        #[test]
+        fn clip_is_the_char_definition(chars in proptest::collection::vec(proptest::prelude::any::<char>(), 0..40)) {
+            let s: String = chars.iter().collect();
+            let mut want = String::new();
+            for (i, ch) in s.chars().enumerate() {
+                if i == 24 {
+                    want.push('…');
+                    break;
+                }
+                want.push(if ch.is_control() { '?' } else { ch });
+            }
+            let mut got = String::new();
+            got.clip(&s);
+            proptest::prop_assert_eq!(got, want);
+        }
     }
 
     proptest::proptest! {

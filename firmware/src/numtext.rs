@@ -3,31 +3,68 @@
 //! core's `str::parse::<f64>` (Eisel–Lemire with a 10 KiB power-of-five table and a big-decimal
 //! fallback) and `{}` on floats (Grisu with a Dragon fallback) cost about 25 KiB of flash on the
 //! Cortex-M4; the console needs neither their full precision nor their range (everything it
-//! reads or writes is an `f32`). This module does both with `f64` arithmetic (already linked
-//! for the command laws' design code) and a 23-entry table of exact powers of ten.
+//! reads or writes is an `f32`). This module does both in integer arithmetic only (a 64-bit
+//! binary mantissa scaled by ten step by step, see `Big`): no soft-float `f64` is linked for
+//! it on the board.
 //!
 //! * [`parse_f32`] accepts what `str::parse::<f64>` accepted on the console: an optional sign,
 //!   digits with an optional `.` (at least one digit, `1.` and `.5` included), an optional
 //!   exponent `e`/`E` with optional sign and at least one digit. Anything else (`nan`, `inf`,
 //!   `0x10`, `1_000`, `1e`, spaces) is [`NumError::NotANumber`]; a value beyond `f32::MAX` is
 //!   [`NumError::Overflow`]; a value below the smallest subnormal rounds to zero as in core.
-//!   **Precision**: the result is the `f32` nearest the decimal (ties to even), except when
-//!   the decimal lies within about 4·10⁻¹⁶ (relative) of the midpoint between two `f32`
-//!   values, where it may be the other neighbour: always within 1 ulp of the correctly
-//!   rounded value (tested against core's correctly rounded parser). Digits past the 19th
-//!   significant one are ignored (a relative change below 10⁻¹⁸).
+//!   **Precision**: the result is the `f32` nearest the decimal (ties to even) — the
+//!   scaling carries 64 bits and a sticky bit, exact on ties, within 2⁻⁵⁶ (relative)
+//!   otherwise, so only a decimal within 2⁻⁵⁶ of the midpoint between two `f32` (none of
+//!   the console's short numbers) could round the other way — tested bit for bit against
+//!   core's correctly rounded parser. Digits past the
+//!   19th significant one are ignored (a relative change below 10⁻¹⁸: the result is then
+//!   within 1 ulp of the correctly rounded value).
 //! * [`Num`] displays an `f32` with the fewest significant digits (1 … 9) that parse back
 //!   ([`parse_f32`] and core's parser both) to the same `f32`, like core's `{}`; positional
 //!   for 10⁻⁵ ≤ |v| < 10¹⁰ (`0.0122`, `100`, `-2.5`), otherwise with an exponent (`1e-7`,
 //!   `3.4028235e38`), where core's `{}` wrote every zero. `inf`, `-inf`, `NaN`, `0` and `-0`
 //!   as core writes them.
 //! * [`Fixed`] displays with a fixed number of decimals (≤ 9), like core's `{:.N}`, rounded to
-//!   nearest (a tie within 10⁻¹⁶ relative may round either way); beyond 10¹⁸ units of the
-//!   last decimal it falls back to [`Num`].
+//!   nearest, ties to even, from the same scaling (exact: an `f32` times 10⁹ fits 64 bits); beyond 10¹⁸ units
+//!   of the last decimal it falls back to [`Num`].
 //!
 //! Nothing here panics or allocates.
 
 use core::fmt;
+
+/// A Q16.16 value as `f32`: the same value as `to_num::<f32>()` (the `i32` rounds to nearest,
+/// ties to even, then the power-of-two scaling is exact), in two instructions instead of
+/// `fixed`'s generic float conversion (≈ 0.5 KB of flash).
+#[inline]
+pub fn q_f32(x: crate::fx::Q) -> f32 {
+    x.to_bits() as f32 * (1.0 / 65536.0)
+}
+
+/// Q16.16 from `f32`, saturating, NaN → 0, rounded to nearest with ties to even: the same
+/// value as `fx::q` (`fixed`'s `saturating_from_num`), without its generic float conversion
+/// (≈ 0.4 KB of flash). `v·2^16` is exact in `f32` and so is its fraction below 2^23.
+pub fn q_of(v: f32) -> crate::fx::Q {
+    use crate::fx::Q;
+    let s = v * 65536.0;
+    if v.is_nan() {
+        Q::ZERO
+    } else if s >= 2_147_483_648.0 {
+        Q::MAX
+    } else if s < -2_147_483_648.0 {
+        Q::MIN
+    } else {
+        let t = s as i32; // toward zero
+        let f = s - t as f32;
+        let odd = t & 1 != 0;
+        Q::from_bits(if f > 0.5 || (f == 0.5 && odd) {
+            t + 1
+        } else if f < -0.5 || (f == -0.5 && odd) {
+            t - 1
+        } else {
+            t
+        })
+    }
+}
 
 /// Why [`parse_f32`] refused a text.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,33 +75,135 @@ pub enum NumError {
     Overflow,
 }
 
-impl fmt::Display for NumError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
+impl NumError {
+    /// The reason, as the console writes it after the refused text.
+    pub fn as_str(self) -> &'static str {
+        match self {
             NumError::NotANumber => "is not a number",
             NumError::Overflow => "is out of the f32 range",
-        })
+        }
     }
 }
 
-/// 10^0 … 10^22: every one exact in `f64`.
-const POW10: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-];
-
-/// `x·10^n` by multiplications or divisions by exact powers of ten: one correctly rounded
-/// operation for |n| ≤ 22, at most ⌈|n|/22⌉ for larger |n| (the callers keep |n| ≤ 66).
-#[inline(never)] // one copy for the parser and both formatters (flash)
-fn scale(mut x: f64, n: i32) -> f64 {
-    let mut m = n.unsigned_abs();
-    while m > 0 {
-        let step = m.min(22);
-        let p = POW10[step as usize];
-        x = if n > 0 { x * p } else { x / p };
-        m -= step;
+impl fmt::Display for NumError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
     }
-    x
+}
+
+/// 10^0 … 10^19.
+const POW10: [u64; 20] = {
+    let mut t = [1u64; 20];
+    let mut i = 1;
+    while i < 20 {
+        t[i] = t[i - 1] * 10;
+        i += 1;
+    }
+    t
+};
+
+/// A positive binary floating-point value `m·2^e` with a 64-bit mantissa (normalised: bit
+/// 63 set) and a sticky flag: `true` when bits below the mantissa were dropped (the exact
+/// value is then a little *above* `m·2^e`). Multiplying or dividing by ten loses less than
+/// one unit of the 64th bit per step; the callers take at most 84 steps, so the result is
+/// within 2⁻⁵⁶ (relative) of the exact value, and *exact*, sticky clear, whenever the exact
+/// value fits the mantissa — every tie between two `f32` or two decimals does (≤ 25 and
+/// ≤ 54 significant bits). Integers only: no soft-float `f64` in the image; 64-bit words
+/// (two registers on the Cortex-M4) keep the code small.
+#[derive(Clone, Copy)]
+struct Big {
+    m: u64,
+    e: i32,
+    sticky: bool,
+}
+
+/// A non-negative value as integer part, 64 fraction bits, and whether bits below those
+/// were dropped.
+struct Split {
+    int: u64,
+    frac: u64,
+    lost: bool,
+}
+
+impl Big {
+    /// `v·2^e` (`v > 0`).
+    fn new(v: u64, e: i32) -> Big {
+        let z = v.leading_zeros();
+        Big {
+            m: v << z,
+            e: e - z as i32,
+            sticky: false,
+        }
+    }
+
+    fn mul10(&mut self) {
+        let p = self.m as u128 * 10;
+        let (hi, lo) = ((p >> 64) as u64, p as u64); // hi < 10
+        let sh = 64 - hi.leading_zeros(); // 3 or 4: bits above the 64 kept
+        self.sticky |= lo & ((1 << sh) - 1) != 0;
+        self.m = (hi << (64 - sh)) | (lo >> sh);
+        self.e += sh as i32;
+    }
+
+    fn div10(&mut self) {
+        let (q, r) = (self.m / 10, self.m % 10);
+        let z = q.leading_zeros(); // 3 or 4
+        let r = r << z;
+        self.sticky |= r % 10 != 0;
+        self.m = (q << z) | (r / 10);
+        self.e -= z as i32;
+    }
+
+    /// `self·10^n`.
+    #[inline(never)]
+    fn scale10(mut self, n: i32) -> Big {
+        for _ in 0..n.unsigned_abs() {
+            if n > 0 {
+                self.mul10()
+            } else {
+                self.div10()
+            }
+        }
+        self
+    }
+
+    /// Integer part and fraction (`None` if the value is 2^64 or more).
+    fn split(self) -> Option<Split> {
+        let sh = -self.e; // value = m / 2^sh
+        if sh <= 0 {
+            return None;
+        }
+        Some(if sh < 64 {
+            Split {
+                int: self.m >> sh,
+                frac: self.m << (64 - sh),
+                lost: self.sticky,
+            }
+        } else if sh < 128 {
+            let t = sh - 64;
+            Split {
+                int: 0,
+                frac: self.m.checked_shr(t as u32).unwrap_or(0),
+                lost: self.sticky || self.m & ((1u64 << t) - 1) != 0,
+            }
+        } else {
+            Split {
+                int: 0,
+                frac: 0,
+                lost: true,
+            }
+        })
+    }
+
+    /// Round to nearest, ties to even, at bit `sh` of the mantissa (`1 ≤ sh ≤ 64`): the
+    /// mantissa kept, as an integer.
+    fn round_at(self, sh: u32) -> u64 {
+        let kept = self.m.checked_shr(sh).unwrap_or(0);
+        let rest = self.m & (u64::MAX >> (64 - sh));
+        let half = 1u64 << (sh - 1);
+        let up = rest > half || (rest == half && (self.sticky || kept & 1 == 1));
+        kept + up as u64
+    }
 }
 
 fn n_digits(mut v: u64) -> i32 {
@@ -93,8 +232,26 @@ fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
     if top <= -46 {
         return Ok(0.0); // ≤ 1e-46, below half the smallest subnormal (7.0e-46)
     }
-    // Here −65 ≤ e10 ≤ 38 and mant < 10^19: no intermediate leaves f64's normal range.
-    let v = scale(mant as f64, e10) as f32;
+    // Here −65 ≤ e10 ≤ 38 and mant < 10^19.
+    let b = Big::new(mant, 0).scale10(e10);
+    // The value is in [2^(63+e), 2^(64+e)): its f32 exponent, and where the 24-bit
+    // significand ends (lower for a subnormal).
+    let exp = 63 + b.e;
+    if exp > 127 {
+        return Err(NumError::Overflow);
+    }
+    let bits = if exp >= -126 {
+        let sig = b.round_at(40) as u32; // 2^23 … 2^24 (carry into the exponent)
+        (((exp + 126) as u32) << 23) + sig
+    } else {
+        let sh = 40 + (-126 - exp) as u32;
+        if sh > 64 {
+            0 // below 2^-150: half the smallest subnormal
+        } else {
+            b.round_at(sh) as u32
+        }
+    };
+    let v = f32::from_bits(bits);
     if v.is_finite() {
         Ok(v)
     } else {
@@ -221,45 +378,66 @@ impl Buf {
             self.push(c);
         }
     }
-    fn out(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    fn as_str(&self) -> &str {
         // Only ASCII is ever pushed.
-        f.write_str(core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?"))
+        core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?")
     }
 }
 
-/// Round a non-negative `f64` below 2^63 to the nearest integer (ties away from zero; the
-/// shortest-digit search checks its candidates, so the tie rule does not matter there).
-fn round_u64(x: f64) -> u64 {
-    (x + 0.5) as u64
+/// A number's text, built on the stack: [`Num::text`], [`Fixed::text`], [`uint`]. Writing it
+/// with `write_str` keeps `core::fmt`'s formatting machinery (`write!`, `Formatter`) out of
+/// the board image.
+pub struct Text(Buf);
+
+impl Text {
+    pub fn as_str(&self) -> &str {
+        self.0.as_str()
+    }
+}
+
+/// The decimal text of an unsigned integer.
+pub fn uint(v: u64) -> Text {
+    let mut buf = Buf::new();
+    buf.push_u64(v, 0);
+    Text(buf)
 }
 
 /// The shortest decimal `d·10^e` (d with 1 … 9 digits) that converts back to `x`
 /// (finite, > 0).
 fn shortest(x: f32) -> (u64, i32) {
-    let xd = x as f64;
     let bits = x.to_bits();
     let be = ((bits >> 23) & 0xff) as i32;
-    let e2 = if be == 0 {
-        31 - (bits & 0x7f_ffff).leading_zeros() as i32 - 149 // subnormal
+    let frac = (bits & 0x7f_ffff) as u64;
+    // x = b exactly; e2 = floor(log2 x).
+    let (b, e2) = if be == 0 {
+        (Big::new(frac, -149), 63 - frac.leading_zeros() as i32 - 149) // subnormal
     } else {
-        be - 127
+        (Big::new(frac | 1 << 23, be - 150), be - 127)
     };
     // k ≈ floor(log10 x) (1233/4096 ≈ log10 2), then made exact so that
     // s = x·10^(8−k) rounds to a 9-digit integer.
+    let s_of = |k: i32| {
+        b.scale10(8 - k).split().unwrap_or(Split {
+            int: u64::MAX,
+            frac: 0,
+            lost: false,
+        })
+    };
     let mut k = (e2 * 1233) >> 12;
-    let mut s = scale(xd, 8 - k);
+    let mut s = s_of(k);
     for _ in 0..4 {
-        if s >= 999_999_999.5 {
-            k += 1;
-        } else if s < 99_999_999.5 {
-            k -= 1;
+        let half = s.frac >= 1 << 63;
+        if s.int > 999_999_999 || (s.int == 999_999_999 && half) {
+            k += 1; // s ≥ 999,999,999.5
+        } else if s.int < 99_999_999 || (s.int == 99_999_999 && !half) {
+            k -= 1; // s < 99,999,999.5
         } else {
             break;
         }
-        s = scale(xd, 8 - k);
+        s = s_of(k);
     }
     let good = |(d, e): (u64, i32)| decimal_to_f32(d, e) == Ok(x);
-    let digits = |p: i32| digits_p(s, k, p);
+    let digits = |p: i32| digits_p(&s, k, p);
     // Fewest digits that round-trip: 9 always do for an f32 (half a unit of the 9th digit is
     // ≤ 5·10⁻⁹ relative, half an f32 ulp ≥ 2.98·10⁻⁸); a binary search over 1 … 8, each
     // candidate checked by converting it back.
@@ -280,13 +458,23 @@ fn shortest(x: f32) -> (u64, i32) {
     (d, e)
 }
 
-/// `s` (in [10^8 − 0.5, 10^9 − 0.5), the value times 10^(8−k)) rounded to `p` digits, as
-/// `d·10^e`.
+/// `s` (the value times 10^(8−k), in [10^8 − 0.5, 10^9 − 0.5)) rounded to `p` digits (ties
+/// away from zero: the candidates are checked by converting them back, so the tie rule does
+/// not matter), as `d·10^e`.
 #[inline(never)]
-fn digits_p(s: f64, k: i32, p: i32) -> (u64, i32) {
-    let mut d = round_u64(s / POW10[(9 - p) as usize]);
+fn digits_p(s: &Split, k: i32, p: i32) -> (u64, i32) {
+    let div = POW10[(9 - p) as usize];
+    // s/div = q + (r + frac)/div; for div ≥ 10, div/2 is an integer, so the rest reaches
+    // one half exactly when r ≥ div/2.
+    let (q, r) = (s.int / div, s.int % div);
+    let up = if div == 1 {
+        s.frac >= 1 << 63
+    } else {
+        r >= div / 2
+    };
+    let mut d = q + up as u64;
     let mut e = k - p + 1;
-    if d >= POW10[p as usize] as u64 {
+    if d >= POW10[p as usize] {
         d /= 10; // 9.99… rounded up to 10.0…
         e += 1;
     }
@@ -352,11 +540,18 @@ fn write_num(v: f32, buf: &mut Buf) {
 #[derive(Clone, Copy, Debug)]
 pub struct Num(pub f32);
 
-impl fmt::Display for Num {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl Num {
+    /// The text, without `core::fmt` (see [`Text`]).
+    pub fn text(self) -> Text {
         let mut buf = Buf::new();
         write_num(self.0, &mut buf);
-        buf.out(f)
+        Text(buf)
+    }
+}
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 
@@ -364,32 +559,55 @@ impl fmt::Display for Num {
 #[derive(Clone, Copy, Debug)]
 pub struct Fixed(pub f32, pub u8);
 
-impl fmt::Display for Fixed {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl Fixed {
+    /// The text, without `core::fmt` (see [`Text`]).
+    pub fn text(self) -> Text {
         let mut buf = Buf::new();
         let n = self.1.min(9) as i32;
-        let s = scale(self.0.abs() as f64, n);
-        if !self.0.is_finite() || s >= 1e18 {
-            write_num(self.0, &mut buf);
+        let a = self.0.abs();
+        let bits = a.to_bits();
+        let (be, frac) = (((bits >> 23) & 0xff) as i32, (bits & 0x7f_ffff) as u64);
+        // |v|·10^n, exact (24 + 30 bits fit the mantissa), split at the point.
+        let s = if !a.is_finite() {
+            None
+        } else if a == 0.0 {
+            Some(Split {
+                int: 0,
+                frac: 0,
+                lost: false,
+            })
+        } else if be == 0 {
+            Big::new(frac, -149).scale10(n).split()
         } else {
-            // Ties to even, as core: `s` is exact here for the console's values (an f32 times
-            // 10^n ≤ 10^9 fits f64's 53 bits whenever the f32 has few fraction bits).
-            let mut q = s as u64;
-            let r = s - q as f64;
-            if r > 0.5 || (r == 0.5 && q % 2 == 1) {
-                q += 1;
+            Big::new(frac | 1 << 23, be - 150).scale10(n).split()
+        };
+        // Ties to even, as core (a tie is exact here: `lost` is clear only then).
+        let q = s.map(|s| {
+            let half = 1u64 << 63;
+            let up = s.frac > half || (s.frac == half && (s.lost || s.int % 2 == 1));
+            s.int.saturating_add(up as u64)
+        });
+        match q {
+            Some(q) if q < POW10[18] => {
+                if self.0.is_sign_negative() {
+                    buf.push(b'-');
+                }
+                let p = POW10[n as usize];
+                buf.push_u64(q / p, 0);
+                if n > 0 {
+                    buf.push(b'.');
+                    buf.push_u64(q % p, n as usize);
+                }
             }
-            if self.0.is_sign_negative() {
-                buf.push(b'-');
-            }
-            let p = POW10[n as usize] as u64;
-            buf.push_u64(q / p, 0);
-            if n > 0 {
-                buf.push(b'.');
-                buf.push_u64(q % p, n as usize);
-            }
+            _ => write_num(self.0, &mut buf),
         }
-        buf.out(f)
+        Text(buf)
+    }
+}
+
+impl fmt::Display for Fixed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text().as_str())
     }
 }
 
@@ -513,6 +731,27 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn q_of_is_fx_q(bits in any::<u32>()) {
+            let v = f32::from_bits(bits);
+            prop_assert_eq!(q_of(v), crate::fx::q(v), "{:e}", v);
+        }
+
+        #[test]
+        fn q_of_is_fx_q_near_q16(raw in any::<i32>(), half in any::<bool>()) {
+            // Values on and next to the Q16.16 grid, ties included.
+            let v = (raw as f32 + if half { 0.5 } else { 0.0 }) / 65536.0;
+            prop_assert_eq!(q_of(v), crate::fx::q(v), "{:e}", v);
+        }
+
+        #[test]
+        fn q_f32_is_to_num(bits in any::<i32>()) {
+            let x = crate::fx::Q::from_bits(bits);
+            prop_assert_eq!(q_f32(x).to_bits(), x.to_num::<f32>().to_bits());
+        }
+    }
+
+    proptest! {
         #![proptest_config(ProptestConfig::with_cases(20_000))]
 
         /// Every finite f32 (any bit pattern): the text reads back to the same value, by our
@@ -545,7 +784,8 @@ mod tests {
         }
 
         /// Decimal texts of every accepted shape: accepted exactly when core accepted them, and
-        /// within 1 ulp of core's correctly rounded `f32` parse.
+        /// within 1 ulp of core's correctly rounded `f32` parse, and equal to it when no
+        /// digit is dropped (≤ 19 significant digits).
         #[test]
         fn parse_agrees_with_core(s in "[-+]?[0-9]{0,22}(\\.[0-9]{0,22})?([eE][-+]?[0-9]{1,3})?") {
             let ours = parse_f32(&s);
@@ -555,6 +795,12 @@ mod tests {
                     let exact: f32 = s.parse().unwrap();
                     let v = ours.unwrap();
                     prop_assert!(ulps(v, exact) <= 1, "{} -> {:e} vs {:e}", s, v, exact);
+                    // Up to 19 significant digits nothing is dropped: correctly rounded.
+                    let m = s.split(['e', 'E']).next().unwrap_or("");
+                    let digits: String = m.chars().filter(|c| c.is_ascii_digit()).collect();
+                    if digits.trim_matches('0').len() <= 19 {
+                        prop_assert_eq!(v.to_bits(), exact.to_bits(), "{}", s);
+                    }
                 }
             }
         }
@@ -573,6 +819,20 @@ mod tests {
         #[test]
         fn fixed_matches_core(raw in any::<i32>(), n in 0u8..=6) {
             let v = raw as f32 / 4096.0;
+            let ours = format!("{}", Fixed(v, n));
+            let core_s = format!("{:.*}", n as usize, v);
+            prop_assert_eq!(ours, core_s);
+        }
+
+        /// Any finite `f32` (subnormals and ties included) and up to 9 decimals: identical text
+        /// to core's `{:.N}` while the result has at most 17 digits (then `Fixed` is positional).
+        #[test]
+        fn fixed_matches_core_any_f32(m in 0u32..1 << 24, eu in any::<u32>(), n in 0u8..=9, neg in any::<bool>()) {
+            // v = ±m·2^e, exact in f32 for e ≥ −149; e up to 32 − 4n keeps |v|·10^n < 2^56.
+            let e = -149 + (eu % (182 - 4 * n as u32)) as i32;
+            let v = (m as f64 * 2f64.powi(e)) as f32;
+            let v = if neg { -v } else { v };
+            prop_assert_eq!(v as f64, if neg { -1.0 } else { 1.0 } * m as f64 * 2f64.powi(e));
             let ours = format!("{}", Fixed(v, n));
             let core_s = format!("{:.*}", n as usize, v);
             prop_assert_eq!(ours, core_s);

@@ -51,17 +51,28 @@ pub enum ParamError {
     Invalid(&'static str, &'static str),
 }
 
+impl ParamError {
+    /// The message; for [`ParamError::Invalid`] its start, followed by `: field: reason`.
+    pub fn message(self) -> &'static str {
+        match self {
+            ParamError::UnknownName => "unknown parameter",
+            ParamError::NotFinite => "value is not a finite number",
+            ParamError::NotInteger => "value must be an integer",
+            ParamError::OutOfRange => "value out of range",
+            ParamError::NotWhileRunning => {
+                "parameter may not change while running (mode idle first)"
+            }
+            ParamError::Invalid(..) => "config refused",
+        }
+    }
+}
+
 impl core::fmt::Display for ParamError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.message())?;
         match self {
-            ParamError::UnknownName => f.write_str("unknown parameter"),
-            ParamError::NotFinite => f.write_str("value is not a finite number"),
-            ParamError::NotInteger => f.write_str("value must be an integer"),
-            ParamError::OutOfRange => f.write_str("value out of range"),
-            ParamError::NotWhileRunning => {
-                f.write_str("parameter may not change while running (mode idle first)")
-            }
-            ParamError::Invalid(field, why) => write!(f, "config refused: {field}: {why}"),
+            ParamError::Invalid(field, why) => write!(f, ": {field}: {why}"),
+            _ => Ok(()),
         }
     }
 }

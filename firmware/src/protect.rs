@@ -20,6 +20,7 @@ use crate::config::Config;
 use crate::control::{Mode, Telemetry};
 use crate::frames::Dq;
 use crate::fx::{mul, Q};
+use crate::numtext::q_f32;
 
 /// Rate of [`crate::Controller::supervise`], Hz.
 pub const SUPERVISE_HZ: f32 = 1_000.0;
@@ -359,7 +360,7 @@ impl Protection {
                         x: t.x,
                         force_n: abs(self.force_filt),
                         i2t: self.i2t,
-                        derate: self.derate.to_num(),
+                        derate: q_f32(self.derate),
                     },
                     later: 0,
                 })
@@ -383,10 +384,10 @@ impl Protection {
     ) -> Verdict {
         let dt = 1.0 / SUPERVISE_HZ;
         self.ticks = self.ticks.wrapping_add(1);
-        let v_bus: f32 = t.v_bus.to_num();
-        let omega: f32 = t.omega_m.to_num();
-        let i_d: f32 = t.i_dq.d.to_num();
-        let i_q: f32 = t.i_dq.q.to_num();
+        let v_bus: f32 = q_f32(t.v_bus);
+        let omega: f32 = q_f32(t.omega_m);
+        let i_d: f32 = q_f32(t.i_dq.d);
+        let i_q: f32 = q_f32(t.i_dq.q);
         let controlled = matches!(mode, Mode::Run | Mode::Open);
         // Faults found this tick (bit per code); the reported one is chosen by cause
         // priority at the end: a sensor that lies (current sum, encoder) before what is
@@ -405,7 +406,7 @@ impl Protection {
         } else {
             0.0
         };
-        self.derate = Q::from_num(k);
+        self.derate = crate::numtext::q_of(k);
 
         // I²t: dθ/dt = ((|i|/I_cont)² − θ)/τ (first-order winding temperature rise, per unit
         // of the rise at the continuous current), forward Euler at 1 kHz (τ ≥ 0.1 s ≫ 1 ms).
@@ -417,8 +418,7 @@ impl Protection {
         }
 
         // Phase-current consistency: the star point floats, so i_a + i_b + i_c = 0.
-        let s: f32 =
-            t.i_abc[0].to_num::<f32>() + t.i_abc[1].to_num::<f32>() + t.i_abc[2].to_num::<f32>();
+        let s: f32 = q_f32(t.i_abc[0]) + q_f32(t.i_abc[1]) + q_f32(t.i_abc[2]);
         self.isum_now = s > cfg.i_sum_tol_a || s < -cfg.i_sum_tol_a;
         self.isum_count = leaky(self.isum_count, self.isum_now);
         if self.isum_count >= ISUM_TICKS {
@@ -457,7 +457,7 @@ impl Protection {
 
         if controlled {
             // Stroke.
-            let x: f32 = t.x.to_num();
+            let x: f32 = q_f32(t.x);
             if x < cfg.x_min_m || x > cfg.x_max_m {
                 set(Fault::StrokeLimit);
             }
@@ -475,8 +475,8 @@ impl Protection {
             let we = omega * cfg.pole_pairs as f32;
             let l = cfg.l_phase_h;
             let r = cfg.r_phase_ohm;
-            let ed = t.v_dq.d.to_num::<f32>() - r * i_d + we * l * i_q;
-            let eq = t.v_dq.q.to_num::<f32>() - r * i_q - we * l * i_d;
+            let ed = q_f32(t.v_dq.d) - r * i_d + we * l * i_q;
+            let eq = q_f32(t.v_dq.q) - r * i_q - we * l * i_d;
             let w_abs = if omega < 0.0 { -omega } else { omega };
             let lim = cfg.ke_v_s_per_rad * w_abs * (1.0 + EMF_REL_TOL) + cfg.enc_emf_tol_v;
             ed * ed + eq * eq > lim * lim
@@ -512,12 +512,12 @@ impl Protection {
         t: &Telemetry,
         encoder_implausible: bool,
     ) -> Option<&'static str> {
-        let v: f32 = t.v_bus.to_num();
+        let v: f32 = q_f32(t.v_bus);
         match f {
             Fault::OverCurrent => t
                 .i_abc
                 .iter()
-                .any(|i| i.to_num::<f32>().abs() >= cfg.i_trip_a)
+                .any(|i| q_f32(*i).abs() >= cfg.i_trip_a)
                 .then_some("a phase current is still above i_trip_a"),
             Fault::BusOverVoltage => {
                 (v > cfg.derate_start_v).then_some("bus still above derate_start_v")
@@ -535,7 +535,7 @@ impl Protection {
             Fault::SpeedImplausible => (abs(self.omega_raw) > cfg.omega_max_rad_s)
                 .then_some("speed still above omega_max_rad_s"),
             Fault::StrokeLimit => {
-                let x: f32 = t.x.to_num();
+                let x: f32 = q_f32(t.x);
                 (x < cfg.x_min_m || x > cfg.x_max_m).then_some("travel still outside the stroke")
             }
             Fault::LoopOverrun => (self.bucket > 0).then_some("overruns still being reported"),

@@ -159,12 +159,11 @@ pub fn save<F: Flash>(f: &mut F, cfg: &Config) -> Result<(), PowerLost> {
         None => (0, 1),
     };
     let mut at = free[s].div_ceil(n) * n;
-    if at + n > f.sector_words() {
-        s ^= 1;
-        f.erase(s)?;
-        at = 0;
-    } else if best.is_none() && free[s] > 0 {
-        // No valid record anywhere but garbage in sector 0: start clean.
+    // The active sector full: the other one, erased. No valid record anywhere but garbage in
+    // sector 0: start clean. (One erase call site: the board's erase is inlined.)
+    let full = at + n > f.sector_words();
+    if full || (best.is_none() && free[s] > 0) {
+        s ^= full as usize;
         f.erase(s)?;
         at = 0;
     }

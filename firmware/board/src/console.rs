@@ -24,7 +24,7 @@ use embedded_io_async::{Read, Write};
 use regen_fw::console::Console;
 use regen_fw::store::FlashStore;
 
-use crate::drive::{self, Pending, PENDING, PERIODS};
+use crate::drive::{self, Pending, Slot, PENDING, PERIODS};
 use crate::store::BoardFlash;
 
 /// Telemetry lines dropped because the UART was busy.
@@ -90,10 +90,7 @@ impl core::fmt::Write for LastLine {
 /// must store what was set before it).
 async fn wait_applied() {
     for _ in 0..100 {
-        let empty = critical_section::with(|cs| {
-            let q = PENDING.borrow_ref(cs);
-            q.clear.is_none() && q.cfg.is_none() && q.mode.is_none()
-        });
+        let empty = critical_section::with(|cs| PENDING.borrow_ref(cs).is_empty());
         if empty {
             return;
         }
@@ -106,15 +103,15 @@ async fn wait_applied() {
 fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
     let mut p = Pending::default();
     if before.fault().is_some() && after.fault().is_none() {
-        p.clear = before.fault();
+        p.clear = before.fault().into();
     }
-    if after.config() != before.config() {
-        p.cfg = Some(*after.config());
+    if after.config().differs(before.config()) {
+        p.cfg = Slot::Full(*after.config());
     }
     if after.mode() != before.mode() {
-        p.mode = Some(after.mode());
+        p.mode = Slot::Full(after.mode());
     }
-    if p.clear.is_none() && p.cfg.is_none() && p.mode.is_none() {
+    if p.is_empty() {
         return false;
     }
     critical_section::with(|cs| {
@@ -149,9 +146,12 @@ pub async fn console_task(
     let mut ticker = Ticker::every(Duration::from_micros(500));
     let mut inbuf = [0u8; 32];
 
-    let _ = tx.write_all(b"\r\n# regen-board ").await;
-    let _ = tx.write_all(boot_msg.as_bytes()).await;
-    let _ = tx.write_all(b"\r\n").await;
+    // The boot line, through the reply buffer: one write (one await point less in this
+    // task's state machine: flash).
+    let _ = reply.write_str("\r\n# regen-board ");
+    let _ = reply.write_str(boot_msg);
+    let _ = reply.write_str("\r\n");
+    let _ = tx.write_all(&reply.b).await;
 
     loop {
         match select(rx.read(&mut inbuf), ticker.next()).await {
@@ -168,7 +168,9 @@ pub async fn console_task(
                     }
                     reply.clear();
                     if too_long {
-                        let _ = write!(reply, "error: line longer than {LINE_MAX} characters\r\n");
+                        let _ = reply.write_str("error: line longer than ");
+                        let _ = reply.write_str(regen_fw::numtext::uint(LINE_MAX as u64).as_str());
+                        let _ = reply.write_str(" characters\r\n");
                     } else if let Ok(text) = core::str::from_utf8(&line) {
                         match drive::snapshot() {
                             Some(before) => {

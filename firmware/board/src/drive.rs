@@ -72,21 +72,81 @@ pub struct LoopState {
     pub io: BoardIo,
 }
 
-pub static LOOP: Mutex<RefCell<Option<LoopState>>> = Mutex::new(RefCell::new(None));
+pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot::Empty));
+
+/// An optional value whose empty state is all zero bytes (`repr(C, u8)`: tag 0, no niche), so
+/// a static holding one is zero-initialised (`.bss`) and costs no flash. An `Option<T>` keeps
+/// `None` in a niche of `T` (an enum or `bool` value no `T` has), which is not zero: the
+/// `Option<LoopState>` and the mailbox's `Option<Config>` put 1.6 KB of initial values in
+/// flash (`.data`).
+#[repr(C, u8)]
+#[derive(Clone, Copy, Debug, Default)]
+pub enum Slot<T> {
+    #[default]
+    Empty,
+    Full(T),
+}
+
+impl<T> Slot<T> {
+    pub fn is_empty(&self) -> bool {
+        matches!(self, Slot::Empty)
+    }
+    pub fn get(&self) -> Option<&T> {
+        match self {
+            Slot::Full(v) => Some(v),
+            Slot::Empty => None,
+        }
+    }
+    pub fn get_mut(&mut self) -> Option<&mut T> {
+        match self {
+            Slot::Full(v) => Some(v),
+            Slot::Empty => None,
+        }
+    }
+}
+
+impl<T: Copy> Slot<T> {
+    pub fn value(&self) -> Option<T> {
+        self.get().copied()
+    }
+    /// `self` if full, else `other` (as `Option::or`).
+    pub fn or(self, other: Slot<T>) -> Slot<T> {
+        if self.is_empty() {
+            other
+        } else {
+            self
+        }
+    }
+}
+
+impl<T> From<Option<T>> for Slot<T> {
+    fn from(o: Option<T>) -> Self {
+        match o {
+            Some(v) => Slot::Full(v),
+            None => Slot::Empty,
+        }
+    }
+}
 
 /// Changes posted by the console for the interrupt to apply between two steps.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Pending {
     /// Clear this fault (only if it is still the latched one).
-    pub clear: Option<Fault>,
-    pub cfg: Option<Config>,
-    pub mode: Option<Mode>,
+    pub clear: Slot<Fault>,
+    pub cfg: Slot<Config>,
+    pub mode: Slot<Mode>,
+}
+
+impl Pending {
+    pub fn is_empty(&self) -> bool {
+        self.clear.is_empty() && self.cfg.is_empty() && self.mode.is_empty()
+    }
 }
 
 pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending {
-    clear: None,
-    cfg: None,
-    mode: None,
+    clear: Slot::Empty,
+    cfg: Slot::Empty,
+    mode: Slot::Empty,
 }));
 
 /// Current-loop periods run since boot (wraps).
@@ -104,7 +164,7 @@ pub static ENERGY_HI: AtomicU32 = AtomicU32::new(0);
 
 /// Copy of the controller for a task (briefly locks out the interrupt: ≈ 2 µs).
 pub fn snapshot() -> Option<Controller> {
-    critical_section::with(|cs| LOOP.borrow_ref(cs).as_ref().map(|s| s.ctl.clone()))
+    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| s.ctl.clone()))
 }
 
 /// Energy since boot, J.
@@ -124,7 +184,7 @@ pub fn energy_j(ts: f32) -> f32 {
 pub fn on_sample() {
     critical_section::with(|cs| {
         let mut guard = LOOP.borrow_ref_mut(cs);
-        let Some(st) = guard.as_mut() else {
+        let Some(st) = guard.get_mut() else {
             // Not started yet: acknowledge the conversions and leave the bridge as it is (off).
             pac::ADC1.isr().write(|w| w.set_jeos(true));
             pac::ADC2.isr().write(|w| w.set_jeos(true));
@@ -154,21 +214,21 @@ pub fn on_sample() {
         // Console changes, between this step and the next (copied out only when present:
         // the mailbox holds a 264-byte configuration).
         let mut q = PENDING.borrow_ref_mut(cs);
-        if q.clear.is_none() && q.cfg.is_none() && q.mode.is_none() {
+        if q.is_empty() {
             PERIODS.fetch_add(1, Ordering::Relaxed);
             check_overrun(&mut st.ctl);
             return;
         }
         let p = core::mem::take(&mut *q);
         drop(q);
-        if let Some(f) = p.clear {
+        if let Some(f) = p.clear.value() {
             // The console's copy checked the cause is gone; if it came back since, the
             // controller refuses and the fault stays latched (the console shows it).
             if st.ctl.fault() == Some(f) {
                 let _ = st.ctl.clear_fault();
             }
         }
-        if let Some(c) = p.cfg {
+        if let Some(c) = p.cfg.value() {
             let old_hz = st.ctl.config().pwm_hz;
             // Validated by the console on its copy: the same check cannot fail here, and if it
             // did nothing would change.
@@ -178,7 +238,7 @@ pub fn on_sample() {
                 }
             }
         }
-        if let Some(m) = p.mode {
+        if let Some(m) = p.mode.value() {
             if st.ctl.set_mode(m).is_err() {
                 MODE_REFUSED.fetch_add(1, Ordering::Relaxed);
             }

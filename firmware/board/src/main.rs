@@ -19,11 +19,11 @@ mod pwm;
 mod store;
 mod supervisor;
 
+use defmt_rtt as _;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::{interrupt, pac};
 use regen_fw::store::{boot, FlashStore, StoreFault};
 use regen_fw::{Config, Controller};
-use {defmt_rtt as _, panic_probe as _};
 
 /// The current-loop interrupt: ADC1 and ADC2 share this vector; only ADC2's end of injected
 /// sequence is enabled, so it fires once per PWM period.
@@ -32,7 +32,21 @@ fn ADC1_2() {
     drive::on_sample();
 }
 
-/// A fault (and a panic: panic-probe ends in a HardFault) opens the bridge first: the
+/// A panic: the bridge opens first (the last duties must not stay applied), then the file and
+/// line go to the defmt log and the image stops in a HardFault; the watchdog resets it.
+/// The panic *message* is not formatted: that would link `core::fmt` (≈ 2.5 KB of flash) for
+/// a path that the firmware's no-panic rule keeps unreachable; the location identifies it.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    pwm::force_off();
+    match info.location() {
+        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
+        None => defmt::error!("panicked"),
+    }
+    cortex_m::asm::udf()
+}
+
+/// A fault (and a panic, which ends in a HardFault) opens the bridge first: the
 /// current loop no longer runs, and the last duties must not stay applied. The watchdog then
 /// resets the image within its timeout.
 #[cortex_m_rt::exception]
@@ -132,7 +146,7 @@ async fn main(spawner: embassy_executor::Spawner) {
     );
 
     critical_section::with(|cs| {
-        drive::LOOP.borrow_ref_mut(cs).replace(drive::LoopState {
+        *drive::LOOP.borrow_ref_mut(cs) = drive::Slot::Full(drive::LoopState {
             ctl,
             io: drive::BoardIo {
                 adc1: parts.adc1,

@@ -19,7 +19,9 @@
 //! `1/√(L_L·C_L)` the branch is resistive (`R + R_L`) and damps most.
 //!
 //! Discretisation: trapezoidal (Tustin) state-space equivalent at the law rate
-//! (`Config::law_rate_hz`, decimated from the loop), computed in `f64` with `+ − × ÷` only.
+//! (`Config::law_rate_hz`, decimated from the loop), computed in `f32` with `+ − × ÷` only
+//! (the parameters are `f32` anyway; no soft-float `f64` is linked into the board image for
+//! it): a few `f32` roundings (≈ 10⁻⁷ relative) per coefficient, the same on host and board.
 
 use super::lti::{decimation, Lti, LtiParams, M, N};
 use super::{CommandLaw, LawInput};
@@ -37,7 +39,7 @@ pub struct Impedance {
 
 /// The continuous branch as a state space (states `[i, v_C]` with an inductor, `[v_C, 0]`
 /// without), input `e`, output `i`.
-fn continuous(rt: f64, l: f64, c: f64) -> ([[f64; 2]; 2], [f64; 2], [f64; 2], f64) {
+fn continuous(rt: f32, l: f32, c: f32) -> ([[f32; 2]; 2], [f32; 2], [f32; 2], f32) {
     let inv_c = if c > 0.0 { 1.0 / c } else { 0.0 };
     if l > 0.0 {
         (
@@ -61,8 +63,8 @@ fn continuous(rt: f64, l: f64, c: f64) -> ([[f64; 2]; 2], [f64; 2], [f64; 2], f6
 /// Tustin equivalent of the branch at period `ts`, as filter parameters (input 0 = `e_q`).
 #[allow(clippy::needless_range_loop)]
 pub fn discretise(r: f32, r_load: f32, l_load: f32, c_load: f32, ts: f32) -> LtiParams {
-    let (a, b, c, d) = continuous(r as f64 + r_load as f64, l_load as f64, c_load as f64);
-    let h = ts as f64 / 2.0;
+    let (a, b, c, d) = continuous(r + r_load, l_load, c_load);
+    let h = ts / 2.0;
     // M = (I − h·A)⁻¹ (2×2).
     let (m00, m01, m10, m11) = (
         1.0 - h * a[0][0],
@@ -80,18 +82,18 @@ pub fn discretise(r: f32, r_load: f32, l_load: f32, c_load: f32, ts: f32) -> Lti
     let mut out = LtiParams::default();
     for i in 0..2 {
         for j in 0..2 {
-            out.a[i * N + j] = (mi[i][0] * p[0][j] + mi[i][1] * p[1][j]) as f32;
+            out.a[i * N + j] = mi[i][0] * p[0][j] + mi[i][1] * p[1][j];
         }
         let mb = mi[i][0] * b[0] + mi[i][1] * b[1];
-        out.b[i * M] = (2.0 * h * mb) as f32;
+        out.b[i * M] = 2.0 * h * mb;
     }
     let cm = [
         c[0] * mi[0][0] + c[1] * mi[1][0],
         c[0] * mi[0][1] + c[1] * mi[1][1],
     ];
-    out.c[0] = cm[0] as f32;
-    out.c[1] = cm[1] as f32;
-    out.d[0] = (d + h * (cm[0] * b[0] + cm[1] * b[1])) as f32;
+    out.c[0] = cm[0];
+    out.c[1] = cm[1];
+    out.d[0] = d + h * (cm[0] * b[0] + cm[1] * b[1]);
     out
 }
 

@@ -29,7 +29,29 @@ impl Coef {
     /// Nearest coefficient to `v` (saturating; non-finite → 0). Uses only `+ − × ÷`, so the
     /// board and the host get the same bits.
     pub fn from_f32(v: f32) -> Coef {
-        Coef::from_f64(v as f64)
+        // In f32 (no soft-float f64 on the board), bit-identical to `from_f64(v as f64)`:
+        // `v·2^40` is exact (a power-of-two scaling), an f32 of magnitude ≥ 2^23 is an
+        // integer, and below that `s − trunc(s)` is exact, so the half-away rounding sees the
+        // exact fraction.
+        if !v.is_finite() {
+            return Coef(0);
+        }
+        let s = v * (1u64 << COEF_FRAC) as f32;
+        if s >= 9.2e18 {
+            Coef(i64::MAX)
+        } else if s <= -9.2e18 {
+            Coef(i64::MIN)
+        } else {
+            let t = s as i64; // toward zero
+            let f = s - t as f32;
+            Coef(if f >= 0.5 {
+                t + 1
+            } else if f <= -0.5 {
+                t - 1
+            } else {
+                t
+            })
+        }
     }
 
     /// As [`Coef::from_f32`], from `f64`.
@@ -103,12 +125,8 @@ pub struct LtiParams {
 impl LtiParams {
     /// All coefficients finite and within the [`Coef`] range.
     pub fn is_valid(&self) -> bool {
-        self.a
-            .iter()
-            .chain(self.b.iter())
-            .chain(self.c.iter())
-            .chain(self.d.iter())
-            .all(|v| v.is_finite() && *v <= COEF_MAX && *v >= -COEF_MAX)
+        let ok = |m: &[f32]| m.iter().all(|v| v.is_finite() && v.abs() <= COEF_MAX);
+        ok(&self.a) && ok(&self.b) && ok(&self.c) && ok(&self.d)
     }
 }
 
@@ -142,7 +160,9 @@ impl Lti {
     }
 
     /// Output for input `u` at the current state (no state change).
-    #[inline]
+    /// Out of line (as `advance`): one copy shared by the impedance and optimal laws, which
+    /// run at the decimated law rate (flash: each inlined copy is over 1 KB on the M4).
+    #[inline(never)]
     pub fn output(&self, u: &[Q; M]) -> Q {
         let mut y: i64 = 0;
         for i in 0..N {
@@ -155,7 +175,7 @@ impl Lti {
     }
 
     /// Advance the state with input `u`.
-    #[inline]
+    #[inline(never)]
     pub fn advance(&mut self, u: &[Q; M]) {
         let us = [q_to_state(u[0]), q_to_state(u[1]), q_to_state(u[2])];
         let mut nx = [0i64; N];
@@ -202,6 +222,38 @@ pub fn law_period(pwm_hz: f32, law_rate_hz: f32) -> f32 {
     decimation(pwm_hz, law_rate_hz) as f32 / pwm_hz
 }
 
+/// `a / d`, truncating toward zero like `/` (`d > 0`; `d = 0` gives 0 instead of a panic):
+/// the high 64 bits of `|a|` by one `u64` division, the low 64 bits by shift and subtract.
+/// A 32-bit target has no 128-bit division routine: the compiler expands each `i128` `/` in
+/// place (≈ 1 KB of flash on the M4); this one copy is a few hundred bytes. The laws divide
+/// rarely (the tracking law once per dither half-period, three divisions).
+#[inline(never)]
+pub fn div_i128(a: i128, d: u64) -> i128 {
+    if d == 0 {
+        return 0;
+    }
+    let n = a.unsigned_abs();
+    let hi = (n >> 64) as u64;
+    let (q_hi, mut r) = (hi / d, hi % d);
+    let lo = n as u64;
+    let mut q_lo = 0u64;
+    for i in (0..64).rev() {
+        // r < d before the shift; the bit shifted out of r means r ≥ d.
+        let carry = r >> 63;
+        r = (r << 1) | ((lo >> i) & 1);
+        if carry != 0 || r >= d {
+            r = r.wrapping_sub(d);
+            q_lo |= 1 << i;
+        }
+    }
+    let q = ((q_hi as u128) << 64 | q_lo as u128) as i128;
+    if a < 0 {
+        q.wrapping_neg()
+    } else {
+        q
+    }
+}
+
 /// `2^x` for `x` in Q16.16 (|x| < 30), as a [`Coef`] bit pattern scaled by 2^-40 … computed in
 /// integers only: the fractional part by a degree-14 Taylor series of `e^(f·ln 2)` in 62-bit
 /// fixed point (relative error < 1e-12 for f ∈ [0, 1)). Returns the value in Q32.32 (i64),
@@ -211,17 +263,20 @@ pub fn exp2_q(x: Q) -> i64 {
     let n = bits >> 16; // floor
     let f = bits & 0xFFFF; // [0, 1) in 1/65536
                            // y = f·ln2 in Q1.62
-    const LN2_Q62: i128 = 3_196_577_161_300_663_914; // ln 2 · 2^62
-    let y: i128 = (f as i128 * LN2_Q62) >> 16;
-    let one: i128 = 1 << 62;
+    const LN2_Q62: u64 = 3_196_577_161_300_663_914; // ln 2 · 2^62
+                                                    // Everything below 2^63 (y < ln 2 in Q1.62, terms ≤ 1, sum < 2): u64, with one u64×u64
+                                                    // product per term (cheaper on the M4 than i128 arithmetic; the same bits).
+    let y = ((f as u128 * LN2_Q62 as u128) >> 16) as u64;
+    let one: u64 = 1 << 62;
     let mut term = one;
     let mut sum = one;
-    let mut k = 1;
+    let mut k: u64 = 1;
     while k <= 14 {
-        term = ((term * y) >> 62) / k;
+        term = ((term as u128 * y as u128) >> 62) as u64 / k;
         sum += term;
         k += 1;
     }
+    let sum = sum as i128;
     // sum in Q2.62 → Q32.32 scaled by 2^n
     let shift = 30 - n; // 62 − 32 − n
     let v = if shift >= 0 {
@@ -283,6 +338,29 @@ mod tests {
             let n1 = -0.01 * x0 + 0.998 * x1;
             x0 = n0;
             x1 = n1;
+        }
+    }
+
+    proptest::proptest! {
+        /// The f32 path gives the bits of the f64 one for every finite f32 in the range the
+        /// filters accept (and saturates the same way beyond it).
+        #[test]
+        fn coef_from_f32_is_the_f64_rounding(bits in proptest::prelude::any::<u32>()) {
+            let v = f32::from_bits(bits);
+            proptest::prop_assume!(v.is_finite() && v.abs() <= 8.3e6);
+            proptest::prop_assert_eq!(Coef::from_f32(v), Coef::from_f64(v as f64));
+        }
+    }
+
+    proptest::proptest! {
+        /// The division is `/` (any sign of the dividend, divisors of any size).
+        #[test]
+        fn div_i128_is_the_division(a in proptest::prelude::any::<i128>(),
+                                    d in 1u64..,
+                                    shift in 0u32..128) {
+            let d = (d >> (shift % 64)).max(1); // small divisors as often as large ones
+            proptest::prop_assert_eq!(div_i128(a, d), a / d as i128);
+            proptest::prop_assert_eq!(div_i128(a >> shift, d), (a >> shift) / d as i128);
         }
     }
 

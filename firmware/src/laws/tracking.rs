@@ -22,7 +22,7 @@
 //! Everything runs in integers: `R_L = 2^θ` with `θ` in Q16.16 (see [`super::lti::exp2_q`]),
 //! the conductance `1/(R + R_L)` is one i128 division per half-cycle.
 
-use super::lti::{exp2_q, q_to_state, state_to_q, Coef};
+use super::lti::{div_i128, exp2_q, q_to_state, state_to_q, Coef};
 use super::{CommandLaw, LawInput};
 use crate::frames::Dq;
 use crate::fx::{Gain, Q};
@@ -104,7 +104,7 @@ fn log2_f32(x: f32) -> f32 {
 }
 
 fn q_of(v: f32) -> Q {
-    crate::fx::q(v)
+    crate::numtext::q_of(v)
 }
 
 impl Tracking {
@@ -116,7 +116,8 @@ impl Tracking {
         let theta_min = q_of(log2_f32(p.r_min));
         let theta_max = q_of(log2_f32(p.r_max));
         let mut t = Tracking {
-            r_q32: (p.r_phase as f64 * 4_294_967_296.0) as i64,
+            // f32·2^32 is exact (power-of-two scaling): no f64 needed.
+            r_q32: (p.r_phase * 4_294_967_296.0) as i64,
             r_gain: Gain::from_f32(p.r_phase),
             half_len,
             settle_len: half_len / 2,
@@ -131,7 +132,7 @@ impl Tracking {
             step_max: q_of(p.step_max * LOG2_E),
             theta_min,
             theta_max,
-            p_min: (p.p_min_w as f64 * 65536.0) as i64,
+            p_min: (p.p_min_w * 65536.0) as i64,
             theta: Q::ZERO,
             plus: true,
             count: 0,
@@ -164,12 +165,14 @@ impl Tracking {
         };
         let total = exp2_q(th).saturating_add(self.r_q32).max(1);
         // 1/total in Coef (2^-40) from a Q32.32 total: 2^72 / total.
-        self.g = Coef(((1i128 << 72) / total as i128) as i64);
+        // total ≥ 1.
+        self.g = Coef(div_i128(1i128 << 72, total as u64) as i64);
     }
 
     fn end_half(&mut self) {
         let mean = if self.w_acc > 0 {
-            (self.acc / self.w_acc) as i64
+            // 0 < w_acc ≤ span² < 2^63 (span < 2^31 periods).
+            div_i128(self.acc, self.w_acc as u64) as i64
         } else {
             0
         };
@@ -180,7 +183,7 @@ impl Tracking {
             let sum = pp.saturating_add(pm);
             if sum > 2 * self.p_min {
                 // ratio in Q16.16
-                let ratio = (((pp - pm) as i128) << 16) / sum as i128;
+                let ratio = div_i128(((pp - pm) as i128) << 16, sum as u64); // sum > 0
                 let ratio = Q::from_bits(crate::fx::sat_i32(ratio as i64));
                 let step = self
                     .k_step
