@@ -54,6 +54,20 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
       sed -n 's/.*min=\([0-9]*\) max=\([0-9]*\).*/\1–\2/p')
     echo "  $f: $p"
   done
+  # The step as the board image builds it (firmware/board/Cargo.toml: every package at
+  # opt-level "z", for flash): the same source, counted and checked for bit identity too.
+  zdir="$here/target/board-profile"
+  (cd "$here" && cargo build -q --release --target-dir "$zdir" \
+    --config 'profile.release.opt-level="z"' --config 'profile.release.package."*".opt-level="z"')
+  zelf="$zdir/thumbv7em-none-eabihf/release/regen-m4check"
+  zm4=$(timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+    -semihosting-config enable=on,target=native -kernel "$zelf" | tr -d '\r' | grep '^digest=')
+  if [ "$host" != "$zm4" ]; then
+    echo "FAIL: the board-profile Cortex-M4 outputs differ from the host's" >&2
+    exit 1
+  fi
+  zline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step 2>&1 | grep insnwin | tail -n1)
+  echo "instructions per current-loop step as the board builds it (opt-level z, bit identity OK): min $(echo "$zline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$zline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
 else
   echo "instruction count skipped: $tools not found"
 fi

@@ -335,7 +335,12 @@ impl Controller {
         let k = &self.g.k;
 
         // ---- Measurements (scalings folded into constants; the zero code cancels) ----
-        let [ia, ib, ic] = s.i_abc.map(|c| c as u32);
+        // The record of this period starts with its sample, copied first while no other value
+        // holds a register, as two words and a half-word (a whole-struct copy becomes a
+        // `memcpy` call when the board builds for size).
+        self.rec.sample = RawSample::from_words(s.to_words());
+        // Element by element: `map` becomes a loop through the stack when built for size.
+        let [ia, ib, ic] = [s.i_abc[0] as u32, s.i_abc[1] as u32, s.i_abc[2] as u32];
         // Phase over-current on the raw codes, while they are in registers (protection below).
         let lo = k.i_lo;
         let off = |c: u32| c.wrapping_sub(lo);
@@ -370,9 +375,8 @@ impl Controller {
 
         let (sin, cos) = theta_e.sin_cos();
         let i_dq = park_bounded(i_ab, sin, cos);
-        // The record of this period, written as its values become known (after `trip_on`,
-        // whose snapshot reads the last period's).
-        self.rec.sample = *s;
+        // The rest of this period's record, written as its values become known (after
+        // `trip_on`, whose snapshot takes them from the last period).
         self.rec.i_dq = i_dq;
         self.rec.theta_e = theta_e;
 
