@@ -82,17 +82,21 @@ fn gates_off(v: f64, l_h: f64, seconds: f64) -> Run {
     }
 }
 
-/// Onset speed of the reference device's bridge on its 320 V bus: √3·K_e·ω = V_bus, m/s
-/// (0.50 m/s).
-fn onset() -> f64 {
-    let sc = Scenario::imposed(
+/// The reference device on its 320 V bus (for its parameters).
+fn reference() -> Scenario {
+    Scenario::imposed(
         Motion::Triangle {
             amplitude_m: 0.4,
             freq_hz: 1.0,
         },
         f64::INFINITY,
         1.0,
-    );
+    )
+}
+
+/// Onset speed of the reference device's bridge: √3·K_e·ω = V_bus, m/s (0.50 m/s).
+fn onset() -> f64 {
+    let sc = reference();
     sc.bus.initial_v * sc.screw.lead_m_per_rad / (3f64.sqrt() * sc.machine.ke_v_s_per_rad)
 }
 
@@ -167,14 +171,7 @@ fn above_the_onset_the_bridge_rectifies_and_brakes() {
 
 #[test]
 fn without_inductance_the_bridge_is_the_static_resistive_one() {
-    let sc = Scenario::imposed(
-        Motion::Triangle {
-            amplitude_m: 0.4,
-            freq_hz: 1.0,
-        },
-        f64::INFINITY,
-        1.0,
-    );
+    let sc = reference();
     let (ke, r) = (sc.machine.ke_v_s_per_rad, sc.machine.r_ohm);
     for k in [1.2, 1.5] {
         let v = k * onset();
