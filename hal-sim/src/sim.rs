@@ -117,8 +117,12 @@ struct Flows {
     /// Σ v̂·v̄, m²/s².
     vv: f64,
     electromechanical: f64,
-    /// Σ mean(i_α² + i_β²), A² (copper loss = 3/2·R·T·Σ, conduction = 3/2·R_on·T·Σ).
+    /// Σ mean(i_α² + i_β²), A² (copper loss = 3/2·R·T·Σ, conduction = 3/2·R_on·T·(Σ − the
+    /// gates-off part)).
     i2: f64,
+    /// The part of `i2` from periods with the gates off: the current then flows through the
+    /// body diodes, whose drop is not modelled, not through the switches' R_on.
+    i2_off: f64,
     to_inverter: f64,
     switching_loss: f64,
     brake: f64,
@@ -433,7 +437,7 @@ impl Sim {
             copper_loss: p.copper * f.i2,
             to_inverter: f.to_inverter * ts,
             switching_loss: f.switching_loss * ts,
-            conduction_loss: p.r_on_15 * ts * f.i2,
+            conduction_loss: p.r_on_15 * ts * (f.i2 - f.i2_off),
             logic_loss: p.logic_w * ts * self.steps as f64,
             brake: f.brake * ts,
             source_r_loss: f.source_r_loss * ts,
@@ -662,7 +666,11 @@ impl Sim {
             let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
             averaged_period(&e, v, p, &mut self.s.i_ab)
         } else {
-            other_period(act, vb0, &e, p, ts, &mut self.s.i_ab)
+            let el = other_period(act, vb0, &e, p, ts, &mut self.s.i_ab);
+            if !act.enable {
+                fl.i2_off += el.i2_avg;
+            }
+            el
         };
         fl.i2 += i2_avg;
         let iq_avg = -sn * i_avg[0] + cs * i_avg[1];
