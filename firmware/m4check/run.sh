@@ -13,17 +13,31 @@ bin="$(rustc --print sysroot)/lib/rustlib/x86_64-unknown-linux-gnu/bin"
 export PATH="$bin:$PATH"
 
 host=$(cd "$root" && cargo run -q --release -p regen-fw --example digest -- "$here/vectors.bin")
+# The digest line an ELF prints on the emulated Cortex-M4.
+m4_digest() {
+  timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+    -semihosting-config enable=on,target=native -kernel "$1" | tr -d '\r' | grep '^digest='
+}
 (cd "$here" && cargo build -q --release)
 elf="$here/target/thumbv7em-none-eabihf/release/regen-m4check"
-m4=$(timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
-  -semihosting-config enable=on,target=native -kernel "$elf" | tr -d '\r' | grep '^digest=')
+m4=$(m4_digest "$elf")
 echo "host:      $host"
 echo "cortex-m4: $m4"
 if [ "$host" != "$m4" ]; then
   echo "FAIL: the Cortex-M4 outputs differ from the host's" >&2
   exit 1
 fi
-echo "bit identity: OK"
+# The step as the board image builds it (firmware/board/Cargo.toml: every package at
+# opt-level "z", for flash): the same source, checked for bit identity too, counted below.
+zdir="$here/target/board-profile"
+(cd "$here" && cargo build -q --release --target-dir "$zdir" \
+  --config 'profile.release.opt-level="z"' --config 'profile.release.package."*".opt-level="z"')
+zelf="$zdir/thumbv7em-none-eabihf/release/regen-m4check"
+if [ "$host" != "$(m4_digest "$zelf")" ]; then
+  echo "FAIL: the board-profile Cortex-M4 outputs differ from the host's" >&2
+  exit 1
+fi
+echo "bit identity: OK (opt-level 3 and the board's opt-level z)"
 
 tools="$root/../shared/tools/qemu-insn"
 if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
@@ -54,18 +68,6 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
       sed -n 's/.*min=\([0-9]*\) max=\([0-9]*\).*/\1–\2/p')
     echo "  $f: $p"
   done
-  # The step as the board image builds it (firmware/board/Cargo.toml: every package at
-  # opt-level "z", for flash): the same source, counted and checked for bit identity too.
-  zdir="$here/target/board-profile"
-  (cd "$here" && cargo build -q --release --target-dir "$zdir" \
-    --config 'profile.release.opt-level="z"' --config 'profile.release.package."*".opt-level="z"')
-  zelf="$zdir/thumbv7em-none-eabihf/release/regen-m4check"
-  zm4=$(timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
-    -semihosting-config enable=on,target=native -kernel "$zelf" | tr -d '\r' | grep '^digest=')
-  if [ "$host" != "$zm4" ]; then
-    echo "FAIL: the board-profile Cortex-M4 outputs differ from the host's" >&2
-    exit 1
-  fi
   zline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step 2>&1 | grep insnwin | tail -n1)
   echo "instructions per current-loop step as the board builds it (opt-level z, bit identity OK): min $(echo "$zline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$zline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
 else
