@@ -140,18 +140,6 @@ impl SinCos {
     }
 }
 
-/// ⌊x⌋ for |x| < 2⁶³ (an integer), without the `floor` library call of the baseline x86-64
-/// target.
-#[inline]
-pub fn floor_i64(x: f64) -> i64 {
-    let i = x as i64;
-    if (i as f64) > x {
-        i - 1
-    } else {
-        i
-    }
-}
-
 /// ⌊x⌋ modulo 2¹⁶ (two's complement, as a 16-bit hardware counter wraps) for |x| < 2⁵¹,
 /// without a libcall or a saturating conversion: adding 1.5·2⁵² rounds x to the nearest
 /// integer n in the low mantissa bits (every double in [2⁵², 2⁵³) is an integer), and n − 1
@@ -338,7 +326,6 @@ mod tests {
             -7.000_000_1,
             1e15 + 0.5,
         ] {
-            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
             assert_eq!(floor_wrap_u16(x), x.floor() as i64 as u16, "{x}");
         }
     }
