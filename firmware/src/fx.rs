@@ -187,11 +187,6 @@ pub fn fixed_i32(v: f32, n: u8) -> i32 {
     }
 }
 
-/// `v·2^30` rounded, for a constant known to lie in (−2, 2) (Q2.30); saturates outside.
-pub fn q30(v: f32) -> i32 {
-    fixed_i32(v, 30)
-}
-
 fn pow2(n: u8) -> f32 {
     (1u64 << n) as f32
 }
