@@ -204,6 +204,21 @@ impl Recorder {
         let k = self.channels.iter().position(|x| *x == c)?;
         Some(self.rows.iter().map(|r| r[k]).collect())
     }
+    /// FNV-1a (64-bit) of the recorded values' IEEE-754 bits, little-endian, row by row:
+    /// what `regen run` prints so that another implementation can check the same bits.
+    pub fn digest(&self) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in self
+            .rows
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_bits().to_le_bytes())
+        {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        h
+    }
     /// CSV text (header line + rows).
     pub fn to_csv(&self) -> String {
         let mut s = self

@@ -3,7 +3,7 @@
 
 use super::output::{plot_svg, write, Series};
 use crate::scenario::Scenario;
-use crate::sim::Channel;
+use crate::sim::{Channel, Energy, Recorder};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -15,24 +15,81 @@ pub struct RunArgs {
     pub out: PathBuf,
 }
 
-pub fn run(a: &RunArgs) -> Result<(), String> {
-    let sc = Scenario::from_file(&a.scenario)?;
+/// What one closed-loop run leaves: the ledger at the end and at `settle_s`, the latched
+/// fault with the console's decoding, the recorded channels. `regen run` prints and writes it;
+/// the Python module (`hal-sim/python`) returns it.
+pub struct RunOutcome {
+    /// Energy ledger at the end of the run, J.
+    pub energy: Energy,
+    /// Energy ledger after the PWM period nearest `settle_s`, J (averages are taken after it).
+    pub energy_at_settle: Energy,
+    /// PWM periods simulated, and the one `energy_at_settle` was read after.
+    pub steps: u64,
+    pub settle_step: u64,
+    /// Name of the latched firmware fault, if any.
+    pub fault: Option<&'static str>,
+    /// The console's `faults` reply (snapshot at the trip, safe state, later faults).
+    pub faults_text: Option<String>,
+    /// Recorded channels (None when the scenario records none).
+    pub recorder: Option<Recorder>,
+    /// Wall time of the stepping, s.
+    pub wall_s: f64,
+}
+
+/// Run a scenario for its `duration_s` (rounded to whole PWM periods); `progress` is called
+/// with the fraction done about 50 times.
+pub fn simulate(sc: &Scenario, mut progress: impl FnMut(f64)) -> Result<RunOutcome, String> {
     let mut sim = sc.build()?;
     let t = std::time::Instant::now();
     let n = (sc.duration_s / sim.period()).round() as u64;
+    let settle_step = ((sc.settle_s / sim.period()).round() as u64).min(n);
+    let mut energy_at_settle = sim.energy();
     let chunk = (n / 50).max(1);
     let mut done = 0;
     while done < n {
-        let k = chunk.min(n - done);
+        let mut k = chunk.min(n - done);
+        if done < settle_step {
+            k = k.min(settle_step - done);
+        }
         for _ in 0..k {
             sim.step();
         }
         done += k;
-        eprint!("\r{:3.0} %", 100.0 * done as f64 / n as f64);
+        if done == settle_step {
+            energy_at_settle = sim.energy();
+        }
+        progress(done as f64 / n as f64);
     }
+    let wall_s = t.elapsed().as_secs_f64();
+    let fault = sim.controller().fault().map(|f| f.name());
+    let faults_text = fault.map(|_| {
+        let mut out = String::new();
+        let _ = regen_fw::console::Console::new().execute(
+            "faults",
+            sim.controller_mut(),
+            &mut regen_fw::console::NoStore,
+            &mut out,
+        );
+        out
+    });
+    Ok(RunOutcome {
+        energy: sim.energy(),
+        energy_at_settle,
+        steps: n,
+        settle_step,
+        fault,
+        faults_text,
+        recorder: sim.take_recorder(),
+        wall_s,
+    })
+}
+
+pub fn run(a: &RunArgs) -> Result<(), String> {
+    let sc = Scenario::from_file(&a.scenario)?;
+    let o = simulate(&sc, |f| eprint!("\r{:3.0} %", 100.0 * f))?;
     eprintln!();
-    let wall = t.elapsed().as_secs_f64();
-    let e = sim.energy();
+    let wall = o.wall_s;
+    let e = o.energy;
     println!(
         "{}: {:.2} s simulated in {:.2} s ({:.0}× real time)",
         sc.name,
@@ -45,22 +102,18 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         e.residual(),
         100.0 * e.relative_residual()
     );
-    if let Some(f) = sim.controller().fault() {
-        println!("firmware fault latched: {}", f.name());
-        // The console's decoding: snapshot at the trip, safe state, later faults.
-        let mut out = String::new();
-        let _ = regen_fw::console::Console::new().execute(
-            "faults",
-            sim.controller_mut(),
-            &mut regen_fw::console::NoStore,
-            &mut out,
-        );
-        print!("{out}");
+    if let (Some(name), Some(text)) = (o.fault, &o.faults_text) {
+        println!("firmware fault latched: {name}");
+        print!("{text}");
     }
-    if let Some(rec) = sim.take_recorder() {
+    if let Some(rec) = o.recorder {
         let csv = a.out.join(format!("{}.csv", sc.name));
         write(&csv, &rec.to_csv())?;
         println!("trace: {}", csv.display());
+        println!(
+            "channels digest (FNV-1a 64 of the f64 bits, row-major): {:016x}",
+            rec.digest()
+        );
         let col = |c| rec.column(c);
         if let (Some(t), Some(x), Some(v), Some(f)) = (
             col(Channel::T),
