@@ -166,3 +166,32 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The ledger at `settle_s` and at the end equal a plain run stepped to those times.
+    #[test]
+    fn simulate_reads_the_ledger_at_settle() {
+        let mut sc = Scenario::tmd(306.0);
+        sc.duration_s = 0.5;
+        sc.settle_s = 0.1837;
+        let o = simulate(&sc, |_| {}).unwrap();
+        let mut sim = sc.build().unwrap();
+        let settle = (sc.settle_s / sim.period()).round() as u64;
+        let n = (sc.duration_s / sim.period()).round() as u64;
+        assert_eq!((o.settle_step, o.steps), (settle, n));
+        for _ in 0..settle {
+            sim.step();
+        }
+        assert_eq!(o.energy_at_settle, sim.energy());
+        for _ in settle..n {
+            sim.step();
+        }
+        assert_eq!(o.energy, sim.energy());
+        assert!(o.energy_at_settle.external_work < o.energy.external_work);
+        let rec = o.recorder.unwrap();
+        assert_eq!(rec.rows.len() as u64, n / sc.record.every);
+    }
+}
