@@ -413,7 +413,7 @@ fn tmd_power(py: Python<'_>, scenario: &PyScenario, r_load_ohm: Vec<f64>) -> PyR
             "drive: the analytic TMD power needs a structure with a sine excitation",
         ));
     };
-    if let Some(r) = r_load_ohm.iter().find(|r| !(**r > 0.0)) {
+    if let Some(r) = r_load_ohm.iter().find(|r| r.is_nan() || **r <= 0.0) {
         return Err(err(format!(
             "r_load_ohm = {r}: must be > 0 Ω (inf for open circuit)"
         )));
