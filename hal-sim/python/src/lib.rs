@@ -122,9 +122,20 @@ impl PyScenario {
         toml::Value::try_from(&self.inner).map_err(|e| err(e.to_string()))
     }
 
-    /// The dotted scenario path a key means: a registry name (console `set`) is `law.set.NAME`.
+    /// The dotted scenario path a key means: the sweep's names are where `set_param` puts
+    /// them, a registry name (console `set`) is `law.set.NAME`.
     fn path(key: &str) -> String {
-        if !key.contains('.') && regen_fw::params::find(key).is_some() {
+        let sweep = match key {
+            "r_load_ohm" => Some("law.r_load_ohm"),
+            "a0_m_s2" => Some("drive.excitation.a0_m_s2"),
+            "freq_hz" => Some("drive.excitation.freq_hz"),
+            "ke_v_s_per_rad" => Some("machine.ke_v_s_per_rad"),
+            "current_bw_hz" => Some("firmware.current_bw_hz"),
+            _ => None,
+        };
+        if let Some(p) = sweep {
+            p.to_string()
+        } else if !key.contains('.') && regen_fw::params::find(key).is_some() {
             format!("law.set.{key}")
         } else {
             key.to_string()

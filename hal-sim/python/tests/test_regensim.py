@@ -108,7 +108,9 @@ def test_registry_and_dotted_keys():
     sc = rs.Scenario.tmd(306.0)
     assert sc.get("law.r_load_ohm") == 306.0
     sc.set("law.r_load_ohm", 100)  # an int where a float lives
-    assert sc.get("r_load_ohm" if False else "law.r_load_ohm") == 100.0
+    assert sc.get("law.r_load_ohm") == 100.0 and sc.get("r_load_ohm") == 100.0
+    sc.set("a0_m_s2", 0.5)  # the sweep's names read back from where the sweep puts them
+    assert sc.get("a0_m_s2") == sc.get("drive.excitation.a0_m_s2") == 0.5
     # A registry name lands in [law.set] and reads back from there.
     assert sc.get("trk_period_s") == pytest.approx(rs.Scenario.tmd().get("trk_period_s"))
     sc.set("trk_period_s", 8.0)
