@@ -71,15 +71,6 @@ pub trait DriveIo {
     fn now_us(&self) -> u64;
 }
 
-/// One current-loop period against any [`DriveIo`]: sample, compute, apply.
-#[inline(always)]
-pub fn run_period<IO: DriveIo>(ctl: &mut crate::control::Controller, io: &mut IO) -> Actuation {
-    let s = io.sample();
-    let a = ctl.step(&s);
-    io.apply(&a);
-    a
-}
-
 #[cfg(test)]
 mod tests {
     use super::RawSample;

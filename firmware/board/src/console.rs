@@ -12,7 +12,7 @@
 //! ≤ 10 periods, later). Only the last line of a batch is kept, and a line is dropped (and
 //! counted) when the UART is still busy with the previous one, so a stream faster than
 //! 115,200 baud thins out instead of backing up. The console's energy counter is overwritten
-//! after each batch with the loop's exact per-period integral (`drive::energy_j`).
+//! after each batch with the loop's exact per-period integral (`Period::energy_j`).
 
 use core::fmt::Write as _;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -24,7 +24,8 @@ use embedded_io_async::{Read, Write};
 use regen_fw::console::Console;
 use regen_fw::store::FlashStore;
 
-use crate::drive::{self, Pending, Slot, PENDING, PERIODS};
+use crate::drive::{self, PENDING};
+use regen_fw::period::{Pending, Slot};
 use crate::store::BoardFlash;
 
 /// Telemetry lines dropped because the UART was busy.
@@ -106,7 +107,13 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
         p.clear = before.fault().into();
     }
     if after.config().differs(before.config()) {
-        p.cfg = Slot::Full(*after.config());
+        // Validated and compiled here, in the task (≈ 8,700 instructions: more than a
+        // period); the loop only installs it. `execute` accepted it on the copy, so this
+        // cannot fail; if it did, nothing would be posted.
+        match before.compile(after.config()) {
+            Ok(c) => p.cfg = Slot::Full(c),
+            Err(_) => return false,
+        }
     }
     if after.mode() != before.mode() {
         p.mode = Slot::Full(after.mode());
@@ -142,7 +149,7 @@ pub async fn console_task(
         last: Buf::new(),
         lines: 0,
     };
-    let mut last_period = PERIODS.load(Ordering::Relaxed);
+    let mut last_period = drive::counters().periods;
     let mut ticker = Ticker::every(Duration::from_micros(500));
     let mut inbuf = [0u8; 32];
 
@@ -202,7 +209,8 @@ pub async fn console_task(
                 too_long = false;
             }
             Either::Second(()) => {
-                let now = PERIODS.load(Ordering::Relaxed);
+                let c = drive::counters();
+                let now = c.periods;
                 let n = now.wrapping_sub(last_period);
                 last_period = now;
                 if n == 0 {
@@ -218,7 +226,7 @@ pub async fn console_task(
                 for _ in 0..batch {
                     con.tick(&ctl, &mut tel);
                 }
-                con.energy_j = drive::energy_j(ctl.config().ts());
+                con.energy_j = c.energy_j(ctl.config().ts());
                 if tel.lines > 0 {
                     TEL_DROPPED.fetch_add(tel.lines - 1, Ordering::Relaxed);
                     // Send only if the UART has drained the previous line; else drop it.

@@ -7,8 +7,8 @@
 //! * `store`: `regen_fw::store` on two pages of flash bank 2.
 //! * `supervisor`: watchdog, loop-alive and overrun checks, fault logs.
 //!
-//! The control core `regen-fw` is linked unchanged: the interrupt calls the same
-//! `regen_fw::io::run_period` the simulator calls.
+//! The control core `regen-fw` is linked unchanged: the interrupt runs the same period
+//! routine (`regen_fw::period::Period`) the simulator runs.
 #![no_std]
 #![no_main]
 
@@ -146,8 +146,9 @@ async fn main(spawner: embassy_executor::Spawner) {
     );
 
     critical_section::with(|cs| {
-        *drive::LOOP.borrow_ref_mut(cs) = drive::Slot::Full(drive::LoopState {
+        *drive::LOOP.borrow_ref_mut(cs) = regen_fw::Slot::Full(drive::LoopState {
             ctl,
+            per: regen_fw::Period::NEW,
             io: drive::BoardIo {
                 adc1: parts.adc1,
                 adc2: parts.adc2,
