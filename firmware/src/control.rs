@@ -262,6 +262,14 @@ impl Controller {
         &self.prot
     }
 
+    /// A trip the hardware took by itself (a comparator through the timer's break input:
+    /// the bridge is already off): latched as the software's own trip of that kind, with the
+    /// last period's telemetry.
+    pub fn hardware_trip(&mut self, f: Fault) {
+        let t = self.telemetry();
+        self.trip(f, &t);
+    }
+
     /// The board's timer saw the current loop finish after its period ended.
     pub fn report_overrun(&mut self) {
         self.prot.report_overrun();

@@ -5,7 +5,8 @@
 //! 1. sample ([`DriveIo::sample`]), step, add the period's electrical power to the exact energy
 //!    sum ([`Period::step`]);
 //! 2. actuate ([`DriveIo::apply`]): the duties are written before any slower work;
-//! 3. [`Period::finish`]: protection supervision on every `supervise_every()`-th period (the
+//! 3. [`Period::finish`]: a hardware trip latched as a fault ([`PeriodHw::tripped`]),
+//!    protection supervision on every `supervise_every()`-th period (the
 //!    first period included), the console's changes posted in the mailbox ([`Pending`]), the
 //!    period count, and the overrun check last ([`PeriodHw::overran`]: the next sample was
 //!    ready before this period's work was done), which the controller counts against
@@ -20,17 +21,24 @@
 //! hooks on the sample and the actuation in between; a test in `hal-sim` (`sim.rs`,
 //! `split_step_is_exactly_one_step`) pins that sequence to [`Period::run`].
 
+use crate::config::Config;
 use crate::control::{Compiled, Controller, Fault, Mode};
 use crate::io::{Actuation, DriveIo, RawSample};
 
 /// What the period needs from the hardware besides [`DriveIo`].
 pub trait PeriodHw {
+    /// A trip the hardware took since the last call (comparator → timer break), if any;
+    /// the flag is acknowledged by the call.
+    fn tripped(&mut self) -> Option<Fault> {
+        None
+    }
     /// The next period's sample is already complete: this period's work ended late.
     fn overran(&mut self) -> bool {
         false
     }
-    /// The PWM frequency changed (an idle-only parameter): reprogram the timer.
-    fn set_pwm_hz(&mut self, _pwm_hz: f32) {}
+    /// A new configuration is in force (the hardware thresholds follow it);
+    /// `pwm_hz_changed`: reprogram the timer (an idle-only parameter).
+    fn installed(&mut self, _cfg: &Config, _pwm_hz_changed: bool) {}
 }
 
 /// An optional value whose empty state is all zero bytes (`repr(C, u8)`: tag 0, no niche), so
@@ -161,6 +169,9 @@ impl Period {
     /// After the actuation: supervision, mailbox, counters, overrun.
     #[inline(always)]
     pub fn finish<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
+        if let Some(f) = hw.tripped() {
+            ctl.hardware_trip(f);
+        }
         if self.countdown == 0 {
             ctl.supervise();
             self.countdown = ctl.supervise_every().saturating_sub(1);
@@ -191,9 +202,7 @@ impl Period {
         if let Slot::Full(c) = &mail.cfg {
             let old_hz = ctl.config().pwm_hz;
             ctl.install(c);
-            if c.config().pwm_hz != old_hz {
-                hw.set_pwm_hz(c.config().pwm_hz);
-            }
+            hw.installed(c.config(), c.config().pwm_hz != old_hz);
         }
         if let Slot::Full(m) = mail.mode {
             if ctl.set_mode(m).is_err() {
@@ -224,7 +233,6 @@ impl Period {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Config;
     use std::vec::Vec;
 
     /// A drive whose encoder turns at a fixed rate and whose current codes follow a fixed
@@ -234,6 +242,8 @@ mod tests {
         counts_per_period: u16,
         /// `overran()` answers true on periods where `n % every == phase` (every = 0: never).
         overrun_every: u32,
+        /// `tripped()` reports this once, at the end of this period.
+        trip_at: Option<(u32, Fault)>,
         overran_calls: u32,
         applied: Vec<Actuation>,
         pwm: Vec<f32>,
@@ -246,6 +256,7 @@ mod tests {
                 counts_per_period,
                 overrun_every,
                 overran_calls: 0,
+                trip_at: None,
                 applied: Vec::new(),
                 pwm: Vec::new(),
             }
@@ -273,12 +284,20 @@ mod tests {
     }
 
     impl PeriodHw for Mock {
+        fn tripped(&mut self) -> Option<Fault> {
+            match self.trip_at {
+                Some((k, f)) if k + 1 == self.n => Some(f),
+                _ => None,
+            }
+        }
         fn overran(&mut self) -> bool {
             self.overran_calls += 1;
             self.overrun_every != 0 && (self.n - 1) % self.overrun_every == 0
         }
-        fn set_pwm_hz(&mut self, hz: f32) {
-            self.pwm.push(hz);
+        fn installed(&mut self, cfg: &Config, pwm_hz_changed: bool) {
+            if pwm_hz_changed {
+                self.pwm.push(cfg.pwm_hz);
+            }
         }
     }
 
@@ -427,5 +446,21 @@ mod tests {
         per.run(&mut ctl, &mut mail, &mut io);
         assert_eq!(per.mode_refused, 1);
         assert_eq!(ctl.fault(), f);
+    }
+
+    /// A hardware trip reported at the end of period k latches its fault there: period k
+    /// ran as commanded, period k + 1 opens the bridge.
+    #[test]
+    fn hardware_trip_latches_and_opens() {
+        let mut ctl = running();
+        let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(7, 0));
+        io.trip_at = Some((50, Fault::OverCurrent));
+        for _ in 0..52 {
+            per.run(&mut ctl, &mut mail, &mut io);
+        }
+        assert!(io.applied[50].enable);
+        assert!(!io.applied[51].enable);
+        assert_eq!(ctl.fault(), Some(Fault::OverCurrent));
+        assert_eq!(ctl.mode(), Fault::OverCurrent.safe_mode());
     }
 }

@@ -25,13 +25,15 @@ use regen_fw::console::Console;
 use regen_fw::store::FlashStore;
 
 use crate::drive::{self, PENDING};
-use regen_fw::period::{Pending, Slot};
 use crate::store::BoardFlash;
+use regen_fw::period::{Pending, Slot};
 
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 
 const LINE_MAX: usize = 120;
+const LINE_TOO_LONG: &str = "error: line longer than 120 characters\r\n";
+const _: () = assert!(LINE_MAX == 120, "LINE_TOO_LONG states LINE_MAX");
 /// `list` writes ≈ 3 KB (35 parameters); room for a registry half as large again.
 const REPLY_MAX: usize = 4608;
 
@@ -149,7 +151,9 @@ pub async fn console_task(
         last: Buf::new(),
         lines: 0,
     };
-    let mut last_period = drive::counters().periods;
+    // From boot: the first batch covers the periods run before this task started (at most
+    // one second of them, as after any stall).
+    let mut last_period = 0;
     let mut ticker = Ticker::every(Duration::from_micros(500));
     let mut inbuf = [0u8; 32];
 
@@ -175,12 +179,10 @@ pub async fn console_task(
                     }
                     reply.clear();
                     if too_long {
-                        let _ = reply.write_str("error: line longer than ");
-                        let _ = reply.write_str(regen_fw::numtext::uint(LINE_MAX as u64).as_str());
-                        let _ = reply.write_str(" characters\r\n");
+                        let _ = reply.write_str(LINE_TOO_LONG);
                     } else if let Ok(text) = core::str::from_utf8(&line) {
                         match drive::snapshot() {
-                            Some(before) => {
+                            Some((before, _)) => {
                                 let mut ctl = before.clone();
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
                                 if post(&before, &ctl) {
@@ -209,16 +211,15 @@ pub async fn console_task(
                 too_long = false;
             }
             Either::Second(()) => {
-                let c = drive::counters();
+                let Some((ctl, c)) = drive::snapshot() else {
+                    continue;
+                };
                 let now = c.periods;
                 let n = now.wrapping_sub(last_period);
                 last_period = now;
                 if n == 0 {
                     continue;
                 }
-                let Some(ctl) = drive::snapshot() else {
-                    continue;
-                };
                 tel.lines = 0;
                 // At most one second of periods per batch (after a long stall the rest is
                 // skipped: no line could be sent in time anyway).

@@ -19,17 +19,18 @@ use core::cell::RefCell;
 
 use critical_section::Mutex;
 use embassy_stm32::adc::InjectedAdc;
-use embassy_stm32::gpio::Output;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM2;
 use embassy_stm32::peripherals::{ADC1, ADC2};
 use embassy_stm32::timer::qei::Qei;
-use regen_fw::control::Controller;
-use regen_fw::io::{Actuation, DriveIo, RawSample};
+use regen_fw::config::Config;
+use regen_fw::control::{Controller, Fault};
+use regen_fw::io::{Actuation, DriveIo, HwThresholds, RawSample};
 use regen_fw::period::{Pending, Period, PeriodHw, Slot};
 
 use crate::board;
 use crate::pwm::Pwm;
+use crate::trip;
 
 /// The board's hardware boundary.
 pub struct BoardIo {
@@ -39,7 +40,9 @@ pub struct BoardIo {
     pub adc2: InjectedAdc<'static, ADC2, 2>,
     pub qei: Qei<'static, TIM2>,
     pub pwm: Pwm,
-    pub brake: Output<'static>,
+    /// The chopper comparator's threshold code, and whether the software forces it on.
+    pub chop: u16,
+    pub brake: bool,
 }
 
 impl DriveIo for BoardIo {
@@ -57,11 +60,9 @@ impl DriveIo for BoardIo {
 
     fn apply(&mut self, out: &Actuation) {
         self.pwm.write(&out.duties, out.enable);
-        if out.brake {
-            self.brake.set_high();
-        } else {
-            self.brake.set_low();
-        }
+        // The software's brake command overrides the chopper's comparator (`trip.rs`).
+        self.brake = out.brake;
+        trip::set_chopper(self.chop, out.brake);
     }
 
     fn now_us(&self) -> u64 {
@@ -77,10 +78,21 @@ impl PeriodHw for BoardIo {
         pac::ADC2.isr().read().jeos()
     }
 
-    /// `pwm_hz` is an idle-only parameter: the bridge is off when it changes.
-    fn set_pwm_hz(&mut self, pwm_hz: f32) {
-        if let Some(arr) = board::arr_for(pwm_hz) {
-            self.pwm.set_arr(arr);
+    #[inline(always)]
+    fn tripped(&mut self) -> Option<Fault> {
+        trip::take_trip()
+    }
+
+    /// The comparators' thresholds follow the configuration; `pwm_hz` is an idle-only
+    /// parameter (the bridge is off when it changes).
+    fn installed(&mut self, cfg: &Config, pwm_hz_changed: bool) {
+        let t = HwThresholds::of(cfg);
+        self.chop = t.chop;
+        trip::set_thresholds(&t, self.brake);
+        if pwm_hz_changed {
+            if let Some(arr) = board::arr_for(cfg.pwm_hz) {
+                self.pwm.set_arr(arr);
+            }
         }
     }
 }
@@ -97,14 +109,10 @@ pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot:
 /// Changes posted by the console for the period routine to apply between two steps.
 pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending::EMPTY));
 
-/// Copy of the controller for a task (briefly locks out the interrupt: ≈ 2 µs).
-pub fn snapshot() -> Option<Controller> {
-    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| s.ctl.clone()))
-}
-
-/// Copy of the period's counters and energy sum (zero before the loop starts).
-pub fn counters() -> Period {
-    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map_or(Period::NEW, |s| s.per))
+/// Copy of the controller and of the period's counters and energy sum for a task (briefly
+/// locks out the interrupt: ≈ 2 µs); `None` before the loop starts.
+pub fn snapshot() -> Option<(Controller, Period)> {
+    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| (s.ctl.clone(), s.per)))
 }
 
 /// The current-loop interrupt body (called from the `ADC1_2` handler).
@@ -112,10 +120,9 @@ pub fn counters() -> Period {
 pub fn on_sample() {
     critical_section::with(|cs| {
         let mut guard = LOOP.borrow_ref_mut(cs);
+        // The interrupt is enabled only once the loop state is in place (`main.rs`), and it
+        // is never taken out: this `else` cannot run.
         let Some(st) = guard.get_mut() else {
-            // Not started yet: acknowledge the conversions and leave the bridge as it is (off).
-            pac::ADC1.isr().write(|w| w.set_jeos(true));
-            pac::ADC2.isr().write(|w| w.set_jeos(true));
             return;
         };
         let mut mail = PENDING.borrow_ref_mut(cs);

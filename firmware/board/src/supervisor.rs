@@ -11,7 +11,6 @@
 //!   (the interrupt was held off longer than a period). Logged, with the overrun count (the
 //!   interrupt's own check: the next sample was ready before it finished).
 
-
 use embassy_stm32::peripherals::IWDG;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, Ticker};
@@ -22,7 +21,8 @@ use crate::drive;
 #[embassy_executor::task]
 pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
     let mut ticker = Ticker::every(Duration::from_millis(SUPERVISION_MS));
-    let mut last_n = drive::counters().periods;
+    // The loop starts before this task: its first tick sees periods run.
+    let mut last_n = 0;
     let mut win_t = Instant::now();
     let mut win_n = last_n;
     let mut last_fault = None;
@@ -33,11 +33,10 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
     wdg.unleash();
     loop {
         ticker.next().await;
-        let c = drive::counters();
-        let n = c.periods;
-        let Some(ctl) = drive::snapshot() else {
+        let Some((ctl, c)) = drive::snapshot() else {
             continue;
         };
+        let n = c.periods;
         if n == last_n && !dead {
             crate::pwm::force_off();
             dead = true;
