@@ -292,7 +292,7 @@ mod tests {
         }
         fn overran(&mut self) -> bool {
             self.overran_calls += 1;
-            self.overrun_every != 0 && (self.n - 1) % self.overrun_every == 0
+            self.overrun_every != 0 && (self.n - 1).is_multiple_of(self.overrun_every)
         }
         fn installed(&mut self, cfg: &Config, pwm_hz_changed: bool) {
             if pwm_hz_changed {
