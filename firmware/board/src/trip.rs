@@ -134,11 +134,13 @@ pub fn arm(t: &HwThresholds) -> bool {
     !(sr.bif(0) || sr.bif(1))
 }
 
-/// Clear BIF and B2IF (rc_w0: the other flags are written 1, no effect).
+/// Clear BIF and B2IF (rc_w0): the other defined flags are written 1 (no effect), the
+/// reserved bits 0 (their reset value).
 fn clear_flags() {
+    const FLAGS: u32 = 0x00F3_3FFF; // UIF … CC4OF, SBIF, CC5IF, CC6IF, IDXF … TERRF
     pac::TIM1
         .sr()
-        .write_value(pac::timer::regs::SrAdv(!(1 << 7 | 1 << 8)));
+        .write_value(pac::timer::regs::SrAdv(FLAGS & !(1 << 7 | 1 << 8)));
 }
 
 /// A break taken since the last call, acknowledged: BRK (over-current) first.
