@@ -49,7 +49,10 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   rline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_refresh 2>&1 | grep insnwin | tail -n1)
   echo "instructions on a step serving a refresh request itself (law_mut; none in the recorded run, counted on copies): min $(echo "$rline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$rline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_set_config 2>&1 | grep insnwin | tail -n1)
-  echo "instructions of the run's configuration change (set_config between two steps: validation, gains, slow terms): $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  echo "instructions of the run's configuration change done at once (set_config, as the console's copy does it: validation, gains, slow terms): $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  kline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_compile 2>&1 | grep insnwin | tail -n1)
+  iline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_install 2>&1 | grep insnwin | tail -n1)
+  echo "the same change as the loop takes it: compiled in the console's task $(echo "$kline" | sed -n 's/.*max=\([0-9]*\).*/\1/p'), swapped in between two steps $(echo "$iline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: the swap within the step budget, 400)"
   sline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_supervise 2>&1 | grep insnwin | tail -n1)
   echo "$sline"
   echo "instructions per protection supervision tick (1 kHz, outside the step): min $(echo "$sline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$sline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"

@@ -12,7 +12,8 @@ use crate::frames::Rotation;
 use crate::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq};
 use crate::fx::{clamp_sym, mul, Angle, Duty, Gain, Q};
 use crate::io::{Actuation, RawSample};
-use crate::laws::{CommandLaw, Law, LawInput};
+use crate::laws::{CommandLaw, Law, LawInput, Resistor};
+use crate::period::Slot;
 use crate::pi::{limit_vector, CurrentPi, VLimit};
 use crate::svpwm::{inv_bus, modulate_scaled, CENTRED};
 
@@ -80,6 +81,23 @@ struct StepRecord {
     v_saturated: bool,
 }
 
+/// A configuration validated and compiled outside the current loop
+/// ([`Controller::compile`]), ready for [`Controller::install`].
+#[derive(Clone, Copy, Debug)]
+pub struct Compiled {
+    cfg: Config,
+    g: Gains,
+    /// The new law when a law parameter changed (its state starts afresh), else empty.
+    law: Slot<Law>,
+}
+
+impl Compiled {
+    /// The configuration it was compiled from.
+    pub fn config(&self) -> &Config {
+        &self.cfg
+    }
+}
+
 /// The current controller and everything it owns.
 #[derive(Clone, Debug)]
 pub struct Controller {
@@ -132,16 +150,39 @@ impl Controller {
     }
 
     /// Replace the configuration (validated first; on error nothing changes). The law's
-    /// state is rebuilt only when a law parameter changed.
+    /// state is rebuilt only when a law parameter changed. Same as [`Controller::compile`]
+    /// then [`Controller::install`].
     pub fn set_config(&mut self, cfg: &Config) -> Result<(), ConfigError> {
-        let g = Gains::new(cfg)?;
-        if Law::params_changed(&self.cfg, cfg) {
-            self.law = Law::from_config(cfg);
-        }
-        self.cfg = *cfg;
-        self.g = g;
-        self.refresh_now();
+        let c = self.compile(cfg)?;
+        self.install(&c);
         Ok(())
+    }
+
+    /// Everything slow of a configuration change, done against this controller without
+    /// changing it: validation, the compiled gains and, when a law parameter changed, the new
+    /// law. On the board this runs in the console's task on its copy of the controller; the
+    /// current loop then only [`Controller::install`]s the result between two steps.
+    pub fn compile(&self, cfg: &Config) -> Result<Compiled, ConfigError> {
+        let g = Gains::new(cfg)?;
+        let law = if Law::params_changed(&self.cfg, cfg) {
+            Slot::Full(Law::from_config(cfg))
+        } else {
+            Slot::Empty
+        };
+        Ok(Compiled { cfg: *cfg, g, law })
+    }
+
+    /// Put a compiled configuration in force: copies of fixed size and the slow terms'
+    /// refresh (the same work whatever changed), no validation or gain design. Compile it
+    /// against this controller's configuration (or one with the same law parameters).
+    #[inline(never)]
+    pub fn install(&mut self, c: &Compiled) {
+        if let Slot::Full(l) = &c.law {
+            self.law = *l;
+        }
+        self.cfg = c.cfg;
+        self.g = c.g;
+        self.refresh_now();
     }
 
     /// The configuration in force.
@@ -219,6 +260,14 @@ impl Controller {
     /// Protection state: fault record with its snapshot, warnings, I²t, derate factor.
     pub fn protection(&self) -> &Protection {
         &self.prot
+    }
+
+    /// A trip the hardware took by itself (a comparator through the timer's break input:
+    /// the bridge is already off): latched as the software's own trip of that kind, with the
+    /// last period's telemetry.
+    pub fn hardware_trip(&mut self, f: Fault) {
+        let t = self.telemetry();
+        self.trip(f, &t);
     }
 
     /// The board's timer saw the current loop finish after its period ended.
@@ -467,19 +516,25 @@ impl Controller {
     /// and from then on every period.
     #[inline(always)]
     fn refresh_law(&mut self, i_dq: Dq, vb: u32) {
-        let g_law = match &self.law {
-            Law::Resistor(r) if self.mode == Mode::Run => r.conductance,
-            Law::Resistor(_) => Gain::ZERO,
+        let mut law = match &self.law {
+            Law::Resistor(r) if self.mode == Mode::Run => *r,
+            Law::Resistor(_) => Resistor {
+                conductance: Gain::ZERO,
+            },
             _ => return self.refresh_all(i_dq, vb),
         };
         let g = &self.g;
         let e_q = g.k.ke_per_vel.scale(self.enc.vel);
         self.held.e_q = e_q;
+        // The law itself (`Resistor::command`, inlined: it reads only `e_q`), then the
+        // current limit.
+        let c = law.command(&LawInput {
+            e_q,
+            ..LawInput::default()
+        });
         let r = Dq {
-            d: Q::ZERO,
-            // −clamp(x) = clamp(−x) for the symmetric clamp, and |clamp(x)| ≤ i_max <
-            // 2^31 LSB, so the negation after the clamp needs no saturation.
-            q: -clamp_sym(g_law.scale(e_q), g.i_max),
+            d: clamp_sym(c.d, g.i_max),
+            q: clamp_sym(c.q, g.i_max),
         };
         self.held.i_ref = derated(r, e_q, self.prot.derate);
     }

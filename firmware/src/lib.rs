@@ -37,6 +37,7 @@ pub mod io;
 pub mod laws;
 pub mod numtext;
 pub mod params;
+pub mod period;
 pub mod pi;
 pub mod protect;
 pub mod selftest;
@@ -44,5 +45,6 @@ pub mod store;
 pub mod svpwm;
 
 pub use config::{Config, ConfigError, Gains};
-pub use control::{Controller, Mode, Telemetry};
+pub use control::{Compiled, Controller, Mode, Telemetry};
 pub use io::{Actuation, DriveIo, RawSample};
+pub use period::{Pending, Period, PeriodHw, Slot};

@@ -20,7 +20,7 @@ use crate::plant::{
 };
 use regen_fw::fx::Duty;
 use regen_fw::io::{Actuation, DriveIo, RawSample};
-use regen_fw::{Config, Controller, Mode};
+use regen_fw::{Config, Controller, Mode, Pending, Period, PeriodHw};
 use std::f64::consts::TAU;
 
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
@@ -291,11 +291,10 @@ pub struct Sim {
     /// Periods until the recorder keeps the next row.
     rec_countdown: u64,
     ts: f64,
-    /// Periods per protection supervision tick (`Controller::supervise`, 1 kHz), and the
-    /// periods until the step count is next a multiple of it (a countdown instead of a
-    /// 64-bit modulo per period).
-    sup_every: u64,
-    sup_countdown: u64,
+    /// The firmware's period around the step (`regen_fw::period`: supervision countdown,
+    /// exact energy sum, overrun count) and its console mailbox, as on the board.
+    per: Period,
+    mail: Pending,
 }
 
 impl Sim {
@@ -359,10 +358,9 @@ impl Sim {
             steps: 0,
             rec: None,
             ts,
-            sup_every: 1,
-            sup_countdown: 0,
+            per: Period::NEW,
+            mail: Pending::EMPTY,
         };
-        sim.sup_every = (sim.ctl.supervise_every() as u64).max(1);
         sim.stored_start = sim.stored();
         Ok(sim)
     }
@@ -528,18 +526,29 @@ impl Sim {
         on_sample: impl FnOnce(&mut RawSample),
         on_actuation: impl FnOnce(&mut Actuation),
     ) {
-        // The firmware's period through the hardware trait (as `regen_fw::io::run_period`,
-        // written out because the controller and the plant live in one struct).
+        // The firmware's period (`regen_fw::period::Period::run`, the board's interrupt body)
+        // with the hooks between its parts: the controller and the plant live in one struct,
+        // so the sequence is written out here; `split_step_is_exactly_one_step` pins it to
+        // `Period::run`.
         let mut sample = PlantIo(self).sample();
         on_sample(&mut sample);
-        let mut out = self.ctl.step(&sample);
-        // Protection supervision at 1 kHz, between loop periods (as on the board).
-        if self.sup_countdown == 0 {
-            self.ctl.supervise();
-        }
+        let mut out = self.per.step(&mut self.ctl, &sample);
         on_actuation(&mut out);
         PlantIo(self).apply(&out);
+        self.per
+            .finish(&mut self.ctl, &mut self.mail, &mut SimTimer);
         self.finish_period();
+    }
+
+    /// The period's state: energy sum, period and overrun counts, supervision countdown.
+    pub fn loop_period(&self) -> &Period {
+        &self.per
+    }
+
+    /// The console mailbox the period applies between two steps (as the board's console
+    /// posts to it). A `pwm_hz` change through it does not change the plant's period.
+    pub fn mailbox(&mut self) -> &mut Pending {
+        &mut self.mail
     }
 
     /// The plant side of [`Sim::step`] without the controller, first half: the sample the
@@ -562,12 +571,6 @@ impl Sim {
         self.advance(&act);
         self.active = self.pending;
         self.steps += 1;
-        // Periods until `steps` is next a multiple of `sup_every`.
-        self.sup_countdown = if self.sup_countdown == 0 {
-            self.sup_every - 1
-        } else {
-            self.sup_countdown - 1
-        };
         if self.rec.is_some() {
             self.rec_countdown -= 1;
             if self.rec_countdown == 0 {
@@ -1341,6 +1344,11 @@ pub fn p_only(ctl: &mut Controller) {
 /// The plant side of the hardware boundary.
 struct PlantIo<'a>(&'a mut Sim);
 
+/// The simulator's timer as the period sees it: never late (the simulated loop has no
+/// clock), PWM frequency fixed by the plant's period.
+struct SimTimer;
+impl PeriodHw for SimTimer {}
+
 impl DriveIo for PlantIo<'_> {
     fn sample(&mut self) -> RawSample {
         self.0.sample_now()
@@ -1378,12 +1386,27 @@ mod tests {
         b.record(&ch, 20);
         let mut ctl = regen_fw::Controller::new(&sc.config().unwrap()).unwrap();
         ctl.set_mode(regen_fw::Mode::Run).unwrap();
+        // `b` driven through the board's period routine (`Period::run`) from outside.
+        struct Split<'a>(&'a mut super::Sim);
+        impl regen_fw::DriveIo for Split<'_> {
+            fn sample(&mut self) -> regen_fw::RawSample {
+                self.0.take_sample()
+            }
+            fn apply(&mut self, out: &regen_fw::Actuation) {
+                self.0.apply_and_advance(out)
+            }
+            fn now_us(&self) -> u64 {
+                0
+            }
+        }
+        impl regen_fw::PeriodHw for Split<'_> {}
+        let (mut per, mut mail) = (regen_fw::Period::NEW, regen_fw::Pending::EMPTY);
         for _ in 0..20_000 {
             a.step();
-            let s = b.take_sample();
-            let out = ctl.step(&s);
-            b.apply_and_advance(&out);
+            per.run(&mut ctl, &mut mail, &mut Split(&mut b));
         }
+        assert_eq!(a.loop_period(), &per);
+        assert_eq!(a.ctl.fault(), ctl.fault());
         assert_eq!(a.motion(), b.motion());
         assert_eq!(a.energy(), b.energy());
         assert!(a.energy().external_work > 0.0);

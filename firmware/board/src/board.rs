@@ -13,7 +13,7 @@
 
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, InjectedAdc};
 use embassy_stm32::flash::{Async, Bank2Region, Flash};
-use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::gpio::OutputType;
 use embassy_stm32::pac::adc::vals::Exten;
 use embassy_stm32::peripherals::{ADC1, ADC2, IWDG, TIM1, TIM2};
 use embassy_stm32::rcc::{self, mux};
@@ -143,10 +143,12 @@ pub const VBUS_SAMPLE: embassy_stm32::adc::SampleTime = embassy_stm32::adc::Samp
 // ---------------------------------------------------------------------------------------------
 // Brake chopper
 // ---------------------------------------------------------------------------------------------
-// The brake-resistor switch is a plain GPIO (push-pull, high = resistor across the bus): the
-// core's chopper is a hysteresis on/off decision taken once per period, so no timer channel
-// is needed. PC8 (morpho CN10-2) is free on the NUCLEO-G474RE and on the IHM08M1 pinout; the
-// IHM08M1 has no brake switch, so this drives an external one.
+// The brake-resistor switch is driven by COMP7's output on PC8 (AF7, morpho CN10-2, free on
+// the NUCLEO-G474RE and on the IHM08M1 pinout; the IHM08M1 has no brake switch, so this drives
+// an external one): on above `brake_on_v` on a second bus divider (PB14), whatever the CPU
+// does; the core's brake command forces it on through the comparator's DAC threshold
+// (`trip.rs`). From reset until `trip::arm` PC8 is an analog input: the switch's gate driver
+// needs a pull-down (chopper off).
 
 // ---------------------------------------------------------------------------------------------
 // Console
@@ -198,7 +200,6 @@ pub struct Parts {
     pub adc1: InjectedAdc<'static, ADC1, 2>,
     pub adc2: InjectedAdc<'static, ADC2, 2>,
     pub qei: Qei<'static, TIM2>,
-    pub brake: Output<'static>,
     pub uart: Option<BufferedUart<'static>>,
     pub flash: Bank2Region<'static, Async>,
     pub iwdg: IndependentWatchdog<'static, IWDG>,
@@ -207,9 +208,6 @@ pub struct Parts {
 /// Build every driver. The PWM outputs start with MOE = 0 (`pwm::configure` follows); the
 /// injected conversions are armed on TIM1 TRGO.
 pub fn take(p: Peripherals) -> Parts {
-    // Brake switch first, and off.
-    let brake = Output::new(p.PC8, Level::Low, Speed::Low);
-
     let mut pwm = ComplementaryPwm::new(
         p.TIM1,
         Some(PwmPin::new(p.PA8, OutputType::PushPull)),
@@ -266,7 +264,6 @@ pub fn take(p: Peripherals) -> Parts {
         adc1,
         adc2,
         qei,
-        brake,
         uart,
         flash,
         iwdg,

@@ -12,7 +12,7 @@
 //! ≤ 10 periods, later). Only the last line of a batch is kept, and a line is dropped (and
 //! counted) when the UART is still busy with the previous one, so a stream faster than
 //! 115,200 baud thins out instead of backing up. The console's energy counter is overwritten
-//! after each batch with the loop's exact per-period integral (`drive::energy_j`).
+//! after each batch with the loop's exact per-period integral (`Period::energy_j`).
 
 use core::fmt::Write as _;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -24,13 +24,16 @@ use embedded_io_async::{Read, Write};
 use regen_fw::console::Console;
 use regen_fw::store::FlashStore;
 
-use crate::drive::{self, Pending, Slot, PENDING, PERIODS};
+use crate::drive::{self, PENDING};
 use crate::store::BoardFlash;
+use regen_fw::period::{Pending, Slot};
 
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 
 const LINE_MAX: usize = 120;
+const LINE_TOO_LONG: &str = "error: line longer than 120 characters\r\n";
+const _: () = assert!(LINE_MAX == 120, "LINE_TOO_LONG states LINE_MAX");
 /// `list` writes ≈ 3 KB (35 parameters); room for a registry half as large again.
 const REPLY_MAX: usize = 4608;
 
@@ -106,7 +109,13 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
         p.clear = before.fault().into();
     }
     if after.config().differs(before.config()) {
-        p.cfg = Slot::Full(*after.config());
+        // Validated and compiled here, in the task (≈ 8,700 instructions: more than a
+        // period); the loop only installs it. `execute` accepted it on the copy, so this
+        // cannot fail; if it did, nothing would be posted.
+        match before.compile(after.config()) {
+            Ok(c) => p.cfg = Slot::Full(c),
+            Err(_) => return false,
+        }
     }
     if after.mode() != before.mode() {
         p.mode = Slot::Full(after.mode());
@@ -142,7 +151,9 @@ pub async fn console_task(
         last: Buf::new(),
         lines: 0,
     };
-    let mut last_period = PERIODS.load(Ordering::Relaxed);
+    // From boot: the first batch covers the periods run before this task started (at most
+    // one second of them, as after any stall).
+    let mut last_period = 0;
     let mut ticker = Ticker::every(Duration::from_micros(500));
     let mut inbuf = [0u8; 32];
 
@@ -168,12 +179,10 @@ pub async fn console_task(
                     }
                     reply.clear();
                     if too_long {
-                        let _ = reply.write_str("error: line longer than ");
-                        let _ = reply.write_str(regen_fw::numtext::uint(LINE_MAX as u64).as_str());
-                        let _ = reply.write_str(" characters\r\n");
+                        let _ = reply.write_str(LINE_TOO_LONG);
                     } else if let Ok(text) = core::str::from_utf8(&line) {
                         match drive::snapshot() {
-                            Some(before) => {
+                            Some((before, _)) => {
                                 let mut ctl = before.clone();
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
                                 if post(&before, &ctl) {
@@ -202,15 +211,15 @@ pub async fn console_task(
                 too_long = false;
             }
             Either::Second(()) => {
-                let now = PERIODS.load(Ordering::Relaxed);
+                let Some((ctl, c)) = drive::snapshot() else {
+                    continue;
+                };
+                let now = c.periods;
                 let n = now.wrapping_sub(last_period);
                 last_period = now;
                 if n == 0 {
                     continue;
                 }
-                let Some(ctl) = drive::snapshot() else {
-                    continue;
-                };
                 tel.lines = 0;
                 // At most one second of periods per batch (after a long stall the rest is
                 // skipped: no line could be sent in time anyway).
@@ -218,7 +227,7 @@ pub async fn console_task(
                 for _ in 0..batch {
                     con.tick(&ctl, &mut tel);
                 }
-                con.energy_j = drive::energy_j(ctl.config().ts());
+                con.energy_j = c.energy_j(ctl.config().ts());
                 if tel.lines > 0 {
                     TEL_DROPPED.fetch_add(tel.lines - 1, Ordering::Relaxed);
                     // Send only if the UART has drained the previous line; else drop it.

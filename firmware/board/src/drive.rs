@@ -1,32 +1,36 @@
 //! The current loop: the ADC end-of-injected-sequence interrupt (highest priority) runs one
-//! `regen_fw::io::run_period` per PWM period against [`BoardIo`], the board's `DriveIo`.
+//! `regen_fw::period::Period::run` per PWM period against [`BoardIo`], the board's `DriveIo`
+//! and `PeriodHw` (everything at the PWM rate around the step is in that routine, tested on
+//! the host; this file is only the peripherals and the sharing).
 //!
 //! Sharing with the thread-mode tasks:
 //! * The controller and the hardware handles live in [`LOOP`], a critical-section mutex. The
 //!   interrupt is the highest-priority code, so its own critical section costs nothing; a task
 //!   holds the lock only to copy the controller (880 bytes, ≈ 2 µs) — it never runs console
 //!   commands inside it.
-//! * Console commands run on a copy of the controller; what they changed (configuration, mode,
-//!   cleared fault) is posted to [`PENDING`] and applied by the interrupt right after its next
-//!   step, so parameters change between steps only and a step never sees half a change.
-//! * Counters ([`PERIODS`], [`OVERRUNS`]) are atomics read by the supervision task.
+//! * Console commands run on a copy of the controller; what they changed (configuration
+//!   compiled in the task, mode, cleared fault) is posted to [`PENDING`] and applied by the
+//!   period routine right after its next step, so parameters change between steps only and a
+//!   step never sees half a change.
+//! * The period's counters and energy sum live in [`LoopState`]; tasks copy them under the
+//!   same lock ([`counters`]).
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicU32, Ordering};
 
 use critical_section::Mutex;
 use embassy_stm32::adc::InjectedAdc;
-use embassy_stm32::gpio::Output;
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM2;
 use embassy_stm32::peripherals::{ADC1, ADC2};
 use embassy_stm32::timer::qei::Qei;
 use regen_fw::config::Config;
-use regen_fw::control::{Controller, Fault, Mode};
-use regen_fw::io::{run_period, Actuation, DriveIo, RawSample};
+use regen_fw::control::{Controller, Fault};
+use regen_fw::io::{Actuation, DriveIo, HwThresholds, RawSample};
+use regen_fw::period::{Pending, Period, PeriodHw, Slot};
 
 use crate::board;
 use crate::pwm::Pwm;
+use crate::trip;
 
 /// The board's hardware boundary.
 pub struct BoardIo {
@@ -36,7 +40,9 @@ pub struct BoardIo {
     pub adc2: InjectedAdc<'static, ADC2, 2>,
     pub qei: Qei<'static, TIM2>,
     pub pwm: Pwm,
-    pub brake: Output<'static>,
+    /// The chopper comparator's threshold code, and whether the software forces it on.
+    pub chop: u16,
+    pub brake: bool,
 }
 
 impl DriveIo for BoardIo {
@@ -54,11 +60,9 @@ impl DriveIo for BoardIo {
 
     fn apply(&mut self, out: &Actuation) {
         self.pwm.write(&out.duties, out.enable);
-        if out.brake {
-            self.brake.set_high();
-        } else {
-            self.brake.set_low();
-        }
+        // The software's brake command overrides the chopper's comparator (`trip.rs`).
+        self.brake = out.brake;
+        trip::set_chopper(self.chop, out.brake);
     }
 
     fn now_us(&self) -> u64 {
@@ -66,117 +70,49 @@ impl DriveIo for BoardIo {
     }
 }
 
+impl PeriodHw for BoardIo {
+    /// The next sequence already finished (its flag is set again) before this period's work
+    /// is done.
+    #[inline(always)]
+    fn overran(&mut self) -> bool {
+        pac::ADC2.isr().read().jeos()
+    }
+
+    #[inline(always)]
+    fn tripped(&mut self) -> Option<Fault> {
+        trip::take_trip()
+    }
+
+    /// The comparators' thresholds follow the configuration; `pwm_hz` is an idle-only
+    /// parameter (the bridge is off when it changes).
+    fn installed(&mut self, cfg: &Config, pwm_hz_changed: bool) {
+        let t = HwThresholds::of(cfg);
+        self.chop = t.chop;
+        trip::set_thresholds(&t, self.brake);
+        if pwm_hz_changed {
+            if let Some(arr) = board::arr_for(cfg.pwm_hz) {
+                self.pwm.set_arr(arr);
+            }
+        }
+    }
+}
+
 /// Everything the interrupt owns.
 pub struct LoopState {
     pub ctl: Controller,
+    pub per: Period,
     pub io: BoardIo,
 }
 
 pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot::Empty));
 
-/// An optional value whose empty state is all zero bytes (`repr(C, u8)`: tag 0, no niche), so
-/// a static holding one is zero-initialised (`.bss`) and costs no flash. An `Option<T>` keeps
-/// `None` in a niche of `T` (an enum or `bool` value no `T` has), which is not zero: the
-/// `Option<LoopState>` and the mailbox's `Option<Config>` put 1.6 KB of initial values in
-/// flash (`.data`).
-#[repr(C, u8)]
-#[derive(Clone, Copy, Debug, Default)]
-pub enum Slot<T> {
-    #[default]
-    Empty,
-    Full(T),
-}
+/// Changes posted by the console for the period routine to apply between two steps.
+pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending::EMPTY));
 
-impl<T> Slot<T> {
-    pub fn is_empty(&self) -> bool {
-        matches!(self, Slot::Empty)
-    }
-    pub fn get(&self) -> Option<&T> {
-        match self {
-            Slot::Full(v) => Some(v),
-            Slot::Empty => None,
-        }
-    }
-    pub fn get_mut(&mut self) -> Option<&mut T> {
-        match self {
-            Slot::Full(v) => Some(v),
-            Slot::Empty => None,
-        }
-    }
-}
-
-impl<T: Copy> Slot<T> {
-    pub fn value(&self) -> Option<T> {
-        self.get().copied()
-    }
-    /// `self` if full, else `other` (as `Option::or`).
-    pub fn or(self, other: Slot<T>) -> Slot<T> {
-        if self.is_empty() {
-            other
-        } else {
-            self
-        }
-    }
-}
-
-impl<T> From<Option<T>> for Slot<T> {
-    fn from(o: Option<T>) -> Self {
-        match o {
-            Some(v) => Slot::Full(v),
-            None => Slot::Empty,
-        }
-    }
-}
-
-/// Changes posted by the console for the interrupt to apply between two steps.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Pending {
-    /// Clear this fault (only if it is still the latched one).
-    pub clear: Slot<Fault>,
-    pub cfg: Slot<Config>,
-    pub mode: Slot<Mode>,
-}
-
-impl Pending {
-    pub fn is_empty(&self) -> bool {
-        self.clear.is_empty() && self.cfg.is_empty() && self.mode.is_empty()
-    }
-}
-
-pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending {
-    clear: Slot::Empty,
-    cfg: Slot::Empty,
-    mode: Slot::Empty,
-}));
-
-/// Current-loop periods run since boot (wraps).
-pub static PERIODS: AtomicU32 = AtomicU32::new(0);
-/// Periods since the last protection supervision tick.
-static SUPERVISE_COUNT: AtomicU32 = AtomicU32::new(0);
-/// Periods whose computation was not finished before the next sample was ready.
-pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
-/// A posted mode change was refused by the controller (fault latched in between).
-pub static MODE_REFUSED: AtomicU32 = AtomicU32::new(0);
-/// Sum of `p_elec` over all periods, in Q16.16 watt·periods, low and high words (the
-/// console's energy counter is recomputed from it: exact, not from sampled power).
-pub static ENERGY_LO: AtomicU32 = AtomicU32::new(0);
-pub static ENERGY_HI: AtomicU32 = AtomicU32::new(0);
-
-/// Copy of the controller for a task (briefly locks out the interrupt: ≈ 2 µs).
-pub fn snapshot() -> Option<Controller> {
-    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| s.ctl.clone()))
-}
-
-/// Energy since boot, J.
-pub fn energy_j(ts: f32) -> f32 {
-    let (lo, hi) = critical_section::with(|_| {
-        (
-            ENERGY_LO.load(Ordering::Relaxed),
-            ENERGY_HI.load(Ordering::Relaxed),
-        )
-    });
-    let acc = ((hi as u64) << 32 | lo as u64) as i64;
-    acc as f32 / 65_536.0 * ts
+/// Copy of the controller and of the period's counters and energy sum for a task (briefly
+/// locks out the interrupt: ≈ 2 µs); `None` before the loop starts.
+pub fn snapshot() -> Option<(Controller, Period)> {
+    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| (s.ctl.clone(), s.per)))
 }
 
 /// The current-loop interrupt body (called from the `ADC1_2` handler).
@@ -184,77 +120,12 @@ pub fn energy_j(ts: f32) -> f32 {
 pub fn on_sample() {
     critical_section::with(|cs| {
         let mut guard = LOOP.borrow_ref_mut(cs);
+        // The interrupt is enabled only once the loop state is in place (`main.rs`), and it
+        // is never taken out: this `else` cannot run.
         let Some(st) = guard.get_mut() else {
-            // Not started yet: acknowledge the conversions and leave the bridge as it is (off).
-            pac::ADC1.isr().write(|w| w.set_jeos(true));
-            pac::ADC2.isr().write(|w| w.set_jeos(true));
             return;
         };
-        run_period(&mut st.ctl, &mut st.io);
-
-        // Protection supervision (I²t, force, stroke, speed, sensors, derating) at 1 kHz, in
-        // the loop's own context so it never races the step: ≈ 500 instructions one period in
-        // `supervise_every()` (20 at 20 kHz).
-        let n = SUPERVISE_COUNT.load(Ordering::Relaxed) + 1;
-        if n >= st.ctl.supervise_every() {
-            SUPERVISE_COUNT.store(0, Ordering::Relaxed);
-            st.ctl.supervise();
-        } else {
-            SUPERVISE_COUNT.store(n, Ordering::Relaxed);
-        }
-
-        // Exact energy: Σ p_elec (Q16.16) per period, 64-bit.
-        let p = st.ctl.telemetry().p_elec.to_bits() as i64;
-        let acc = ((ENERGY_HI.load(Ordering::Relaxed) as u64) << 32
-            | ENERGY_LO.load(Ordering::Relaxed) as u64) as i64;
-        let acc = acc.saturating_add(p) as u64;
-        ENERGY_LO.store(acc as u32, Ordering::Relaxed);
-        ENERGY_HI.store((acc >> 32) as u32, Ordering::Relaxed);
-
-        // Console changes, between this step and the next (copied out only when present:
-        // the mailbox holds a 264-byte configuration).
-        let mut q = PENDING.borrow_ref_mut(cs);
-        if q.is_empty() {
-            PERIODS.fetch_add(1, Ordering::Relaxed);
-            check_overrun(&mut st.ctl);
-            return;
-        }
-        let p = core::mem::take(&mut *q);
-        drop(q);
-        if let Some(f) = p.clear.value() {
-            // The console's copy checked the cause is gone; if it came back since, the
-            // controller refuses and the fault stays latched (the console shows it).
-            if st.ctl.fault() == Some(f) {
-                let _ = st.ctl.clear_fault();
-            }
-        }
-        if let Some(c) = p.cfg.value() {
-            let old_hz = st.ctl.config().pwm_hz;
-            // Validated by the console on its copy: the same check cannot fail here, and if it
-            // did nothing would change.
-            if st.ctl.set_config(&c).is_ok() && c.pwm_hz != old_hz {
-                if let Some(arr) = board::arr_for(c.pwm_hz) {
-                    st.io.pwm.set_arr(arr);
-                }
-            }
-        }
-        if let Some(m) = p.mode.value() {
-            if st.ctl.set_mode(m).is_err() {
-                MODE_REFUSED.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        PERIODS.fetch_add(1, Ordering::Relaxed);
-        check_overrun(&mut st.ctl);
+        let mut mail = PENDING.borrow_ref_mut(cs);
+        st.per.run(&mut st.ctl, &mut mail, &mut st.io);
     });
-}
-
-/// Overrun: the next sequence already finished (its flag is set again) before this period's
-/// work is done.
-#[inline(always)]
-fn check_overrun(ctl: &mut Controller) {
-    if pac::ADC2.isr().read().jeos() {
-        OVERRUNS.fetch_add(1, Ordering::Relaxed);
-        // The controller counts them against `overrun_limit` (protect.rs) and trips.
-        ctl.report_overrun();
-    }
 }

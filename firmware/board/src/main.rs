@@ -7,8 +7,8 @@
 //! * `store`: `regen_fw::store` on two pages of flash bank 2.
 //! * `supervisor`: watchdog, loop-alive and overrun checks, fault logs.
 //!
-//! The control core `regen-fw` is linked unchanged: the interrupt calls the same
-//! `regen_fw::io::run_period` the simulator calls.
+//! The control core `regen-fw` is linked unchanged: the interrupt runs the same period
+//! routine (`regen_fw::period::Period`) the simulator runs.
 #![no_std]
 #![no_main]
 
@@ -18,6 +18,7 @@ mod drive;
 mod pwm;
 mod store;
 mod supervisor;
+mod trip;
 
 use defmt_rtt as _;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -39,9 +40,8 @@ fn ADC1_2() {
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     pwm::force_off();
-    match info.location() {
-        Some(l) => defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line()),
-        None => defmt::error!("panicked"),
+    if let Some(l) = info.location() {
+        defmt::error!("panicked at {=str}:{=u32}", l.file(), l.line());
     }
     cortex_m::asm::udf()
 }
@@ -137,23 +137,25 @@ async fn main(spawner: embassy_executor::Spawner) {
         defmt::error!("TIM1 does not count: drive stays off");
         return;
     };
-    defmt::info!(
-        "TIM1: ARR {} ({} Hz), dead time DTG {:#x}, update at {}",
-        arr,
-        board::TIM1_HZ / (2 * arr as u32),
-        board::dtg(board::DEAD_TIME_NS),
-        pwm.at
-    );
+    defmt::info!("TIM1: ARR {}, update at {}", arr, pwm.at);
 
+    // Hardware trips (comparators → TIM1 breaks, chopper), armed with the bridge off. A break
+    // flagged at arming is left set: the loop's first period latches it as a fault.
+    let thr = regen_fw::io::HwThresholds::of(&cfg);
+    if !trip::arm(&thr) {
+        defmt::error!("hardware trip at arming (comparator active): latched by the loop");
+    }
     critical_section::with(|cs| {
-        *drive::LOOP.borrow_ref_mut(cs) = drive::Slot::Full(drive::LoopState {
+        *drive::LOOP.borrow_ref_mut(cs) = regen_fw::Slot::Full(drive::LoopState {
             ctl,
+            per: regen_fw::Period::NEW,
             io: drive::BoardIo {
                 adc1: parts.adc1,
                 adc2: parts.adc2,
                 qei: parts.qei,
                 pwm,
-                brake: parts.brake,
+                chop: thr.chop,
+                brake: false,
             },
         });
     });

@@ -1,7 +1,7 @@
 //! Supervision at 100 Hz: feeds the independent watchdog, checks that the current-loop
 //! interrupt runs once per PWM period, and logs faults and counters with defmt.
 //!
-//! Loop check. The interrupt counts its periods (`drive::PERIODS`); the expected count over a
+//! Loop check. The interrupt counts its periods (the period routine's `periods`); the expected count over a
 //! window is `Δt·pwm_hz` from embassy's clock (TIM15, independent of TIM1 and the ADCs).
 //! * No period at all during one supervision interval (10 ms = 200 periods at 20 kHz): the
 //!   loop is dead (ADC trigger lost, interrupt disabled, a peripheral hung). The bridge is
@@ -11,19 +11,18 @@
 //!   (the interrupt was held off longer than a period). Logged, with the overrun count (the
 //!   interrupt's own check: the next sample was ready before it finished).
 
-use core::sync::atomic::Ordering;
-
 use embassy_stm32::peripherals::IWDG;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_time::{Duration, Instant, Ticker};
 
 use crate::board::SUPERVISION_MS;
-use crate::drive::{self, MODE_REFUSED, OVERRUNS, PERIODS};
+use crate::drive;
 
 #[embassy_executor::task]
 pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
     let mut ticker = Ticker::every(Duration::from_millis(SUPERVISION_MS));
-    let mut last_n = PERIODS.load(Ordering::Relaxed);
+    // The loop starts before this task: its first tick sees periods run.
+    let mut last_n = 0;
     let mut win_t = Instant::now();
     let mut win_n = last_n;
     let mut last_fault = None;
@@ -34,10 +33,10 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
     wdg.unleash();
     loop {
         ticker.next().await;
-        let n = PERIODS.load(Ordering::Relaxed);
-        let Some(ctl) = drive::snapshot() else {
+        let Some((ctl, c)) = drive::snapshot() else {
             continue;
         };
+        let n = c.periods;
         if n == last_n && !dead {
             crate::pwm::force_off();
             dead = true;
@@ -76,7 +75,7 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
             }
             last_fault = f;
         }
-        let o = OVERRUNS.load(Ordering::Relaxed);
+        let o = c.overruns;
         if o != last_overruns {
             defmt::warn!(
                 "current-loop overruns: {} (total {})",
@@ -85,12 +84,12 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
             );
             last_overruns = o;
         }
-        let r = MODE_REFUSED.load(Ordering::Relaxed);
+        let r = c.mode_refused;
         if r != last_refused {
             defmt::warn!("a console mode change was refused by the loop (fault latched)");
             last_refused = r;
         }
-        let d = crate::console::TEL_DROPPED.load(Ordering::Relaxed);
+        let d = crate::console::TEL_DROPPED.load(core::sync::atomic::Ordering::Relaxed);
         if d.wrapping_sub(last_dropped) >= 1000 {
             defmt::info!("telemetry lines dropped (UART busy): {}", d);
             last_dropped = d;

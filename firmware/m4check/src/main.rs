@@ -15,7 +15,7 @@ use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
 use regen_fw::svpwm::{inv_bus, modulate_limited};
-use regen_fw::{Actuation, Config, Controller, Mode, RawSample};
+use regen_fw::{Actuation, Compiled, Config, Controller, Mode, RawSample};
 
 static VECTORS: &[u8] = include_bytes!("../vectors.bin");
 
@@ -38,12 +38,31 @@ pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
     ctl.step(black_box(s))
 }
 
-/// The configuration change of the recorded run (R_L 306 → 2 Ω halfway): validation, the
-/// gains, and the slow terms refreshed at once, between two steps.
+/// The configuration change of the recorded run (R_L 306 → 2 Ω halfway) done at once, as
+/// `set_config` does: validation, the gains, and the slow terms refreshed. Counted on a copy;
+/// the loop itself takes the change as `regen_compile` (the console's task) then
+/// `regen_install` (between two steps).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_set_config(ctl: &mut Controller, cfg: &Config) -> bool {
     ctl.set_config(cfg).is_ok()
+}
+
+/// The slow half of a configuration change, outside the loop (the board's console task):
+/// validation, gains, the law when its parameters changed.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_compile(ctl: &Controller, cfg: &Config) -> Option<Compiled> {
+    ctl.compile(cfg).ok()
+}
+
+/// The swap the period routine does between two steps when the mailbox holds a compiled
+/// configuration (`Period::finish` → `Controller::install`): fixed-size copies and the slow
+/// terms' refresh.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_install(ctl: &mut Controller, c: &Compiled) {
+    ctl.install(c)
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -149,16 +168,16 @@ fn main() -> ! {
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
-        if k == half
-            && !regen_set_config(
-                c,
-                &Config {
-                    r_load_ohm: 2.0,
-                    ..cfg
-                },
-            )
-        {
-            bad_cfg = true;
+        if k == half {
+            let new = Config {
+                r_load_ohm: 2.0,
+                ..cfg
+            };
+            black_box(regen_set_config(&mut c.clone(), &new));
+            match regen_compile(c, &new) {
+                Some(compiled) => regen_install(c, &compiled),
+                None => bad_cfg = true,
+            }
         }
         if k % 1000 == 500 {
             let mut copy = c.clone();
