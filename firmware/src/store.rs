@@ -1,281 +1,316 @@
-//! Persistent parameter store: versioned, checksummed, wear-levelled, power-loss safe.
+//! Persistent parameter store: the configuration as one item of a `sequential-storage` map.
 //!
-//! Equivalent, argued here, of `sequential-storage`'s queue (which we did not have time to
-//! integrate): two flash sectors used as a ping-pong append log of records.
+//! The map (`sequential_storage::map::MapStorage`, over any `embedded-storage-async`
+//! [`NorFlash`]) gives CRC-checked items, power-fail-safe replacement of an item by a newer one
+//! with the same key, wear levelling over its pages and repair after an interrupted operation.
+//! On the board it runs over embassy-stm32's interrupt-driven flash (`Bank2Region<Async>`,
+//! 8-byte writes), awaited in the console's task: a page erase no longer blocks the executor.
 //!
-//! Record layout (32-bit words, little-endian on the board):
-//! `[MAGIC_VERSION, seq, n, value_0 … value_{n-1}, crc32, COMMIT]`, where `value_i` is the
-//! `f32` bit pattern of registry entry `i` ([`crate::params::PARAMS`] order), `seq` increases
-//! by one per save, and `crc32` covers every word from `MAGIC_VERSION` to the last value.
+//! Keyed by the parameter registry: the configuration is stored under [`CONFIG_KEY`] as the
+//! list of the registry's entries, each as `(id, value)` with `id` = [`param_id`] of the
+//! entry's name (a 16-bit hash, distinct over the registry: tested) and the value's `f32` bits.
+//! A firmware whose registry gained an entry loads the entries it finds and keeps the factory
+//! value for the new one; an entry the firmware no longer has is skipped. Every value read is
+//! checked against its registry range and the whole against [`Config::validate`].
 //!
-//! Power-loss argument. NOR flash words are written one at a time and an erased word reads
-//! `0xFFFF_FFFF`. A save appends a record after the last one, writing `COMMIT` last; a record
-//! counts only if its `COMMIT` word is present *and* its CRC matches, so a save cut at any
-//! word leaves the previous record as the newest valid one (old parameters), and a completed
-//! save makes the new one newest (new parameters); a mix is impossible because a record is
-//! read whole or not at all. When the active sector is full, the *other* sector (which holds
-//! no newest record) is erased and the record written there: an interrupted erase destroys
-//! only older records. Wear-levelling: records append through a sector before any erase, and
-//! the two sectors alternate, so each erase serves `SECTOR_WORDS / record_len` saves.
+//! Old or new, never a mix: the whole configuration is one item, written with its CRC after the
+//! previous one; a save cut at any byte leaves the previous item as the newest valid one, a
+//! completed save makes the new one newest (tested by cutting power after every byte written,
+//! over many saves in a row, `tests` below).
 //!
-//! Boot: [`boot`] returns the newest valid record's configuration, or `Config::default()` and
-//! a [`StoreFault`] when the store is empty, corrupt, or its record fails validation (e.g.
-//! written by an older firmware with a different registry: the version word changes with the
-//! registry length).
+//! The parameter-store tests exercise the map on [`MemFlash`], a RAM NOR flash with the G474's
+//! geometry (8-byte write granule programmed once per erase, 2 KiB pages) and a power-cut
+//! budget counted in bytes; the simulated drive (`hal-sim`) uses it as its flash.
+
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use sequential_storage::cache::{Cache, Uncached};
+pub use sequential_storage::map::MapConfig;
+use sequential_storage::map::{MapStorage, SerializationError, Value};
 
 use crate::config::Config;
-use crate::console::ParamStore;
 use crate::params::PARAMS;
 
-const MAGIC: u32 = 0x5247_0000; // "RG"
-/// Store format version, bumped when the layout changes.
-pub const VERSION: u32 = 1;
-const COMMIT: u32 = 0x0000_C0DE;
+/// The map key of the configuration item.
+pub const CONFIG_KEY: u8 = 1;
+/// Item format (first half-word of the value); a different format is not read.
+const FORMAT: u16 = 1;
+/// Bytes of one registry entry in the item: id (u16) and value (f32), little-endian.
+const ENTRY: usize = 6;
+/// Bytes of the configuration item's value.
+pub const ITEM_BYTES: usize = 4 + ENTRY * PARAMS.len();
+/// The data buffer the map needs: key (1 byte) and value, rounded up to the 8-byte granule.
+pub const BUF_BYTES: usize = (1 + ITEM_BYTES).div_ceil(8) * 8;
+const _: () = assert!(BUF_BYTES > ITEM_BYTES && BUF_BYTES.is_multiple_of(8));
 
-/// A NOR flash of two sectors, word addressed.
-pub trait Flash {
-    /// Words per sector.
-    fn sector_words(&self) -> usize;
-    fn read(&self, sector: usize, word: usize) -> u32;
-    /// Program one word (may only clear bits). `Err` = power lost.
-    fn write(&mut self, sector: usize, word: usize, v: u32) -> Result<(), PowerLost>;
-    /// Erase a sector to all ones. `Err` = power lost (sector content undefined).
-    fn erase(&mut self, sector: usize) -> Result<(), PowerLost>;
+/// The map the store runs on.
+pub type Map<S> = MapStorage<u8, S, Cache<Uncached, Uncached, Uncached, u8>>;
+
+/// The map over a region of `flash` (`region` page aligned, at least two pages: build it as
+/// `const { MapConfig::new(range) }` and a bad range is a compile error).
+pub const fn map<S: NorFlash>(flash: S, region: MapConfig<S>) -> Map<S> {
+    MapStorage::new(flash, region, Cache::new_uncached())
 }
-
-/// The simulated power failed during a flash operation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PowerLost;
 
 /// Why boot fell back to defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StoreFault {
-    /// No valid record (blank flash or every record torn/corrupt).
+    /// No configuration item (blank flash, or none that reads back whole).
     Empty,
-    /// The newest record has a valid CRC but its values are refused by `Config::validate`.
+    /// The newest item reads back whole but a value is outside its registry range or the
+    /// configuration fails `Config::validate`.
     Invalid,
+    /// The flash could not be read, or the map is corrupt beyond the crate's repair.
+    Unreadable,
 }
 
-fn rec_len() -> usize {
-    3 + PARAMS.len() + 2
-}
-
-fn header() -> u32 {
-    MAGIC | (VERSION << 8) | (PARAMS.len() as u32 & 0xFF)
-}
-
-/// CRC-32 (IEEE, reflected), bitwise: slow but tiny, and only run outside the current loop.
-pub fn crc32(words: impl Iterator<Item = u32>) -> u32 {
-    let mut crc = !0u32;
-    for w in words {
-        for b in w.to_le_bytes() {
-            crc ^= b as u32;
-            for _ in 0..8 {
-                crc = if crc & 1 != 0 {
-                    (crc >> 1) ^ 0xEDB8_8320
-                } else {
-                    crc >> 1
-                };
-            }
+impl StoreFault {
+    pub fn message(self) -> &'static str {
+        match self {
+            StoreFault::Empty => "store empty",
+            StoreFault::Invalid => "stored parameters invalid",
+            StoreFault::Unreadable => "store unreadable",
         }
     }
-    !crc
 }
 
-/// A valid record found at (sector, word) with its sequence number.
-#[derive(Clone, Copy, Debug)]
-struct Found {
-    sector: usize,
-    at: usize,
-    seq: u32,
-}
-
-fn valid_at<F: Flash>(f: &F, s: usize, at: usize) -> Option<u32> {
-    let n = rec_len();
-    if at + n > f.sector_words() || f.read(s, at) != header() {
-        return None;
+/// A registry entry's key in the stored item: FNV-1a (32 bit) of its name, folded to 16 bits.
+pub const fn param_id(name: &str) -> u16 {
+    let b = name.as_bytes();
+    let mut h: u32 = 0x811C_9DC5;
+    let mut i = 0;
+    while i < b.len() {
+        h ^= b[i] as u32;
+        h = h.wrapping_mul(0x0100_0193);
+        i += 1;
     }
-    if f.read(s, at + n - 1) != COMMIT || f.read(s, at + 2) != PARAMS.len() as u32 {
-        return None;
-    }
-    let crc = crc32((at..at + n - 2).map(|i| f.read(s, i)));
-    (crc == f.read(s, at + n - 2)).then(|| f.read(s, at + 1))
+    (h ^ (h >> 16)) as u16
 }
 
-/// Scan both sectors: newest valid record, and the first free word of each sector
-/// (after the last word that is not erased).
-fn scan<F: Flash>(f: &F) -> (Option<Found>, [usize; 2]) {
-    let n = rec_len();
-    let mut best: Option<Found> = None;
-    let mut free = [0usize; 2];
-    for (s, fr) in free.iter_mut().enumerate() {
-        let w = f.sector_words();
-        *fr = (0..w)
-            .rev()
-            .find(|&i| f.read(s, i) != !0)
-            .map_or(0, |i| i + 1);
-        let mut at = 0;
-        while at + n <= w {
-            if let Some(seq) = valid_at(f, s, at) {
-                if best.is_none_or(|b| seq.wrapping_sub(b.seq) as i32 > 0) {
-                    best = Some(Found { sector: s, at, seq });
-                }
-            }
-            at += n;
+/// The configuration item's value: the configuration read back, and whether every stored
+/// value passed its registry range.
+struct Item {
+    cfg: Config,
+    in_range: bool,
+}
+
+impl<'a> Value<'a> for Item {
+    fn serialize_into(&self, buf: &mut [u8]) -> Result<usize, SerializationError> {
+        let b = buf
+            .get_mut(..ITEM_BYTES)
+            .ok_or(SerializationError::BufferTooSmall)?;
+        b[..2].copy_from_slice(&FORMAT.to_le_bytes());
+        b[2..4].copy_from_slice(&(PARAMS.len() as u16).to_le_bytes());
+        for (p, e) in PARAMS.iter().zip(b[4..].chunks_exact_mut(ENTRY)) {
+            e[..2].copy_from_slice(&param_id(p.name).to_le_bytes());
+            e[2..].copy_from_slice(&(p.get)(&self.cfg).to_bits().to_le_bytes());
         }
+        Ok(ITEM_BYTES)
     }
-    (best, free)
-}
 
-fn decode<F: Flash>(f: &F, r: Found) -> Result<Config, StoreFault> {
-    let mut c = Config::default();
-    for (i, p) in PARAMS.iter().enumerate() {
-        let v = f32::from_bits(f.read(r.sector, r.at + 3 + i));
-        p.check(v).map_err(|_| StoreFault::Invalid)?;
-        (p.set)(&mut c, v);
-    }
-    c.validate().map_err(|_| StoreFault::Invalid)?;
-    Ok(c)
-}
-
-/// Read the configuration at boot; defaults and a fault if there is none usable.
-pub fn boot<F: Flash>(f: &F) -> (Config, Option<StoreFault>) {
-    match scan(f).0 {
-        None => (Config::default(), Some(StoreFault::Empty)),
-        Some(r) => match decode(f, r) {
-            Ok(c) => (c, None),
-            Err(e) => (Config::default(), Some(e)),
-        },
+    fn deserialize_from(buf: &'a [u8]) -> Result<(Self, usize), SerializationError> {
+        let word = |i: usize| buf.get(i..i + 2).map(|s| u16::from_le_bytes([s[0], s[1]]));
+        let (Some(FORMAT), Some(n)) = (word(0), word(2)) else {
+            return Err(SerializationError::InvalidFormat);
+        };
+        let len = 4 + ENTRY * n as usize;
+        let entries = buf.get(4..len).ok_or(SerializationError::InvalidFormat)?;
+        let mut cfg = Config::default();
+        let mut in_range = true;
+        for e in entries.chunks_exact(ENTRY) {
+            let id = u16::from_le_bytes([e[0], e[1]]);
+            let v = f32::from_bits(u32::from_le_bytes([e[2], e[3], e[4], e[5]]));
+            if let Some(p) = PARAMS.iter().find(|p| param_id(p.name) == id) {
+                in_range &= p.check(v).is_ok();
+                (p.set)(&mut cfg, v);
+            }
+        }
+        Ok((Item { cfg, in_range }, len))
     }
 }
 
-/// Append a record for `cfg`. Records sit at multiples of the record length; the next slot
-/// is the first whole slot after the last non-erased word of the active sector.
-pub fn save<F: Flash>(f: &mut F, cfg: &Config) -> Result<(), PowerLost> {
-    let n = rec_len();
-    let (best, free) = scan(f);
-    let (mut s, seq) = match best {
-        Some(b) => (b.sector, b.seq.wrapping_add(1)),
-        None => (0, 1),
+/// Read the configuration at boot: the newest stored one, or `Config::default()` and the
+/// reason.
+pub async fn load<S: NorFlash>(
+    m: &mut Map<S>,
+    buf: &mut [u8; BUF_BYTES],
+) -> (Config, Option<StoreFault>) {
+    match m.fetch_item::<Item>(buf, &CONFIG_KEY).await {
+        Ok(Some(it)) if it.in_range && it.cfg.validate().is_ok() => (it.cfg, None),
+        Ok(Some(_)) | Err(sequential_storage::Error::SerializationError(_)) => {
+            (Config::default(), Some(StoreFault::Invalid))
+        }
+        Ok(None) => (Config::default(), Some(StoreFault::Empty)),
+        Err(_) => (Config::default(), Some(StoreFault::Unreadable)),
+    }
+}
+
+/// Store `cfg` as the newest configuration.
+pub async fn save<S: NorFlash>(
+    m: &mut Map<S>,
+    buf: &mut [u8; BUF_BYTES],
+    cfg: &Config,
+) -> Result<(), &'static str> {
+    let item = Item {
+        cfg: *cfg,
+        in_range: true,
     };
-    let mut at = free[s].div_ceil(n) * n;
-    // The active sector full: the other one, erased. No valid record anywhere but garbage in
-    // sector 0: start clean. (One erase call site: the board's erase is inlined.)
-    let full = at + n > f.sector_words();
-    if full || (best.is_none() && free[s] > 0) {
-        s ^= full as usize;
-        f.erase(s)?;
-        at = 0;
-    }
-    let mut words = [0u32; 64];
-    let body = 3 + PARAMS.len();
-    if n > words.len() {
-        return Ok(()); // unreachable with the registry's size; checked by a test
-    }
-    words[0] = header();
-    words[1] = seq;
-    words[2] = PARAMS.len() as u32;
-    for (i, p) in PARAMS.iter().enumerate() {
-        words[3 + i] = (p.get)(cfg).to_bits();
-    }
-    words[body] = crc32(words[..body].iter().copied());
-    words[body + 1] = COMMIT;
-    for (i, w) in words[..n].iter().enumerate() {
-        f.write(s, at + i, *w)?;
-    }
-    Ok(())
+    m.store_item(buf, &CONFIG_KEY, &item)
+        .await
+        .map_err(|e| match e {
+            sequential_storage::Error::Storage { .. } => "flash write failed",
+            sequential_storage::Error::FullStorage => "store full",
+            _ => "store corrupt",
+        })
 }
 
-/// A [`ParamStore`] over a [`Flash`].
-pub struct FlashStore<F: Flash>(pub F);
-
-impl<F: Flash> ParamStore for FlashStore<F> {
-    fn save(&mut self, cfg: &Config) -> Result<(), &'static str> {
-        save(&mut self.0, cfg).map_err(|_| "flash write failed")
-    }
-    fn load(&mut self) -> Result<Config, &'static str> {
-        match boot(&self.0) {
-            (c, None) => Ok(c),
-            (_, Some(StoreFault::Empty)) => Err("store empty or corrupt"),
-            (_, Some(StoreFault::Invalid)) => Err("stored parameters invalid"),
-        }
-    }
-}
-
-/// A simulated NOR flash of two sectors of `W` words, with a power-cut budget: after
-/// `budget` operations (word writes or erases) every operation fails with [`PowerLost`] and
-/// changes nothing more (an interrupted erase leaves the sector half erased).
+/// A NOR flash in RAM with the STM32G474's geometry: `P` pages of 2 KiB, read by the byte,
+/// programmed in 8-byte double words, each once after an erase (the G474 refuses a second
+/// program of a double word, its ECC, unless the new value is all zeros: RM0440, PROGERR). A power-cut budget in bytes: the write that
+/// reaches it programs the bytes before the cut and fails, and from then on every operation
+/// fails and changes nothing (an erase in progress leaves the first half of its page erased).
 #[derive(Clone)]
-pub struct SimFlash<const W: usize> {
-    pub mem: [[u32; W]; 2],
+pub struct MemFlash<const P: usize> {
+    pub mem: [[u8; 2048]; P],
+    /// Bytes that may still be programmed before the power is cut (`None`: never).
     pub budget: Option<usize>,
-    pub ops: usize,
-    pub erases: [u32; 2],
+    /// Bytes programmed since the budget was set (or since creation).
+    pub written: usize,
+    /// Erases per page.
+    pub erases: [u32; P],
+    /// Programs of a double word that was not erased with a value other than zero (refused,
+    /// as by the G474).
+    pub reprograms: u32,
+    dead: bool,
 }
 
-impl<const W: usize> Default for SimFlash<W> {
+/// The simulated power failed, or the operation was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MemFlashError(pub NorFlashErrorKind);
+
+impl NorFlashError for MemFlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        self.0
+    }
+}
+
+impl<const P: usize> Default for MemFlash<P> {
     fn default() -> Self {
-        SimFlash {
-            mem: [[!0; W]; 2],
+        MemFlash {
+            mem: [[0xFF; 2048]; P],
             budget: None,
-            ops: 0,
-            erases: [0; 2],
+            written: 0,
+            erases: [0; P],
+            reprograms: 0,
+            dead: false,
         }
     }
 }
 
-impl<const W: usize> SimFlash<W> {
-    fn spend(&mut self) -> Result<(), PowerLost> {
-        if let Some(b) = self.budget {
-            if self.ops >= b {
-                return Err(PowerLost);
-            }
-        }
-        self.ops += 1;
-        Ok(())
+impl<const P: usize> MemFlash<P> {
+    /// Restore the power (after a cut): the contents stay as the cut left them.
+    pub fn power_on(&mut self) {
+        self.dead = false;
+        self.budget = None;
+    }
+    /// Whether the power was cut.
+    pub fn is_dead(&self) -> bool {
+        self.dead
+    }
+    fn locate(&self, offset: u32, len: usize) -> Option<(usize, usize)> {
+        let (page, at) = (offset as usize / 2048, offset as usize % 2048);
+        (page < P && at + len <= 2048).then_some((page, at))
     }
 }
 
-impl<const W: usize> Flash for SimFlash<W> {
-    fn sector_words(&self) -> usize {
-        W
+const OTHER: MemFlashError = MemFlashError(NorFlashErrorKind::Other);
+
+impl<const P: usize> ErrorType for MemFlash<P> {
+    type Error = MemFlashError;
+}
+
+impl<const P: usize> ReadNorFlash for MemFlash<P> {
+    const READ_SIZE: usize = 1;
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let (page, at) = self
+            .locate(offset, bytes.len())
+            .ok_or(MemFlashError(NorFlashErrorKind::OutOfBounds))?;
+        bytes.copy_from_slice(&self.mem[page][at..at + bytes.len()]);
+        Ok(())
     }
-    fn read(&self, s: usize, w: usize) -> u32 {
-        self.mem
-            .get(s)
-            .and_then(|m| m.get(w))
-            .copied()
-            .unwrap_or(!0)
+    fn capacity(&self) -> usize {
+        P * 2048
     }
-    fn write(&mut self, s: usize, w: usize, v: u32) -> Result<(), PowerLost> {
-        self.spend()?;
-        if let Some(x) = self.mem.get_mut(s).and_then(|m| m.get_mut(w)) {
-            *x &= v; // NOR programming only clears bits
+}
+
+impl<const P: usize> NorFlash for MemFlash<P> {
+    const WRITE_SIZE: usize = 8;
+    const ERASE_SIZE: usize = 2048;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        if self.dead {
+            return Err(OTHER);
+        }
+        if !from.is_multiple_of(2048)
+            || !to.is_multiple_of(2048)
+            || to < from
+            || to as usize > P * 2048
+        {
+            return Err(MemFlashError(NorFlashErrorKind::NotAligned));
+        }
+        for page in (from / 2048) as usize..(to / 2048) as usize {
+            if self.budget == Some(self.written) {
+                // Power lost during this erase: half of the page erased.
+                self.mem[page][..1024].fill(0xFF);
+                self.dead = true;
+                return Err(OTHER);
+            }
+            self.mem[page].fill(0xFF);
+            self.erases[page] += 1;
         }
         Ok(())
     }
-    fn erase(&mut self, s: usize) -> Result<(), PowerLost> {
-        let cut = self.spend().is_err();
-        if let Some(m) = self.mem.get_mut(s) {
-            let upto = if cut { W / 2 } else { W };
-            m[..upto].iter_mut().for_each(|x| *x = !0);
-            if !cut {
-                self.erases[s] += 1;
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        if self.dead {
+            return Err(OTHER);
+        }
+        if !offset.is_multiple_of(8) || !bytes.len().is_multiple_of(8) {
+            return Err(MemFlashError(NorFlashErrorKind::NotAligned));
+        }
+        let (page, at) = self
+            .locate(offset, bytes.len())
+            .ok_or(MemFlashError(NorFlashErrorKind::OutOfBounds))?;
+        for (k, dw) in bytes.chunks_exact(8).enumerate() {
+            let cell = &mut self.mem[page][at + 8 * k..at + 8 * k + 8];
+            // RM0440 PROGERR: a double word that is not erased may only be programmed with
+            // all zeros.
+            if cell.iter().any(|&b| b != 0xFF) && dw.iter().any(|&b| b != 0) {
+                self.reprograms += 1;
+                return Err(OTHER);
+            }
+            for (c, &b) in cell.iter_mut().zip(dw) {
+                if self.budget == Some(self.written) {
+                    self.dead = true;
+                    return Err(OTHER);
+                }
+                *c &= b; // NOR programming only clears bits
+                self.written += 1;
             }
         }
-        if cut {
-            Err(PowerLost)
-        } else {
-            Ok(())
-        }
+        Ok(())
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use embassy_futures::block_on;
 
-    type F = SimFlash<100>; // about 3 records per sector: exercises sector switching quickly
+    /// Four pages, as the board's store region.
+    type F = MemFlash<4>;
+    const RANGE: core::ops::Range<u32> = 0..4 * 2048;
 
     fn cfg(r: f32) -> Config {
         Config {
@@ -284,69 +319,316 @@ mod tests {
         }
     }
 
-    #[test]
-    fn empty_and_corrupt_boot_to_defaults_with_fault() {
-        let mut f = F::default();
-        assert_eq!(boot(&f), (Config::default(), Some(StoreFault::Empty)));
-        save(&mut f, &cfg(100.0)).unwrap();
-        assert_eq!(boot(&f), (cfg(100.0), None));
-        f.mem[0][5] ^= 1; // flip one bit of a value
-        assert_eq!(boot(&f), (Config::default(), Some(StoreFault::Empty)));
-        let mut g = F::default();
-        g.mem[0]
-            .iter_mut()
-            .enumerate()
-            .for_each(|(i, x)| *x = (i as u32).wrapping_mul(2_654_435_761));
-        assert_eq!(boot(&g).1, Some(StoreFault::Empty));
-        assert!(rec_len() <= 64);
+    fn boot(f: &F) -> (Config, Option<StoreFault>) {
+        let mut m = map(f.clone(), const { MapConfig::new(RANGE) });
+        block_on(load(&mut m, &mut [0; BUF_BYTES]))
+    }
+
+    fn save_on(f: F, c: &Config) -> (F, Result<(), &'static str>) {
+        let mut m = map(f, const { MapConfig::new(RANGE) });
+        let r = block_on(save(&mut m, &mut [0; BUF_BYTES], c));
+        (m.destroy().0, r)
     }
 
     #[test]
-    fn power_cut_at_every_step_leaves_old_or_new() {
-        // Several saves in a row so that cuts land in appends, sector switches and erases.
-        for n_prev in 0..8u32 {
-            let mut base = F::default();
-            for i in 0..n_prev {
-                save(&mut base, &cfg(10.0 + i as f32)).unwrap();
-            }
-            let old = boot(&base);
-            let new = cfg(500.0);
-            // Count the operations of an uninterrupted save.
-            let mut probe = base.clone();
-            probe.ops = 0;
-            save(&mut probe, &new).unwrap();
-            let steps = probe.ops;
-            assert!(steps >= rec_len());
-            for k in 0..=steps {
-                let mut f = base.clone();
-                f.ops = 0;
-                f.budget = Some(k);
-                let r = save(&mut f, &new);
-                assert_eq!(r.is_ok(), k == steps, "n_prev {n_prev} k {k}");
-                f.budget = None;
-                let b = boot(&f);
-                if k == steps {
-                    assert_eq!(b, (new, None));
-                } else {
-                    assert_eq!(b, old, "n_prev {n_prev} cut after {k} of {steps}");
-                }
-                // And the store still works after the cut.
-                save(&mut f, &cfg(7.0)).unwrap();
-                assert_eq!(boot(&f), (cfg(7.0), None));
+    fn param_ids_are_distinct() {
+        for (i, a) in PARAMS.iter().enumerate() {
+            for b in &PARAMS[i + 1..] {
+                assert_ne!(param_id(a.name), param_id(b.name), "{} {}", a.name, b.name);
             }
         }
     }
 
     #[test]
-    fn wear_levelling_alternates_sectors() {
+    fn empty_corrupt_and_invalid_boot_to_defaults_with_fault() {
+        let f = F::default();
+        assert_eq!(boot(&f), (Config::default(), Some(StoreFault::Empty)));
+        let (f, r) = save_on(f, &cfg(100.0));
+        r.unwrap();
+        assert_eq!(boot(&f), (cfg(100.0), None));
+        // One bit of the stored r_load_ohm flipped: the item's CRC fails, nothing newer.
+        let mut g = f.clone();
+        let pos = find(&g, &100.0f32.to_bits().to_le_bytes()).expect("value in flash");
+        g.mem[pos.0][pos.1] ^= 0x01;
+        assert_ne!(boot(&g).0, cfg(100.0));
+        assert!(boot(&g).1.is_some());
+        // A value outside its registry range, stored whole: refused as invalid.
+        let bad = Config {
+            r_load_ohm: -5.0,
+            ..Config::default()
+        };
+        let (h, r) = save_on(f, &bad);
+        r.unwrap();
+        assert_eq!(boot(&h), (Config::default(), Some(StoreFault::Invalid)));
+    }
+
+    fn find(f: &F, pat: &[u8]) -> Option<(usize, usize)> {
+        (0..4).find_map(|p| {
+            f.mem[p]
+                .windows(pat.len())
+                .position(|w| w == pat)
+                .map(|i| (p, i))
+        })
+    }
+
+    /// An entry the firmware does not know is skipped; one it lacks keeps its factory value.
+    #[test]
+    fn registry_changes_are_tolerated() {
+        let stored = Config {
+            r_load_ohm: 55.0,
+            ..Config::default()
+        };
+        let mut item = [0u8; ITEM_BYTES];
+        let n = Item {
+            cfg: stored,
+            in_range: true,
+        }
+        .serialize_into(&mut item)
+        .unwrap();
+        assert_eq!(n, ITEM_BYTES);
+        // The r_load_ohm entry's id replaced by one no registry entry has: skipped, so the
+        // configuration read keeps the factory value there.
+        let i = PARAMS.iter().position(|p| p.name == "r_load_ohm").unwrap();
+        let at = 4 + ENTRY * i;
+        let mut unknown = item;
+        unknown[at..at + 2].copy_from_slice(&0xFFFFu16.to_le_bytes());
+        assert!(PARAMS.iter().all(|p| param_id(p.name) != 0xFFFF));
+        let (it, used) = Item::deserialize_from(&unknown).unwrap();
+        assert_eq!((it.cfg, it.in_range, used), (Config::default(), true, n));
+        // An item written by a firmware with one entry fewer (the last): the rest is read.
+        let mut short = item;
+        short[2..4].copy_from_slice(&(PARAMS.len() as u16 - 1).to_le_bytes());
+        let (it, used) = Item::deserialize_from(&short[..n - ENTRY]).unwrap();
+        let mut want = stored;
+        let last = &PARAMS[PARAMS.len() - 1];
+        (last.set)(&mut want, (last.get)(&Config::default()));
+        assert_eq!((it.cfg, used), (want, n - ENTRY));
+        // Another format: not read.
+        let mut other = item;
+        other[0] = 9;
+        assert!(Item::deserialize_from(&other).is_err());
+        assert!(Item::deserialize_from(&item[..3]).is_err());
+        assert!(Item::deserialize_from(&item[..n - 1]).is_err());
+    }
+
+    /// Cut the power after every byte written (and during every erase) of a save, after
+    /// 0 … 24 earlier saves (so that cuts land in appends, page migrations and erases); then
+    /// boot: the old or the new configuration, never anything else; the store works after.
+    #[test]
+    fn power_cut_after_every_byte_leaves_old_or_new() {
+        let mut base = F::default();
+        let mut cases = 0usize;
+        for n_prev in 0..25u32 {
+            let old = boot(&base);
+            let new = cfg(500.0 + n_prev as f32);
+            // Bytes of an uninterrupted save.
+            let mut probe = base.clone();
+            probe.written = 0;
+            let (probe, r) = save_on(probe, &new);
+            r.unwrap();
+            let total = probe.written;
+            assert!(total >= ITEM_BYTES, "{total}");
+            for k in 0..=total {
+                let mut f = base.clone();
+                f.written = 0;
+                f.budget = Some(k);
+                let (mut f, r) = save_on(f, &new);
+                let cut = f.is_dead();
+                assert_eq!(r.is_ok(), !cut, "n_prev {n_prev} k {k}");
+                f.power_on();
+                let b = boot(&f);
+                if cut {
+                    assert!(
+                        b == old || b == (new, None),
+                        "n_prev {n_prev}: cut after {k} of {total} bytes: {b:?}"
+                    );
+                } else {
+                    assert_eq!(b, (new, None), "n_prev {n_prev} k {k}");
+                }
+                // The store still works after the cut, and never reprograms a double word.
+                let (f, r) = save_on(f, &cfg(7.0));
+                assert!(
+                    r.is_ok(),
+                    "n_prev {n_prev} k {k}/{total}: save after the cut: {r:?}, reprograms {}",
+                    f.reprograms
+                );
+                assert_eq!(boot(&f), (cfg(7.0), None));
+                assert_eq!(f.reprograms, 0);
+                cases += 1;
+            }
+            base = save_on(base, &new).0;
+            assert_eq!(boot(&base), (new, None));
+        }
+        assert!(cases > 25 * ITEM_BYTES, "{cases}");
+    }
+
+    #[test]
+    fn wear_is_spread_over_the_pages() {
         let mut f = F::default();
-        for i in 0..60 {
-            save(&mut f, &cfg(1.0 + i as f32)).unwrap();
+        for i in 0..200 {
+            f = save_on(f, &cfg(1.0 + i as f32)).0;
             assert_eq!(boot(&f).0, cfg(1.0 + i as f32));
         }
-        let per = 100 / rec_len();
-        // 60 saves, `per` per sector fill → about 60/per erases shared by both sectors.
-        assert!(f.erases[0].abs_diff(f.erases[1]) <= 1, "{:?}", f.erases);
-        assert!((f.erases[0] + f.erases[1]) as usize <= 60 / per + 1);
+        let (lo, hi) = (
+            f.erases.iter().min().unwrap(),
+            f.erases.iter().max().unwrap(),
+        );
+        assert!(hi - lo <= 1, "{:?}", f.erases);
+        // Items per page: (2048 − page markers) / item; erases ≈ saves / items per page.
+        let per_page = 2048 / (ITEM_BYTES + 16);
+        let total: u32 = f.erases.iter().sum();
+        assert!(total as usize <= 200 / (per_page - 1) + 4, "{:?}", f.erases);
+    }
+
+    /// The executor keeps running while a save waits on the flash: the watchdog feeder (the
+    /// board's supervision task, every 10 ms) and a save run together on a virtual clock, the
+    /// flash taking the G474's times (DS12288: page erase 22 ms typical, double-word program
+    /// 82 µs). Awaited operations leave the feeder on time; the same save with every flash
+    /// operation run to completion in place (as `block_on` did) holds it for an erase.
+    #[test]
+    fn watchdog_is_fed_during_saves() {
+        let (async_gap, async_save) = feed_gaps(false);
+        let (blocking_gap, blocking_save) = feed_gaps(true);
+        std::println!(
+            "longest save {:.1} ms; longest gap between watchdog feeds: awaited flash {:.3} ms, \
+             blocking flash {:.3} ms (feed period 10 ms)",
+            async_save as f64 / 1e3,
+            async_gap as f64 / 1e3,
+            blocking_gap as f64 / 1e3
+        );
+        assert_eq!(async_save, blocking_save);
+        assert!(
+            async_save >= ERASE_US,
+            "no save erased a page: {async_save} µs"
+        );
+        // Awaited: the feeder runs on its tick whatever the flash does.
+        assert_eq!(async_gap, FEED_US);
+        // Blocking: an erase holds the feeder (the model bites).
+        assert!(blocking_gap >= ERASE_US, "{blocking_gap}");
+    }
+
+    const FEED_US: u64 = 10_000;
+    const ERASE_US: u64 = 22_000;
+    const PROGRAM_US: u64 = 82;
+
+    /// Virtual time (µs) and the earliest time a pending future asked to be woken at.
+    struct Clock {
+        now: core::cell::Cell<u64>,
+        wake: core::cell::Cell<u64>,
+    }
+
+    struct Until<'a>(&'a Clock, u64);
+    impl core::future::Future for Until<'_> {
+        type Output = ();
+        fn poll(
+            self: core::pin::Pin<&mut Self>,
+            _: &mut core::task::Context<'_>,
+        ) -> core::task::Poll<()> {
+            if self.0.now.get() >= self.1 {
+                core::task::Poll::Ready(())
+            } else {
+                self.0.wake.set(self.0.wake.get().min(self.1));
+                core::task::Poll::Pending
+            }
+        }
+    }
+
+    /// [`MemFlash`] whose operations take time: awaited on the clock, or (`blocking`) passed
+    /// in place, the executor frozen meanwhile.
+    struct Timed<'a> {
+        f: F,
+        clock: &'a Clock,
+        blocking: bool,
+    }
+    impl Timed<'_> {
+        async fn take(&self, us: u64) {
+            let end = self.clock.now.get() + us;
+            if self.blocking {
+                self.clock.now.set(end);
+            } else {
+                Until(self.clock, end).await
+            }
+        }
+    }
+    impl ErrorType for Timed<'_> {
+        type Error = MemFlashError;
+    }
+    impl ReadNorFlash for Timed<'_> {
+        const READ_SIZE: usize = 1;
+        async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            self.f.read(offset, bytes).await
+        }
+        fn capacity(&self) -> usize {
+            self.f.capacity()
+        }
+    }
+    impl NorFlash for Timed<'_> {
+        const WRITE_SIZE: usize = 8;
+        const ERASE_SIZE: usize = 2048;
+        async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            self.take(ERASE_US * u64::from((to - from) / 2048)).await;
+            self.f.erase(from, to).await
+        }
+        async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            self.take(PROGRAM_US * (bytes.len() / 8) as u64).await;
+            self.f.write(offset, bytes).await
+        }
+    }
+
+    /// 30 saves in a row (several page erases) beside a feeder; the longest gap between two
+    /// feeds and the longest save, µs.
+    fn feed_gaps(blocking: bool) -> (u64, u64) {
+        use core::future::Future;
+        use core::task::{Context, Poll, Waker};
+        let clock = Clock {
+            now: 0.into(),
+            wake: u64::MAX.into(),
+        };
+        let stop = core::cell::Cell::new(false);
+        let gap = core::cell::Cell::new(0u64);
+        let longest = core::cell::Cell::new(0u64);
+        let saves = async {
+            let flash = Timed {
+                f: F::default(),
+                clock: &clock,
+                blocking,
+            };
+            let mut m = map(flash, const { MapConfig::new(RANGE) });
+            let mut buf = [0; BUF_BYTES];
+            for i in 0..30 {
+                let t0 = clock.now.get();
+                save(&mut m, &mut buf, &cfg(10.0 + i as f32)).await.unwrap();
+                longest.set(longest.get().max(clock.now.get() - t0));
+                // The console task awaits its next line between two saves.
+                Until(&clock, clock.now.get() + 1_000).await;
+            }
+            assert_eq!(load(&mut m, &mut buf).await, (cfg(39.0), None));
+            stop.set(true);
+        };
+        let feeder = async {
+            let mut last = 0;
+            let mut tick = FEED_US;
+            while !stop.get() {
+                Until(&clock, tick).await;
+                let now = clock.now.get();
+                gap.set(gap.get().max(now - last));
+                last = now;
+                tick = now + FEED_US;
+            }
+            gap.set(gap.get().max(clock.now.get() - last));
+        };
+        let (mut a, mut b) = (core::pin::pin!(saves), core::pin::pin!(feeder));
+        let mut cx = Context::from_waker(Waker::noop());
+        let (mut a_done, mut b_done) = (false, false);
+        while !(a_done && b_done) {
+            clock.wake.set(u64::MAX);
+            a_done = a_done || a.as_mut().poll(&mut cx) == Poll::Ready(());
+            b_done = b_done || b.as_mut().poll(&mut cx) == Poll::Ready(());
+            let w = clock.wake.get();
+            if w != u64::MAX && !(a_done && b_done) {
+                clock.now.set(clock.now.get().max(w));
+            }
+        }
+        (gap.get(), longest.get())
     }
 }

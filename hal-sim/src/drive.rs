@@ -1,7 +1,7 @@
 //! A simulated drive as its serial console sees it: the closed-loop [`Sim`] (the firmware's
 //! `Controller` against the plant), the firmware's console executor
-//! ([`regen_fw::console::Console`], unchanged) and a simulated two-sector NOR flash behind the
-//! firmware's parameter store ([`regen_fw::store::FlashStore`]).
+//! ([`regen_fw::console::Console`], unchanged) and a simulated four-page NOR flash behind the
+//! firmware's parameter store ([`regen_fw::store`]).
 //!
 //! As on the board, a console line is executed *between* two control periods (the board runs
 //! the console outside the current-loop interrupt), and [`Console::tick`] runs after every
@@ -23,26 +23,29 @@
 use crate::sim::Sim;
 use crate::Scenario;
 use regen_fw::config::Config;
-use regen_fw::console::{CmdResult, Console, ParamStore, Refused};
-use regen_fw::store::{FlashStore, SimFlash};
+use regen_fw::console::{CmdResult, Console, ParamStore, Refused, Saved};
+use regen_fw::store::{self, MapConfig, MemFlash, BUF_BYTES};
 use std::fmt::Write;
 
-/// Words per flash sector: a 2 KiB page of the STM32G474.
-pub const SECTOR_WORDS: usize = 512;
-
-/// The simulated drive's store: the firmware's flash store on a simulated flash, whose
-/// factory configuration (`defaults`) is the scenario's, i.e. this simulated hardware's.
+/// The simulated drive's store: the firmware's store (`regen_fw::store`, a `sequential-storage`
+/// map) on a simulated flash of four 2 KiB pages, as the board's, run to completion (the host's
+/// flash takes no time); its factory configuration (`defaults`) is the scenario's, i.e. this
+/// simulated hardware's.
 struct SimStore {
-    flash: FlashStore<SimFlash<SECTOR_WORDS>>,
+    map: store::Map<MemFlash<4>>,
     factory: Config,
 }
 
 impl ParamStore for SimStore {
-    fn save(&mut self, cfg: &Config) -> Result<(), &'static str> {
-        self.flash.save(cfg)
+    fn save(&mut self, cfg: &Config) -> Result<Saved, &'static str> {
+        embassy_futures::block_on(store::save(&mut self.map, &mut [0; BUF_BYTES], cfg))
+            .map(|()| Saved::Done)
     }
     fn load(&mut self) -> Result<Config, &'static str> {
-        self.flash.load()
+        match embassy_futures::block_on(store::load(&mut self.map, &mut [0; BUF_BYTES])) {
+            (c, None) => Ok(c),
+            (_, Some(f)) => Err(f.message()),
+        }
     }
     fn factory(&self) -> Config {
         self.factory
@@ -66,7 +69,7 @@ impl SimDrive {
             sim,
             console: Console::new(),
             store: SimStore {
-                flash: FlashStore(SimFlash::default()),
+                map: store::map(MemFlash::default(), const { MapConfig::new(0..4 * 2048) }),
                 factory,
             },
             mark: (0.0, 0.0),
