@@ -21,11 +21,10 @@ use embassy_futures::select::{select, Either};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
 use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
-use regen_fw::console::Console;
-use regen_fw::store::FlashStore;
+use regen_fw::console::{save_reply, Console};
 
 use crate::drive::{self, Pending, Slot, PENDING, PERIODS};
-use crate::store::BoardFlash;
+use crate::store::BoardStore;
 
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
@@ -128,7 +127,7 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
 pub async fn console_task(
     mut tx: BufferedUartTx<'static>,
     mut rx: BufferedUartRx<'static>,
-    mut store: FlashStore<BoardFlash>,
+    mut store: BoardStore,
     boot_msg: &'static str,
 ) {
     // Lives in the task's static storage (embassy allocates task futures statically).
@@ -176,6 +175,11 @@ pub async fn console_task(
                             Some(before) => {
                                 let mut ctl = before.clone();
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
+                                // A `save`: written here, awaited (the executor runs on).
+                                if let Some(r) = store.finish().await {
+                                    let _ = save_reply(r, reply);
+                                    let _ = reply.write_str("\r\n");
+                                }
                                 if post(&before, &ctl) {
                                     wait_applied().await;
                                 }
