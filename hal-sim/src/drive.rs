@@ -1,6 +1,6 @@
 //! A simulated drive as its serial console sees it: the closed-loop [`Sim`] (the firmware's
 //! `Controller` against the plant), the firmware's console executor
-//! ([`regen_fw::console::Console`], unchanged) and a simulated four-page NOR flash behind the
+//! ([`regen_fw::console::Console`], unchanged) and a simulated two-page NOR flash behind the
 //! firmware's parameter store ([`regen_fw::store`]).
 //!
 //! As on the board, a console line is executed *between* two control periods (the board runs
@@ -24,25 +24,23 @@ use crate::sim::Sim;
 use crate::Scenario;
 use regen_fw::config::Config;
 use regen_fw::console::{CmdResult, Console, ParamStore, Refused, Saved};
-use regen_fw::store::{self, MapConfig, MemFlash, BUF_BYTES};
+use regen_fw::store::{MemFlash, Store};
 use std::fmt::Write;
 
-/// The simulated drive's store: the firmware's store (`regen_fw::store`, a `sequential-storage`
-/// map) on a simulated flash of four 2 KiB pages, as the board's, run to completion (the host's
-/// flash takes no time); its factory configuration (`defaults`) is the scenario's, i.e. this
-/// simulated hardware's.
+/// The simulated drive's store: the firmware's store (`regen_fw::store`) on a simulated flash
+/// of two 2 KiB pages, as the board's, run to completion (the host's flash takes no time); its
+/// factory configuration (`defaults`) is the scenario's, i.e. this simulated hardware's.
 struct SimStore {
-    map: store::Map<MemFlash<4>>,
+    store: Store<MemFlash<2>>,
     factory: Config,
 }
 
 impl ParamStore for SimStore {
     fn save(&mut self, cfg: &Config) -> Result<Saved, &'static str> {
-        embassy_futures::block_on(store::save(&mut self.map, &mut [0; BUF_BYTES], cfg))
-            .map(|()| Saved::Done)
+        embassy_futures::block_on(self.store.save(cfg)).map(|()| Saved::Done)
     }
     fn load(&mut self) -> Result<Config, &'static str> {
-        match embassy_futures::block_on(store::load(&mut self.map, &mut [0; BUF_BYTES])) {
+        match self.store.load() {
             (c, None) => Ok(c),
             (_, Some(f)) => Err(f.message()),
         }
@@ -69,7 +67,10 @@ impl SimDrive {
             sim,
             console: Console::new(),
             store: SimStore {
-                map: store::map(MemFlash::default(), const { MapConfig::new(0..4 * 2048) }),
+                store: Store {
+                    flash: MemFlash::default(),
+                    base: 0,
+                },
                 factory,
             },
             mark: (0.0, 0.0),

@@ -4,7 +4,7 @@
 //! * `pwm`: TIM1 centre-aligned complementary PWM, dead time, sampling instant, gate enable.
 //! * `drive`: the current loop in the ADC interrupt (highest priority), `DriveIo` for the board.
 //! * `console`: `regen_fw::console` over USART2 (ST-LINK VCP), telemetry.
-//! * `store`: `regen_fw::store` (a `sequential-storage` map) on four pages of flash bank 2.
+//! * `store`: `regen_fw::store` (an append log of records) on two pages of flash bank 2.
 //! * `supervisor`: watchdog, loop-alive and overrun checks, fault logs.
 //!
 //! The control core `regen-fw` is linked unchanged: the interrupt calls the same
@@ -99,13 +99,6 @@ async fn main(spawner: embassy_executor::Spawner) {
             (
                 Config::default(),
                 "stored parameters invalid: DEFAULT parameters (fault store_invalid)",
-            )
-        }
-        Err(StoreFault::Unreadable) => {
-            defmt::warn!("parameter store unreadable: defaults in use");
-            (
-                Config::default(),
-                "store unreadable: DEFAULT parameters (fault store_unreadable)",
             )
         }
     };

@@ -1,5 +1,5 @@
-//! The parameter store on the G474: `regen_fw::store` (a `sequential-storage` map) over the
-//! last four 2 KiB pages of flash bank 2, through embassy-stm32's interrupt-driven flash
+//! The parameter store on the G474: `regen_fw::store` (an append log of records) over the last
+//! two 2 KiB pages of flash bank 2, through embassy-stm32's interrupt-driven flash
 //! (`Bank2Region<Async>`, 8-byte double-word writes), awaited in the console's task.
 //!
 //! Stalls. Erases and programs are awaited: while a page erase runs (22 ms typical, 40 ms worst
@@ -12,13 +12,13 @@
 //!
 //! Torn double words. A power cut while a double word is being programmed can leave it with an
 //! uncorrectable ECC error; the G474 raises an NMI when it is read, which would otherwise turn
-//! every boot (the map scans its pages) into a reset loop. The NMI handler
+//! every boot (the store scans its pages) into a reset loop. The NMI handler
 //! ([`note_ecc_and_reset`]) records FLASH_ECCR's bank and address in RAM that survives a reset
 //! and resets; at the next boot [`recover_ecc`] programs that double word to zero (the one value
 //! the G474 accepts over a programmed double word, RM0440 PROGERR; its ECC is then consistent).
-//! The map reads the zeroed word as a torn item and skips it, as it skips an item cut part way
-//! (host test `regen_fw::store::tests::power_cut_after_every_byte_leaves_old_or_new`): the
-//! previous configuration stays the newest valid one.
+//! The store reads the zeroed word as part of a torn record and skips it, as it skips a record
+//! cut part way (host test `regen_fw::store::tests::power_cut_after_every_byte_leaves_old_or_new`):
+//! the previous configuration stays the newest valid one.
 
 use core::mem::MaybeUninit;
 use core::ops::Range;
@@ -26,40 +26,86 @@ use core::ptr::addr_of_mut;
 
 use embassy_stm32::flash::{Async, Bank2Region};
 use embassy_stm32::pac;
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use regen_fw::console::{ParamStore, Saved};
-use regen_fw::store::{self, MapConfig, StoreFault, BUF_BYTES};
+use regen_fw::store::{ReadNow, Store, StoreFault, PAGE};
 use regen_fw::Config;
 
 /// The store's region, as offsets into embassy's `Bank2Region` (bank 2 starts at
-/// 0x0804_0000 in dual-bank mode, DBANK = 1, the factory option): its last four 2 KiB pages,
-/// 0x0807_E000 … 0x0807_FFFF. The image (< 64 KiB) lies entirely in bank 1.
-pub const STORE_RANGE: Range<u32> = 0x3_E000..0x4_0000;
+/// 0x0804_0000 in dual-bank mode, DBANK = 1, the factory option): its last two 2 KiB pages,
+/// 0x0807_F000 … 0x0807_FFFF. The image (< 64 KiB) lies entirely in bank 1.
+pub const STORE_RANGE: Range<u32> = 0x4_0000 - 2 * PAGE..0x4_0000;
 
-pub type BoardMap = store::Map<Bank2Region<'static, Async>>;
+/// Absolute address of bank 2 (dual-bank mode).
+const BANK2_BASE: u32 = 0x0804_0000;
+
+/// Bank 2 through embassy's async driver, read straight from the memory map.
+pub struct BoardFlash(pub Bank2Region<'static, Async>);
+
+impl ReadNow for BoardFlash {
+    fn read_now(&self, offset: u32, bytes: &mut [u8]) {
+        for (i, b) in bytes.iter_mut().enumerate() {
+            let off = offset + i as u32;
+            *b = if off < 0x4_0000 {
+                // SAFETY: inside bank 2, memory-mapped flash.
+                unsafe { ((BANK2_BASE + off) as *const u8).read_volatile() }
+            } else {
+                0xFF
+            };
+        }
+    }
+}
+
+impl ErrorType for BoardFlash {
+    type Error = embassy_stm32::flash::Error;
+}
+
+impl ReadNorFlash for BoardFlash {
+    const READ_SIZE: usize = 1;
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.read_now(offset, bytes);
+        Ok(())
+    }
+    fn capacity(&self) -> usize {
+        0x4_0000
+    }
+}
+
+impl NorFlash for BoardFlash {
+    const WRITE_SIZE: usize = 8;
+    const ERASE_SIZE: usize = PAGE as usize;
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.write(offset, bytes).await
+    }
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0.erase(from, to).await
+    }
+}
 
 /// The store as the console task holds it.
 pub struct BoardStore {
-    pub map: BoardMap,
+    pub store: Store<BoardFlash>,
     /// What the flash holds (read at boot, replaced by each successful save): `load` returns
     /// it without reading the flash again; the store is the flash's only writer.
     pub held: Result<Config, StoreFault>,
     /// A `save` taken by [`ParamStore::save`], written by the task ([`BoardStore::finish`]).
     pub request: Option<Config>,
-    pub buf: [u8; BUF_BYTES],
 }
 
 impl BoardStore {
-    /// Open the map over `region` and read the configuration it holds (after recovering a
+    /// Open the store over `region` and read the configuration it holds (after recovering a
     /// torn double word, if the last reset came from one).
     pub async fn open(mut region: Bank2Region<'static, Async>) -> (BoardStore, bool) {
         let recovered = recover_ecc(&mut region).await;
         let mut s = BoardStore {
-            map: store::map(region, const { MapConfig::new(STORE_RANGE) }),
+            store: Store {
+                flash: BoardFlash(region),
+                base: STORE_RANGE.start,
+            },
             held: Err(StoreFault::Empty),
             request: None,
-            buf: [0; BUF_BYTES],
         };
-        s.held = match store::load(&mut s.map, &mut s.buf).await {
+        s.held = match s.store.load() {
             (c, None) => Ok(c),
             (_, Some(f)) => Err(f),
         };
@@ -69,7 +115,7 @@ impl BoardStore {
     /// Write the pending `save`, if any; its result.
     pub async fn finish(&mut self) -> Option<Result<(), &'static str>> {
         let cfg = self.request.take()?;
-        let r = store::save(&mut self.map, &mut self.buf, &cfg).await;
+        let r = self.store.save(&cfg).await;
         if r.is_ok() {
             self.held = Ok(cfg);
         }
