@@ -175,11 +175,6 @@ pub async fn console_task(
                             Some(before) => {
                                 let mut ctl = before.clone();
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
-                                // A `save`: written here, awaited (the executor runs on).
-                                if let Some(r) = store.finish().await {
-                                    let _ = save_reply(r, reply);
-                                    let _ = reply.write_str("\r\n");
-                                }
                                 if post(&before, &ctl) {
                                     wait_applied().await;
                                 }
@@ -190,6 +185,12 @@ pub async fn console_task(
                         }
                     } else {
                         let _ = reply.write_str("error: line is not UTF-8\r\n");
+                    }
+                    // A `save`: written here, awaited (the executor runs on), with no copy of
+                    // the controller alive across the wait (the task's state stays small).
+                    if let Some(r) = store.finish().await {
+                        let _ = save_reply(r, reply);
+                        let _ = reply.write_str("\r\n");
                     }
                     if reply.overflow {
                         reply.b.truncate(REPLY_MAX - 40);
