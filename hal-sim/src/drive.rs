@@ -1,7 +1,7 @@
 //! A simulated drive as its serial console sees it: the closed-loop [`Sim`] (the firmware's
 //! `Controller` against the plant), the firmware's console executor
-//! ([`regen_fw::console::Console`], unchanged) and a simulated two-sector NOR flash behind the
-//! firmware's parameter store ([`regen_fw::store::FlashStore`]).
+//! ([`regen_fw::console::Console`], unchanged) and a simulated two-page NOR flash behind the
+//! firmware's parameter store ([`regen_fw::store`]).
 //!
 //! As on the board, a console line is executed *between* two control periods (the board runs
 //! the console outside the current-loop interrupt), and [`Console::tick`] runs after every
@@ -23,26 +23,27 @@
 use crate::sim::Sim;
 use crate::Scenario;
 use regen_fw::config::Config;
-use regen_fw::console::{CmdResult, Console, ParamStore, Refused};
-use regen_fw::store::{FlashStore, SimFlash};
+use regen_fw::console::{CmdResult, Console, ParamStore, Refused, Saved};
+use regen_fw::store::{MemFlash, Store};
 use std::fmt::Write;
 
-/// Words per flash sector: a 2 KiB page of the STM32G474.
-pub const SECTOR_WORDS: usize = 512;
-
-/// The simulated drive's store: the firmware's flash store on a simulated flash, whose
+/// The simulated drive's store: the firmware's store (`regen_fw::store`) on a simulated flash
+/// of two 2 KiB pages, as the board's, run to completion (the host's flash takes no time); its
 /// factory configuration (`defaults`) is the scenario's, i.e. this simulated hardware's.
 struct SimStore {
-    flash: FlashStore<SimFlash<SECTOR_WORDS>>,
+    store: Store<MemFlash<2>>,
     factory: Config,
 }
 
 impl ParamStore for SimStore {
-    fn save(&mut self, cfg: &Config) -> Result<(), &'static str> {
-        self.flash.save(cfg)
+    fn save(&mut self, cfg: &Config) -> Result<Saved, &'static str> {
+        embassy_futures::block_on(self.store.save(cfg)).map(|()| Saved::Done)
     }
     fn load(&mut self) -> Result<Config, &'static str> {
-        self.flash.load()
+        match self.store.load() {
+            (c, None) => Ok(c),
+            (_, Some(f)) => Err(f.message()),
+        }
     }
     fn factory(&self) -> Config {
         self.factory
@@ -66,7 +67,10 @@ impl SimDrive {
             sim,
             console: Console::new(),
             store: SimStore {
-                flash: FlashStore(SimFlash::default()),
+                store: Store {
+                    flash: MemFlash::default(),
+                    base: 0,
+                },
                 factory,
             },
             mark: (0.0, 0.0),

@@ -160,24 +160,12 @@ pub const VBUS_SAMPLE: embassy_stm32::adc::SampleTime = embassy_stm32::adc::Samp
 pub const CONSOLE_BAUD: u32 = 115_200;
 
 // ---------------------------------------------------------------------------------------------
-// Parameter store (flash)
+// Supervision (the parameter store's flash region is `store::STORE_RANGE`)
 // ---------------------------------------------------------------------------------------------
-/// Two 2 KiB pages at the end of bank 2 (dual-bank mode, DBANK = 1, the factory option), as
-/// offsets into embassy's `Bank2Region` (bank 2 starts at 0x0804_0000): 0x0807_F000 and
-/// 0x0807_F800. The image (< 64 KiB) lies entirely in bank 1, so erasing or programming bank 2
-/// never stalls instruction fetches of the current loop (read-while-write, RM0440 §3.3.9).
-pub const STORE_PAGE_OFFSETS: [u32; 2] = [0x3_F000, 0x3_F800];
-/// Page size (erase unit) in bank 2, bytes.
-pub const STORE_PAGE_BYTES: u32 = 2048;
-
-// ---------------------------------------------------------------------------------------------
-// Supervision
-// ---------------------------------------------------------------------------------------------
-/// Independent-watchdog timeout, µs. The supervision task feeds it every 10 ms. The longest
-/// legitimate stall of the thread-mode executor is a store `save` (a page erase, 22 ms typical
-/// and 40 ms worst case per DS12288, plus ≈ 42 double-word programs of ≤ 90 µs), so the timeout
-/// must exceed 40 + 4 + 10 ms with the LSI's tolerance (29.5–34 kHz: the real timeout can be
-/// 6 % shorter). 100 ms leaves margin and is still short against the structure's vibration
+/// Independent-watchdog timeout, µs. The supervision task feeds it every 10 ms; a store `save`
+/// does not hold the thread-mode executor (its flash operations are awaited, `store.rs`). The
+/// timeout covers the feed period many times over, the LSI's tolerance included (29.5–34 kHz:
+/// the real timeout can be 6 % shorter), and 100 ms is still short against the structure's vibration
 /// period (≥ 1 s): a hung image costs at most a tenth of a cycle before the reset opens the
 /// bridge (pins high-impedance, gate-driver pull-downs). The current loop itself is not
 /// guarded by the watchdog but by the supervision task (see `supervisor.rs`).

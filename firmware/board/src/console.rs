@@ -21,11 +21,10 @@ use embassy_futures::select::{select, Either};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
 use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
-use regen_fw::console::Console;
-use regen_fw::store::FlashStore;
+use regen_fw::console::{save_reply, Console};
 
 use crate::drive::{self, PENDING};
-use crate::store::BoardFlash;
+use crate::store::BoardStore;
 use regen_fw::period::{Pending, Slot};
 
 /// Telemetry lines dropped because the UART was busy.
@@ -137,7 +136,7 @@ fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
 pub async fn console_task(
     mut tx: BufferedUartTx<'static>,
     mut rx: BufferedUartRx<'static>,
-    mut store: FlashStore<BoardFlash>,
+    mut store: BoardStore,
     boot_msg: &'static str,
 ) {
     // Lives in the task's static storage (embassy allocates task futures statically).
@@ -195,6 +194,12 @@ pub async fn console_task(
                         }
                     } else {
                         let _ = reply.write_str("error: line is not UTF-8\r\n");
+                    }
+                    // A `save`: written here, awaited (the executor runs on), with no copy of
+                    // the controller alive across the wait (the task's state stays small).
+                    if let Some(r) = store.finish().await {
+                        let _ = save_reply(r, reply);
+                        let _ = reply.write_str("\r\n");
                     }
                     if reply.overflow {
                         reply.b.truncate(REPLY_MAX - 40);

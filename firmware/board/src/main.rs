@@ -4,7 +4,7 @@
 //! * `pwm`: TIM1 centre-aligned complementary PWM, dead time, sampling instant, gate enable.
 //! * `drive`: the current loop in the ADC interrupt (highest priority), `DriveIo` for the board.
 //! * `console`: `regen_fw::console` over USART2 (ST-LINK VCP), telemetry.
-//! * `store`: `regen_fw::store` on two pages of flash bank 2.
+//! * `store`: `regen_fw::store` (an append log of records) on two pages of flash bank 2.
 //! * `supervisor`: watchdog, loop-alive and overrun checks, fault logs.
 //!
 //! The control core `regen-fw` is linked unchanged: the interrupt runs the same period
@@ -23,7 +23,7 @@ mod trip;
 use defmt_rtt as _;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::{interrupt, pac};
-use regen_fw::store::{boot, FlashStore, StoreFault};
+use regen_fw::store::StoreFault;
 use regen_fw::{Config, Controller};
 
 /// The current-loop interrupt: ADC1 and ADC2 share this vector; only ADC2's end of injected
@@ -81,27 +81,25 @@ async fn main(spawner: embassy_executor::Spawner) {
     }
 
     // Parameters: the store, or defaults with a reported fault.
-    let mut flash = store::BoardFlash {
-        region: parts.flash,
-    };
-    let ecc_page = store::recover_ecc(&mut flash);
-    if let Some(page) = ecc_page {
-        defmt::warn!(
-            "store page {} held an ECC error (power cut during a save): erased",
-            page
-        );
+    let (flash, recovered) = store::BoardStore::open(parts.flash).await;
+    if recovered {
+        defmt::warn!("store: a double word torn by a power cut during a save was zeroed");
     }
-    let (cfg, store_fault) = boot(&flash);
-    let boot_msg: &'static str = match store_fault {
-        None if ecc_page.is_some() => "store page with ECC error erased; older parameters loaded",
-        None => "parameters loaded from flash",
-        Some(StoreFault::Empty) => {
-            defmt::warn!("parameter store empty or corrupt: defaults in use");
-            "store empty or corrupt: DEFAULT parameters (fault store_empty)"
+    let (cfg, boot_msg): (Config, &'static str) = match flash.held {
+        Ok(c) => (c, "parameters loaded from flash"),
+        Err(StoreFault::Empty) => {
+            defmt::warn!("parameter store empty: defaults in use");
+            (
+                Config::default(),
+                "store empty: DEFAULT parameters (fault store_empty)",
+            )
         }
-        Some(StoreFault::Invalid) => {
+        Err(StoreFault::Invalid) => {
             defmt::warn!("stored parameters invalid: defaults in use");
-            "stored parameters invalid: DEFAULT parameters (fault store_invalid)"
+            (
+                Config::default(),
+                "stored parameters invalid: DEFAULT parameters (fault store_invalid)",
+            )
         }
     };
     let (ctl, cfg) = match Controller::new(&cfg) {
@@ -174,14 +172,13 @@ async fn main(spawner: embassy_executor::Spawner) {
     match parts.uart {
         Some(uart) => {
             let (tx, rx) = uart.split();
-            match console::console_task(tx, rx, FlashStore(flash), boot_msg) {
+            match console::console_task(tx, rx, flash, boot_msg) {
                 Ok(t) => spawner.spawn(t),
                 Err(_) => defmt::error!("console task not started"),
             }
         }
         None => {
             defmt::error!("console UART not available: running without console");
-            let _ = &mut flash;
         }
     }
 }

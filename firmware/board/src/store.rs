@@ -1,108 +1,135 @@
-//! `regen_fw::store::Flash` on the G474's internal flash: two 2 KiB pages at the end of bank 2.
+//! The parameter store on the G474: `regen_fw::store` (an append log of records) over the last
+//! two 2 KiB pages of flash bank 2, through embassy-stm32's interrupt-driven flash
+//! (`Bank2Region<Async>`, 8-byte double-word writes), awaited in the console's task.
 //!
-//! Word mapping. The store's model is a NOR flash of 32-bit words, each programmed once after
-//! an erase. The G474 programs 64-bit double words, each once after an erase (8 ECC bits per
-//! double word: a second program of the same double word is refused with PROGERR). So logical
-//! word `i` of a page is the double word at byte `8·i`, programmed as `[v, !v]`: 256 logical
-//! words per page (6 records of the 40-word layout). Reading returns `v` when the two halves
-//! are complementary, `0xFFFF_FFFF` when the double word is erased, and `0` (which breaks the
-//! record's CRC) otherwise. Writing a double word that is not erased is refused (the store then
-//! reports a failed save; its records stay consistent, see `regen_fw::store`). Every program
-//! and erase is verified by reading back.
-//!
-//! Stalls. Erase and program go through embassy's *interrupt-driven* flash driver, run to
-//! completion with `block_on` in the console task: interrupts stay enabled (embassy's blocking
-//! driver would hold a critical section for the whole 22–40 ms page erase, i.e. stop the current
-//! loop for up to 800 periods). With the image in bank 1 and the store in bank 2 the flash is
-//! read-while-write, so the current-loop interrupt keeps fetching code and constants during
-//! an erase (the driver turns the flash data cache off meanwhile: constant loads take the
-//! 4 wait states, the instruction cache and prefetch are unaffected). The thread-mode executor
-//! is blocked for the save (≤ 45 ms): the watchdog timeout accounts for it (`board.rs`).
-//! The core's console additionally refuses `save` in mode `run`.
+//! Stalls. Erases and programs are awaited: while a page erase runs (22 ms typical, 40 ms worst
+//! case, DS12288) the executor runs the other tasks, the supervision task's watchdog feed among
+//! them (host test `regen_fw::store::tests::watchdog_is_fed_during_saves`). With the image in
+//! bank 1 and the store in bank 2 the flash is read-while-write, so the current-loop interrupt
+//! keeps fetching code and constants meanwhile (embassy turns the data cache off during the
+//! operation: constant loads take the 4 wait states). The core's console refuses `save` in
+//! mode `run`.
 //!
 //! Torn double words. A power cut while a double word is being programmed can leave it with an
 //! uncorrectable ECC error; the G474 raises an NMI when it is read, which would otherwise turn
-//! every boot (the store scan reads the page) into a reset loop. The NMI handler
+//! every boot (the store scans its pages) into a reset loop. The NMI handler
 //! ([`note_ecc_and_reset`]) records FLASH_ECCR's bank and address in RAM that survives a reset
-//! and resets; at the next boot [`recover_ecc`] erases the store page holding that address
-//! before the scan. The records in that page are lost (the store then boots from the other
-//! page's newest record, or defaults with the usual fault), not the drive.
+//! and resets; at the next boot [`recover_ecc`] programs that double word to zero (the one value
+//! the G474 accepts over a programmed double word, RM0440 PROGERR; its ECC is then consistent).
+//! The store reads the zeroed word as part of a torn record and skips it, as it skips a record
+//! cut part way (host test `regen_fw::store::tests::power_cut_after_every_byte_leaves_old_or_new`):
+//! the previous configuration stays the newest valid one.
 
 use core::mem::MaybeUninit;
+use core::ops::Range;
 use core::ptr::addr_of_mut;
 
-use embassy_futures::block_on;
 use embassy_stm32::flash::{Async, Bank2Region};
 use embassy_stm32::pac;
-use regen_fw::store::{Flash, PowerLost};
+use embedded_storage_async::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use regen_fw::console::{ParamStore, Saved};
+use regen_fw::store::{ReadNow, Store, StoreFault, PAGE};
+use regen_fw::Config;
 
-use crate::board::{STORE_PAGE_BYTES, STORE_PAGE_OFFSETS};
+/// The store's region, as offsets into embassy's `Bank2Region` (bank 2 starts at
+/// 0x0804_0000 in dual-bank mode, DBANK = 1, the factory option): its last two 2 KiB pages,
+/// 0x0807_F000 … 0x0807_FFFF. The image (< 64 KiB) lies entirely in bank 1.
+pub const STORE_RANGE: Range<u32> = 0x4_0000 - 2 * PAGE..0x4_0000;
 
 /// Absolute address of bank 2 (dual-bank mode).
 const BANK2_BASE: u32 = 0x0804_0000;
 
-pub struct BoardFlash {
-    pub region: Bank2Region<'static, Async>,
+/// Bank 2 through embassy's async driver, read straight from the memory map.
+pub struct BoardFlash(pub Bank2Region<'static, Async>);
+
+impl ReadNow for BoardFlash {
+    fn read_now(&self, offset: u32, bytes: &mut [u8]) {
+        for (i, b) in bytes.iter_mut().enumerate() {
+            let off = offset + i as u32;
+            *b = if off < 0x4_0000 {
+                // SAFETY: inside bank 2, memory-mapped flash.
+                unsafe { ((BANK2_BASE + off) as *const u8).read_volatile() }
+            } else {
+                0xFF
+            };
+        }
+    }
 }
 
-impl BoardFlash {
-    fn offset(&self, sector: usize, word: usize) -> Option<u32> {
-        let page = *STORE_PAGE_OFFSETS.get(sector)?;
-        (word < self.sector_words()).then_some(page + 8 * word as u32)
-    }
-
-    fn read_dw(&self, off: u32) -> (u32, u32) {
-        let p = (BANK2_BASE + off) as *const u32;
-        // SAFETY: `off` is inside one of the two store pages of bank 2 (checked by `offset`),
-        // memory-mapped flash, aligned to 8 bytes.
-        unsafe { (p.read_volatile(), p.add(1).read_volatile()) }
-    }
+impl ErrorType for BoardFlash {
+    type Error = embassy_stm32::flash::Error;
 }
 
-impl Flash for BoardFlash {
-    fn sector_words(&self) -> usize {
-        (STORE_PAGE_BYTES / 8) as usize
-    }
-
-    fn read(&self, sector: usize, word: usize) -> u32 {
-        let Some(off) = self.offset(sector, word) else {
-            return !0;
-        };
-        match self.read_dw(off) {
-            (lo, hi) if lo == !0 && hi == !0 => !0,
-            (lo, hi) if hi == !lo => lo,
-            _ => 0,
-        }
-    }
-
-    fn write(&mut self, sector: usize, word: usize, v: u32) -> Result<(), PowerLost> {
-        let off = self.offset(sector, word).ok_or(PowerLost)?;
-        if self.read_dw(off) != (!0, !0) {
-            return Err(PowerLost);
-        }
-        let mut b = [0u8; 8];
-        b[..4].copy_from_slice(&v.to_le_bytes());
-        b[4..].copy_from_slice(&(!v).to_le_bytes());
-        block_on(self.region.write(off, &b)).map_err(|_| PowerLost)?;
-        // Read back: the driver's interrupt clears the error flags before the waiting future
-        // looks at them, so a failed program is caught here rather than trusted.
-        if self.read_dw(off) != (v, !v) {
-            return Err(PowerLost);
-        }
+impl ReadNorFlash for BoardFlash {
+    const READ_SIZE: usize = 1;
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        self.read_now(offset, bytes);
         Ok(())
     }
+    fn capacity(&self) -> usize {
+        0x4_0000
+    }
+}
 
-    fn erase(&mut self, sector: usize) -> Result<(), PowerLost> {
-        let page = *STORE_PAGE_OFFSETS.get(sector).ok_or(PowerLost)?;
-        block_on(self.region.erase(page, page + STORE_PAGE_BYTES)).map_err(|_| PowerLost)?;
-        // Verify the erase (same reason as the write read-back).
-        let all_ones =
-            (0..self.sector_words()).all(|w| self.read_dw(page + 8 * w as u32) == (!0, !0));
-        if all_ones {
-            Ok(())
-        } else {
-            Err(PowerLost)
+impl NorFlash for BoardFlash {
+    const WRITE_SIZE: usize = 8;
+    const ERASE_SIZE: usize = PAGE as usize;
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        self.0.write(offset, bytes).await
+    }
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        self.0.erase(from, to).await
+    }
+}
+
+/// The store as the console task holds it.
+pub struct BoardStore {
+    pub store: Store<BoardFlash>,
+    /// What the flash holds (read at boot, replaced by each successful save): `load` returns
+    /// it without reading the flash again; the store is the flash's only writer.
+    pub held: Result<Config, StoreFault>,
+    /// A `save` taken by [`ParamStore::save`], written by the task ([`BoardStore::finish`]).
+    pub request: Option<Config>,
+}
+
+impl BoardStore {
+    /// Open the store over `region` and read the configuration it holds (after recovering a
+    /// torn double word, if the last reset came from one).
+    pub async fn open(mut region: Bank2Region<'static, Async>) -> (BoardStore, bool) {
+        let recovered = recover_ecc(&mut region).await;
+        let mut s = BoardStore {
+            store: Store {
+                flash: BoardFlash(region),
+                base: STORE_RANGE.start,
+            },
+            held: Err(StoreFault::Empty),
+            request: None,
+        };
+        s.held = match s.store.load() {
+            (c, None) => Ok(c),
+            (_, Some(f)) => Err(f),
+        };
+        (s, recovered)
+    }
+
+    /// Write the pending `save`, if any; its result.
+    pub async fn finish(&mut self) -> Option<Result<(), &'static str>> {
+        let cfg = self.request.take()?;
+        let r = self.store.save(&cfg).await;
+        if r.is_ok() {
+            self.held = Ok(cfg);
         }
+        Some(r)
+    }
+}
+
+impl ParamStore for BoardStore {
+    fn save(&mut self, cfg: &Config) -> Result<Saved, &'static str> {
+        self.request = Some(*cfg);
+        Ok(Saved::Deferred)
+    }
+    fn load(&mut self) -> Result<Config, &'static str> {
+        self.held.map_err(StoreFault::message)
     }
 }
 
@@ -130,9 +157,9 @@ pub fn note_ecc_and_reset() -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// At boot, before the store is read: if the last reset came from an ECC error inside a store
-/// page, erase that page. Returns the page erased.
-pub fn recover_ecc(f: &mut BoardFlash) -> Option<usize> {
+/// At boot, before the store is read: if the last reset came from an ECC error inside the
+/// store's region, program that double word to zero. Whether one was.
+async fn recover_ecc(region: &mut Bank2Region<'static, Async>) -> bool {
     // SAFETY: see `note_ecc_and_reset`; any bit pattern is a valid `[u32; 2]`.
     let note = unsafe {
         let p = addr_of_mut!(ECC_NOTE).cast::<[u32; 2]>();
@@ -141,12 +168,13 @@ pub fn recover_ecc(f: &mut BoardFlash) -> Option<usize> {
         n
     };
     if note[0] != ECC_MAGIC || note[1] >> 31 == 0 {
-        return None;
+        return false;
     }
     // ADDR_ECC is the byte offset of the failing double word in its bank (RM0440 §3.7.9).
-    let off = note[1] & 0x7_FFFF;
-    let sector = STORE_PAGE_OFFSETS
-        .iter()
-        .position(|&p| (p..p + STORE_PAGE_BYTES).contains(&off))?;
-    f.erase(sector).ok().map(|_| sector)
+    let off = note[1] & 0x7_FFF8;
+    if !STORE_RANGE.contains(&off) {
+        return false;
+    }
+    // The note's offset is relative to bank 2's start, as the region's offsets are.
+    region.write(off, &[0; 8]).await.is_ok()
 }
