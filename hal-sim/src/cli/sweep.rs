@@ -23,7 +23,7 @@ pub struct SweepArgs {
     #[arg(long, default_value = "r_load_ohm")]
     pub param: String,
     /// Values (comma separated); default: 13 loads from 10 Ω to 1 kΩ including 306 Ω.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub values: Vec<f64>,
     /// Output directory.
     #[arg(long, default_value = "regen-out")]
