@@ -86,14 +86,14 @@ pub fn check_units(rec: &super::Record, file: &Path) -> Result<(), String> {
             file.display()
         ));
     }
-    if !(stroke <= 10.0) {
+    if stroke.is_nan() || stroke > 10.0 {
         return Err(format!(
             "{}: column x_m looks wrong: stroke {stroke} m, allowed ≤ 10 m (x in millimetres? x/1000 gives {} m)",
             file.display(),
             stroke * 1e-3
         ));
     }
-    if !(vmax <= 20.0) {
+    if vmax.is_nan() || vmax > 20.0 {
         return Err(format!(
             "{}: columns x_m/t_s look wrong: speed up to {vmax:.4} m/s, allowed ≤ 20 m/s (x in mm or t in ms?)",
             file.display()
