@@ -231,7 +231,7 @@ fn default_duration() -> f64 {
 impl Scenario {
     /// Parse TOML text; the error names the key and line.
     pub fn from_toml(text: &str) -> Result<Scenario, String> {
-        let s: Scenario = toml::from_str(text).map_err(|e| e.to_string())?;
+        let s: Scenario = toml::from_str(text).map_err(|e| toml_error(text, &e))?;
         s.check()?;
         Ok(s)
     }
@@ -655,6 +655,21 @@ impl Scenario {
             sim.record(&ch, self.record.every);
         }
         Ok(sim)
+    }
+}
+
+/// A TOML error on one line: `line N (`the line`): message`.
+fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', " ");
+    match e.span() {
+        Some(sp) => {
+            let start = sp.start.min(text.len());
+            let line = text[..start].matches('\n').count() + 1;
+            let content = text.lines().nth(line - 1).unwrap_or("").trim();
+            let content: String = content.chars().take(60).collect();
+            format!("line {line} (`{content}`): {msg}")
+        }
+        None => msg,
     }
 }
 
