@@ -174,8 +174,8 @@ impl Plot {
             .y_desc(&self.ylabel)
             .x_labels(8)
             .y_labels(8)
-            .x_label_formatter(&|v| tick(*v))
-            .y_label_formatter(&|v| tick(*v))
+            .x_label_formatter(&|v| tick(snap(*v, xlo, xhi)))
+            .y_label_formatter(&|v| tick(snap(*v, ylo, yhi)))
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 15))
             .light_line_style(RGBColor(0xee, 0xee, 0xee))
@@ -344,6 +344,16 @@ pub fn robust_range(v: &[f64], log: bool) -> (f64, f64) {
     }
 }
 
+/// A tick computed as start + k·step that should be 0 but carries rounding noise (1e-17 on
+/// an axis of ±0.2) is 0.
+fn snap(v: f64, lo: f64, hi: f64) -> f64 {
+    if v.abs() < 1e-9 * (hi - lo).abs() {
+        0.0
+    } else {
+        v
+    }
+}
+
 /// A tick label: the shortest decimal that represents the tick (`0.002`, `250`, `-4e4` is
 /// printed `-40000`; below 1e-4 or from 1e7 in scientific notation `2e-5`, `1.5e7`).
 pub fn tick(v: f64) -> String {
@@ -395,6 +405,8 @@ mod tests {
         assert_eq!(tick(2e-3), "0.002");
         assert_eq!(tick(2e-5), "2e-5");
         assert_eq!(tick(10f64.powf(2.0 * 0.5f64.log10() + 3.0)), "250");
+        assert_eq!(tick(snap(-2.775e-17, -0.25, 0.25)), "0");
+        assert_eq!(tick(snap(2e-5, 0.0, 1e-4)), "2e-5");
         assert!(is_round("0.25") && is_round("150") && is_round("2e-5") && is_round("-40000"));
         assert!(!is_round("25.119") && !is_round("158.489") && !is_round("-3.83e4"));
     }
