@@ -24,6 +24,8 @@ pub enum Style {
     Markers,
     /// A line with a marker at every point.
     LineMarkers,
+    /// Small filled dots (scatter of thousands of points).
+    Dots,
 }
 
 /// One series: its legend name, its points, how it is drawn, and which points faulted
@@ -48,6 +50,12 @@ impl Series {
     pub fn markers(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
         Series {
             style: Style::Markers,
+            ..Series::line(name, points)
+        }
+    }
+    pub fn dots(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            style: Style::Dots,
             ..Series::line(name, points)
         }
     }
@@ -131,7 +139,9 @@ impl Plot {
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let pts: Vec<Vec<(f64, f64, bool)>> = self.series.iter().map(|s| self.visible(s)).collect();
         let xs: Vec<f64> = pts.iter().flatten().map(|p| p.0).collect();
-        let ys: Vec<f64> = pts.iter().flatten().map(|p| p.1).collect();
+        // Faulted points do not set the range (a run that tripped says nothing about the
+        // scale of the others): they are drawn on the frame when outside it.
+        let ys: Vec<f64> = pts.iter().flatten().filter(|p| !p.2).map(|p| p.1).collect();
         let (x0, x1) = match self.window {
             Some((a, b)) => (a, b),
             None => full_range(&xs, self.xlog),
@@ -183,6 +193,7 @@ impl Plot {
             .draw()
             .map_err(e)?;
         let clamp = |p: (f64, f64)| (p.0.clamp(xlo, xhi), p.1.clamp(ylo, yhi));
+        let corner = self.legend_corner(pts, (xlo, xhi), (ylo, yhi));
         let mut any_fault = false;
         let mut outliers = Vec::new();
         for (k, (s, p)) in self.series.iter().zip(pts).enumerate() {
@@ -190,6 +201,7 @@ impl Plot {
             let shape = k % 3;
             let line = matches!(s.style, Style::Line | Style::LineMarkers);
             let marks = matches!(s.style, Style::Markers | Style::LineMarkers);
+            let dots = s.style == Style::Dots;
             // Later series are drawn thinner so one lying on another leaves both visible.
             let width = if line {
                 3usize.saturating_sub(k / 2).max(1) as u32
@@ -201,11 +213,30 @@ impl Plot {
                     outliers.push(clamp((q.0, q.1)));
                 }
             }
-            if line {
+            // Lines after the second are dashed, so a line lying on another leaves both
+            // visible.
+            let dashed = line && k >= 2;
+            if line && !dashed {
                 ch.draw_series(LineSeries::new(
                     p.iter().map(|q| clamp((q.0, q.1))),
                     c.stroke_width(width),
                 ))
+                .map_err(e)?;
+            }
+            if dashed {
+                ch.draw_series(DashedLineSeries::new(
+                    p.iter().map(|q| clamp((q.0, q.1))),
+                    8,
+                    6,
+                    c.stroke_width(width),
+                ))
+                .map_err(e)?;
+            }
+            if s.style == Style::Dots {
+                ch.draw_series(
+                    p.iter()
+                        .map(|q| Circle::new(clamp((q.0, q.1)), 1, c.filled())),
+                )
                 .map_err(e)?;
             }
             if marks {
@@ -231,7 +262,11 @@ impl Plot {
                     // A line sample for a line, a marker sample for markers alone.
                     let st = c.stroke_width(if line { width } else { 2 });
                     match (line, shape) {
+                        (true, _) if dashed => {
+                            (PathElement::new(vec![(x, y), (x + 8, y)], st)).into_dyn()
+                        }
                         (true, _) => PathElement::new(vec![(x, y), (x + 24, y)], st).into_dyn(),
+                        (false, _) if dots => Circle::new((x + 12, y), 3, c.filled()).into_dyn(),
                         (false, 0) => Circle::new((x + 12, y), 4, st).into_dyn(),
                         (false, 1) => TriangleMarker::new((x + 12, y), 5, st).into_dyn(),
                         (false, _) => Cross::new((x + 12, y), 4, st).into_dyn(),
@@ -267,7 +302,7 @@ impl Plot {
         }
         if !self.series.is_empty() {
             ch.configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
+                .position(corner)
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .label_font(("sans-serif", 13))
@@ -275,6 +310,48 @@ impl Plot {
                 .map_err(e)?;
         }
         Ok(())
+    }
+}
+
+impl Plot {
+    /// The corner of the plot holding the fewest points (each corner: 45 % of the width, 30 %
+    /// of the height), where the legend goes.
+    fn legend_corner(
+        &self,
+        pts: &[Vec<(f64, f64, bool)>],
+        (x0, x1): (f64, f64),
+        (y0, y1): (f64, f64),
+    ) -> SeriesLabelPosition {
+        let fx = |x: f64| {
+            if self.xlog {
+                (x.log10() - x0.log10()) / (x1.log10() - x0.log10())
+            } else {
+                (x - x0) / (x1 - x0)
+            }
+        };
+        let fy = |y: f64| {
+            if self.ylog {
+                (y.log10() - y0.log10()) / (y1.log10() - y0.log10())
+            } else {
+                (y - y0) / (y1 - y0)
+            }
+        };
+        let mut count = [0usize; 4]; // upper right, upper left, lower right, lower left
+        for p in pts.iter().flatten() {
+            let (u, v) = (fx(p.0), fy(p.1));
+            let (right, left, up, down) = (u > 0.55, u < 0.45, v > 0.7, v < 0.3);
+            count[0] += (right && up) as usize;
+            count[1] += (left && up) as usize;
+            count[2] += (right && down) as usize;
+            count[3] += (left && down) as usize;
+        }
+        let best = (0..4).min_by_key(|&k| count[k]).unwrap_or(0);
+        match best {
+            1 => SeriesLabelPosition::UpperLeft,
+            2 => SeriesLabelPosition::LowerRight,
+            3 => SeriesLabelPosition::LowerLeft,
+            _ => SeriesLabelPosition::UpperRight,
+        }
     }
 }
 

@@ -1,6 +1,6 @@
 //! Every plot the tools write, rendered (resvg, with the DejaVu Sans file under
 //! tests/fonts/) and checked: at least five tick labels, each a round number, and data drawn
-//! (coloured pixels inside the frame). With `REGEN_FIGURES=DIR` the PNGs are kept there
+//! (more than 50 coloured pixels: a series of 100 one-pixel dots makes about 150). With `REGEN_FIGURES=DIR` the PNGs are kept there
 //! (docs/figures/ is made so).
 
 use std::path::{Path, PathBuf};
@@ -109,7 +109,7 @@ fn check_dir(dir: &Path, keep: &Option<PathBuf>, prefix: &str) -> usize {
             ))
         });
         let coloured = render(&svg, png.as_deref());
-        assert!(coloured > 200, "{}: {coloured} data pixels", p.display());
+        assert!(coloured > 50, "{}: {coloured} data pixels", p.display());
         n += 1;
     }
     n

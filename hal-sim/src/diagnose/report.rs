@@ -461,7 +461,7 @@ fn scatter(
         .collect();
     let mut p = crate::plot::Plot::new(title, xl, yl);
     p.ylog = ylog;
-    p.series.push(crate::plot::Series::markers(
+    p.series.push(crate::plot::Series::dots(
         format!("final-model residual ({} points)", pts.len()),
         pts,
     ));
