@@ -22,9 +22,11 @@ pub mod fastmath;
 pub mod faults;
 pub mod lqg;
 pub mod plant;
+pub mod plot;
 pub mod scenario;
 pub mod sim;
 pub mod study;
+pub mod summary;
 
 pub use scenario::Scenario;
 pub use sim::{Channel, Energy, Rig, Sim};

@@ -21,7 +21,7 @@
 //! every = 20
 //! ```
 
-use crate::plant::{Bus, Drive, Excitation, Inverter, Losses, Machine, Screw, Sensors};
+use crate::plant::{Bus, Drive, Excitation, Inverter, Losses, Machine, Motion, Screw, Sensors};
 use crate::sim::{Channel, Rig, Sim};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
@@ -231,7 +231,7 @@ fn default_duration() -> f64 {
 impl Scenario {
     /// Parse TOML text; the error names the key and line.
     pub fn from_toml(text: &str) -> Result<Scenario, String> {
-        let s: Scenario = toml::from_str(text).map_err(|e| e.to_string())?;
+        let s: Scenario = toml::from_str(text).map_err(|e| toml_error(text, &e))?;
         s.check()?;
         Ok(s)
     }
@@ -287,13 +287,25 @@ impl Scenario {
         }
     }
 
-    fn check(&self) -> Result<(), String> {
-        if !(self.duration_s.is_finite() && self.duration_s > 0.0 && self.duration_s <= 1e5) {
-            return Err("duration_s: must be a positive number of seconds (≤ 1e5)".into());
+    /// Every value checked for finiteness, sign and physical range (see [`Scenario::physics`])
+    /// and the firmware configuration it implies; the error names the key, the value and
+    /// the allowed range.
+    pub fn check(&self) -> Result<(), String> {
+        in_range("duration_s", self.duration_s, Lo::Open(0.0), 1e5, "s")?;
+        in_range(
+            "settle_s",
+            self.settle_s,
+            Lo::Closed(0.0),
+            self.duration_s,
+            "s",
+        )?;
+        if self.settle_s >= self.duration_s {
+            return Err(format!(
+                "settle_s = {}: must lie in [0, duration_s = {}) s",
+                self.settle_s, self.duration_s
+            ));
         }
-        if !(self.settle_s >= 0.0 && self.settle_s < self.duration_s) {
-            return Err("settle_s: must lie in [0, duration_s)".into());
-        }
+        self.physics()?;
         for c in &self.record.channels {
             if Channel::from_name(c).is_none() {
                 let all: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
@@ -348,17 +360,263 @@ impl Scenario {
             r_load_ohm: self.law.r_load_ohm as f32,
             ..Config::default()
         };
-        c.validate().map_err(|e| format!("firmware.{e}"))?;
+        c.validate().map_err(|e| {
+            let key = if e.field == "r_load_ohm" {
+                "law.r_load_ohm".to_string()
+            } else {
+                format!("firmware.{}", e.field)
+            };
+            match regen_fw::params::find(e.field) {
+                Some(p) => format!(
+                    "{key} = {}: {} (allowed [{}, {}] {})",
+                    (p.get)(&c),
+                    e.reason,
+                    p.min,
+                    p.max,
+                    p.unit
+                ),
+                None => format!("{key}: {}", e.reason),
+            }
+        })?;
         if let Some(o) = &self.law.opt {
             c.opt = o.params()?;
         }
         for (name, v) in &self.law.set {
             let p = regen_fw::params::find(name)
                 .ok_or_else(|| format!("law.set.{name}: unknown parameter"))?;
-            p.apply(&mut c, *v as f32, false)
-                .map_err(|e| format!("law.set.{name} = {v}: {e}"))?;
+            f32_value(&format!("law.set.{name}"), *v)?;
+            p.apply(&mut c, *v as f32, false).map_err(|e| {
+                format!(
+                    "law.set.{name} = {v}: {e} (allowed [{}, {}] {})",
+                    p.min, p.max, p.unit
+                )
+            })?;
         }
         Ok(c)
+    }
+
+    /// The plant's values against their physical ranges. The ranges are wide (a 10 MN
+    /// structure, a 10 g excitation) and only refuse what cannot be a device: a NaN, a
+    /// negative mass, a frequency ≤ 0, an efficiency above 1.
+    pub fn physics(&self) -> Result<(), String> {
+        use Lo::{Closed, Open};
+        let m = &self.machine;
+        in_range("machine.r_ohm", m.r_ohm, Open(0.0), 1e3, "Ω")?;
+        in_range("machine.l_h", m.l_h, Open(0.0), 10.0, "H")?;
+        in_range(
+            "machine.ke_v_s_per_rad",
+            m.ke_v_s_per_rad,
+            Open(0.0),
+            100.0,
+            "V·s/rad",
+        )?;
+        in_range(
+            "machine.pole_pairs",
+            m.pole_pairs as f64,
+            Closed(1.0),
+            255.0,
+            "",
+        )?;
+        in_range(
+            "machine.angle_offset_rad",
+            m.angle_offset_rad,
+            Closed(-1e3),
+            1e3,
+            "rad",
+        )?;
+        let s = &self.screw;
+        in_range(
+            "screw.lead_m_per_rad",
+            s.lead_m_per_rad,
+            Open(0.0),
+            1.0,
+            "m/rad",
+        )?;
+        in_range("screw.j_kg_m2", s.j_kg_m2, Open(0.0), 10.0, "kg·m²")?;
+        in_range("screw.b_nms", s.b_nms, Closed(0.0), 1e3, "N·m·s/rad")?;
+        in_range("screw.efficiency", s.efficiency, Open(0.0), 1.0, "")?;
+        in_range("screw.coulomb_n", s.coulomb_n, Closed(0.0), 1e6, "N")?;
+        in_range(
+            "screw.viscous_n_s_per_m",
+            s.viscous_n_s_per_m,
+            Closed(0.0),
+            1e8,
+            "N·s/m",
+        )?;
+        in_range("screw.p3", s.p3, Closed(-1.0), 1.0, "")?;
+        in_range("screw.p5", s.p5, Closed(-1.0), 1.0, "")?;
+        in_range("screw.p4", s.p4, Closed(-1e3), 1e3, "rad")?;
+        in_range("screw.p6", s.p6, Closed(-1e3), 1e3, "rad")?;
+        in_range("screw.ball_m", s.ball_m, Open(0.0), 1.0, "m")?;
+        in_range(
+            "screw.stick_velocity",
+            s.stick_velocity,
+            Open(0.0),
+            1.0,
+            "m/s",
+        )?;
+        match &self.drive {
+            Drive::Imposed { motion } => match motion {
+                Motion::Sine {
+                    amplitude_m,
+                    freq_hz,
+                }
+                | Motion::Triangle {
+                    amplitude_m,
+                    freq_hz,
+                } => {
+                    in_range(
+                        "drive.motion.amplitude_m",
+                        *amplitude_m,
+                        Closed(0.0),
+                        10.0,
+                        "m",
+                    )?;
+                    in_range("drive.motion.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
+                }
+                Motion::Recorded { t_s, x_m } => {
+                    series("drive.motion", t_s, "x_m", x_m, 10.0)?;
+                }
+            },
+            Drive::Structure {
+                structure,
+                excitation,
+            } => {
+                in_range(
+                    "drive.structure.mass_kg",
+                    structure.mass_kg,
+                    Open(0.0),
+                    1e9,
+                    "kg",
+                )?;
+                in_range(
+                    "drive.structure.stiffness_n_per_m",
+                    structure.stiffness_n_per_m,
+                    Closed(0.0),
+                    1e12,
+                    "N/m",
+                )?;
+                in_range(
+                    "drive.structure.damping_n_s_per_m",
+                    structure.damping_n_s_per_m,
+                    Closed(0.0),
+                    1e12,
+                    "N·s/m",
+                )?;
+                match excitation {
+                    Excitation::Sine { a0_m_s2, freq_hz }
+                    | Excitation::Triangle { a0_m_s2, freq_hz } => {
+                        // 1000 m/s² (100 g) is kept: the drive's own protection must answer
+                        // it (an over-force fault), not the reader.
+                        in_range(
+                            "drive.excitation.a0_m_s2",
+                            *a0_m_s2,
+                            Closed(0.0),
+                            1e4,
+                            "m/s²",
+                        )?;
+                        in_range("drive.excitation.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
+                    }
+                    Excitation::KanaiTajimi {
+                        s0,
+                        omega_g,
+                        zeta_g,
+                        ..
+                    } => {
+                        in_range(
+                            "drive.excitation.s0",
+                            *s0,
+                            Closed(0.0),
+                            1e6,
+                            "(m/s²)²/(rad/s)",
+                        )?;
+                        in_range(
+                            "drive.excitation.omega_g",
+                            *omega_g,
+                            Open(0.0),
+                            1e4,
+                            "rad/s",
+                        )?;
+                        in_range("drive.excitation.zeta_g", *zeta_g, Open(0.0), 10.0, "")?;
+                    }
+                    Excitation::Recorded { t_s, a_m_s2 } => {
+                        series("drive.excitation", t_s, "a_m_s2", a_m_s2, 1e4)?;
+                    }
+                    Excitation::RecordedCsv { path } => {
+                        if path.is_empty() {
+                            return Err(
+                                "drive.excitation.path = \"\": a CSV file path expected".into()
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        let b = &self.bus;
+        in_range("bus.capacitance_f", b.capacitance_f, Open(0.0), 10.0, "F")?;
+        in_range("bus.initial_v", b.initial_v, Closed(0.0), 2000.0, "V")?;
+        if let Some(v) = b.source_v {
+            in_range("bus.source_v", v, Closed(0.0), 2000.0, "V")?;
+        }
+        in_range("bus.source_r_ohm", b.source_r_ohm, Open(0.0), 1e6, "Ω")?;
+        in_range("bus.brake_r_ohm", b.brake_r_ohm, Open(0.0), 1e6, "Ω")?;
+        let period = 1.0 / self.firmware.pwm_hz as f64;
+        in_range(
+            "inverter.dead_time_s",
+            self.inverter.dead_time_s,
+            Closed(0.0),
+            0.1 * period,
+            "s (a tenth of the PWM period)",
+        )?;
+        let l = &self.losses;
+        in_range("losses.k_sw_s", l.k_sw_s, Closed(0.0), 1e-5, "s")?;
+        in_range("losses.r_on_ohm", l.r_on_ohm, Closed(0.0), 10.0, "Ω")?;
+        in_range("losses.logic_w", l.logic_w, Closed(0.0), 1e3, "W")?;
+        let n = &self.sensors;
+        for (k, o) in n.current_offset_a.iter().enumerate() {
+            in_range(
+                &format!("sensors.current_offset_a[{k}]"),
+                *o,
+                Closed(-1e3),
+                1e3,
+                "A",
+            )?;
+        }
+        in_range(
+            "sensors.current_noise_a",
+            n.current_noise_a,
+            Closed(0.0),
+            1e3,
+            "A",
+        )?;
+        in_range(
+            "sensors.vbus_offset_v",
+            n.vbus_offset_v,
+            Closed(-1e3),
+            1e3,
+            "V",
+        )?;
+        in_range(
+            "sensors.vbus_noise_v",
+            n.vbus_noise_v,
+            Closed(0.0),
+            1e3,
+            "V",
+        )?;
+        if self.law.r_load_ohm != f64::INFINITY {
+            in_range(
+                "law.r_load_ohm",
+                self.law.r_load_ohm,
+                Closed(0.0),
+                1e9,
+                "Ω (or inf = open)",
+            )?;
+            f32_value("law.r_load_ohm", self.law.r_load_ohm)?;
+        }
+        if self.record.every == 0 {
+            return Err("record.every = 0: must be ≥ 1 (keep one PWM period in `every`)".into());
+        }
+        Ok(())
     }
 
     /// The drive with recorded files loaded.
@@ -398,6 +656,96 @@ impl Scenario {
         }
         Ok(sim)
     }
+}
+
+/// A TOML error on one line: `line N (`the line`): message`.
+fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', " ");
+    match e.span() {
+        Some(sp) => {
+            let start = sp.start.min(text.len());
+            let line = text[..start].matches('\n').count() + 1;
+            let content = text.lines().nth(line - 1).unwrap_or("").trim();
+            let content: String = content.chars().take(60).collect();
+            format!("line {line} (`{content}`): {msg}")
+        }
+        None => msg,
+    }
+}
+
+/// The lower end of an allowed range.
+#[derive(Clone, Copy)]
+enum Lo {
+    Open(f64),
+    Closed(f64),
+}
+
+/// `key = value: must be a finite number in (lo, hi] unit` unless `value` lies there.
+fn in_range(key: &str, v: f64, lo: Lo, hi: f64, unit: &str) -> Result<(), String> {
+    let (ok_lo, bracket, l) = match lo {
+        Lo::Open(l) => (v > l, '(', l),
+        Lo::Closed(l) => (v >= l, '[', l),
+    };
+    if v.is_finite() && ok_lo && v <= hi {
+        return Ok(());
+    }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    Err(format!(
+        "{key} = {v}: must be a finite number in {bracket}{l}, {hi}]{unit}"
+    ))
+}
+
+/// A value the firmware takes as `f32`: refused when it underflows to 0 (as overflow is).
+fn f32_value(key: &str, v: f64) -> Result<(), String> {
+    if v != 0.0 && v.is_finite() && (v.abs() as f32) < f32::MIN_POSITIVE {
+        return Err(format!(
+            "{key} = {v}: too small for the firmware's f32 (|value| ≥ {:e} or 0)",
+            f32::MIN_POSITIVE
+        ));
+    }
+    if v.is_finite() && (v.abs() as f32).is_infinite() {
+        return Err(format!(
+            "{key} = {v}: too large for the firmware's f32 (|value| ≤ {:e})",
+            f32::MAX
+        ));
+    }
+    Ok(())
+}
+
+/// A recorded series: at least two samples, equal lengths, finite, times increasing.
+fn series(key: &str, t: &[f64], name: &str, y: &[f64], max_abs: f64) -> Result<(), String> {
+    if t.len() != y.len() || t.len() < 2 {
+        return Err(format!(
+            "{key}: t_s ({} values) and {name} ({} values) must have the same length ≥ 2",
+            t.len(),
+            y.len()
+        ));
+    }
+    for (k, w) in t.windows(2).enumerate() {
+        if w[1] <= w[0] || w[1].is_nan() || w[0].is_nan() || !w[1].is_finite() || !w[0].is_finite()
+        {
+            return Err(format!(
+                "{key}.t_s[{}] = {}: times must be finite and increasing (previous {})",
+                k + 1,
+                w[1],
+                w[0]
+            ));
+        }
+    }
+    for (k, v) in y.iter().enumerate() {
+        in_range(
+            &format!("{key}.{name}[{k}]"),
+            *v,
+            Lo::Closed(-max_abs),
+            max_abs,
+            "",
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

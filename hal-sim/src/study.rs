@@ -849,7 +849,7 @@ pub enum StudyKind {
     /// one-way and the two-way law with a drive loss model; writes regimes.csv + regimes.svg.
     Regimes {
         /// Output directory.
-        #[arg(long, default_value = "out/study")]
+        #[arg(long, default_value = "regen-out/study")]
         out: PathBuf,
         /// Number of intensities (log-spaced).
         #[arg(long, default_value_t = 12)]
@@ -887,7 +887,7 @@ pub enum StudyKind {
         #[arg(long)]
         catalogue: Option<PathBuf>,
         /// Output CSV.
-        #[arg(long, default_value = "out/study/sizing.csv")]
+        #[arg(long, default_value = "regen-out/study/sizing.csv")]
         out: PathBuf,
     },
     /// Design the two-way controller for the reference model and print it as `set opt.*`
@@ -920,11 +920,35 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
             i_max,
         } => {
             if !(*i_max > 0.0 && *i_max <= 500.0) {
-                return Err("i_max must be in (0, 500] A".into());
+                return Err(format!("--i-max = {i_max}: must be in (0, 500] A"));
             }
-            if *points < 2 || !(q_min > &0.0 && q_max > q_min) || !(*secs > 0.0) {
-                return Err("need points ≥ 2, 0 < q_min < q_max, secs > 0".into());
+            if *points < 2 || *points > 1000 {
+                return Err(format!("--points = {points}: must be in [2, 1000]"));
             }
+            if !(*q_min > 0.0 && q_min.is_finite()) {
+                return Err(format!(
+                    "--q-min = {q_min}: must be a finite intensity > 0 m²/s³"
+                ));
+            }
+            if !(q_max > q_min && q_max.is_finite()) {
+                return Err(format!(
+                    "--q-max = {q_max}: must be finite and > --q-min = {q_min} m²/s³"
+                ));
+            }
+            if !(*secs > 0.0 && *secs <= 1e5) {
+                return Err(format!("--secs = {secs}: must be in (0, 1e5] s"));
+            }
+            for (key, v) in [("--p-logic", p_logic), ("--k-sw", k_sw), ("--r-on", r_on)] {
+                if !(*v >= 0.0 && v.is_finite()) {
+                    return Err(format!("{key} = {v}: must be a finite number ≥ 0"));
+                }
+            }
+            if !(*extra_max > 0.0 && extra_max.is_finite()) {
+                return Err(format!(
+                    "--extra-max = {extra_max}: must be a finite power > 0 W"
+                ));
+            }
+            crate::cli::output::check_out_dir(dir)?;
             let loss = LossModel {
                 p_logic_w: *p_logic,
                 k_sw: *k_sw,
@@ -934,7 +958,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
                 .map(|k| q_min * (q_max / q_min).powf(k as f64 / (*points - 1) as f64))
                 .collect();
             let rows = regime_study(LinModel::reference(), loss, &qs, *secs, *seed, *i_max)?;
-            write_regime(&rows, *extra_max, dir).map_err(|e| e.to_string())?;
+            write_regime(&rows, *extra_max, dir).map_err(|e| format!("{}: {e}", dir.display()))?;
             let _ = writeln!(
                 out,
                 "a_rms m/s²  net R / one-way / two-way W   two-way may spend extra W"

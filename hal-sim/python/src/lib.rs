@@ -330,7 +330,7 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
         sc.record.channels.clear();
     }
     let o = py
-        .detach(|| hal_sim::cli::run::simulate(&sc, |_| {}))
+        .detach(|| hal_sim::cli::run::simulate(&sc, &mut |_| {}))
         .map_err(err)?;
     let d = PyDict::new(py);
     let ch = PyDict::new(py);
@@ -350,11 +350,18 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
     let period = 1.0 / f64::from(sc.firmware.pwm_hz);
     d.set_item("period_s", period)?;
     d.set_item("wall_s", o.wall_s)?;
-    // The run's summary. Seam: when `hal_sim::summary` exists, this dict is its fields.
+    // The run's summary: `hal_sim::summary::RunSummary`'s fields (what `regen run` prints),
+    // and the mean power of every ledger flow after settling.
+    let r = &o.summary;
     let s = PyDict::new(py);
-    s.set_item("name", &sc.name)?;
-    s.set_item("duration_s", sc.duration_s)?;
-    s.set_item("settle_s", sc.settle_s)?;
+    s.set_item("name", &r.name)?;
+    s.set_item("duration_s", r.duration_s)?;
+    s.set_item("settle_s", r.settle_s)?;
+    s.set_item("mean_power_w", r.mean_power_w)?;
+    s.set_item("peak_force_n", r.peak_force_n)?;
+    s.set_item("peak_force_t_s", r.peak_force_t_s)?;
+    s.set_item("peak_force_settled_n", r.peak_force_settled_n)?;
+    s.set_item("fault_t_s", r.fault_t_s)?;
     s.set_item("wall_s", o.wall_s)?;
     s.set_item("real_time_factor", sc.duration_s / o.wall_s.max(1e-12))?;
     s.set_item("energy_residual_j", o.energy.residual())?;

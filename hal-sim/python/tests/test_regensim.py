@@ -28,9 +28,10 @@ def parse_cli_run(out):
     energy, digest = {}, None
     for line in out.splitlines():
         s = line.strip()
-        if s.endswith(",") and ": " in s and not s.startswith("Energy"):
-            k, v = s[:-1].split(": ")
-            energy[k] = float(v)
+        if s.startswith("energy ledger (J, exact): "):
+            for kv in s.split(": ", 1)[1].split(", "):
+                k, v = kv.split(" = ")
+                energy[k] = float(v)
         if s.startswith("channels digest"):
             digest = int(s.rsplit(" ", 1)[1], 16)
     return energy, digest

@@ -58,6 +58,7 @@ fn main() {
                 param: "r_load_ohm".into(),
                 values: Vec::new(),
                 out: "regen-out".into(),
+                quiet: false,
             })
         }
     };

@@ -3,6 +3,7 @@
 
 pub mod client;
 pub mod output;
+pub mod progress;
 pub mod run;
 #[cfg(unix)]
 pub mod serve;

@@ -1,9 +1,13 @@
-//! `regen run SCENARIO`: one closed-loop run → CSV of the recorded channels, an SVG time
-//! trace, force–displacement and force–velocity plots, and the energy ledger.
+//! `regen run SCENARIO`: one closed-loop run → its answer (mean harvested power after
+//! settling, peak force, energy balance, faults latched; [`crate::summary::RunSummary`]), a
+//! CSV of the recorded channels and plots of force against time, displacement and velocity.
 
-use super::output::{plot_svg, write, Series};
+use super::output::{check_out_dir, write};
+use super::progress::Progress;
+use crate::plot::{Plot, Series};
 use crate::scenario::Scenario;
 use crate::sim::{Channel, Energy, Recorder};
+use crate::summary::{run_to_end, RunSummary};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -13,12 +17,40 @@ pub struct RunArgs {
     /// Output directory.
     #[arg(long, default_value = "regen-out")]
     pub out: PathBuf,
+    /// Zoom the time plot on an event: `T0,T1` in seconds.
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub window: Option<Vec<f64>>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
-/// What one closed-loop run leaves: the ledger at the end and at `settle_s`, the latched
-/// fault with the console's decoding, the recorded channels. `regen run` prints and writes it;
-/// the Python module (`hal-sim/python`) returns it.
+/// `--window T0,T1` checked against the run: finite, T0 < T1, inside [0, duration].
+pub fn check_window(w: &Option<Vec<f64>>, duration_s: f64) -> Result<Option<(f64, f64)>, String> {
+    let Some(w) = w else { return Ok(None) };
+    let &[a, b] = w.as_slice() else {
+        return Err(format!(
+            "--window = {}: two times T0,T1 in seconds expected, {} given",
+            w.iter()
+                .map(|v| v.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+            w.len()
+        ));
+    };
+    if !(a.is_finite() && b.is_finite() && a >= 0.0 && a < b && b <= duration_s) {
+        return Err(format!(
+            "--window = {a},{b}: must be two times T0 < T1 in [0, {duration_s}] s (the run's duration)"
+        ));
+    }
+    Ok(Some((a, b)))
+}
+
+/// What one closed-loop run leaves: its summary, the ledger at the end and at `settle_s`, the
+/// latched fault with the console's decoding, the recorded channels. `regen run` prints and
+/// writes it; the Python module (`hal-sim/python`) returns it.
 pub struct RunOutcome {
+    pub summary: RunSummary,
     /// Energy ledger at the end of the run, J.
     pub energy: Energy,
     /// Energy ledger after the PWM period nearest `settle_s`, J (averages are taken after it).
@@ -36,30 +68,12 @@ pub struct RunOutcome {
     pub wall_s: f64,
 }
 
-/// Run a scenario for its `duration_s` (rounded to whole PWM periods); `progress` is called
-/// with the fraction done about 50 times.
-pub fn simulate(sc: &Scenario, mut progress: impl FnMut(f64)) -> Result<RunOutcome, String> {
+/// Run a scenario for its `duration_s` (whole PWM periods); `progress` is called with the
+/// simulated seconds advanced since its last call ([`run_to_end`]).
+pub fn simulate(sc: &Scenario, progress: &mut dyn FnMut(f64)) -> Result<RunOutcome, String> {
     let mut sim = sc.build()?;
     let t = std::time::Instant::now();
-    let n = (sc.duration_s / sim.period()).round() as u64;
-    let settle_step = ((sc.settle_s / sim.period()).round() as u64).min(n);
-    let mut energy_at_settle = sim.energy();
-    let chunk = (n / 50).max(1);
-    let mut done = 0;
-    while done < n {
-        let mut k = chunk.min(n - done);
-        if done < settle_step {
-            k = k.min(settle_step - done);
-        }
-        for _ in 0..k {
-            sim.step();
-        }
-        done += k;
-        if done == settle_step {
-            energy_at_settle = sim.energy();
-        }
-        progress(done as f64 / n as f64);
-    }
+    let summary = run_to_end(sc, &mut sim, progress);
     let wall_s = t.elapsed().as_secs_f64();
     let fault = sim.controller().fault().map(|f| f.name());
     let faults_text = fault.map(|_| {
@@ -73,10 +87,11 @@ pub fn simulate(sc: &Scenario, mut progress: impl FnMut(f64)) -> Result<RunOutco
         out
     });
     Ok(RunOutcome {
-        energy: sim.energy(),
-        energy_at_settle,
-        steps: n,
-        settle_step,
+        energy: summary.energy,
+        energy_at_settle: summary.energy_at_settle,
+        steps: summary.steps,
+        settle_step: summary.settle_step,
+        summary,
         fault,
         faults_text,
         recorder: sim.take_recorder(),
@@ -84,29 +99,26 @@ pub fn simulate(sc: &Scenario, mut progress: impl FnMut(f64)) -> Result<RunOutco
     })
 }
 
+/// The ledger on one line with every value exact (the shortest text that reads back to the
+/// same `f64`): `energy ledger (J, exact): external_work = …, to_inverter = …, …`.
+pub fn exact_ledger_line(e: &Energy) -> String {
+    let d = format!("{e:?}");
+    let inner = d
+        .strip_prefix("Energy { ")
+        .and_then(|s| s.strip_suffix(" }"))
+        .unwrap_or(&d);
+    format!("energy ledger (J, exact): {}", inner.replace(": ", " = "))
+}
+
 pub fn run(a: &RunArgs) -> Result<(), String> {
     let sc = Scenario::from_file(&a.scenario)?;
-    let o = simulate(&sc, |f| eprint!("\r{:3.0} %", 100.0 * f))?;
-    eprintln!();
-    let wall = o.wall_s;
-    let e = o.energy;
-    println!(
-        "{}: {:.2} s simulated in {:.2} s ({:.0}× real time)",
-        sc.name,
-        sc.duration_s,
-        wall,
-        sc.duration_s / wall
-    );
-    println!(
-        "{e:#?}\nenergy residual {:.3e} J ({:.4} %)",
-        e.residual(),
-        100.0 * e.relative_residual()
-    );
-    if let (Some(name), Some(text)) = (o.fault, &o.faults_text) {
-        println!("firmware fault latched: {name}");
-        print!("{text}");
-    }
-    if let Some(rec) = o.recorder {
+    let window = check_window(&a.window, sc.duration_s)?;
+    check_out_dir(&a.out)?;
+    let bar = Progress::new(&sc.name, sc.duration_s, a.quiet);
+    let o = simulate(&sc, &mut bar.callback())?;
+    bar.finish();
+    let (s, wall) = (&o.summary, o.wall_s);
+    if let Some(rec) = &o.recorder {
         let csv = a.out.join(format!("{}.csv", sc.name));
         write(&csv, &rec.to_csv())?;
         println!("trace: {}", csv.display());
@@ -123,47 +135,44 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         ) {
             let zip =
                 |a: &[f64], b: &[f64]| a.iter().copied().zip(b.iter().copied()).collect::<Vec<_>>();
-            let p = plot_svg(
-                &a.out.join(format!("{}-force-x.svg", sc.name)),
-                "force against displacement",
-                "x (m)",
-                "force (N)",
-                &[Series {
-                    name: "f".into(),
-                    points: zip(&x, &f),
-                    markers: false,
-                }],
-                false,
-            )?;
-            println!("plot: {}", p.display());
-            let p = plot_svg(
-                &a.out.join(format!("{}-force-v.svg", sc.name)),
-                "force against velocity",
-                "ẋ (m/s)",
-                "force (N)",
-                &[Series {
-                    name: "f".into(),
-                    points: zip(&v, &f),
-                    markers: false,
-                }],
-                false,
-            )?;
-            println!("plot: {}", p.display());
-            let p = plot_svg(
-                &a.out.join(format!("{}-force-t.svg", sc.name)),
-                "force against time",
-                "t (s)",
-                "force (N)",
-                &[Series {
-                    name: "f".into(),
-                    points: zip(&t, &f),
-                    markers: false,
-                }],
-                false,
-            )?;
-            println!("plot: {}", p.display());
+            let what = format!("{} ({}, {} s)", sc.name, sc.law.kind, sc.duration_s);
+            for (file, title, xl, xs, win) in [
+                (
+                    "force-x",
+                    "force against displacement",
+                    "displacement x (m)",
+                    &x,
+                    None,
+                ),
+                (
+                    "force-v",
+                    "force against velocity",
+                    "velocity ẋ (m/s)",
+                    &v,
+                    None,
+                ),
+                ("force-t", "force against time", "time t (s)", &t, window),
+            ] {
+                let mut p = Plot::new(format!("{what}: {title}"), xl, "force on the device (N)");
+                p.series.push(Series::line("force", zip(xs, &f)));
+                p.window = win;
+                let path = p.write_svg(&a.out.join(format!("{}-{file}.svg", sc.name)))?;
+                println!("plot: {}", path.display());
+            }
         }
     }
+    println!(
+        "{:.2} s simulated in {:.2} s ({:.0}× real time)",
+        sc.duration_s,
+        wall,
+        sc.duration_s / wall
+    );
+    if let Some(text) = &o.faults_text {
+        // The console's decoding: snapshot at the trip, safe state, later faults.
+        print!("{text}");
+    }
+    println!("{}", exact_ledger_line(&o.energy));
+    print!("{}", s.text());
     Ok(())
 }
 
@@ -177,7 +186,7 @@ mod tests {
         let mut sc = Scenario::tmd(306.0);
         sc.duration_s = 0.5;
         sc.settle_s = 0.1837;
-        let o = simulate(&sc, |_| {}).unwrap();
+        let o = simulate(&sc, &mut |_| {}).unwrap();
         let mut sim = sc.build().unwrap();
         let settle = (sc.settle_s / sim.period()).round() as u64;
         let n = (sc.duration_s / sim.period()).round() as u64;

@@ -7,11 +7,17 @@ use crate::plant::{Machine, Screw};
 #[derive(clap::Args, Debug)]
 pub struct SizingArgs {
     /// K_e as the paper gives it (its "0.77"), V·s/rad.
-    #[arg(long, default_value_t = 0.77)]
+    #[arg(long, default_value_t = 0.77, allow_negative_numbers = true)]
     pub ke_paper: f64,
 }
 
 pub fn run(a: &SizingArgs) -> Result<(), String> {
+    if !(a.ke_paper > 0.0 && a.ke_paper <= 100.0) {
+        return Err(format!(
+            "--ke-paper = {}: must be a finite number in (0, 100] V·s/rad",
+            a.ke_paper
+        ));
+    }
     let m = Machine::default();
     let s = Screw::default();
     let d = DesignCase::default();

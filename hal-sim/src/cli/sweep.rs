@@ -1,15 +1,19 @@
 //! `regen sweep SCENARIO --param NAME --values ...`: one closed-loop run per value, in
 //! parallel (rayon), average power into the drive after `settle_s`; for the resistor load
 //! the analytic harmonic-balance curve is drawn beside it. With no scenario: the reference
-//! TMD sweep (what `cargo run --release` with no arguments does).
+//! TMD sweep (what `cargo run --release` with no arguments does). Every run's fault is
+//! reported (text, the CSV's `fault` column, a red cross in the plot); the best point is the
+//! best of the runs that did not fault.
 
-use super::output::{plot_svg, write_csv, Series};
+use super::output::{check_out_dir, write};
+use super::progress::Progress;
 use crate::analytic::{logspace, optimum_load, tmd_power, DampingFormula};
 use crate::plant::{Drive, Excitation};
+use crate::plot::{Plot, Series};
 use crate::scenario::Scenario;
+use crate::summary::{run_scenario, si, RunSummary};
 use rayon::prelude::*;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 #[derive(clap::Args, Debug)]
 pub struct SweepArgs {
@@ -19,11 +23,14 @@ pub struct SweepArgs {
     #[arg(long, default_value = "r_load_ohm")]
     pub param: String,
     /// Values (comma separated); default: 13 loads from 10 Ω to 1 kΩ including 306 Ω.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub values: Vec<f64>,
     /// Output directory.
     #[arg(long, default_value = "regen-out")]
     pub out: PathBuf,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 /// Apply a parameter value to a scenario.
@@ -54,19 +61,22 @@ pub fn set_param(sc: &mut Scenario, name: &str, v: f64) -> Result<(), String> {
 }
 
 /// Average power from the machine into the drive after `settle_s`, W, and the run's
-/// relative energy residual.
+/// relative energy residual ([`run_scenario`]'s figures).
 pub fn average_power(sc: &Scenario) -> Result<(f64, f64), String> {
-    let mut sc = sc.clone();
-    sc.record.channels.clear();
-    let mut sim = sc.build()?;
-    sim.run_for(sc.settle_s);
-    let e0 = sim.energy().to_inverter;
-    sim.run_for(sc.duration_s - sc.settle_s);
-    let e = sim.energy();
-    Ok((
-        (e.to_inverter - e0) / (sc.duration_s - sc.settle_s),
-        e.relative_residual(),
-    ))
+    let r = run_scenario(sc, &mut |_| {})?;
+    Ok((r.mean_power_w, r.energy.relative_residual()))
+}
+
+/// Axis label of a swept parameter, with its unit.
+fn param_label(name: &str) -> String {
+    match name {
+        "r_load_ohm" => "load resistance R_L (Ω, log scale)".into(),
+        "a0_m_s2" => "base acceleration amplitude a₀ (m/s²)".into(),
+        "freq_hz" => "excitation frequency (Hz)".into(),
+        "ke_v_s_per_rad" => "back-emf constant K_e (V·s/rad, per-phase peak)".into(),
+        "current_bw_hz" => "current-loop bandwidth (Hz)".into(),
+        _ => name.into(),
+    }
 }
 
 /// The default load grid of the reference sweep, Ω (denser near the expected optima).
@@ -81,7 +91,7 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
     };
     let values = if a.values.is_empty() {
         if a.param != "r_load_ohm" {
-            return Err("--values: required for this parameter".into());
+            return Err(format!("--values: required for --param {}", a.param));
         }
         DEFAULT_LOADS.to_vec()
     } else {
@@ -92,78 +102,117 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         .map(|&v| {
             let mut s = sc.clone();
             set_param(&mut s, &a.param, v)?;
-            s.config()?;
+            s.check()
+                .and_then(|_| s.config().map(|_| ()))
+                .map_err(|e| format!("--param {} --values {v}: {e}", a.param))?;
             Ok(s)
         })
         .collect::<Result<_, String>>()?;
-    let t = std::time::Instant::now();
-    let done = AtomicUsize::new(0);
+    check_out_dir(&a.out)?;
+    let reference = a.scenario.is_none();
     let n = scs.len();
-    let res: Vec<Result<(f64, f64), String>> = scs
-        .par_iter()
-        .map(|s| {
-            let r = average_power(s);
-            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-            eprint!(
-                "\r[{}{}] {k}/{n}",
-                "#".repeat(k * 30 / n),
-                " ".repeat(30 - k * 30 / n)
-            );
-            r
-        })
-        .collect();
-    eprintln!();
-    let wall = t.elapsed().as_secs_f64();
-    let mut rows = Vec::new();
-    let mut sim_pts = Vec::new();
-    let mut header = vec![a.param.as_str(), "p_closed_loop_w", "energy_residual_rel"];
-    for (v, r) in values.iter().zip(res) {
-        let (p, resid) = r?;
-        sim_pts.push((*v, p));
-        rows.push(vec![*v, p, resid]);
-    }
-    println!(
-        "{} runs of {:.1} s simulated in {:.2} s wall",
-        n, sc.duration_s, wall
+    let bar = Progress::new(
+        &format!("sweep {}", a.param),
+        sc.duration_s * n as f64 * if reference { 2.0 } else { 1.0 },
+        a.quiet,
     );
-    let mut series = vec![Series {
-        name: format!(
-            "closed loop, K_e = {:.3} V·s/rad per-phase peak",
-            sc.machine.ke_v_s_per_rad
-        ),
-        points: sim_pts.clone(),
-        markers: true,
-    }];
+    let t = std::time::Instant::now();
+    let runs = |scs: &[Scenario]| -> Result<Vec<RunSummary>, String> {
+        scs.par_iter()
+            .map(|s| run_scenario(s, &mut bar.callback()))
+            .collect()
+    };
+    let res = runs(&scs)?;
     // The reference sweep also runs the paper-equivalent device (per-phase peak K_e =
     // 0.77·√1.5, whose consistent damping equals the paper's 9/4·0.77²), so the plot shows
     // the paper's optimum reproduced in closed loop beside the firmware-default device.
-    if a.scenario.is_none() {
-        let ke_p = 0.77 * 1.5f64.sqrt();
-        let pts: Vec<(f64, f64)> = scs
-            .par_iter()
+    let ke_p = 0.77 * 1.5f64.sqrt();
+    let paper_eq = if reference {
+        let scs_p: Vec<Scenario> = scs
+            .iter()
             .map(|s| {
                 let mut s = s.clone();
                 s.machine.ke_v_s_per_rad = ke_p;
-                average_power(&s).map(|(p, _)| (s.law.r_load_ohm, p))
+                s
             })
-            .collect::<Result<_, String>>()?;
-        let best = pts
+            .collect();
+        Some(runs(&scs_p)?)
+    } else {
+        None
+    };
+    bar.finish();
+    let wall = t.elapsed().as_secs_f64();
+    let fault_of = |r: &RunSummary| r.fault.unwrap_or("none");
+    let mut header: Vec<String> = vec![
+        a.param.clone(),
+        "p_closed_loop_w".into(),
+        "peak_force_n".into(),
+        "energy_residual_rel".into(),
+        "fault".into(),
+    ];
+    let mut rows: Vec<Vec<String>> = values
+        .iter()
+        .zip(&res)
+        .map(|(v, r)| {
+            vec![
+                format!("{v:.6e}"),
+                format!("{:.6e}", r.mean_power_w),
+                format!("{:.6e}", r.peak_force_n),
+                format!("{:.3e}", r.energy.relative_residual()),
+                fault_of(r).to_string(),
+            ]
+        })
+        .collect();
+    let with_fault =
+        |rs: &[RunSummary]| -> Vec<bool> { rs.iter().map(|r| r.fault.is_some()).collect() };
+    let points = |rs: &[RunSummary]| -> Vec<(f64, f64)> {
+        values
             .iter()
-            .copied()
-            .fold((0.0, f64::MIN), |b, p| if p.1 > b.1 { p } else { b });
-        println!(
-            "closed loop, paper-equivalent K_e = {ke_p:.3}: best of the swept loads R_L = {:.1} Ω, P = {:.2} W",
-            best.0, best.1
-        );
-        for (r, p) in rows.iter_mut().zip(&pts) {
-            r.push(p.1);
+            .zip(rs)
+            .map(|(v, r)| (*v, r.mean_power_w))
+            .collect()
+    };
+    let mut plot = Plot::new(
+        format!(
+            "{}: mean power into the drive, {} runs of {} s",
+            sc.name, n, sc.duration_s
+        ),
+        param_label(&a.param),
+        "mean harvested power (W)",
+    );
+    plot.xlog = a.param == "r_load_ohm";
+    plot.series.push(Series {
+        faulted: with_fault(&res),
+        ..Series::markers(
+            format!(
+                "closed loop, K_e = {:.3} V·s/rad",
+                sc.machine.ke_v_s_per_rad
+            ),
+            points(&res),
+        )
+    });
+    let mut answer = Vec::new();
+    if let Some(pe) = &paper_eq {
+        for (row, r) in rows.iter_mut().zip(pe) {
+            row.push(format!("{:.6e}", r.mean_power_w));
+            row.push(fault_of(r).to_string());
         }
-        header.push("p_closed_loop_paper_equivalent_w");
-        series.push(Series {
-            name: format!("closed loop, paper-equivalent K_e = {ke_p:.3}"),
-            points: pts,
-            markers: true,
+        header.push("p_closed_loop_paper_equivalent_w".into());
+        header.push("fault_paper_equivalent".into());
+        plot.series.push(Series {
+            faulted: with_fault(pe),
+            ..Series::markers(
+                format!("closed loop, paper-equivalent K_e = {ke_p:.3}"),
+                points(pe),
+            )
         });
+        if let Some((v, r)) = best(&values, pe) {
+            answer.push(format!(
+                "closed loop, paper-equivalent K_e = {ke_p:.3}: best of the swept points {} = {v}, mean power {}",
+                a.param,
+                si(r.mean_power_w, "W")
+            ));
+        }
     }
     // Analytic curves for the resistor sweep of a sine-excited structure.
     if let (
@@ -174,12 +223,9 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         },
     ) = (a.param.as_str(), &sc.drive)
     {
-        let ta = std::time::Instant::now();
-        let grid = logspace(
-            values[0].min(10.0),
-            values[values.len() - 1].max(1000.0),
-            400,
-        );
+        let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let grid = logspace(lo.clamp(1e-3, 10.0), hi.max(1000.0), 400);
         let model = |f: DampingFormula, r: f64| {
             tmd_power(r, &sc.machine, &sc.screw, structure, *a0_m_s2, *freq_hz, f)
         };
@@ -188,7 +234,6 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
             .map(|&r| (r, model(DampingFormula::PerPhasePeak, r).p_load))
             .collect();
         let opt = optimum_load(|r| model(DampingFormula::PerPhasePeak, r).p_load, 1.0, 1e4);
-        let ta = ta.elapsed().as_secs_f64();
         // The paper's model: its 9/4 formula with K_e = 0.77 (= 3/2·our K_e for the
         // default device), as eq. 16 is written.
         let mut paper_m = sc.machine;
@@ -206,53 +251,95 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
             .p_load
         };
         let opt_paper = optimum_load(paper, 1.0, 1e4);
-        println!("analytic (harmonic balance, this device): optimum R_L = {opt:.1} Ω, P = {:.2} W  [{} points + optimum in {:.2} ms]", model(DampingFormula::PerPhasePeak, opt).p_load, grid.len(), ta * 1e3);
-        println!("analytic (paper's eq. 16 with K_e = 0.77 and 9/4): optimum R_L = {opt_paper:.1} Ω, P = {:.2} W", paper(opt_paper));
-        let best = sim_pts
-            .iter()
-            .copied()
-            .fold((0.0, f64::MIN), |b, p| if p.1 > b.1 { p } else { b });
-        println!(
-            "closed loop: best of the swept loads R_L = {:.1} Ω, P = {:.2} W",
-            best.0, best.1
-        );
-        for r in rows.iter_mut() {
-            let (p_a, p_p) = (
-                model(DampingFormula::PerPhasePeak, r[0]).p_load,
-                paper(r[0]),
-            );
-            r.push(p_a);
-            r.push(p_p);
+        answer.push(format!(
+            "analytic (harmonic balance, this device): optimum R_L = {opt:.1} Ω, mean power {}",
+            si(model(DampingFormula::PerPhasePeak, opt).p_load, "W")
+        ));
+        answer.push(format!(
+            "analytic (paper's eq. 16 with K_e = 0.77 and 9/4): optimum R_L = {opt_paper:.1} Ω, mean power {}",
+            si(paper(opt_paper), "W")
+        ));
+        for (row, v) in rows.iter_mut().zip(&values) {
+            row.push(format!(
+                "{:.6e}",
+                model(DampingFormula::PerPhasePeak, *v).p_load
+            ));
+            row.push(format!("{:.6e}", paper(*v)));
         }
-        header.push("p_analytic_w");
-        header.push("p_paper_model_w");
-        series.push(Series {
-            name: format!("harmonic balance (optimum {opt:.0} Ω)"),
-            points: an,
-            markers: false,
-        });
-        series.push(Series {
-            name: format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)"),
-            points: grid.iter().map(|&r| (r, paper(r))).collect(),
-            markers: false,
-        });
+        header.push("p_analytic_w".into());
+        header.push("p_paper_model_w".into());
+        plot.series.push(Series::line(
+            format!("harmonic balance (optimum {opt:.0} Ω)"),
+            an,
+        ));
+        plot.series.push(Series::line(
+            format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)"),
+            grid.iter().map(|&r| (r, paper(r))).collect(),
+        ));
     }
-    let csv = a.out.join(format!("sweep-{}-{}.csv", sc.name, a.param));
-    write_csv(&csv, &header, &rows)?;
+    let stem = format!("sweep-{}-{}", sc.name, a.param);
+    let csv = a.out.join(format!("{stem}.csv"));
+    let mut text = header.join(",") + "\n";
     for r in &rows {
+        text += &(r.join(",") + "\n");
+    }
+    write(&csv, &text)?;
+    let svg = plot.write_svg(&a.out.join(format!("{stem}.svg")))?;
+    println!(
+        "{n} runs of {:.1} s simulated in {wall:.2} s",
+        sc.duration_s
+    );
+    for (v, r) in values.iter().zip(&res) {
         println!(
-            "  {} = {:9.3}  P = {:8.3} W  (energy residual {:.2e})",
-            a.param, r[0], r[1], r[2]
+            "  {} = {v:<10}  mean power {:>11}  peak force {:>10}  energy residual {:.1e}{}",
+            a.param,
+            si(r.mean_power_w, "W"),
+            si(r.peak_force_n, "N"),
+            r.energy.relative_residual(),
+            r.fault
+                .map(|f| format!(
+                    "  FAULT {f} at t = {:.3} s",
+                    r.fault_t_s.unwrap_or(f64::NAN)
+                ))
+                .unwrap_or_default()
         );
     }
-    let svg = plot_svg(
-        &a.out.join(format!("sweep-{}-{}.svg", sc.name, a.param)),
-        &format!("{}: average power into the drive", sc.name),
-        &a.param,
-        "power (W)",
-        &series,
-        a.param == "r_load_ohm",
-    )?;
     println!("CSV: {}\nplot: {}", csv.display(), svg.display());
+    for l in &answer {
+        println!("{l}");
+    }
+    let faulted: Vec<String> = values
+        .iter()
+        .zip(&res)
+        .filter_map(|(v, r)| r.fault.map(|f| format!("{} = {v} ({f})", a.param)))
+        .collect();
+    match best(&values, &res) {
+        Some((v, r)) => println!(
+            "best of the swept points: {} = {v}, mean harvested power {}, peak force {}",
+            a.param,
+            si(r.mean_power_w, "W"),
+            si(r.peak_force_n, "N")
+        ),
+        None => println!("best of the swept points: none, every run latched a fault"),
+    }
+    if faulted.is_empty() {
+        println!("faults latched: none");
+    } else {
+        println!(
+            "faults latched in {} of {n} runs (their power is not a result): {}",
+            faulted.len(),
+            faulted.join(", ")
+        );
+    }
     Ok(())
+}
+
+/// The run of highest mean power among those that latched no fault.
+fn best<'a>(values: &[f64], rs: &'a [RunSummary]) -> Option<(f64, &'a RunSummary)> {
+    values
+        .iter()
+        .copied()
+        .zip(rs)
+        .filter(|(_, r)| r.fault.is_none() && r.mean_power_w.is_finite())
+        .max_by(|a, b| a.1.mean_power_w.total_cmp(&b.1.mean_power_w))
 }

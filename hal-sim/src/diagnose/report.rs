@@ -442,42 +442,30 @@ pub fn breakdown(rec: &Record, r: &[f64]) -> Vec<(String, f64, usize)> {
         .collect()
 }
 
-/// Write a scatter plot (decimated to ~3000 points) as SVG.
-pub fn svg_scatter(
+/// A scatter plot of `ys` against `xs` (decimated to ~3000 points) through [`crate::plot`].
+fn scatter(
     path: &std::path::Path,
     title: &str,
     xl: &str,
+    yl: &str,
     xs: &[f64],
     ys: &[f64],
-) -> std::io::Result<()> {
-    let n = xs.len();
-    let step = (n / 3000).max(1);
-    let (w, h, m) = (800.0, 400.0, 50.0);
-    let fmin = |v: &[f64]| v.iter().cloned().fold(f64::MAX, f64::min);
-    let fmax = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max);
-    let (x0, x1, y0, y1) = (fmin(xs), fmax(xs), fmin(ys), fmax(ys));
-    let sx = |x: f64| m + (x - x0) / (x1 - x0).max(1e-300) * (w - 2.0 * m);
-    let sy = |y: f64| h - m - (y - y0) / (y1 - y0).max(1e-300) * (h - 2.0 * m);
-    let mut s = String::new();
-    let _ = write!(s, "<svg xmlns='http://www.w3.org/2000/svg' width='{w}' height='{h}'><rect width='100%' height='100%' fill='white'/>");
-    let _ = write!(s, "<text x='{m}' y='20' font-size='14'>{title}</text><text x='{}' y='{}' font-size='12'>{xl} [{x0:.4e} .. {x1:.4e}]; y [{y0:.3e} .. {y1:.3e}]</text>", m, h - 10.0);
-    let _ = write!(
-        s,
-        "<line x1='{m}' x2='{}' y1='{}' y2='{}' stroke='gray'/>",
-        w - m,
-        sy(0.0),
-        sy(0.0)
-    );
-    for i in (0..n).step_by(step) {
-        let _ = write!(
-            s,
-            "<circle cx='{:.1}' cy='{:.1}' r='1' fill='steelblue'/>",
-            sx(xs[i]),
-            sy(ys[i])
-        );
-    }
-    s.push_str("</svg>\n");
-    std::fs::write(path, s)
+    ylog: bool,
+) -> Result<(), String> {
+    let step = (xs.len() / 3000).max(1);
+    let pts: Vec<(f64, f64)> = xs
+        .iter()
+        .zip(ys)
+        .step_by(step)
+        .map(|(x, y)| (*x, *y))
+        .collect();
+    let mut p = crate::plot::Plot::new(title, xl, yl);
+    p.ylog = ylog;
+    p.series.push(crate::plot::Series::dots(
+        format!("final-model residual ({} points)", pts.len()),
+        pts,
+    ));
+    p.write_svg(path).map(|_| ())
 }
 
 /// Write residual plots into `dir`: against time, position, velocity, and its spectrum.
@@ -485,39 +473,60 @@ pub fn write_plots(
     dir: &std::path::Path,
     rec: &Record,
     d: &Diagnosis,
-) -> std::io::Result<Vec<String>> {
-    std::fs::create_dir_all(dir)?;
+) -> Result<Vec<String>, String> {
     let mut out = Vec::new();
-    for (name, xl, xs) in [
-        ("residual_vs_time.svg", "t [s]", &rec.t),
-        ("residual_vs_position.svg", "x [m]", &rec.x),
-        ("residual_vs_velocity.svg", "v [m/s]", &rec.v),
+    for (name, what, xl, xs) in [
+        ("residual_vs_time.svg", "time", "time t (s)", &rec.t),
+        (
+            "residual_vs_position.svg",
+            "position",
+            "position x (m)",
+            &rec.x,
+        ),
+        (
+            "residual_vs_velocity.svg",
+            "velocity",
+            "velocity v (m/s)",
+            &rec.v,
+        ),
     ] {
         let p = dir.join(name);
-        svg_scatter(
+        scatter(
             &p,
-            &format!("final-model residual [N] ({name})"),
+            &format!("diagnosis: final-model force residual against {what}"),
             xl,
+            "force residual (N)",
             xs,
             &d.residual,
+            false,
         )?;
         out.push(p.display().to_string());
     }
     let sp = welch(&d.residual, rec.dt());
     let (f, a): (Vec<f64>, Vec<f64>) = sp.into_iter().skip(1).unzip();
     let p = dir.join("residual_spectrum.svg");
-    svg_scatter(&p, "residual amplitude spectrum [N]", "f [Hz]", &f, &a)?;
+    scatter(
+        &p,
+        "diagnosis: residual amplitude spectrum (Welch)",
+        "frequency (Hz)",
+        "amplitude (N, log scale)",
+        &f,
+        &a,
+        true,
+    )?;
     out.push(p.display().to_string());
     let ps = &d.position_spectrum;
     if !ps.spectrum.is_empty() {
         let (nu, a): (Vec<f64>, Vec<f64>) = ps.spectrum.iter().cloned().unzip();
         let p = dir.join("residual_spectrum_position.svg");
-        svg_scatter(
+        scatter(
             &p,
-            "residual amplitude spectrum over position [N] (wavelength = 1/spatial frequency)",
-            "spatial frequency [cycles/m]",
+            "diagnosis: residual amplitude over position (wavelength = 1/spatial frequency)",
+            "spatial frequency (cycles/m)",
+            "amplitude (N, log scale)",
             &nu,
             &a,
+            true,
         )?;
         out.push(p.display().to_string());
     }

@@ -1,0 +1,504 @@
+//! The one plotting module of the tools (`plotters`, SVG backend): every command's plots go
+//! through [`Plot::write_svg`].
+//!
+//! What every plot gets: a title saying what was run, axis labels with units (a log axis says
+//! so in its label), ticks at round numbers (1, 2, 5 × 10ⁿ, printed without spurious digits),
+//! a legend with a line or marker sample per series, a grid, and a robust range: when a few
+//! points lie far outside the bulk of the data, the range is set by the bulk (0.5 % … 99.5 %
+//! quantiles, widened by a quarter of their span) and the outliers are drawn on the frame as
+//! red triangles, counted in the legend. A time window (`--window`) zooms on an event.
+//! Faulted points (a sweep's runs that latched a fault) are drawn as red crosses.
+//!
+//! The SVG text is left to the viewer's sans-serif font, so no font ships with the tools; the
+//! PNGs under `docs/figures/` are rendered from these SVGs with `resvg` and the DejaVu Sans
+//! file the render test loads.
+
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// How a series is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Style {
+    Line,
+    Markers,
+    /// A line with a marker at every point.
+    LineMarkers,
+    /// Small filled dots (scatter of thousands of points).
+    Dots,
+}
+
+/// One series: its legend name, its points, how it is drawn, and which points faulted
+/// (empty = none).
+#[derive(Clone, Debug)]
+pub struct Series {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+    pub style: Style,
+    pub faulted: Vec<bool>,
+}
+
+impl Series {
+    pub fn line(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            name: name.into(),
+            points,
+            style: Style::Line,
+            faulted: Vec::new(),
+        }
+    }
+    pub fn markers(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            style: Style::Markers,
+            ..Series::line(name, points)
+        }
+    }
+    pub fn dots(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            style: Style::Dots,
+            ..Series::line(name, points)
+        }
+    }
+}
+
+/// A plot: title, axis labels (with units), axes, series, and an optional x window.
+#[derive(Clone, Debug)]
+pub struct Plot {
+    pub title: String,
+    pub xlabel: String,
+    pub ylabel: String,
+    pub xlog: bool,
+    pub ylog: bool,
+    pub series: Vec<Series>,
+    /// Show only x in [a, b] (the y range follows the data inside).
+    pub window: Option<(f64, f64)>,
+    /// Width and height, px.
+    pub size: (u32, u32),
+}
+
+const COLOURS: [RGBColor; 6] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0x8c, 0x56, 0x4b),
+    RGBColor(0x17, 0xbe, 0xcf),
+];
+const FAULT: RGBColor = RGBColor(0xd6, 0x27, 0x28);
+
+impl Plot {
+    pub fn new(
+        title: impl Into<String>,
+        xlabel: impl Into<String>,
+        ylabel: impl Into<String>,
+    ) -> Plot {
+        Plot {
+            title: title.into(),
+            xlabel: xlabel.into(),
+            ylabel: ylabel.into(),
+            xlog: false,
+            ylog: false,
+            series: Vec::new(),
+            window: None,
+            size: (900, 540),
+        }
+    }
+
+    /// Render to SVG text.
+    pub fn svg(&self) -> Result<String, String> {
+        let mut text = String::new();
+        {
+            let root = SVGBackend::with_string(&mut text, self.size).into_drawing_area();
+            self.draw(&root)?;
+            root.present()
+                .map_err(|e| format!("plot `{}`: {e}", self.title))?;
+        }
+        Ok(text)
+    }
+
+    /// Render and write to `path` (its directory is created); the error names the path.
+    pub fn write_svg(&self, path: &Path) -> Result<PathBuf, String> {
+        let text = self.svg()?;
+        crate::cli::output::write(path, &text)?;
+        Ok(path.to_path_buf())
+    }
+
+    /// The points inside the window (all finite points without one; a log axis keeps > 0).
+    fn visible(&self, s: &Series) -> Vec<(f64, f64, bool)> {
+        s.points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.0.is_finite() && p.1.is_finite())
+            .filter(|(_, p)| (!self.xlog || p.0 > 0.0) && (!self.ylog || p.1 > 0.0))
+            .filter(|(_, p)| self.window.is_none_or(|(a, b)| p.0 >= a && p.0 <= b))
+            .map(|(k, p)| (p.0, p.1, s.faulted.get(k).copied().unwrap_or(false)))
+            .collect()
+    }
+
+    fn draw(&self, root: &DrawingArea<SVGBackend, plotters::coord::Shift>) -> Result<(), String> {
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let pts: Vec<Vec<(f64, f64, bool)>> = self.series.iter().map(|s| self.visible(s)).collect();
+        let xs: Vec<f64> = pts.iter().flatten().map(|p| p.0).collect();
+        // Faulted points do not set the range (a run that tripped says nothing about the
+        // scale of the others): they are drawn on the frame when outside it.
+        let ys: Vec<f64> = pts.iter().flatten().filter(|p| !p.2).map(|p| p.1).collect();
+        let (x0, x1) = match self.window {
+            Some((a, b)) => (a, b),
+            None => full_range(&xs, self.xlog),
+        };
+        let (y0, y1) = robust_range(&ys, self.ylog);
+        match (self.xlog, self.ylog) {
+            (false, false) => self.chart(root, x0..x1, y0..y1, &pts),
+            (true, false) => self.chart(root, (x0..x1).log_scale(), y0..y1, &pts),
+            (false, true) => self.chart(root, x0..x1, (y0..y1).log_scale(), &pts),
+            (true, true) => self.chart(root, (x0..x1).log_scale(), (y0..y1).log_scale(), &pts),
+        }
+    }
+
+    fn chart<'a, X, Y>(
+        &self,
+        root: &DrawingArea<SVGBackend<'a>, plotters::coord::Shift>,
+        xr: X,
+        yr: Y,
+        pts: &[Vec<(f64, f64, bool)>],
+    ) -> Result<(), String>
+    where
+        X: AsRangedCoord<Value = f64>,
+        Y: AsRangedCoord<Value = f64>,
+        X::CoordDescType: ValueFormatter<f64>,
+        Y::CoordDescType: ValueFormatter<f64>,
+    {
+        let e = |e: DrawingAreaErrorKind<_>| format!("plot `{}`: {e}", self.title);
+        let mut ch = ChartBuilder::on(root)
+            .caption(&self.title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(48)
+            .y_label_area_size(78)
+            .build_cartesian_2d(xr, yr)
+            .map_err(e)?;
+        let (xd, yd) = (ch.x_range(), ch.y_range());
+        let (xlo, xhi) = (xd.start, xd.end);
+        let (ylo, yhi) = (yd.start, yd.end);
+        ch.configure_mesh()
+            .x_desc(&self.xlabel)
+            .y_desc(&self.ylabel)
+            .x_labels(8)
+            .y_labels(8)
+            .x_label_formatter(&|v| tick(snap(*v, xlo, xhi)))
+            .y_label_formatter(&|v| tick(snap(*v, ylo, yhi)))
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 15))
+            .light_line_style(RGBColor(0xee, 0xee, 0xee))
+            .bold_line_style(RGBColor(0xcc, 0xcc, 0xcc))
+            .draw()
+            .map_err(e)?;
+        let clamp = |p: (f64, f64)| (p.0.clamp(xlo, xhi), p.1.clamp(ylo, yhi));
+        let corner = self.legend_corner(pts, (xlo, xhi), (ylo, yhi));
+        let mut any_fault = false;
+        let mut outliers = Vec::new();
+        for (k, (s, p)) in self.series.iter().zip(pts).enumerate() {
+            let c = COLOURS[k % COLOURS.len()];
+            let shape = k % 3;
+            let line = matches!(s.style, Style::Line | Style::LineMarkers);
+            let marks = matches!(s.style, Style::Markers | Style::LineMarkers);
+            let dots = s.style == Style::Dots;
+            // Later series are drawn thinner so one lying on another leaves both visible.
+            let width = if line {
+                3usize.saturating_sub(k / 2).max(1) as u32
+            } else {
+                2
+            };
+            for q in p {
+                if q.1 < ylo || q.1 > yhi {
+                    outliers.push(clamp((q.0, q.1)));
+                }
+            }
+            // Lines after the second are dashed, so a line lying on another leaves both
+            // visible.
+            let dashed = line && k >= 2;
+            if line && !dashed {
+                ch.draw_series(LineSeries::new(
+                    p.iter().map(|q| clamp((q.0, q.1))),
+                    c.stroke_width(width),
+                ))
+                .map_err(e)?;
+            }
+            if dashed {
+                ch.draw_series(DashedLineSeries::new(
+                    p.iter().map(|q| clamp((q.0, q.1))),
+                    8,
+                    6,
+                    c.stroke_width(width),
+                ))
+                .map_err(e)?;
+            }
+            if s.style == Style::Dots {
+                ch.draw_series(
+                    p.iter()
+                        .map(|q| Circle::new(clamp((q.0, q.1)), 1, c.filled())),
+                )
+                .map_err(e)?;
+            }
+            if marks {
+                let at = p.iter().map(|q| clamp((q.0, q.1)));
+                match shape {
+                    0 => ch
+                        .draw_series(at.map(|q| Circle::new(q, 4, c.stroke_width(2))))
+                        .map(|_| ()),
+                    1 => ch
+                        .draw_series(at.map(|q| TriangleMarker::new(q, 5, c.stroke_width(2))))
+                        .map(|_| ()),
+                    _ => ch
+                        .draw_series(at.map(|q| Cross::new(q, 4, c.stroke_width(2))))
+                        .map(|_| ()),
+                }
+                .map_err(e)?;
+            }
+            // The legend entry: a line sample, a marker sample, or both.
+            ch.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                .map_err(e)?
+                .label(&s.name)
+                .legend(move |(x, y)| {
+                    // A line sample for a line, a marker sample for markers alone.
+                    let st = c.stroke_width(if line { width } else { 2 });
+                    match (line, shape) {
+                        (true, _) if dashed => {
+                            (PathElement::new(vec![(x, y), (x + 8, y)], st)).into_dyn()
+                        }
+                        (true, _) => PathElement::new(vec![(x, y), (x + 24, y)], st).into_dyn(),
+                        (false, _) if dots => Circle::new((x + 12, y), 3, c.filled()).into_dyn(),
+                        (false, 0) => Circle::new((x + 12, y), 4, st).into_dyn(),
+                        (false, 1) => TriangleMarker::new((x + 12, y), 5, st).into_dyn(),
+                        (false, _) => Cross::new((x + 12, y), 4, st).into_dyn(),
+                    }
+                });
+            let bad: Vec<(f64, f64)> = p
+                .iter()
+                .filter(|q| q.2)
+                .map(|q| clamp((q.0, q.1)))
+                .collect();
+            if !bad.is_empty() {
+                any_fault = true;
+                ch.draw_series(bad.iter().map(|&q| Cross::new(q, 8, FAULT.stroke_width(3))))
+                    .map_err(e)?;
+            }
+        }
+        if any_fault {
+            ch.draw_series(std::iter::empty::<Cross<(f64, f64), i32>>())
+                .map_err(e)?
+                .label("fault latched")
+                .legend(|(x, y)| Cross::new((x + 12, y), 6, FAULT.stroke_width(3)));
+        }
+        if !outliers.is_empty() {
+            let n = outliers.len();
+            ch.draw_series(
+                outliers
+                    .into_iter()
+                    .map(|q| TriangleMarker::new(q, 6, FAULT.filled())),
+            )
+            .map_err(e)?
+            .label(format!("{n} point(s) beyond the range, drawn on the frame"))
+            .legend(|(x, y)| TriangleMarker::new((x + 12, y), 6, FAULT.filled()));
+        }
+        if !self.series.is_empty() {
+            ch.configure_series_labels()
+                .position(corner)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 13))
+                .draw()
+                .map_err(e)?;
+        }
+        Ok(())
+    }
+}
+
+impl Plot {
+    /// The corner of the plot holding the fewest points (each corner: 45 % of the width, 30 %
+    /// of the height), where the legend goes.
+    fn legend_corner(
+        &self,
+        pts: &[Vec<(f64, f64, bool)>],
+        (x0, x1): (f64, f64),
+        (y0, y1): (f64, f64),
+    ) -> SeriesLabelPosition {
+        let fx = |x: f64| {
+            if self.xlog {
+                (x.log10() - x0.log10()) / (x1.log10() - x0.log10())
+            } else {
+                (x - x0) / (x1 - x0)
+            }
+        };
+        let fy = |y: f64| {
+            if self.ylog {
+                (y.log10() - y0.log10()) / (y1.log10() - y0.log10())
+            } else {
+                (y - y0) / (y1 - y0)
+            }
+        };
+        let mut count = [0usize; 4]; // upper right, upper left, lower right, lower left
+        for p in pts.iter().flatten() {
+            let (u, v) = (fx(p.0), fy(p.1));
+            let (right, left, up, down) = (u > 0.55, u < 0.45, v > 0.7, v < 0.3);
+            count[0] += (right && up) as usize;
+            count[1] += (left && up) as usize;
+            count[2] += (right && down) as usize;
+            count[3] += (left && down) as usize;
+        }
+        let best = (0..4).min_by_key(|&k| count[k]).unwrap_or(0);
+        match best {
+            1 => SeriesLabelPosition::UpperLeft,
+            2 => SeriesLabelPosition::LowerRight,
+            3 => SeriesLabelPosition::LowerLeft,
+            _ => SeriesLabelPosition::UpperRight,
+        }
+    }
+}
+
+/// The full range of the values, padded by 3 % (a log axis by 3 % of its decades).
+fn full_range(v: &[f64], log: bool) -> (f64, f64) {
+    let (lo, hi) = v
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    pad(lo, hi, log)
+}
+
+fn pad(lo: f64, hi: f64, log: bool) -> (f64, f64) {
+    if !(lo.is_finite() && hi.is_finite()) {
+        return if log { (1.0, 10.0) } else { (0.0, 1.0) };
+    }
+    if log {
+        let (a, b) = (lo.log10(), hi.log10());
+        let (a, b) = if b - a < 1e-9 {
+            (a - 0.5, b + 0.5)
+        } else {
+            (a, b)
+        };
+        let d = 0.03 * (b - a);
+        return (10f64.powf(a - d), 10f64.powf(b + d));
+    }
+    if hi - lo <= 1e-12 * hi.abs().max(lo.abs()).max(1e-300) {
+        let h = if lo == 0.0 { 1.0 } else { 0.1 * lo.abs() };
+        return (lo - h, hi + h);
+    }
+    let d = 0.03 * (hi - lo);
+    (lo - d, hi + d)
+}
+
+/// The range of the bulk of the values: the full range unless it is more than four times
+/// the span of the 0.5 % … 99.5 % quantiles widened by a quarter of that span on each side
+/// (then the outliers are drawn on the frame).
+pub fn robust_range(v: &[f64], log: bool) -> (f64, f64) {
+    if v.len() < 20 {
+        return full_range(v, log);
+    }
+    let mut s: Vec<f64> = if log {
+        v.iter().map(|x| x.log10()).collect()
+    } else {
+        v.to_vec()
+    };
+    s.sort_by(f64::total_cmp);
+    let q = |f: f64| s[((s.len() - 1) as f64 * f).round() as usize];
+    let (a, b) = (q(0.005), q(0.995));
+    let (lo, hi) = (s[0], s[s.len() - 1]);
+    let span = b - a;
+    if span > 0.0 && hi - lo > 4.0 * span {
+        let (a, b) = ((a - 0.25 * span).max(lo), (b + 0.25 * span).min(hi));
+        if log {
+            (10f64.powf(a), 10f64.powf(b))
+        } else {
+            (a, b)
+        }
+    } else {
+        let (lo, hi) = if log {
+            (10f64.powf(lo), 10f64.powf(hi))
+        } else {
+            (lo, hi)
+        };
+        pad(lo, hi, log)
+    }
+}
+
+/// A tick computed as start + k·step that should be 0 but carries rounding noise (1e-17 on
+/// an axis of ±0.2) is 0.
+fn snap(v: f64, lo: f64, hi: f64) -> f64 {
+    if v.abs() < 1e-9 * (hi - lo).abs() {
+        0.0
+    } else {
+        v
+    }
+}
+
+/// A tick label: the shortest decimal that represents the tick (`0.002`, `250`, `-4e4` is
+/// printed `-40000`; below 1e-4 or from 1e7 in scientific notation `2e-5`, `1.5e7`).
+pub fn tick(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return if v == 0.0 { "0".into() } else { format!("{v}") };
+    }
+    // Ticks are k·step with step = 1, 2, 5 × 10ⁿ: 12 significant digits remove the
+    // rounding noise of k·step and of 10^(log) on a log axis.
+    let r: f64 = format!("{v:.11e}").parse().unwrap_or(v);
+    let a = r.abs();
+    if !(1e-4..1e7).contains(&a) {
+        let s = format!("{r:e}");
+        return s;
+    }
+    let s = format!("{r:.10}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".into()
+    } else {
+        s.into()
+    }
+}
+
+/// Whether a tick label is a round number: at most two significant digits, or three when
+/// its last is 5 (`0.25`, `150`, `1.5e7`, `125`).
+pub fn is_round(label: &str) -> bool {
+    let Ok(v) = label.trim().replace('−', "-").parse::<f64>() else {
+        return false;
+    };
+    if v == 0.0 {
+        return true;
+    }
+    let digits: String = format!("{:e}", v.abs())
+        .split('e')
+        .next()
+        .unwrap_or("")
+        .replace('.', "");
+    digits.len() <= 2 || (digits.len() == 3 && digits.ends_with('5'))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tick_labels_are_short() {
+        assert_eq!(tick(0.1 + 0.2), "0.3");
+        assert_eq!(tick(-40000.0), "-40000");
+        assert_eq!(tick(2e-3), "0.002");
+        assert_eq!(tick(2e-5), "2e-5");
+        assert_eq!(tick(10f64.powf(2.0 * 0.5f64.log10() + 3.0)), "250");
+        assert_eq!(tick(snap(-2.775e-17, -0.25, 0.25)), "0");
+        assert_eq!(tick(snap(2e-5, 0.0, 1e-4)), "2e-5");
+        assert!(is_round("0.25") && is_round("150") && is_round("2e-5") && is_round("-40000"));
+        assert!(!is_round("25.119") && !is_round("158.489") && !is_round("-3.83e4"));
+    }
+
+    #[test]
+    fn outliers_do_not_set_the_range() {
+        let mut v: Vec<f64> = (0..1000).map(|k| (k as f64 * 0.01).sin()).collect();
+        v[10] = 1e6;
+        v[20] = -1e6;
+        let (lo, hi) = robust_range(&v, false);
+        assert!(lo > -2.0 && hi < 2.0, "{lo} {hi}");
+        let (lo, hi) = robust_range(&v[30..], false);
+        assert!(
+            (lo + 1.06).abs() < 0.01 && (hi - 1.06).abs() < 0.01,
+            "{lo} {hi}"
+        );
+    }
+}
