@@ -37,47 +37,34 @@ pub const LINE_MAX: usize = 128;
 /// Every command: name, arguments, what it does (`help`, `help CMD`, and the usage line of a
 /// command given wrong arguments).
 pub static COMMANDS: &[(&str, &str, &str)] = &[
-    ("help", "[CMD]", "the commands, or one command's use"),
+    ("help", "[CMD]", "commands, or one's use"),
     (
         "list",
         "[PATTERN]",
-        "parameters whose name contains PATTERN: value, range, the default `defaults` restores, \
-         rt = settable while running",
+        "parameters named *PATTERN*: value, range, default (as `defaults`), rt: settable in run",
     ),
-    ("get", "NAME", "one parameter"),
+    ("get", "NAME", "a parameter"),
     (
         "set",
         "NAME VALUE",
-        "set a parameter (RAM; checked against its range and the others; inf where max is inf)",
+        "set a parameter (RAM), checked; inf where max is inf",
     ),
-    ("save", "", "parameters to flash (not while running)"),
-    ("load", "", "parameters saved last (not while running)"),
+    ("save", "", "parameters to flash (not in run)"),
+    ("load", "", "parameters saved last (not in run)"),
     (
         "defaults",
         "",
-        "this hardware's factory parameters (not while running)",
+        "this hardware's factory parameters (not in run)",
     ),
     ("status", "", "drive state and measurements"),
-    (
-        "faults",
-        "",
-        "the latched fault in words, its snapshot, warnings",
-    ),
-    (
-        "clear",
-        "",
-        "clear the latched fault once its cause is gone",
-    ),
+    ("faults", "", "latched fault, its snapshot, warnings"),
+    ("clear", "", "clear the fault once its cause is gone"),
     (
         "mode",
         "idle|run|short|open",
-        "idle, open: gates off; run: harvest; short: low sides on",
+        "idle, open: gates off; run: harvest; short: phases shorted",
     ),
-    (
-        "tel",
-        "CH[,CH..] HZ|off",
-        "stream channels as CSV t,v1,.. (help tel: channels)",
-    ),
+    ("tel", "CH[,CH..] HZ|off", "stream channels as CSV t,v1,.."),
 ];
 
 /// A line from [`LineEditor::feed`].
@@ -532,10 +519,7 @@ impl Console {
                         .col(p.unit, 7)
                         .num(p.min)
                         .s(" .. ")
-                        .col(
-                            Num(p.max).text().as_str(),
-                            14 - Num(p.min).text().as_str().len().min(10),
-                        )
+                        .col(Num(p.max).text().as_str(), 10)
                         .col(Num((p.get)(&f)).text().as_str(), 11)
                         .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc)
@@ -826,7 +810,7 @@ impl<W: Write> Put for W {
     #[inline(never)]
     fn col(&mut self, s: &str, width: usize) -> &mut Self {
         self.s(s);
-        let n = s.chars().count();
+        let n = s.len(); // the console's column texts are ASCII
         for _ in n..width.max(n + 1) {
             self.s(" ");
         }
@@ -1047,7 +1031,7 @@ mod tests {
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 1e-50");
         assert_eq!(
             s,
-            "error: r_load_ohm 1e-50: below the f32 range (nonzero, would read as 0); allowed 0 .. inf ohm, now 100\r\n"
+            "error: r_load_ohm 1e-50: below the f32 range (not 0, reads as 0); allowed 0 .. inf ohm, now 100\r\n"
         );
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm nan");
         assert_eq!(
@@ -1116,7 +1100,7 @@ mod tests {
         assert!(r.is_ok(), "{s}");
         assert_eq!(s.lines().count(), 2, "{s}");
         assert!(
-            s.starts_with("set      NAME VALUE          set a parameter"),
+            s.starts_with("set      NAME VALUE          set a parameter (RAM)"),
             "{s}"
         );
         let (_, s) = run(&mut con, &mut ctl, "help tel");

@@ -84,7 +84,7 @@ impl NumError {
         match self {
             NumError::NotANumber => "not a number",
             NumError::Overflow => "above the f32 range (3.4e38)",
-            NumError::Underflow => "below the f32 range (nonzero, would read as 0)",
+            NumError::Underflow => "below the f32 range (not 0, reads as 0)",
         }
     }
 }

@@ -398,7 +398,7 @@ fn a_terminal_is_greeted_echoed_and_told_of_faults() {
     let reply = read_until(&mut *port, "ok\r\n> ", 5.0);
     assert_eq!(
         reply,
-        "\r\nset      NAME VALUE          set a parameter (RAM; checked against its range and the others; inf where max is inf)\r\nok\r\n> "
+        "\r\nset      NAME VALUE          set a parameter (RAM), checked; inf where max is inf\r\nok\r\n> "
     );
     port.write_all(b"list r_\r").unwrap();
     let reply = read_until(&mut *port, "\r\n> ", 5.0);

@@ -30,9 +30,9 @@ use crate::store::BoardFlash;
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 
-/// `list` writes ≈ 5.2 KB (47 parameters in aligned columns, ≈ 110 bytes a row); room for
-/// eight more.
-const REPLY_MAX: usize = 6144;
+/// `list` writes ≈ 3.6 KB (47 parameters in aligned columns, ≈ 75 bytes a row: the board's
+/// image carries no descriptions); room for a dozen more.
+const REPLY_MAX: usize = 4608;
 
 /// A `fmt::Write` sink into a fixed buffer that records overflow instead of truncating
 /// silently.
