@@ -151,6 +151,15 @@ fn board_size(root: &Path) -> Result<String, String> {
     ))
 }
 
+/// `cd DIR && ` for a command run outside the workspace root.
+fn cd(dir: &str) -> String {
+    if dir == "." {
+        String::new()
+    } else {
+        format!("cd {dir} && ")
+    }
+}
+
 fn root() -> PathBuf {
     // xtask/ is one level below the workspace root.
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -166,9 +175,10 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
     for m in MEASURES {
         if quick && m.slow {
             rows.push(format!(
-                "| {} | {} | skipped (`--quick`) | `{} {}` | |",
+                "| {} | {} | skipped (`--quick`) | `{}{} {}` | |",
                 m.what,
                 m.target,
+                cd(m.dir),
                 m.program,
                 m.args.join(" ")
             ));
@@ -218,11 +228,7 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
             m.what,
             m.target,
             figure,
-            if m.dir == "." {
-                String::new()
-            } else {
-                format!("cd {} && ", m.dir)
-            },
+            cd(m.dir),
             m.program,
             m.args.join(" "),
             secs
