@@ -42,6 +42,7 @@ fn main() {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let mut ctl = Controller::new(&Config::default()).unwrap();
     let mut con = Console::new();
+    let mut ed = regen_fw::console::LineEditor::new();
     let mut out = String::new();
     let mut line = String::new();
     let (mut oks, mut errs) = (0u64, 0u64);
@@ -72,6 +73,17 @@ fn main() {
             ctl = Controller::new(&Config::default()).unwrap();
         }
         let before = *ctl.config();
+        out.clear();
+        // The same bytes through the line editor, with a line end: it hands on at most one
+        // line (not longer than it takes) and never panics.
+        let mut lines = 0;
+        for &b in line.as_bytes().iter().chain(b"\r") {
+            if let Some(l) = ed.feed(b, &mut out) {
+                assert!(l.len() <= regen_fw::console::LINE_MAX, "{line:?}");
+                lines += 1;
+            }
+        }
+        assert!(lines <= 1 + line.matches(['\r', '\n']).count(), "{line:?}");
         out.clear();
         match con.execute(&line, &mut ctl, &mut NoStore, &mut out) {
             Ok(()) => oks += 1,

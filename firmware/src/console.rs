@@ -5,8 +5,13 @@
 //! refused command changes nothing. The executor never panics (fuzzed, see
 //! `examples/console_fuzz.rs`).
 //!
-//! Commands: `help`, `list`, `get NAME`, `set NAME VALUE`, `save`, `load`, `defaults`,
-//! `status`, `faults`, `clear`, `mode idle|run|short|open`, `tel CH[,CH…] RATE_HZ`, `tel off`.
+//! Commands: [`COMMANDS`] (`help [CMD]` prints them).
+//!
+//! Terminal side, the same on the board's UART and on `regen serve`'s pty: [`Console::banner`]
+//! on connection, the prompt [`PROMPT`] after every reply, and [`LineEditor`], which echoes
+//! what is typed and edits the line (Backspace/DEL, Ctrl-U, arrow keys ignored), so a plain
+//! terminal program (picocom, screen, minicom) needs no local echo. A fault that latches is
+//! announced unasked by [`Console::notice`] (`# fault …`, a comment line for CSV readers).
 //!
 //! Telemetry lines are CSV: a header `# tel t,<ch>,…` then `<t>,<v>,…` per sample (`t` in s
 //! since `tel` was started), readable by any CSV plotting tool after dropping `#` lines.
@@ -21,6 +26,165 @@ use crate::config::Config;
 use crate::control::{Controller, Mode, Telemetry};
 use crate::numtext::{self, q_f32, Fixed, Num, NumError};
 use crate::params::{self, ParamError, PARAMS};
+use crate::protect::Fault;
+
+/// The prompt, written after the banner and after every reply.
+pub const PROMPT: &str = "> ";
+
+/// Longest console line, bytes (the board's receive buffer).
+pub const LINE_MAX: usize = 128;
+
+/// Every command: name, arguments, what it does (`help`, `help CMD`, and the usage line of a
+/// command given wrong arguments).
+pub static COMMANDS: &[(&str, &str, &str)] = &[
+    ("help", "[CMD]", "commands, or one's use"),
+    (
+        "list",
+        "[PATTERN]",
+        "parameters named *PATTERN*: value, range, default (as `defaults`), rt: settable in run",
+    ),
+    ("get", "NAME", "a parameter"),
+    (
+        "set",
+        "NAME VALUE",
+        "set a parameter (RAM), checked; inf where max is inf",
+    ),
+    ("save", "", "parameters to flash (not in run)"),
+    ("load", "", "parameters saved last (not in run)"),
+    (
+        "defaults",
+        "",
+        "this hardware's factory parameters (not in run)",
+    ),
+    ("status", "", "drive state and measurements"),
+    ("faults", "", "latched fault, its snapshot, warnings"),
+    ("clear", "", "clear the fault once its cause is gone"),
+    (
+        "mode",
+        "idle|run|short|open",
+        "idle, open: gates off; run: harvest; short: phases shorted",
+    ),
+    ("tel", "CH[,CH..] HZ|off", "stream channels as CSV t,v1,.."),
+];
+
+/// A line from [`LineEditor::feed`].
+pub type Line<'a> = &'a str;
+
+/// The console's line editor: assembles received bytes into lines and echoes them, as a
+/// terminal's line discipline would. CR, LF or CRLF end a line; Backspace/DEL erase a
+/// character, Ctrl-U the line; escape sequences (arrow keys) and other control characters
+/// are ignored. A line over [`LINE_MAX`] bytes or not UTF-8 is answered here with one
+/// `error:` line and handed on empty (so the caller only writes the prompt).
+#[derive(Clone, Debug)]
+pub struct LineEditor {
+    buf: [u8; LINE_MAX],
+    len: usize,
+    overlong: bool,
+    cr: bool,
+    /// Escape sequence state: 1 after ESC, 2 inside `ESC [`.
+    esc: u8,
+}
+
+impl Default for LineEditor {
+    fn default() -> Self {
+        LineEditor {
+            buf: [0; LINE_MAX],
+            len: 0,
+            overlong: false,
+            cr: false,
+            esc: 0,
+        }
+    }
+}
+
+impl LineEditor {
+    pub fn new() -> LineEditor {
+        LineEditor::default()
+    }
+
+    /// One received byte; its echo goes to `out`. `Some(line)` when a line ended (empty for
+    /// an empty line, or after an overlong / non-UTF-8 line, whose `error:` line is written).
+    pub fn feed<W: Write>(&mut self, b: u8, out: &mut W) -> Option<Line<'_>> {
+        let cr = core::mem::replace(&mut self.cr, b == b'\r');
+        if self.esc != 0 {
+            // ESC X (two bytes) or ESC [ … final byte (0x40..=0x7e).
+            self.esc =
+                if (self.esc == 1 && b == b'[') || (self.esc == 2 && !(0x40..=0x7e).contains(&b)) {
+                    2
+                } else {
+                    0
+                };
+            return None;
+        }
+        match b {
+            b'\n' if cr => None, // the LF of a CRLF
+            b'\r' | b'\n' => {
+                out.s("\r\n");
+                let n = core::mem::replace(&mut self.len, 0);
+                if core::mem::replace(&mut self.overlong, false) {
+                    out.s("error: line longer than ")
+                        .uint(LINE_MAX as u32)
+                        .s(" characters\r\n");
+                    return Some("");
+                }
+                match core::str::from_utf8(&self.buf[..n]) {
+                    Ok(t) => Some(t),
+                    Err(_) => {
+                        out.s("error: line is not UTF-8\r\n");
+                        Some("")
+                    }
+                }
+            }
+            0x08 | 0x7f => {
+                self.erase(out);
+                None
+            }
+            0x15 => {
+                while self.len > 0 {
+                    self.erase(out);
+                }
+                self.overlong = false;
+                None
+            }
+            0x1b => {
+                self.esc = 1;
+                None
+            }
+            0..=0x1f => None,
+            _ => {
+                if self.len == LINE_MAX {
+                    self.overlong = true;
+                    return None;
+                }
+                self.buf[self.len] = b;
+                self.len += 1;
+                // Echo whole characters: an ASCII byte at once, a multi-byte one when complete.
+                let start = self.char_start();
+                if let Ok(ch) = core::str::from_utf8(&self.buf[start..self.len]) {
+                    out.s(ch);
+                }
+                None
+            }
+        }
+    }
+
+    /// Where the last character starts (its continuation bytes are `0b10xx_xxxx`).
+    fn char_start(&self) -> usize {
+        let mut i = self.len.saturating_sub(1);
+        while i > 0 && self.buf[i] & 0xc0 == 0x80 && self.len - i < 4 {
+            i -= 1;
+        }
+        i
+    }
+
+    /// Erase the last character (all its bytes) and on the terminal.
+    fn erase<W: Write>(&mut self, out: &mut W) {
+        if self.len > 0 {
+            self.len = self.char_start();
+            out.s("\x08 \x08");
+        }
+    }
+}
 
 /// What a store did with a `save`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -132,6 +296,8 @@ pub struct Console {
     pub p_avg_w: f32,
     /// Mean power over the last whole motion cycle.
     pub cycle: CycleMean,
+    /// Code of the fault last announced by [`Console::notice`] (0: none).
+    noticed: u8,
 }
 
 /// Mean power over whole motion cycles: from one upward zero crossing of the shaft speed to
@@ -226,8 +392,14 @@ impl Console {
         let t = ctl.telemetry();
         let p = q_f32(t.p_elec);
         self.add_energy(p * ts);
-        self.p_avg_w += (p - self.p_avg_w) * ts.min(1.0);
-        self.cycle.add(p, q_f32(t.omega_m), ts);
+        if ctl.mode() == Mode::Run {
+            self.p_avg_w += (p - self.p_avg_w) * ts.min(1.0);
+            self.cycle.add(p, q_f32(t.omega_m), ts);
+        } else {
+            // Outside `run` no load is emulated: the averages start again in the next run.
+            self.p_avg_w = 0.0;
+            self.cycle = CycleMean::default();
+        }
         if self.tel_every == 0 {
             return;
         }
@@ -240,6 +412,42 @@ impl Console {
                 out.s(",").num(channel_value(&t, i as usize));
             }
             out.s("\r\n");
+        }
+    }
+
+    /// The greeting, on connection (board: at boot): version, drive state, how to get help,
+    /// then the prompt.
+    pub fn banner<W: Write>(mode: Mode, fault: Option<Fault>, out: &mut W) {
+        out.s("\r\nregen-fw ")
+            .s(env!("CARGO_PKG_VERSION"))
+            .s(" console. drive: mode ")
+            .s(mode.name())
+            .s(", fault ")
+            .s(fault.map_or("none", |f| f.name()))
+            .s(". type help\r\n")
+            .s(PROMPT);
+    }
+
+    /// Announce a fault the moment it is seen latched (call after [`Console::tick`], with
+    /// output that is never dropped): `# fault CODE NAME: what; now in mode M (faults: details)`
+    /// and the prompt. Once per latched fault; `true` when something was written.
+    pub fn notice<W: Write>(&mut self, ctl: &Controller, out: &mut W) -> bool {
+        let f = ctl.fault();
+        let code = f.map_or(0, |f| f.code() + 1);
+        if code == self.noticed {
+            return false;
+        }
+        self.noticed = code;
+        match f {
+            Some(f) => {
+                write_fault(out, "\r\n# fault ", f);
+                out.s("# now in mode ")
+                    .s(ctl.mode().name())
+                    .s(" (faults: details)\r\n")
+                    .s(PROMPT);
+                true
+            }
+            None => false,
         }
     }
 
@@ -295,37 +503,57 @@ impl Console {
         let nargs = a1.is_some() as usize + a2.is_some() as usize + extra as usize;
         let want = |n: usize| nargs == n;
         match cmd {
-            "help" if want(0) => {
-                out.s(
-                    "commands: help | list | get NAME | set NAME VALUE | save | load | defaults\r\n\
-                     | status | faults | clear | mode idle|run|short|open | tel CH[,CH..] HZ | tel off\r\n",
-                );
-                out.s("tel channels:");
-                for ch in CHANNELS {
-                    out.s(" ").s(ch.0).s("[").s(ch.1).s("]");
+            "help" if nargs <= 1 => {
+                let mut n = 0;
+                for c in COMMANDS {
+                    if a1.is_none_or(|a| a == c.0) {
+                        out.col(c.0, 9).col(c.1, 20).s(c.2).s("\r\n");
+                        n += 1;
+                    }
                 }
-                out.s("\r\n");
+                if n == 0 {
+                    fail!(.s("no command '").clip(a1.unwrap_or("")).s("' (help lists them)"))
+                }
+                if a1.is_none_or(|a| a == "tel") {
+                    out.s("tel channels:");
+                    for ch in CHANNELS {
+                        out.s(" ").s(ch.0).s("[").s(ch.1).s("]");
+                    }
+                    out.s("\r\n");
+                }
                 ok!()
             }
-            "list" if want(0) => {
+            "list" if nargs <= 1 => {
+                let pat = a1.unwrap_or("").as_bytes();
+                let hit = |p: &&params::Param| {
+                    pat.is_empty() || p.name.as_bytes().windows(pat.len()).any(|w| w == pat)
+                };
+                let n = PARAMS.iter().filter(hit).count();
+                if n == 0 {
+                    fail!(.s("no parameter name contains '").clip(a1.unwrap_or("")).s("' (list shows all)"))
+                }
                 let c = ctl.config();
-                for p in PARAMS {
-                    out.s(p.name)
-                        .s(" = ")
-                        .num((p.get)(c))
-                        .s(" ")
-                        .s(p.unit)
-                        .s(" [")
+                // The default column is what `defaults` restores on this hardware.
+                let f = store.factory();
+                out.col("name", 19)
+                    .col("value", 12)
+                    .col("unit", 7)
+                    .col("range", 18)
+                    .col("default", 11)
+                    .s("set  description\r\n");
+                for p in PARAMS.iter().filter(hit) {
+                    out.col(p.name, 19)
+                        .col(Num((p.get)(c)).text().as_str(), 12)
+                        .col(p.unit, 7)
                         .num(p.min)
                         .s(" .. ")
-                        .num(p.max)
-                        .s("] default ")
-                        .num(p.default_value())
-                        .s(if p.runtime { " rt - " } else { " idle-only - " })
+                        .col(Num(p.max).text().as_str(), 10)
+                        .col(Num((p.get)(&f)).text().as_str(), 11)
+                        .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc)
                         .s("\r\n");
                 }
-                ok!()
+                ok!(.s(" ").uint(n as u32).s(" of ").uint(PARAMS.len() as u32))
             }
             "get" if want(1) => {
                 let n = a1.unwrap_or("");
@@ -338,23 +566,36 @@ impl Console {
             }
             "set" if want(2) => {
                 let n = a1.unwrap_or("");
+                let vs = a2.unwrap_or("");
                 let Some(p) = params::find(n) else {
                     fail!(.s("unknown parameter '").clip(n).s("' (try list)"))
                 };
-                let v = match parse_f32(a2.unwrap_or("")) {
-                    Ok(v) => v,
-                    Err(e) => fail!(.s("'").clip(a2.unwrap_or("")).s("' ").s(e.as_str())),
-                };
                 let mut c = *ctl.config();
-                match p.apply(&mut c, v, running) {
-                    Ok(()) => {}
-                    Err(ParamError::Invalid(field, why)) => {
-                        fail!(.s(p.name).s(": config refused: ").s(field).s(": ").s(why))
-                    }
-                    Err(e) => fail!(.s(p.name).s(": ").s(e.message())),
-                }
-                if let Err(e) = ctl.set_config(&c) {
-                    fail!(.s(e.field).s(": ").s(e.reason))
+                // The reason, and for a refused configuration the field it conflicts with.
+                let why = match parse_f32(vs) {
+                    Err(e) => Err(("", e.as_str())),
+                    Ok(v) => match p.apply(&mut c, v, running) {
+                        Ok(()) => ctl.set_config(&c).map_err(|e| (e.field, e.reason)),
+                        Err(ParamError::Invalid(field, why)) => Err((field, why)),
+                        Err(e) => Err(("", e.message())),
+                    },
+                };
+                if let Err((field, why)) = why {
+                    fail!(.s(p.name)
+                        .s(" ")
+                        .clip(vs)
+                        .s(": ")
+                        .s(field)
+                        .s(if field.is_empty() { "" } else { ": " })
+                        .s(why)
+                        .s("; allowed ")
+                        .num(p.min)
+                        .s(" .. ")
+                        .num(p.max)
+                        .s(" ")
+                        .s(p.unit)
+                        .s(", now ")
+                        .num((p.get)(ctl.config())))
                 }
                 ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
             }
@@ -390,34 +631,39 @@ impl Console {
             }
             "status" if want(0) => {
                 let t = ctl.telemetry();
-                out.s("mode=")
-                    .s(ctl.mode().name())
-                    .s(" fault=")
-                    .s(ctl.fault().map(|f| f.name()).unwrap_or("none"))
-                    .s(" vbus=")
-                    .num(q_f32(t.v_bus))
-                    .s("V w=")
-                    .num(q_f32(t.omega_m))
-                    .s("rad/s x=")
-                    .num(q_f32(t.x))
-                    .s("m id=")
-                    .num(q_f32(t.i_dq.d))
-                    .s("A iq=")
-                    .num(q_f32(t.i_dq.q))
-                    .s("A p=")
-                    .num(q_f32(t.p_elec))
-                    .s("W p_avg=")
-                    .num(self.p_avg_w)
-                    .s("W p_cycle=");
-                match self.cycle.last {
-                    Some((pw, t)) => {
-                        out.num(pw).s("W cycle=").num(t).s("s");
-                    }
-                    None => {
-                        out.s("none");
+                let run = running;
+                out.col("mode", 10).s(ctl.mode().name());
+                out.s("\r\n")
+                    .col("fault", 10)
+                    .s(ctl.fault().map_or("none", |f| f.name()));
+                for (label, v, unit) in [
+                    ("vbus", q_f32(t.v_bus), "V"),
+                    ("speed", q_f32(t.omega_m), "rad/s"),
+                    ("travel", q_f32(t.x), "m"),
+                    ("id", q_f32(t.i_dq.d), "A"),
+                    ("iq", q_f32(t.i_dq.q), "A"),
+                    ("p", q_f32(t.p_elec), "W"),
+                    ("p_avg", self.p_avg_w, "W"),
+                ] {
+                    out.s("\r\n").col(label, 10);
+                    // Power figures mean nothing outside `run` (no load emulated).
+                    if run || unit != "W" {
+                        out.eng(v, unit);
+                    } else {
+                        out.s("-");
                     }
                 }
-                out.s(" energy=").num(self.energy_j).s("J warnings=");
+                out.s("\r\n").col("p_cycle", 10);
+                match self.cycle.last {
+                    Some((pw, t)) if run => {
+                        out.eng(pw, "W").s(" over ").eng(t, "s");
+                    }
+                    _ => {
+                        out.s(if run { "- (no whole cycle yet)" } else { "-" });
+                    }
+                }
+                out.s("\r\n").col("energy", 10).eng(self.energy_j, "J");
+                out.s("\r\n").col("warnings", 10);
                 write_warnings(out, ctl.protection().warnings);
                 out.s("\r\n");
                 ok!()
@@ -485,7 +731,7 @@ impl Console {
                 let m = match a1.unwrap_or("") {
                     "idle" => Mode::Idle,
                     "run" => Mode::Run,
-                    "short" | "brake" => Mode::Short,
+                    "short" => Mode::Short,
                     "open" => Mode::Open,
                     o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open)")),
                 };
@@ -543,9 +789,9 @@ impl Console {
                 out.s("\r\n");
                 ok!(.s(" tel ").num(pwm / self.tel_every as f32).s(" Hz"))
             }
-            "help" | "list" | "get" | "set" | "save" | "load" | "defaults" | "status"
-            | "faults" | "clear" | "mode" | "tel" => {
-                fail!(.s("wrong arguments for '").s(cmd).s("' (see help)"))
+            _ if COMMANDS.iter().any(|c| c.0 == cmd) => {
+                let c = COMMANDS.iter().find(|c| c.0 == cmd).unwrap_or(&COMMANDS[0]);
+                fail!(.s("usage: ").s(c.0).s(" ").s(c.1))
             }
             _ => fail!(.s("unknown command '").clip(cmd).s("' (see help)")),
         }
@@ -563,6 +809,11 @@ trait Put {
     /// A number with `decimals` decimals ([`Fixed`]).
     fn fixed(&mut self, v: f32, decimals: u8) -> &mut Self;
     fn uint(&mut self, v: u32) -> &mut Self;
+    /// `s` padded with spaces to `width` characters (a table column; at least one space).
+    fn col(&mut self, s: &str, width: usize) -> &mut Self;
+    /// `v` in engineering notation: 4 significant digits, an SI prefix (u, m, k, M) and the
+    /// unit: `12.58 W`, `-3.390 mA`, `555.7 J`.
+    fn eng(&mut self, v: f32, unit: &str) -> &mut Self;
     /// At most 24 characters of user input (keeps errors one short line), control
     /// characters as `?`.
     fn clip(&mut self, s: &str) -> &mut Self;
@@ -585,6 +836,40 @@ impl<W: Write> Put for W {
     #[inline(never)] // one copy per sink type: these are called from ~150 places
     fn uint(&mut self, v: u32) -> &mut Self {
         self.s(numtext::uint(v as u64).as_str())
+    }
+    #[inline(never)]
+    fn col(&mut self, s: &str, width: usize) -> &mut Self {
+        self.s(s);
+        let n = s.len(); // the console's column texts are ASCII
+        for _ in n..width.max(n + 1) {
+            self.s(" ");
+        }
+        self
+    }
+    #[inline(never)]
+    fn eng(&mut self, v: f32, unit: &str) -> &mut Self {
+        let a = v.abs();
+        let (k, prefix) = if a >= 1e6 || a.is_nan() {
+            (1e-6, "M")
+        } else if a >= 1e3 {
+            (1e-3, "k")
+        } else if a >= 1.0 || a == 0.0 {
+            (1.0, "")
+        } else if a >= 1e-3 {
+            (1e3, "m")
+        } else {
+            (1e6, "u")
+        };
+        let m = v * k;
+        // 4 significant digits; a mantissa that rounds up to 1000 keeps 1 decimal.
+        let d = if m.abs() >= 99.995 {
+            1
+        } else if m.abs() >= 9.9995 {
+            2
+        } else {
+            3
+        };
+        self.fixed(m, d).s(" ").s(prefix).s(unit)
     }
     #[inline(never)] // one copy per sink type: these are called from ~150 places
     fn clip(&mut self, s: &str) -> &mut Self {
@@ -651,7 +936,9 @@ fn safe_words(m: Mode) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::string::String;
+    use std::format;
+    use std::string::{String, ToString};
+    use std::vec::Vec;
 
     fn run(con: &mut Console, ctl: &mut Controller, line: &str) -> (CmdResult, String) {
         let mut s = String::new();
@@ -739,6 +1026,13 @@ mod tests {
             "set r_load_ohm 1 2",
             "set nope 1",
             "set r_load_ohm 1e99",
+            "set r_load_ohm 1e-50",
+            "set r_load_ohm -1e-50",
+            "mode brake",
+            "help nope",
+            "list zzz",
+            "help set x",
+            "list a b",
             "set pole_pairs 2.5",
             "set current_bw_hz 4000",
             "set law 7",
@@ -757,10 +1051,39 @@ mod tests {
             assert_eq!(ctl.mode(), Mode::Idle);
         }
         // Number text (numtext): the reason is in the reply; a value set reads back as typed.
+        // Every refusal of a value names the key, the value, the reason, the range and the
+        // current value; underflow is refused as overflow is.
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 1e99");
-        assert_eq!(s, "error: '1e99' is out of the f32 range\r\n");
+        assert_eq!(
+            s,
+            "error: r_load_ohm 1e99: above the f32 range (3.4e38); allowed 0 .. inf ohm, now 100\r\n"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 1e-50");
+        assert_eq!(
+            s,
+            "error: r_load_ohm 1e-50: below the f32 range (not 0, reads as 0); allowed 0 .. inf ohm, now 100\r\n"
+        );
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm nan");
-        assert_eq!(s, "error: 'nan' is not a number\r\n");
+        assert_eq!(
+            s,
+            "error: r_load_ohm nan: not a number; allowed 0 .. inf ohm, now 100\r\n"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "set current_bw_hz 6000");
+        assert_eq!(
+            s,
+            "error: current_bw_hz 6000: value out of range; allowed 10 .. 5000 Hz, now 1000\r\n"
+        );
+        // A conflict with another parameter names it.
+        let (_, s) = run(&mut con, &mut ctl, "set v_bus_ov 50");
+        assert!(
+            s.starts_with("error: v_bus_ov 50: ")
+                && s.ends_with("; allowed 1 .. 2000 V, now 95\r\n"),
+            "{s}"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 0");
+        assert_eq!(s, "ok r_load_ohm = 0 ohm\r\n");
+        let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 100");
+        assert_eq!(s, "ok r_load_ohm = 100 ohm\r\n");
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm 2.5e-3");
         assert_eq!(s, "ok r_load_ohm = 0.0025 ohm\r\n");
         let (_, s) = run(&mut con, &mut ctl, "set r_load_ohm inf");
@@ -781,9 +1104,11 @@ mod tests {
         let mut con = Console::new();
         let (r, s) = run(&mut con, &mut ctl, "list");
         assert!(r.is_ok());
-        assert_eq!(s.lines().count(), PARAMS.len() + 1);
+        // A header, one line per parameter, the `ok` line.
+        assert_eq!(s.lines().count(), PARAMS.len() + 2);
         let (r, s) = run(&mut con, &mut ctl, "help");
         assert!(r.is_ok() && s.ends_with("\r\nok\r\n"), "{s}");
+        assert_eq!(s.lines().count(), COMMANDS.len() + 2, "{s}");
         for l in [
             "status",
             "faults",
@@ -793,6 +1118,258 @@ mod tests {
             "tel off",
         ] {
             assert!(run(&mut con, &mut ctl, l).0.is_ok(), "{l}");
+        }
+    }
+
+    /// `help CMD` prints that command's line only; `tel`'s adds the channels.
+    #[test]
+    fn help_for_one_command() {
+        let mut ctl = Controller::new(&Config::default()).unwrap();
+        let mut con = Console::new();
+        let (r, s) = run(&mut con, &mut ctl, "help set");
+        assert!(r.is_ok(), "{s}");
+        assert_eq!(s.lines().count(), 2, "{s}");
+        assert!(
+            s.starts_with("set      NAME VALUE          set a parameter (RAM)"),
+            "{s}"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "help tel");
+        assert!(s.contains("\r\ntel channels: ia[A] ib[A]"), "{s}");
+        // Every command has its help, and its usage when given wrong arguments.
+        for c in COMMANDS {
+            let (r, s) = run(&mut con, &mut ctl, &format!("help {}", c.0));
+            assert!(r.is_ok() && s.starts_with(c.0), "{s}");
+            let (r, s) = run(&mut con, &mut ctl, &format!("{} a b c", c.0));
+            assert!(r.is_err(), "{s}");
+            assert_eq!(s, format!("error: usage: {} {}\r\n", c.0, c.1));
+        }
+        let (r, s) = run(&mut con, &mut ctl, "help fly");
+        assert!(
+            r.is_err() && s == "error: no command 'fly' (help lists them)\r\n",
+            "{s}"
+        );
+    }
+
+    /// `list PATTERN`: the parameters whose name contains it, in registry order, columns
+    /// aligned, the default column read from the store's factory configuration (what
+    /// `defaults` restores), not from `Config::default()`.
+    #[test]
+    fn list_filters_by_pattern_and_shows_the_factory_default() {
+        struct Factory(Config);
+        impl ParamStore for Factory {
+            fn save(&mut self, _: &Config) -> Result<(), &'static str> {
+                Err("no")
+            }
+            fn load(&mut self) -> Result<Config, &'static str> {
+                Err("no")
+            }
+            fn factory(&self) -> Config {
+                self.0
+            }
+        }
+        let f = Config {
+            v_bus_ov: 110.0,
+            r_load_ohm: 1000.0,
+            ..Config::default()
+        };
+        let mut ctl = Controller::new(&Config::default()).unwrap();
+        let mut con = Console::new();
+        let mut s = String::new();
+        let r = con.execute("list r_", &mut ctl, &mut Factory(f), &mut s);
+        assert!(r.is_ok(), "{s}");
+        let want: Vec<&str> = PARAMS
+            .iter()
+            .map(|p| p.name)
+            .filter(|n| n.contains("r_"))
+            .collect();
+        assert!(want.len() >= 4 && want.contains(&"r_load_ohm"), "{want:?}");
+        let lines: Vec<&str> = s.lines().collect();
+        assert_eq!(lines.len(), want.len() + 2, "{s}");
+        assert!(lines[0].starts_with("name "), "{s}");
+        for (l, n) in lines[1..].iter().zip(&want) {
+            assert!(l.starts_with(&format!("{n} ")), "{l}");
+        }
+        // Columns aligned: every row's value starts where the header's does.
+        let col = lines[0].find("value").unwrap();
+        for l in &lines[1..lines.len() - 1] {
+            assert!(
+                l.as_bytes()[col - 1] == b' ' && l.as_bytes()[col] != b' ',
+                "{l}"
+            );
+        }
+        assert_eq!(
+            lines.last().unwrap(),
+            &format!("ok {} of {}", want.len(), PARAMS.len())
+        );
+        let mut row = |name: &str| {
+            let mut s = String::new();
+            let _ = con.execute(&format!("list {name}"), &mut ctl, &mut Factory(f), &mut s);
+            s.lines()
+                .nth(1)
+                .unwrap()
+                .split_whitespace()
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        };
+        // name value unit min .. max default rt|idle description…
+        let now = std::format!("{}", Config::default().r_load_ohm);
+        assert_eq!(
+            row("r_load_ohm")[..8],
+            ["r_load_ohm", &now, "ohm", "0", "..", "inf", "1000", "rt"]
+        );
+        assert_eq!(
+            row("v_bus_ov")[..8],
+            ["v_bus_ov", "95", "V", "1", "..", "2000", "110", "rt"]
+        );
+        assert_eq!(row("pwm_hz")[7], "idle");
+        // What `defaults` restores is what the column showed.
+        let mut s = String::new();
+        assert!(con
+            .execute("defaults", &mut ctl, &mut Factory(f), &mut s)
+            .is_ok());
+        assert_eq!(ctl.config().v_bus_ov, 110.0);
+    }
+
+    /// The line editor: echo, Backspace/DEL (whole UTF-8 characters), Ctrl-U, CR/LF/CRLF,
+    /// arrow keys ignored, overlong and non-UTF-8 lines refused with one `error:` line.
+    #[test]
+    fn line_editor_edits_echoes_and_refuses() {
+        fn feed(ed: &mut LineEditor, bytes: &[u8]) -> (Vec<String>, String) {
+            let mut echo = String::new();
+            let mut lines = Vec::new();
+            for &b in bytes {
+                if let Some(l) = ed.feed(b, &mut echo) {
+                    lines.push(l.to_string());
+                }
+            }
+            (lines, echo)
+        }
+        let mut ed = LineEditor::new();
+        let (l, e) = feed(&mut ed, b"get r_load_ohx\x7fm\r\n");
+        assert_eq!(l, ["get r_load_ohm"]);
+        assert_eq!(e, "get r_load_ohx\x08 \x08m\r\n");
+        // Backspace (0x08) on an empty line does nothing; LF alone ends a line.
+        let (l, e) = feed(&mut ed, b"\x08ab\x08\x08\x08c\n");
+        assert_eq!(l, ["c"]);
+        assert_eq!(e, "ab\x08 \x08\x08 \x08c\r\n");
+        // Ctrl-U erases the whole line.
+        let (l, e) = feed(&mut ed, b"set x 1\x15status\r");
+        assert_eq!(l, ["status"]);
+        assert_eq!(e, format!("set x 1{}status\r\n", "\x08 \x08".repeat(7)));
+        // An arrow key (ESC [ A) and other controls are ignored.
+        let (l, _) = feed(&mut ed, b"st\x1b[Aa\x01tus\r");
+        assert_eq!(l, ["status"]);
+        // A multi-byte character is echoed when complete and erased whole.
+        let (l, e) = feed(&mut ed, "aΩ\x7fb\r".as_bytes());
+        assert_eq!(l, ["ab"]);
+        assert_eq!(e, "aΩ\x08 \x08b\r\n");
+        // Two CRs: two (empty) lines; CRLF one.
+        let (l, _) = feed(&mut ed, b"\r\r\n");
+        assert_eq!(l, ["", ""]);
+        // Overlong: not executed (handed on empty), one error line; the next line is fine.
+        let long = [b'9'; LINE_MAX + 5];
+        let (l, e) = feed(&mut ed, &long);
+        assert!(l.is_empty() && e.len() == LINE_MAX, "{}", e.len());
+        let (l, e) = feed(&mut ed, b"\r");
+        assert_eq!(l, [""]);
+        assert_eq!(e, "\r\nerror: line longer than 128 characters\r\n");
+        let (l, _) = feed(&mut ed, &[b'x'; LINE_MAX]);
+        assert!(l.is_empty());
+        let (l, _) = feed(&mut ed, b"\r");
+        assert_eq!(l, ["x".repeat(LINE_MAX)]);
+        // Ctrl-U also forgets that the line was too long.
+        feed(&mut ed, &long);
+        let (l, _) = feed(&mut ed, b"\x15ok\r");
+        assert_eq!(l, ["ok"]);
+        // Not UTF-8: one error line.
+        let (l, e) = feed(&mut ed, b"\xff\xfe set\r");
+        assert_eq!(l, [""]);
+        assert!(e.ends_with("\r\nerror: line is not UTF-8\r\n"), "{e:?}");
+    }
+
+    /// The banner, fault notices (once per latched fault, unasked), and power figures blanked
+    /// outside `run`.
+    #[test]
+    fn banner_notice_and_stale_figures() {
+        use crate::io::RawSample;
+        let mut b = String::new();
+        Console::banner(Mode::Idle, None, &mut b);
+        assert_eq!(
+            b,
+            format!(
+                "\r\nregen-fw {} console. drive: mode idle, fault none. type help\r\n> ",
+                env!("CARGO_PKG_VERSION")
+            )
+        );
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        let mut con = Console::new();
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
+        let code = |v: f32| (v / cfg.volts_per_count + 0.5) as u16;
+        let sample = |v: f32| RawSample {
+            i_abc: [cfg.adc_zero_code; 3],
+            v_bus: code(v),
+            encoder: 0,
+        };
+        let mut out = String::new();
+        ctl.step(&sample(60.0));
+        con.tick(&ctl, &mut out);
+        assert!(!con.notice(&ctl, &mut out) && out.is_empty());
+        // A whole cycle's mean, as after a run: shown in run, blanked outside it.
+        con.cycle.last = Some((23.0, 2.0));
+        let (_, s) = run(&mut con, &mut ctl, "status");
+        assert!(s.contains("\r\np_cycle   23.00 W over 2.000 s\r\n"), "{s}");
+        ctl.step(&sample(100.0)); // over-voltage: latched, safe state short
+        con.tick(&ctl, &mut out);
+        assert!(con.notice(&ctl, &mut out));
+        assert_eq!(
+            out,
+            "\r\n# fault 2 bus_over_voltage: bus voltage above v_bus_ov\r\n# now in mode short (faults: details)\r\n> "
+        );
+        // Once only.
+        ctl.step(&sample(100.0));
+        assert!(!con.notice(&ctl, &mut out));
+        let (_, s) = run(&mut con, &mut ctl, "status");
+        assert!(
+            s.starts_with("mode      short\r\nfault     bus_over_voltage\r\n"),
+            "{s}"
+        );
+        assert!(
+            s.contains("\r\np_cycle   -\r\n") && s.contains("\r\np_avg     -\r\n"),
+            "{s}"
+        );
+        assert!(
+            s.contains("\r\nvbus      100.0 V\r\n") || s.contains("vbus      99.9"),
+            "{s}"
+        );
+        assert_eq!(con.cycle.last, None);
+        // Cleared and latched again: announced again.
+        ctl.step(&sample(60.0));
+        assert!(run(&mut con, &mut ctl, "clear").0.is_ok());
+        assert!(!con.notice(&ctl, &mut out));
+        assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
+        ctl.step(&sample(100.0));
+        out.clear();
+        assert!(con.notice(&ctl, &mut out) && out.contains("bus_over_voltage"));
+    }
+
+    /// Engineering notation: 4 significant digits and an SI prefix.
+    #[test]
+    fn engineering_notation() {
+        for (v, u, want) in [
+            (23.0328f32, "W", "23.03 W"),
+            (-0.0033874512, "A", "-3.387 mA"),
+            (0.069885254, "m", "69.89 mm"),
+            (555.7449, "J", "555.7 J"),
+            (12345.0, "J", "12.35 kJ"),
+            (0.0, "W", "0.000 W"),
+            (999.99, "V", "1000.0 V"),
+            (2.5e-6, "A", "2.500 uA"),
+            (3.2e7, "J", "32.00 MJ"),
+        ] {
+            let mut s = String::new();
+            s.eng(v, u);
+            assert_eq!(s, want, "{v}");
         }
     }
 
@@ -851,7 +1428,7 @@ mod tests {
         assert!(ctl.fault().is_none());
         assert!(run(&mut con, &mut ctl, "mode run").0.is_ok());
         let (_, s) = run(&mut con, &mut ctl, "status");
-        assert!(s.contains("warnings=none"), "{s}");
+        assert!(s.contains("\r\nwarnings  none\r\n"), "{s}");
     }
 
     #[test]

@@ -11,7 +11,8 @@
 //!   digits with an optional `.` (at least one digit, `1.` and `.5` included), an optional
 //!   exponent `e`/`E` with optional sign and at least one digit. Anything else (`nan`, `inf`,
 //!   `0x10`, `1_000`, `1e`, spaces) is [`NumError::NotANumber`]; a value beyond `f32::MAX` is
-//!   [`NumError::Overflow`]; a value below the smallest subnormal rounds to zero as in core.
+//!   [`NumError::Overflow`]; a nonzero value whose nearest `f32` is zero (below half the smallest
+//!   subnormal, 7.0e-46) is [`NumError::Underflow`] (core reads it as 0): both ends refused.
 //!   **Precision**: the result is the `f32` nearest the decimal (ties to even) — the
 //!   scaling carries 64 bits and a sticky bit, exact on ties, within 2⁻⁵⁶ (relative)
 //!   otherwise, so only a decimal within 2⁻⁵⁶ of the midpoint between two `f32` (none of
@@ -73,14 +74,17 @@ pub enum NumError {
     NotANumber,
     /// A finite decimal whose magnitude exceeds `f32::MAX`.
     Overflow,
+    /// A nonzero decimal whose nearest `f32` is zero.
+    Underflow,
 }
 
 impl NumError {
     /// The reason, as the console writes it after the refused text.
     pub fn as_str(self) -> &'static str {
         match self {
-            NumError::NotANumber => "is not a number",
-            NumError::Overflow => "is out of the f32 range",
+            NumError::NotANumber => "not a number",
+            NumError::Overflow => "above the f32 range (3.4e38)",
+            NumError::Underflow => "below the f32 range (not 0, reads as 0)",
         }
     }
 }
@@ -230,7 +234,7 @@ fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
         return Err(NumError::Overflow); // ≥ 1e39 > f32::MAX
     }
     if top <= -46 {
-        return Ok(0.0); // ≤ 1e-46, below half the smallest subnormal (7.0e-46)
+        return Err(NumError::Underflow); // ≤ 1e-46, below half the smallest subnormal (7.0e-46)
     }
     // Here −65 ≤ e10 ≤ 38 and mant < 10^19.
     let b = Big::new(mant, 0).scale10(e10);
@@ -252,7 +256,9 @@ fn decimal_to_f32(mut mant: u64, mut e10: i32) -> Result<f32, NumError> {
         }
     };
     let v = f32::from_bits(bits);
-    if v.is_finite() {
+    if bits == 0 {
+        Err(NumError::Underflow) // `mant > 0` rounded to zero
+    } else if v.is_finite() {
         Ok(v)
     } else {
         Err(NumError::Overflow)
@@ -649,8 +655,8 @@ mod tests {
             ("-1.5e-07", -1.5e-7),
             ("000012.5000", 12.5),
             ("3.4028235e38", f32::MAX),
-            ("1e-50", 0.0),
-            ("1e-99999999999", 0.0),
+            ("0e-99", 0.0),
+            ("0.000", 0.0),
             ("1.17549435e-38", f32::MIN_POSITIVE),
             ("1.4e-45", f32::from_bits(1)),
             ("0.000000000000000000000000000000000000001", 1e-39),
@@ -677,6 +683,19 @@ mod tests {
         ] {
             assert_eq!(parse_f32(s), Err(NumError::Overflow), "{s}");
         }
+        // Underflow is refused as overflow is: a nonzero decimal that would read as 0. Half
+        // the smallest subnormal (2^-150 = 7.0064923e-46) rounds to even (0); just above it
+        // rounds up to the smallest subnormal.
+        for s in [
+            "1e-50",
+            "-1e-50",
+            "1e-99999999999",
+            "7e-46",
+            "7.00649232162408535461864791e-46",
+        ] {
+            assert_eq!(parse_f32(s), Err(NumError::Underflow), "{s}");
+        }
+        assert_eq!(parse_f32("7.1e-46"), Ok(f32::from_bits(1)));
     }
 
     #[test]
@@ -793,6 +812,12 @@ mod tests {
                 None => prop_assert!(ours.is_err(), "{} -> {:?}", s, ours),
                 Some(_) => {
                     let exact: f32 = s.parse().unwrap();
+                    let m = s.split(['e', 'E']).next().unwrap_or("");
+                    if exact == 0.0 && m.bytes().any(|c| (b'1'..=b'9').contains(&c)) {
+                        // A nonzero decimal core reads as 0: refused here.
+                        prop_assert_eq!(ours, Err(NumError::Underflow), "{}", s);
+                        return Ok(());
+                    }
                     let v = ours.unwrap();
                     prop_assert!(ulps(v, exact) <= 1, "{} -> {:e} vs {:e}", s, v, exact);
                     // Up to 19 significant digits nothing is dropped: correctly rounded.

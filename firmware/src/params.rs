@@ -77,6 +77,19 @@ impl core::fmt::Display for ParamError {
     }
 }
 
+/// A description as the image carries it: on the board (`target_os = "none"`) none, for flash
+/// (the descriptions are ≈ 1.9 KB of the 64 KiB; they are in `docs/console.md`), on the host
+/// the text. `list` shows it when there is one.
+macro_rules! desc {
+    ($d:expr) => {
+        if cfg!(target_os = "none") {
+            ""
+        } else {
+            $d
+        }
+    };
+}
+
 macro_rules! real {
     ($field:ident, $unit:expr, $min:expr, $max:expr, $rt:expr, $desc:expr) => {
         Param {
@@ -86,7 +99,7 @@ macro_rules! real {
             min: $min,
             max: $max,
             runtime: $rt,
-            desc: $desc,
+            desc: desc!($desc),
             get: |c| c.$field,
             set: |c, v| c.$field = v,
         }
@@ -101,7 +114,7 @@ macro_rules! int {
             min: $min,
             max: $max,
             runtime: $rt,
-            desc: $desc,
+            desc: desc!($desc),
             get: |c| c.$field as f32,
             set: |c, v| c.$field = v as $ty,
         }
@@ -116,7 +129,7 @@ macro_rules! flag {
             min: 0.0,
             max: 1.0,
             runtime: $rt,
-            desc: $desc,
+            desc: desc!($desc),
             get: |c| if c.$field { 1.0 } else { 0.0 },
             set: |c, v| c.$field = v != 0.0,
         }

@@ -98,6 +98,12 @@ impl SimDrive {
         self.console.tick(self.sim.controller(), out);
     }
 
+    /// Announce a fault latched since the last call ([`Console::notice`]); `true` when
+    /// something was written.
+    pub fn notice(&mut self, out: &mut String) -> bool {
+        self.console.notice(self.sim.controller(), out)
+    }
+
     /// Execute one console line (between two periods). Writes the reply, whose last line is
     /// `ok …` or `error: …`, to `out`.
     pub fn execute(&mut self, line: &str, out: &mut String) -> CmdResult {

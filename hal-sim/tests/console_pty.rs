@@ -14,7 +14,7 @@ use hal_sim::analytic::{tmd_power, DampingFormula};
 use hal_sim::cli::client::{is_telemetry, Client};
 use hal_sim::plant::Drive;
 use hal_sim::Scenario;
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -187,15 +187,15 @@ fn harvested_power_follows_r_load_set_over_the_pty() {
         // the speed to the next): over one period of the steady motion that mean is exact
         // like the window's, so the same 1 % holds; the cycle is the excitation's 2 s.
         let status = ok(&mut c, "status");
-        let field = |k: &str| -> f64 {
-            let w = status
-                .iter()
-                .flat_map(|l| l.split(' '))
-                .find_map(|w| w.strip_prefix(k));
-            let w = w.unwrap_or_else(|| panic!("no {k} in {status:?}"));
-            w.trim_end_matches(['W', 's']).parse().unwrap()
-        };
-        let (p_cycle, cycle) = (field("p_cycle="), field("cycle="));
+        // The row `p_cycle   23.03 W over 2.000 s`.
+        let row: Vec<&str> = status
+            .iter()
+            .find(|l| l.starts_with("p_cycle "))
+            .unwrap_or_else(|| panic!("no p_cycle in {status:?}"))
+            .split_whitespace()
+            .collect();
+        assert_eq!((row[2], row[3], row[5]), ("W", "over", "s"), "{row:?}");
+        let (p_cycle, cycle): (f64, f64) = (row[1].parse().unwrap(), row[4].parse().unwrap());
         assert!(
             (p_cycle - a.p_load).abs() < 0.01 * a.p_load,
             "R_L = {r_l} Ω: status p_cycle {p_cycle:.3} W, harmonic balance {:.3} W",
@@ -248,9 +248,9 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
     let before = ok(&mut c, "list");
     let mode_of = |c: &mut Client| {
         let s = ok(c, "status");
-        s[0].split(' ').next().unwrap().to_string()
+        s[0].split_whitespace().nth(1).unwrap().to_string()
     };
-    assert_eq!(mode_of(&mut c), "mode=run");
+    assert_eq!(mode_of(&mut c), "run");
     let long = "set r_load_ohm ".to_string() + &"9".repeat(200);
     let bad: Vec<&[u8]> = vec![
         b"set r_load_ohm nan",
@@ -273,7 +273,7 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
         assert_eq!(r.lines.len(), 1, "{shown}: {:?}", r.lines);
         assert!(r.lines[0].starts_with("error: "), "{shown}: {:?}", r.lines);
         assert_eq!(ok(&mut c, "list"), before, "{shown} changed a parameter");
-        assert_eq!(mode_of(&mut c), "mode=run", "{shown}");
+        assert_eq!(mode_of(&mut c), "run", "{shown}");
     }
     // Line editing as on a terminal: DEL erases, CRLF ends one line (one reply).
     let r = c.send_raw(b"get r_load_ohx\x7fm\r").unwrap();
@@ -314,10 +314,12 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
     let o = client(&["get r_load_ohm", "frobnicate", "set r_load_ohm 7"]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(1), "{out}");
+    // Each error once: on stdout with the replies, nothing repeated on stderr.
     assert_eq!(
         out,
         "ok r_load_ohm = 306 ohm\nerror: unknown command 'frobnicate' (see help)\n"
     );
+    assert_eq!(String::from_utf8_lossy(&o.stderr), "");
     let dir = std::env::temp_dir().join(format!("regen-pty-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let script = dir.join("s.txt");
@@ -326,7 +328,7 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{out}");
     assert!(
-        out.starts_with("ok r_load_ohm = 306 ohm\nmode=run "),
+        out.starts_with("ok r_load_ohm = 306 ohm\nmode      run\n"),
         "{out}"
     );
     let _ = std::fs::remove_dir_all(&dir);
@@ -343,6 +345,97 @@ fn malformed_lines_get_one_error_line_and_change_nothing() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no reply to 'status'"));
     assert!(t.elapsed() < Duration::from_secs(20));
+    let (status, _) = srv.interrupt();
+    assert!(status.success());
+}
+
+/// Read from `port` until `want` has arrived (or panic after `secs`); everything read.
+fn read_until(port: &mut dyn serialport::SerialPort, want: &str, secs: f64) -> String {
+    let end = Instant::now() + Duration::from_secs_f64(secs);
+    let mut got = Vec::new();
+    while !String::from_utf8_lossy(&got).contains(want) {
+        assert!(
+            Instant::now() < end,
+            "waited for {want:?}, got {:?}",
+            String::from_utf8_lossy(&got)
+        );
+        let mut b = [0u8; 1024];
+        match port.read(&mut b) {
+            Ok(k) => got.extend_from_slice(&b[..k]),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(e) => panic!("{e}"),
+        }
+    }
+    String::from_utf8_lossy(&got).into_owned()
+}
+
+/// First contact as a terminal program has it (raw bytes, no client logic): the banner with
+/// version and drive state, the prompt, the echo of what is typed, `help set`, `list r_`, a
+/// refused value with its range and current value; then a fault latching while the drive
+/// runs is announced without being asked.
+#[test]
+fn a_terminal_is_greeted_echoed_and_told_of_faults() {
+    let srv = Serve::start();
+    let mut port = serialport::new(&srv.path, 115_200)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .unwrap();
+    let banner = read_until(&mut *port, "type help\r\n> ", 10.0);
+    assert_eq!(
+        banner,
+        format!(
+            "\r\nregen-fw {} console. drive: mode run, fault none. type help\r\n> ",
+            env!("CARGO_PKG_VERSION")
+        )
+    );
+    // Typed one character at a time, as a person would: each is echoed.
+    for ch in "help set".bytes() {
+        port.write_all(&[ch]).unwrap();
+        let e = read_until(&mut *port, &(ch as char).to_string(), 5.0);
+        assert_eq!(e, (ch as char).to_string());
+    }
+    port.write_all(b"\r").unwrap();
+    let reply = read_until(&mut *port, "ok\r\n> ", 5.0);
+    assert_eq!(
+        reply,
+        "\r\nset      NAME VALUE          set a parameter (RAM), checked; inf where max is inf\r\nok\r\n> "
+    );
+    port.write_all(b"list r_\r").unwrap();
+    let reply = read_until(&mut *port, "\r\n> ", 5.0);
+    let lines: Vec<&str> = reply.split("\r\n").collect();
+    assert_eq!(lines[0], "list r_", "{reply}"); // the echo
+    assert!(lines[1].starts_with("name "), "{reply}");
+    // The scenario's load (306 Ω) is also the default `defaults` restores on this drive.
+    let r_load: Vec<&str> = lines[2].split_whitespace().collect();
+    assert_eq!(
+        r_load[..8],
+        ["r_load_ohm", "306", "ohm", "0", "..", "inf", "306", "rt"],
+        "{reply}"
+    );
+    let names: Vec<&str> = lines[2..]
+        .iter()
+        .take_while(|l| !l.starts_with("ok"))
+        .map(|l| l.split_whitespace().next().unwrap())
+        .collect();
+    assert!(
+        names.iter().all(|n| n.contains("r_")) && names.len() >= 4,
+        "{names:?}"
+    );
+    port.write_all(b"set r_load_ohm -5\r").unwrap();
+    let reply = read_until(&mut *port, "\r\n> ", 5.0);
+    assert_eq!(
+        reply,
+        "set r_load_ohm -5\r\nerror: r_load_ohm -5: value out of range; allowed 0 .. inf ohm, now 306\r\n> "
+    );
+    // A force trip of 1 N: the running drive trips on its next force estimate; the notice
+    // arrives with nothing asked.
+    port.write_all(b"set f_trip_n 1\r").unwrap();
+    let got = read_until(&mut *port, "(faults: details)\r\n> ", 10.0);
+    assert!(
+        got.contains("ok f_trip_n = 1 N\r\n> \r\n# fault 5 over_force: force above the device rating f_trip_n\r\n# now in mode idle (faults: details)\r\n> "),
+        "{got:?}"
+    );
+    drop(port);
     let (status, _) = srv.interrupt();
     assert!(status.success());
 }

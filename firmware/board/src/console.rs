@@ -21,7 +21,7 @@ use embassy_futures::select::{select, Either};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
 use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
-use regen_fw::console::{save_reply, Console};
+use regen_fw::console::{save_reply, Console, LineEditor, PROMPT};
 
 use crate::drive::{self, PENDING};
 use crate::store::BoardStore;
@@ -30,10 +30,8 @@ use regen_fw::period::{Pending, Slot};
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 
-const LINE_MAX: usize = 120;
-const LINE_TOO_LONG: &str = "error: line longer than 120 characters\r\n";
-const _: () = assert!(LINE_MAX == 120, "LINE_TOO_LONG states LINE_MAX");
-/// `list` writes ≈ 3 KB (35 parameters); room for a registry half as large again.
+/// `list` writes ≈ 3.6 KB (47 parameters in aligned columns, ≈ 75 bytes a row: the board's
+/// image carries no descriptions); room for a dozen more.
 const REPLY_MAX: usize = 4608;
 
 /// A `fmt::Write` sink into a fixed buffer that records overflow instead of truncating
@@ -143,8 +141,7 @@ pub async fn console_task(
     let mut reply_buf: Buf<REPLY_MAX> = Buf::new();
     let reply = &mut reply_buf;
     let mut con = Console::new();
-    let mut line: heapless::Vec<u8, LINE_MAX> = heapless::Vec::new();
-    let mut too_long = false;
+    let mut ed = LineEditor::new();
     let mut tel = LastLine {
         cur: Buf::new(),
         last: Buf::new(),
@@ -160,26 +157,24 @@ pub async fn console_task(
     // task's state machine: flash).
     let _ = reply.write_str("\r\n# regen-board ");
     let _ = reply.write_str(boot_msg);
-    let _ = reply.write_str("\r\n");
+    let (mode, fault) = drive::snapshot()
+        .map_or((regen_fw::control::Mode::Idle, None), |(c, _)| {
+            (c.mode(), c.fault())
+        });
+    Console::banner(mode, fault, reply);
     let _ = tx.write_all(&reply.b).await;
 
     loop {
         match select(rx.read(&mut inbuf), ticker.next()).await {
             Either::First(Ok(n)) => {
+                // The console's line editor echoes and edits; a whole line is executed and
+                // its reply, then the prompt, sent before the next line is read.
+                reply.clear();
                 for &c in &inbuf[..n] {
-                    if c != b'\n' && c != b'\r' {
-                        if line.push(c).is_err() {
-                            too_long = true;
-                        }
+                    let Some(text) = ed.feed(c, reply) else {
                         continue;
-                    }
-                    if line.is_empty() && !too_long {
-                        continue; // the other half of a CR LF, or an empty line
-                    }
-                    reply.clear();
-                    if too_long {
-                        let _ = reply.write_str(LINE_TOO_LONG);
-                    } else if let Ok(text) = core::str::from_utf8(&line) {
+                    };
+                    if !text.is_empty() {
                         match drive::snapshot() {
                             Some((before, _)) => {
                                 let mut ctl = before.clone();
@@ -192,8 +187,6 @@ pub async fn console_task(
                                 let _ = reply.write_str("error: current loop not started\r\n");
                             }
                         }
-                    } else {
-                        let _ = reply.write_str("error: line is not UTF-8\r\n");
                     }
                     // A `save`: written here, awaited (the executor runs on), with no copy of
                     // the controller alive across the wait (the task's state stays small).
@@ -201,19 +194,18 @@ pub async fn console_task(
                         let _ = save_reply(r, reply);
                         let _ = reply.write_str("\r\n");
                     }
+                    let _ = reply.write_str(PROMPT);
                     if reply.overflow {
                         reply.b.truncate(REPLY_MAX - 40);
-                        let _ = reply.write_str("\r\nerror: reply truncated\r\n");
+                        let _ = reply.write_str("\r\nerror: reply truncated\r\n> ");
                     }
                     let _ = tx.write_all(&reply.b).await;
-                    line.clear();
-                    too_long = false;
+                    reply.clear();
                 }
+                let _ = tx.write_all(&reply.b).await; // the echo of a partial line
             }
             Either::First(Err(_)) => {
-                // Framing/noise/overrun on the line: drop the partial line.
-                line.clear();
-                too_long = false;
+                // Framing/noise/overrun on the line: what was typed stays in the editor.
             }
             Either::Second(()) => {
                 let Some((ctl, c)) = drive::snapshot() else {
@@ -233,6 +225,11 @@ pub async fn console_task(
                     con.tick(&ctl, &mut tel);
                 }
                 con.energy_j = c.energy_j(ctl.config().ts());
+                // A fault latched since the last batch: announced at once, never dropped.
+                reply.clear();
+                if con.notice(&ctl, reply) {
+                    let _ = tx.write_all(&reply.b).await;
+                }
                 if tel.lines > 0 {
                     TEL_DROPPED.fetch_add(tel.lines - 1, Ordering::Relaxed);
                     // Send only if the UART has drained the previous line; else drop it.

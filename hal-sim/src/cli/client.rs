@@ -6,7 +6,13 @@
 //! `ok` or `error:`; lines before it belong to the reply (`list`, `status`, the `# tel`
 //! header). Telemetry data lines (`t,v1,…`: they start with a digit or a sign) may arrive at
 //! any time while streaming is on; [`is_telemetry`] tells them apart.
+//!
+//! The console echoes what it receives and writes a prompt (`> `) after each reply. The client
+//! strips the prompt from the start of every line and skips empty lines; the echo of the
+//! command it sent (computed with the firmware's own [`LineEditor`]) marks where the reply
+//! starts, and what came before it (a banner, a late line of an earlier reply) is dropped.
 
+use regen_fw::console::{LineEditor, PROMPT};
 use serialport::SerialPort;
 use std::io::Read;
 use std::path::PathBuf;
@@ -120,13 +126,21 @@ impl Client {
         })
     }
 
-    /// The next complete line (without its CR/LF), or `None` at `deadline`.
+    /// The next complete non-empty line (without its CR/LF and any leading prompts), or
+    /// `None` at `deadline`.
     pub fn read_line(&mut self, deadline: Instant) -> Result<Option<String>, ClientError> {
         loop {
             if let Some(i) = self.buf.iter().position(|&b| b == b'\n') {
                 let raw: Vec<u8> = self.buf.drain(..=i).collect();
                 let s = String::from_utf8_lossy(&raw);
-                return Ok(Some(s.trim_end_matches(['\r', '\n']).to_string()));
+                let mut t = s.trim_end_matches(['\r', '\n']);
+                while let Some(r) = t.strip_prefix(PROMPT) {
+                    t = r;
+                }
+                if t.is_empty() {
+                    continue;
+                }
+                return Ok(Some(t.to_string()));
             }
             if Instant::now() >= deadline {
                 return Ok(None);
@@ -162,6 +176,8 @@ impl Client {
         let line = String::from_utf8_lossy(bytes).into_owned();
         let mut bytes = bytes.to_vec();
         bytes.push(b'\n');
+        let echo = echo_of(&bytes);
+        let mut seen = echo.is_empty();
         self.port
             .write_all(&bytes)
             .and_then(|_| self.port.flush())
@@ -169,6 +185,13 @@ impl Client {
         let deadline = Instant::now() + self.timeout;
         let mut reply = Reply::default();
         while let Some(l) = self.read_line(deadline)? {
+            if !seen {
+                seen = l == echo;
+                if is_telemetry(&l) {
+                    reply.lines.push(l);
+                }
+                continue;
+            }
             let end = !is_telemetry(&l) && verdict(&l).is_some();
             reply.lines.push(l);
             if end {
@@ -180,6 +203,18 @@ impl Client {
             partial: reply,
         })
     }
+}
+
+/// The echo the console's line editor gives for `bytes`: its first line, without the line end.
+pub fn echo_of(bytes: &[u8]) -> String {
+    let mut ed = LineEditor::new();
+    let mut e = String::new();
+    for &b in bytes {
+        if ed.feed(b, &mut e).is_some() {
+            break;
+        }
+    }
+    e.split("\r\n").next().unwrap_or("").to_string()
 }
 
 /// The command list of a script: one per line, blank lines and `#` comments skipped.
@@ -217,7 +252,8 @@ pub fn run(a: &ClientArgs) -> Result<(), String> {
                 if !r.is_ok() {
                     refused += 1;
                     if !a.keep_going {
-                        return Err(format!("'{cmd}' refused"));
+                        // The `error:` line is printed: exit status 1 without repeating it.
+                        std::process::exit(1);
                     }
                 }
             }
@@ -236,7 +272,8 @@ pub fn run(a: &ClientArgs) -> Result<(), String> {
         println!("{l}");
     }
     if refused > 0 {
-        return Err(format!("{refused} command(s) refused"));
+        // Each `error:` line is printed above.
+        std::process::exit(1);
     }
     Ok(())
 }
@@ -265,5 +302,15 @@ mod tests {
             Some(false)
         );
         assert_eq!(verdict("r_load_ohm = 306 ohm [0 .. inf] …"), None);
+    }
+
+    #[test]
+    fn echo_is_the_line_editors() {
+        assert_eq!(echo_of(b"status\n"), "status");
+        assert_eq!(
+            echo_of(b"get r_load_ohx\x7fm\r\n"),
+            "get r_load_ohx\x08 \x08m"
+        );
+        assert_eq!(echo_of(b"\xff\xfe set\n"), " set");
     }
 }

@@ -6,6 +6,11 @@
 //! pseudo-terminal whose path is printed, so `picocom`, `screen`, `minicom` or `regen client`
 //! connect to it as to a board's serial port.
 //!
+//! Terminal side: the firmware's own [`LineEditor`] (echo, Backspace/DEL, Ctrl-U) assembles
+//! the lines, the console greets each new reader with [`Console::banner`], writes the prompt
+//! after every reply and announces a latched fault unasked ([`Console::notice`]), exactly as
+//! the board does over its UART.
+//!
 //! Loop: read what arrived (non-blocking) and execute each complete line between two control
 //! periods, run a chunk of periods (0.5 ms of wall time at the requested speed, at most 2000
 //! periods), queue the telemetry lines they produced, write what the pty takes, then sleep
@@ -27,6 +32,7 @@
 use crate::drive::SimDrive;
 use crate::Scenario;
 use nix::errno::Errno;
+use regen_fw::console::{Console, LineEditor, PROMPT};
 use serialport::SerialPort;
 use std::os::unix::io::{AsRawFd, RawFd};
 use std::path::PathBuf;
@@ -34,7 +40,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// Longest accepted console line (the board's receive buffer), bytes.
-pub const MAX_LINE: usize = 128;
+pub const MAX_LINE: usize = regen_fw::console::LINE_MAX;
 /// Output queue size beyond which telemetry lines are dropped, bytes.
 pub const QUEUE_LIMIT: usize = 256 * 1024;
 /// Most control periods between two looks at the pty.
@@ -52,10 +58,6 @@ pub struct ServeArgs {
     /// Stop after this many simulated seconds (default: run until Ctrl-C).
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Echo received characters (for a terminal without local echo; `regen client` does not
-    /// want it). Backspace/DEL edit the line in any case.
-    #[arg(long)]
-    pub echo: bool,
     /// Also create a symbolic link to the pseudo-terminal at this path (a stable name for
     /// scripts), removed on exit.
     #[arg(long)]
@@ -89,10 +91,9 @@ pub struct Server {
     fd: RawFd,
     path: String,
     speed: f64,
-    echo: bool,
-    line: Vec<u8>,
-    overlong: bool,
-    last_cr: bool,
+    ed: LineEditor,
+    /// Whether a reader had the pty open at the last look (a new one gets the banner).
+    connected: bool,
     out: Vec<u8>,
     out_pos: usize,
     lines: u64,
@@ -102,7 +103,7 @@ pub struct Server {
 impl Server {
     /// Open a pseudo-terminal for `drive`, run at `speed` (simulated s per wall s; infinite =
     /// as fast as possible).
-    pub fn open(drive: SimDrive, speed: f64, echo: bool) -> Result<Server, String> {
+    pub fn open(drive: SimDrive, speed: f64) -> Result<Server, String> {
         if speed.is_nan() || speed <= 0.0 {
             return Err("speed must be positive".into());
         }
@@ -124,10 +125,8 @@ impl Server {
             fd,
             path,
             speed,
-            echo,
-            line: Vec::with_capacity(MAX_LINE),
-            overlong: false,
-            last_cr: false,
+            ed: LineEditor::new(),
+            connected: false,
             out: Vec::new(),
             out_pos: 0,
             lines: 0,
@@ -165,6 +164,10 @@ impl Server {
             }
             n += k;
             self.queue_telemetry(&tel);
+            tel.clear();
+            if self.drive.notice(&mut tel) {
+                self.out.extend_from_slice(tel.as_bytes());
+            }
             self.flush();
             if self.speed.is_finite() {
                 let target = n as f64 * ts / self.speed;
@@ -205,49 +208,19 @@ impl Server {
         }
     }
 
-    /// One received byte: line assembly (CR, LF or CRLF end a line), backspace, echo.
+    /// One received byte, through the console's line editor; a complete line is executed and
+    /// answered, then the prompt.
     fn byte(&mut self, b: u8) {
-        let cr_lf = self.last_cr && b == b'\n';
-        self.last_cr = b == b'\r';
-        match b {
-            b'\r' | b'\n' => {
-                if cr_lf {
-                    return; // the LF of a CRLF
-                }
-                if self.echo {
-                    self.out.extend_from_slice(b"\r\n");
-                }
-                let line = std::mem::take(&mut self.line);
-                if std::mem::take(&mut self.overlong) {
-                    let msg = format!("error: line too long (max {MAX_LINE} characters)\r\n");
-                    self.out.extend_from_slice(msg.as_bytes());
-                    self.lines += 1;
-                } else if !line.is_empty() {
-                    let text = String::from_utf8_lossy(&line);
-                    let mut reply = String::new();
-                    let _ = self.drive.execute(&text, &mut reply);
-                    self.out.extend_from_slice(reply.as_bytes());
-                    self.lines += 1;
-                }
-                self.line = line;
-                self.line.clear();
+        let mut text = String::new();
+        if let Some(line) = self.ed.feed(b, &mut text) {
+            if !line.is_empty() {
+                let line = line.to_string();
+                let _ = self.drive.execute(&line, &mut text);
+                self.lines += 1;
             }
-            0x08 | 0x7f => {
-                if self.line.pop().is_some() && self.echo {
-                    self.out.extend_from_slice(b"\x08 \x08");
-                }
-            }
-            _ => {
-                if self.line.len() >= MAX_LINE {
-                    self.overlong = true;
-                } else {
-                    self.line.push(b);
-                    if self.echo {
-                        self.out.push(b);
-                    }
-                }
-            }
+            text.push_str(PROMPT);
         }
+        self.out.extend_from_slice(text.as_bytes());
     }
 
     fn queue_telemetry(&mut self, tel: &str) {
@@ -271,7 +244,16 @@ impl Server {
     }
 
     fn flush(&mut self) {
-        if self.out_pos < self.out.len() && self.hung_up() {
+        let up = !self.hung_up();
+        if up && !self.connected {
+            // A new reader: the banner first, before anything queued.
+            let ctl = self.drive.sim().controller();
+            let mut b = String::new();
+            Console::banner(ctl.mode(), ctl.fault(), &mut b);
+            self.out.splice(self.out_pos..self.out_pos, b.bytes());
+        }
+        self.connected = up;
+        if self.out_pos < self.out.len() && !up {
             // No reader: the output goes nowhere, as on an unplugged UART, and what the pty
             // still holds for the slave is dropped so the next reader gets no stale backlog.
             let _ = nix::sys::termios::tcflush(self.fd, nix::sys::termios::FlushArg::TCOFLUSH);
@@ -337,7 +319,7 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
         }
     }
     let drive = SimDrive::from_scenario(&sc)?;
-    let mut srv = Server::open(drive, a.speed, a.echo)?;
+    let mut srv = Server::open(drive, a.speed)?;
     catch_signals()?;
     if let Some(l) = &a.link {
         let _ = std::fs::remove_file(l);
