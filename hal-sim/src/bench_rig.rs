@@ -5,7 +5,7 @@
 //! force. The device is simulated as physics at `SUB` substeps per sample:
 //! inertia, a damping drive (the motor emulating a damper through its current loop),
 //! LuGre friction (presliding and standstill included), a force offset, and at most one hidden
-//! effect: a clipped current loop, a delay in the drive's force, a load-path resonance (a mass on
+//! effect: a clipped current loop, a delay of the force channel, a load-path resonance (a mass on
 //! a spring-damper), a Stribeck bump (static above Coulomb), a soft presliding regime, play in
 //! the screw (the device's mass and drive sit behind a gap), or an effect outside the
 //! diagnosis's catalogue (a force disturbance at a frequency unrelated to the motion, or a
@@ -92,7 +92,7 @@ pub enum Hidden {
     ClippedCurrentLoop {
         limit_n: f64,
     },
-    /// The drive's force lags the motion by delay_s.
+    /// The force channel lags the position channel by delay_s (acquisition skew).
     Delay {
         delay_s: f64,
     },
@@ -377,8 +377,7 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
             } else {
                 0.0
             };
-            let vdel = if i >= delay { vm } else { 0.0 };
-            let fdrive = (s.drive_damping * vdel).clamp(-limit, limit);
+            let fdrive = (s.drive_damping * vm).clamp(-limit, limit);
             lugre(&mut z, vm, h, sigma0, g(vm));
             let ffr = sigma0 * z + s.viscous * vm;
             let am = (fct - fdrive - ffr) / s.mass_kg;
@@ -386,8 +385,7 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
             xm += vm * h;
             f_cell = fct;
         } else {
-            let vdel = if i >= delay { v[i - delay] } else { 0.0 };
-            let fdrive = (s.drive_damping * vdel).clamp(-limit, limit);
+            let fdrive = (s.drive_damping * v[i]).clamp(-limit, limit);
             lugre(&mut z, v[i], h, sigma0, g(v[i]));
             f_cell = s.mass_kg * a[i] + fdrive + sigma0 * z + s.viscous * v[i];
         }
@@ -411,6 +409,15 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
         }
         out.push(f_cell);
     }
+    if delay > 0 {
+        // the force channel lags the position channel (acquisition skew, a load-cell
+        // amplifier's group delay): the measured force at t is the force at t − delay
+        let first = out[0];
+        out.rotate_right(delay.min(n));
+        for o in out.iter_mut().take(delay.min(n)) {
+            *o = first;
+        }
+    }
     out
 }
 
@@ -426,7 +433,7 @@ fn draw_hidden(kind: &str, s: &RigSpec, vmax: f64, rng: &mut RigRng) -> Hidden {
             limit_n: s.drive_damping * vmax * rng.uni(0.45, 0.8),
         },
         "delay" => Hidden::Delay {
-            delay_s: rng.uni(0.01, 0.05),
+            delay_s: rng.uni(0.005, 0.04),
         },
         "resonance" => Hidden::Resonance {
             mass_kg: s.mass_kg * rng.uni(0.2, 0.6),
@@ -518,6 +525,11 @@ impl RigSpec {
             self.seed,
             self.trajectory.name(),
             self.hidden
+        );
+        let _ = writeln!(
+            out,
+            "# device: mass {} kg, drive damping {} N·s/m, viscous {} N·s/m, Coulomb {} N, offset {} N; noise {} N rms, quantum {} m",
+            self.mass_kg, self.drive_damping, self.viscous, self.coulomb, self.offset_n, self.noise_n, self.quantum_m
         );
         let _ = writeln!(out, "# lead_m_per_rev = {}", self.lead_m);
         out.push_str("t_s,x_m,f_N\n");

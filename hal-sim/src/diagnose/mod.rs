@@ -37,10 +37,26 @@ impl Default for Options {
     }
 }
 
+/// Part of the record a sample belongs to: training.
+pub const TRAIN: u8 = 0;
+/// Held out (validation).
+pub const HELD_OUT: u8 = 1;
+/// Left out of every fit (the device is at rest: friction is static, anywhere within its
+/// breakaway level, and carries no Coulomb sign).
+pub const AT_REST: u8 = 2;
+
 /// Training / held-out split: the record is cut into 10 consecutive blocks and every third
 /// block (indices 2, 5, 8) is held out, so both parts span the whole trajectory.
-pub fn holdout_mask(n: usize) -> Vec<bool> {
-    (0..n).map(|i| (i * 10 / n) % 3 == 2).collect()
+pub fn holdout_mask(n: usize) -> Vec<u8> {
+    (0..n)
+        .map(|i| {
+            if (i * 10 / n) % 3 == 2 {
+                HELD_OUT
+            } else {
+                TRAIN
+            }
+        })
+        .collect()
 }
 
 /// Accumulated normal equations of a column set against the force on one part of the record.
@@ -147,7 +163,8 @@ pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> Vec<f64> {
 
 /// Normal equations of `cols` against `f` on the training (mask false) and held-out (mask
 /// true) samples, visiting every `stride`-th sample.
-pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Normal, Normal) {
+/// `part` holds `TRAIN`, `HELD_OUT` or `AT_REST` (in neither) per sample.
+pub fn normals(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
     let m = cols.len();
     let mut tr = Normal::new(m);
     let mut ho = Normal::new(m);
@@ -158,7 +175,14 @@ pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Nor
         for (k, c) in cols.iter().enumerate() {
             row[k] = c[i];
         }
-        let nm = if hold[i] { &mut ho } else { &mut tr };
+        let nm = match part[i] {
+            TRAIN => &mut tr,
+            HELD_OUT => &mut ho,
+            _ => {
+                i += stride;
+                continue;
+            }
+        };
         for p in 0..m {
             let rp = row[p];
             nm.b[p] += rp * f[i];
@@ -187,10 +211,10 @@ pub struct HoldWeights {
 }
 
 impl HoldWeights {
-    pub fn new(hold: &[bool]) -> Self {
+    pub fn new(part: &[u8]) -> Self {
         HoldWeights {
-            train: hold.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect(),
-            hold: hold.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect(),
+            train: part.iter().map(|&h| (h == TRAIN) as u8 as f64).collect(),
+            hold: part.iter().map(|&h| (h == HELD_OUT) as u8 as f64).collect(),
         }
     }
 }
@@ -340,8 +364,13 @@ pub struct CrossCheck {
 /// Run the diagnosis on a record.
 pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let n = rec.len();
-    let hold = holdout_mask(n);
     let ctx = effects::Context::new(rec);
+    let mut hold = holdout_mask(n);
+    for (h, &r) in hold.iter_mut().zip(&ctx.rest) {
+        if r {
+            *h = AT_REST;
+        }
+    }
     let stride = n.div_ceil(opt.screen_samples).max(1);
     let mut chosen: Vec<Effect> = Vec::new();
     let mut cols = effects::build_columns(&ctx, &chosen);
@@ -354,7 +383,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let sub = effects::SubSignals::new(&ctx, (0..n).step_by(stride).collect());
     let sig = sub.sig();
     let sub_f: Vec<f64> = sub.rows.iter().map(|&i| rec.f[i]).collect();
-    let sub_hold: Vec<bool> = sub.rows.iter().map(|&i| hold[i]).collect();
+    let sub_hold: Vec<u8> = sub.rows.iter().map(|&i| hold[i]).collect();
     let sub_w = HoldWeights::new(&sub_hold);
     let full_w = HoldWeights::new(&hold);
     let mut sub_cols: Vec<Vec<f64>> = cols
@@ -417,7 +446,16 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
                 let nn = extend_normals_dense(&base, &base_refs, &zr, &sub_f, &sub_w);
                 let t = nn.0.solve();
-                if !effects::plausible(eff.kind, &t[base_refs.len()..]) {
+                let nb = base_refs.len();
+                if !effects::plausible(eff.kind, &t[nb..], &t[..nb.min(4)])
+                    || (eff.kind == EffectKind::CurrentLimit
+                        && !effects::clip_consistent(
+                            eff.param,
+                            &sub.bp,
+                            &sub_f,
+                            ctx.base_resid_rms,
+                        ))
+                {
                     return (f64::INFINITY, 0.0);
                 }
                 let rt = nn.0.rss(&t);
@@ -512,7 +550,15 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let tf = full.0.plus(&full.1);
     let th_full = tf.solve();
     let pred = effects::predict(&cols, &th_full);
-    let residual: Vec<f64> = rec.f.iter().zip(&pred).map(|(a, b)| a - b).collect();
+    // samples at rest are in no fit (static friction is anywhere within its breakaway
+    // level): they carry no residual, so they cannot show as a spectral peak either
+    let residual: Vec<f64> = rec
+        .f
+        .iter()
+        .zip(&pred)
+        .zip(&ctx.rest)
+        .map(|((a, b), &r)| if r { 0.0 } else { a - b })
+        .collect();
     let final_full = rel(tf.rss(&th_full), tf.ff);
     let tb = base_full.0.plus(&base_full.1);
     let baseline_full = rel(tb.rss(&tb.solve()), tb.ff);
