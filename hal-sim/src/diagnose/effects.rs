@@ -769,7 +769,8 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
 /// * `position_dependent_friction`: the Coulomb level stays ≥ 0 over the whole stroke;
 /// * `position_periodic_friction`: the ripple amplitude is at most the Coulomb level;
 /// * `stribeck`: the bump is positive (static friction above Coulomb);
-/// * `screw_efficiency`: the driven/driving force ratio lies in (0, 1] (a screw loses);
+/// * `screw_efficiency`: the driven/driving force ratio lies in [0.5, 2] (an efficiency of 0.5
+///   … 1, whichever way the power flows);
 /// * `reflected_inertia`: the extra inertia is positive and at most the baseline inertia;
 /// * `lag`: a delay of the force of unit gain (0.8 … 1.25: the whole force delayed);
 /// * `current_limit`: the clip has unit gain (0.8 … 1.25) — the level itself is checked
@@ -805,7 +806,7 @@ pub fn plausible(kind: EffectKind, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::PositionPeriodicFriction => coef[0].hypot(coef[1]) <= fc,
         EffectKind::Cogging => true,
         EffectKind::Stribeck => coef[0] > 0.0,
-        EffectKind::ScrewEfficiency => coef[0] > -1.0 && coef[0] <= 0.0,
+        EffectKind::ScrewEfficiency => (-0.5..=1.0).contains(&coef[0]),
         EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
         EffectKind::Lag | EffectKind::CurrentLimit | EffectKind::Backlash => unit(coef[0]),
         EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
