@@ -580,12 +580,16 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
     for f in &d.findings {
         let _ = write!(
             s,
-            "  {:<30} held-out error after {:6.3} %  rss drop {:5.1} %  dBIC {:9.1}  held on {:.0} % of segments",
+            "  {:<30} held-out error after {:6.3} %  rss drop {:5.1} %  dBIC {:9.1}{}",
             f.effect,
             100.0 * f.holdout_rel_error_after,
             100.0 * f.holdout_rss_drop,
             f.delta_bic,
-            100.0 * f.consistency
+            if f.effect == "unexplained" {
+                String::new()
+            } else {
+                format!("  held on {:.0} % of segments", 100.0 * f.consistency)
+            }
         );
         let _ = writeln!(s, "  {}", f.note);
         for (k, v) in &f.parameters {
