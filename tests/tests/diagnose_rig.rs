@@ -95,7 +95,8 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
 #[test]
 #[ignore]
 fn rig_long_run() {
-    let t = run(60, 12_000, 1);
+    let n: usize = std::env::var("RIG_N").ok().and_then(|v| v.parse().ok()).unwrap_or(60);
+    let t = run(n, 12_000, 1);
     let all: usize = t.values().map(|t| t.records).sum();
     let exact: usize = t.values().map(|t| t.exact).sum();
     println!("all kinds: {exact}/{all} exactly right");
