@@ -95,7 +95,10 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
 #[test]
 #[ignore]
 fn rig_long_run() {
-    let n: usize = std::env::var("RIG_N").ok().and_then(|v| v.parse().ok()).unwrap_or(60);
+    let n: usize = std::env::var("RIG_N")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(60);
     let t = run(n, 12_000, 1);
     let all: usize = t.values().map(|t| t.records).sum();
     let exact: usize = t.values().map(|t| t.exact).sum();
@@ -114,63 +117,4 @@ fn rig_sample() {
     // (a seeded sample: the figures move only with the code)
     assert!(exact >= 6, "{exact}/{all} exactly right (measured 9)");
     assert!(detected >= 15, "{detected}/{all} detected (measured 18)");
-}
-
-#[test]
-#[ignore]
-fn rig_dump() {
-    let kind = std::env::var("RIG_KIND").unwrap_or("none".into());
-    let seed: u64 = std::env::var("RIG_SEED")
-        .map(|s| s.parse().unwrap())
-        .unwrap_or(502);
-    let traj = match std::env::var("RIG_TRAJ").as_deref() {
-        Ok("tri") => Trajectory::RoundedTriangle,
-        Ok("nb") => Trajectory::Narrowband,
-        Ok("ms") => Trajectory::Multisine,
-        _ => Trajectory::PointToPoint,
-    };
-    let spec = RigSpec::random(seed, &kind, traj, 8000);
-    std::fs::write("/tmp/diag/rig.csv", spec.csv()).unwrap();
-}
-
-#[test]
-#[ignore]
-fn rig_resid() {
-    let rec = hal_sim::diagnose::read_csv(std::path::Path::new("/tmp/diag/rig.csv"), None).unwrap();
-    let o = Options {
-        max_effects: 0,
-        ..Options::default()
-    };
-    let d = diagnose(&rec, &o);
-    let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for (lo, hi) in [
-        (0.0, 0.002),
-        (0.002, 0.01),
-        (0.01, 0.05),
-        (0.05, 0.2),
-        (0.2, 1.01),
-    ] {
-        let r: Vec<f64> = (0..rec.len())
-            .filter(|&i| {
-                rec.v[i].abs() >= lo * vmax && rec.v[i].abs() < hi * vmax && d.residual[i] != 0.0
-            })
-            .map(|i| d.residual[i])
-            .collect();
-        let rms = (r.iter().map(|x| x * x).sum::<f64>() / r.len().max(1) as f64).sqrt();
-        println!("|v|/vmax {lo}-{hi}: {} samples, rms {rms:.2}", r.len());
-    }
-    let mut big: Vec<(usize, f64)> = d
-        .residual
-        .iter()
-        .cloned()
-        .enumerate()
-        .filter(|(_, r)| r.abs() > 8.0)
-        .collect();
-    big.truncate(40);
-    for (i, r) in big {
-        println!(
-            "i {i} r {r:.1} v {:.5} a {:.3} x {:.6}",
-            rec.v[i], rec.a[i], rec.x[i]
-        );
-    }
 }
