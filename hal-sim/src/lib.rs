@@ -15,6 +15,7 @@
 //! `ω > 0`, a braking torque, hence a positive force). See `docs/simulator.md`.
 
 pub mod analytic;
+pub mod bench_rig;
 pub mod cli;
 pub mod diagnose;
 pub mod drive;

@@ -1,6 +1,6 @@
 //! `regen diagnose FILE [--cross FILE2] [--json OUT] [--model OUT.toml] [--plots DIR]`.
 
-use super::{cross_check, diagnose, read_csv, report, Options};
+use super::{cross_check, read_csv, report, try_diagnose, Options};
 use std::path::{Path, PathBuf};
 
 /// Arguments of the `diagnose` subcommand.
@@ -146,7 +146,7 @@ pub fn cli_main(args: DiagnoseArgs) -> Result<(), Box<dyn std::error::Error>> {
         min_holdout_gain: args.min_gain,
         ..Options::default()
     };
-    let mut d = diagnose(&rec, &opt);
+    let mut d = try_diagnose(&rec, &opt)?;
     if let Some(p) = &args.cross {
         let mut other = read_csv(p, args.cutoff_hz)?;
         check_units(&other, p)?;

@@ -31,10 +31,17 @@ pub enum EffectKind {
     /// An unmodelled resonance: a mass hung on the device through a spring-damper
     /// (parameter: resonance frequency, Hz).
     Compliance,
+    /// Play between the imposed motion and the device (parameter: total width, m): while the
+    /// motion crosses the gap after a reversal the device carries no force.
+    Backlash,
+    /// Rate-independent friction hysteresis at reversals (Dahl model: the friction builds up
+    /// over a characteristic displacement instead of switching with the sign of v;
+    /// parameter: that displacement, m).
+    PreslidingHysteresis,
 }
 
 impl EffectKind {
-    pub const ALL: [EffectKind; 10] = [
+    pub const ALL: [EffectKind; 12] = [
         EffectKind::DirectionAsymmetricFriction,
         EffectKind::PositionDependentFriction,
         EffectKind::PositionPeriodicFriction,
@@ -45,6 +52,8 @@ impl EffectKind {
         EffectKind::CurrentLimit,
         EffectKind::ReflectedInertia,
         EffectKind::Compliance,
+        EffectKind::Backlash,
+        EffectKind::PreslidingHysteresis,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -58,6 +67,8 @@ impl EffectKind {
             EffectKind::CurrentLimit => "current_limit",
             EffectKind::ReflectedInertia => "reflected_inertia",
             EffectKind::Compliance => "compliance",
+            EffectKind::Backlash => "backlash",
+            EffectKind::PreslidingHysteresis => "presliding_hysteresis",
         }
     }
     pub fn from_name(s: &str) -> Option<Self> {
@@ -73,6 +84,8 @@ impl EffectKind {
                 | EffectKind::Lag
                 | EffectKind::CurrentLimit
                 | EffectKind::Compliance
+                | EffectKind::Backlash
+                | EffectKind::PreslidingHysteresis
         )
     }
 }
@@ -109,6 +122,81 @@ pub struct Context<'a> {
     /// (`report::position_spectrum`), added to the periodic candidates' grid: a ripple of many
     /// periods over the stroke decorrelates from a log-grid value a few % off.
     pub spatial_wavelengths: Vec<f64>,
+    /// Samples at rest (see `at_rest`), left out of every fit.
+    pub rest: Vec<bool>,
+    /// Baseline coefficients fitted on the whole record (columns of `base_columns`).
+    pub base_th: Vec<f64>,
+    /// Position quantum: the smallest non-zero step of x_m.
+    pub x_quantum: f64,
+    /// rms of the baseline residual on the fitted samples.
+    pub base_resid_rms: f64,
+}
+
+/// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
+/// of the default derivative filter (fs/20), the span over which the derived velocity averages.
+pub const REST_HALF_WINDOW: usize = 20;
+
+/// Samples left out of every fit: at rest — the position moves by no more than its own noise
+/// over ±`REST_HALF_WINDOW` samples, or the derived speed is below the slowest the sensor
+/// resolves over that window (the threshold is the position quantum, the smallest non-zero
+/// step, plus 3 σ of the position noise, σ from the median absolute second difference, σ·√6
+/// for white noise) — or within the window of rest (the zero-phase derivative spreads a start
+/// over it) or of the record's ends.
+pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
+    let n = x.len();
+    let w = REST_HALF_WINDOW;
+    if n < 2 * w + 1 {
+        return vec![false; n];
+    }
+    let q = x
+        .windows(2)
+        .map(|p| (p[1] - p[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::MAX, f64::min);
+    let q = if q == f64::MAX { 0.0 } else { q };
+    let mut d2: Vec<f64> = x
+        .windows(3)
+        .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
+        .collect();
+    let k = d2.len() / 2;
+    let med = *d2.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let sigma = med / 0.6745 / 6f64.sqrt();
+    let thr = q + 3.0 * sigma;
+    // the slowest speed the sensor resolves: thr over the window
+    let v_res = thr / (w as f64 * dt);
+    let still: Vec<bool> = (0..n)
+        .map(|i| {
+            let a = x[i.saturating_sub(w)];
+            let b = x[(i + w).min(n - 1)];
+            ((x[i] - a).abs() <= thr && (b - x[i]).abs() <= thr) || v[i].abs() < v_res
+        })
+        .collect();
+    // the zero-phase derivative filter spreads a start or a stop over ±w samples: a sample
+    // within w of rest has a derived velocity whose sign is not yet (or no longer) the
+    // direction of sliding (the friction is still static there), so it is at rest too
+    let mut rest = still.clone();
+    // the first and last w samples: the zero-phase filter's edges (padding, one-sided
+    // differences) make their derived acceleration unreliable
+    for i in (0..w).chain(n - w..n) {
+        rest[i] = true;
+    }
+    let mut last_still: Option<usize> = None;
+    for i in 0..n {
+        if still[i] {
+            last_still = Some(i);
+        } else if last_still.is_some_and(|j| i - j <= w) {
+            rest[i] = true;
+        }
+    }
+    let mut next_still: Option<usize> = None;
+    for i in (0..n).rev() {
+        if still[i] {
+            next_still = Some(i);
+        } else if next_still.is_some_and(|j| j - i <= w) {
+            rest[i] = true;
+        }
+    }
+    rest
 }
 
 /// Smoothed sign: exact sign outside ±v_eps, linear inside (v_eps = 0.2 % of the peak speed,
@@ -139,7 +227,19 @@ impl<'a> Context<'a> {
             clip_levels: Vec::new(),
             f_motion: 0.0,
             spatial_wavelengths: Vec::new(),
+            rest: at_rest(&rec.x, &rec.v, rec.dt()),
+            base_th: Vec::new(),
+            x_quantum: rec
+                .x
+                .windows(2)
+                .map(|p| (p[1] - p[0]).abs())
+                .filter(|d| *d > 0.0)
+                .fold(f64::MAX, f64::min),
+            base_resid_rms: 0.0,
         };
+        if c.x_quantum == f64::MAX {
+            c.x_quantum = 0.0;
+        }
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;
         let mut steps: Vec<f64> = rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
@@ -149,10 +249,21 @@ impl<'a> Context<'a> {
         // baseline fit on the whole record gives the force proxy for the pred-based effects
         let cols = base_columns(&c);
         let refs: Vec<&[f64]> = cols.iter().map(|(_, v)| v.as_slice()).collect();
-        let all = vec![false; rec.len()];
+        let all: Vec<u8> = c
+            .rest
+            .iter()
+            .map(|&r| if r { super::AT_REST } else { super::TRAIN })
+            .collect();
         let (tr, _) = super::normals(&refs, &rec.f, &all, 1);
-        c.base_pred = predict(&cols, &tr.solve());
+        c.base_th = tr.solve();
+        c.base_pred = predict(&cols, &c.base_th);
         let r0: Vec<f64> = rec.f.iter().zip(&c.base_pred).map(|(f, p)| f - p).collect();
+        let (ss, nn) = r0
+            .iter()
+            .zip(&c.rest)
+            .filter(|(_, &r)| !r)
+            .fold((0.0, 0usize), |(s, k), (e, _)| (s + e * e, k + 1));
+        c.base_resid_rms = (ss / nn.max(1) as f64).sqrt();
         c.spatial_wavelengths = super::report::position_spectrum(rec, &r0)
             .peaks
             .iter()
@@ -618,6 +729,28 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             let l = e.param;
             vec![col("clip_minus_free", map(&|i| bp[i].clamp(-l, l) - bp[i]))]
         }
+        EffectKind::Backlash => {
+            // play operator of width b on the position: the device side follows only while
+            // the motion pushes on one flank; across the gap it carries no force (only the
+            // offset, a sensor property, stays): column −(1 − contact)·(f̂₀ − offset)
+            let contact = play_contact(&ctx.rec.x, e.param);
+            let off = ctx.base_th.get(3).copied().unwrap_or(0.0);
+            let z = match s.rows {
+                None => map(&|i| if contact[i] { 0.0 } else { off - bp[i] }),
+                Some(r) => map(&|j| if contact[r[j]] { 0.0 } else { off - bp[j] }),
+            };
+            vec![col("gap_minus_free", z)]
+        }
+        EffectKind::PreslidingHysteresis => {
+            // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
+            // force becomes Fc·z: column z − sgn v (coefficient Fc)
+            let z = dahl(&ctx.rec.x, e.param);
+            let y = match s.rows {
+                None => map(&|i| z[i] - sg[i]),
+                Some(r) => map(&|j| z[r[j]] - sg[j]),
+            };
+            vec![col("dahl_minus_sgn", y)]
+        }
         EffectKind::Compliance => {
             // A mass m2 hung on the device through a spring-damper (resonance f_r, damping
             // ratio ζ) adds m2·(H(s) − 1)·a, H = (2ζωs + ω²)/(s² + 2ζ₀ωs + ω²) = LP + 2ζ·BP:
@@ -629,15 +762,115 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
     }
 }
 
-/// Physical admissibility of an effect's fitted coefficients: a resonance needs a positive
-/// modal mass and a damping ratio in [0, 1] (an overdamped "mode" has no resonance; such a
-/// fit is a filter shape fitted to something that is not a mode, and is not named
-/// `compliance`).
-pub fn plausible(kind: EffectKind, coef: &[f64]) -> bool {
-    match kind {
-        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
-        _ => true,
+/// Physical admissibility of an effect's fitted coefficients `coef` given the baseline
+/// coefficients `base` (inertia, viscous, Coulomb, offset, ...) fitted with it. A fit outside
+/// the effect's physical range is not that effect and is not named:
+/// * `direction_asymmetric_friction`: the viscous coefficient stays ≥ 0 in both directions;
+/// * `position_dependent_friction`: the Coulomb level stays ≥ 0 over the whole stroke;
+/// * `position_periodic_friction`: the ripple amplitude is at most the Coulomb level;
+/// * `stribeck`: the bump is positive (static friction above Coulomb);
+/// * `screw_efficiency`: the driven/driving force ratio lies in [0.5, 2] (an efficiency of 0.5
+///   … 1, whichever way the power flows);
+/// * `reflected_inertia`: the extra inertia is positive and at most the baseline inertia;
+/// * `lag`: a delay of the force of unit gain (0.8 … 1.25: the whole force delayed);
+/// * `current_limit`: the clip has unit gain (0.8 … 1.25) — the level itself is checked
+///   against the measured force by the selection (`clip_consistent`);
+/// * `compliance`: a positive modal mass and a damping ratio in [0, 1];
+/// * `presliding_hysteresis`: the friction force it carries is positive and at most 1.5× the
+///   Coulomb level;
+/// * `backlash`: unit gain (0.8 … 1.25: the device's own force, carried through the play).
+///
+/// Every parameter must also be finite.
+pub fn plausible(kind: EffectKind, coef: &[f64], base: &[f64]) -> bool {
+    if coef.iter().chain(base).any(|c| !c.is_finite()) {
+        return false;
     }
+    let unit = |g: f64| (0.8..=1.25).contains(&g);
+    let fv = base.get(1).copied().unwrap_or(0.0);
+    let fc = base.get(2).copied().unwrap_or(0.0);
+    let m = base.first().copied().unwrap_or(0.0);
+    match kind {
+        EffectKind::DirectionAsymmetricFriction => fv - coef[0].abs() >= 0.0,
+        EffectKind::PositionDependentFriction => {
+            // Coulomb + s·x̃ + c·x̃² on x̃ ∈ [−1, 1]: ends and the vertex
+            let f = |x: f64| fc + coef[0] * x + coef[1] * x * x;
+            let mut ok = f(-1.0) >= 0.0 && f(1.0) >= 0.0;
+            if coef[1] != 0.0 {
+                let xv = -coef[0] / (2.0 * coef[1]);
+                if (-1.0..=1.0).contains(&xv) {
+                    ok &= f(xv) >= 0.0;
+                }
+            }
+            ok
+        }
+        EffectKind::PositionPeriodicFriction => coef[0].hypot(coef[1]) <= fc,
+        EffectKind::Cogging => true,
+        EffectKind::Stribeck => coef[0] > 0.0,
+        EffectKind::ScrewEfficiency => (-0.5..=1.0).contains(&coef[0]),
+        EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
+        EffectKind::Lag | EffectKind::CurrentLimit | EffectKind::Backlash => unit(coef[0]),
+        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
+        EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
+    }
+}
+
+/// A clip level is consistent with the measured force when, on the samples it clips (baseline
+/// prediction beyond ±L), the measured force does not exceed L: its 90th percentile of |f|
+/// there stays below L plus 3× the baseline residual rms (noise and model error).
+pub fn clip_consistent(l: f64, bp: &[f64], f: &[f64], resid_rms: f64) -> bool {
+    let mut over: Vec<f64> = bp
+        .iter()
+        .zip(f)
+        .filter(|(p, _)| p.abs() > l)
+        .map(|(_, f)| f.abs())
+        .collect();
+    if over.is_empty() {
+        return false;
+    }
+    let k = (over.len() * 9 / 10).min(over.len() - 1);
+    let q = *over.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    q <= l + 3.0 * resid_rms
+}
+
+/// Contact of a play operator of total width `b` driven by `x`: true where the device side
+/// moves with x (x pushes on a flank), false while x crosses the gap.
+pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
+    let h = 0.5 * b;
+    let mut xm = x.first().copied().unwrap_or(0.0);
+    x.iter()
+        .map(|&xi| {
+            let lo = xi - h;
+            let hi = xi + h;
+            if xm < lo {
+                xm = lo;
+                true
+            } else if xm > hi {
+                xm = hi;
+                true
+            } else {
+                false
+            }
+        })
+        .collect()
+}
+
+/// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
+/// z → sgn(dx) + (z − sgn(dx))·exp(−|dx|/xc) over each step (exact for the model).
+pub fn dahl(x: &[f64], xc: f64) -> Vec<f64> {
+    let mut z = 0.0f64;
+    let mut out = Vec::with_capacity(x.len());
+    let mut prev = x.first().copied().unwrap_or(0.0);
+    let ixc = 1.0 / xc.max(1e-300);
+    for &xi in x {
+        let dx = xi - prev;
+        prev = xi;
+        if dx != 0.0 {
+            let s = dx.signum();
+            z = s + (z - s) * (-dx.abs() * ixc).exp();
+        }
+        out.push(z);
+    }
+    out
 }
 
 /// The candidates to screen (one per kind; the grid supplies the parameter).
@@ -713,6 +946,16 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             .map(|&k| mk(k as f64 * ctx.dt))
             .collect(),
         EffectKind::CurrentLimit => ctx.clip_levels.iter().map(|&l| mk(l)).collect(),
+        EffectKind::Backlash | EffectKind::PreslidingHysteresis => {
+            let stroke = 2.0 * ctx.x_half;
+            let lo = (4.0 * ctx.x_quantum).max(stroke / 2000.0);
+            let hi = stroke / 10.0;
+            if hi > 1.5 * lo {
+                logspace(lo, hi, 10).into_iter().map(mk).collect()
+            } else {
+                vec![]
+            }
+        }
         EffectKind::Compliance => {
             // from 10 periods over the record to 0.4·fs
             let t = ctx.dt * ctx.rec.len() as f64;
@@ -733,7 +976,7 @@ pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
     match e.kind {
         // each compliance value costs a pass of the resonator over the whole record: a
         // coarser refinement (7 values per level) keeps the scan cheap on long records
-        EffectKind::Compliance => (0..=6)
+        EffectKind::Compliance | EffectKind::Backlash | EffectKind::PreslidingHysteresis => (0..=6)
             .map(|i| Effect {
                 kind: e.kind,
                 param: e.param * (1.0 + width * (i as f64 / 3.0 - 1.0)),
@@ -825,6 +1068,14 @@ pub fn parameters(
             ("limit_N".into(), e.param),
             ("gain".into(), get("clip_minus_free")),
         ],
+        EffectKind::Backlash => vec![
+            ("width_m".into(), e.param),
+            ("gain".into(), get("gap_minus_free")),
+        ],
+        EffectKind::PreslidingHysteresis => vec![
+            ("characteristic_displacement_m".into(), e.param),
+            ("friction_N".into(), get("dahl_minus_sgn")),
+        ],
         EffectKind::Compliance => {
             let m2 = get("lp_minus_a");
             vec![
@@ -862,6 +1113,11 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         EffectKind::Lag => format!("force lags motion by {:.4} s", e.param),
         EffectKind::CurrentLimit => format!("force clipped near {:.1} N", e.param),
         EffectKind::Compliance => format!("resonance near {:.3} Hz", e.param),
+        EffectKind::Backlash => format!("play of {:.3e} m after reversals", e.param),
+        EffectKind::PreslidingHysteresis => format!(
+            "friction builds up over {:.3e} m after reversals (Dahl)",
+            e.param
+        ),
         _ => String::new(),
     }
 }

@@ -37,10 +37,26 @@ impl Default for Options {
     }
 }
 
+/// Part of the record a sample belongs to: training.
+pub const TRAIN: u8 = 0;
+/// Held out (validation).
+pub const HELD_OUT: u8 = 1;
+/// Left out of every fit (the device is at rest: friction is static, anywhere within its
+/// breakaway level, and carries no Coulomb sign).
+pub const AT_REST: u8 = 2;
+
 /// Training / held-out split: the record is cut into 10 consecutive blocks and every third
 /// block (indices 2, 5, 8) is held out, so both parts span the whole trajectory.
-pub fn holdout_mask(n: usize) -> Vec<bool> {
-    (0..n).map(|i| (i * 10 / n) % 3 == 2).collect()
+pub fn holdout_mask(n: usize) -> Vec<u8> {
+    (0..n)
+        .map(|i| {
+            if (i * 10 / n) % 3 == 2 {
+                HELD_OUT
+            } else {
+                TRAIN
+            }
+        })
+        .collect()
 }
 
 /// Accumulated normal equations of a column set against the force on one part of the record.
@@ -67,6 +83,23 @@ impl Normal {
     /// exact collinearity).
     pub fn solve(&self) -> Vec<f64> {
         solve_sym(&self.g, &self.b, self.m)
+    }
+    /// Normal equations of a subset of the columns (indices into this set, in order).
+    pub fn select(&self, idx: &[usize]) -> Normal {
+        let k = idx.len();
+        let mut g = vec![0.0; k * k];
+        for (r, &i) in idx.iter().enumerate() {
+            for (c, &j) in idx.iter().enumerate() {
+                g[r * k + c] = self.g[i * self.m + j];
+            }
+        }
+        Normal {
+            m: k,
+            g,
+            b: idx.iter().map(|&i| self.b[i]).collect(),
+            ff: self.ff,
+            n: self.n,
+        }
     }
     /// Normal equations of the union of two parts.
     pub fn plus(&self, o: &Normal) -> Normal {
@@ -147,7 +180,8 @@ pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> Vec<f64> {
 
 /// Normal equations of `cols` against `f` on the training (mask false) and held-out (mask
 /// true) samples, visiting every `stride`-th sample.
-pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Normal, Normal) {
+/// `part` holds `TRAIN`, `HELD_OUT` or `AT_REST` (in neither) per sample.
+pub fn normals(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
     let m = cols.len();
     let mut tr = Normal::new(m);
     let mut ho = Normal::new(m);
@@ -158,7 +192,14 @@ pub fn normals(cols: &[&[f64]], f: &[f64], hold: &[bool], stride: usize) -> (Nor
         for (k, c) in cols.iter().enumerate() {
             row[k] = c[i];
         }
-        let nm = if hold[i] { &mut ho } else { &mut tr };
+        let nm = match part[i] {
+            TRAIN => &mut tr,
+            HELD_OUT => &mut ho,
+            _ => {
+                i += stride;
+                continue;
+            }
+        };
         for p in 0..m {
             let rp = row[p];
             nm.b[p] += rp * f[i];
@@ -187,10 +228,10 @@ pub struct HoldWeights {
 }
 
 impl HoldWeights {
-    pub fn new(hold: &[bool]) -> Self {
+    pub fn new(part: &[u8]) -> Self {
         HoldWeights {
-            train: hold.iter().map(|&h| if h { 0.0 } else { 1.0 }).collect(),
-            hold: hold.iter().map(|&h| if h { 1.0 } else { 0.0 }).collect(),
+            train: part.iter().map(|&h| (h == TRAIN) as u8 as f64).collect(),
+            hold: part.iter().map(|&h| (h == HELD_OUT) as u8 as f64).collect(),
         }
     }
 }
@@ -287,6 +328,9 @@ pub struct Finding {
     pub delta_bic: f64,
     pub note: String,
     pub holdout_rel_error_after: f64,
+    /// Fraction of the independent segments of the record on which the finding held (see
+    /// `STABILITY_SEGMENTS`); 0 for `unexplained`.
+    pub consistency: f64,
 }
 
 /// A baseline term with its significance (held-out error when it is dropped).
@@ -300,9 +344,12 @@ pub struct BaselineTerm {
 }
 
 /// Everything the diagnosis produced.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Diagnosis {
     pub n: usize,
+    /// Stated verdicts, reported first: a record the diagnosis cannot use, a baseline that is
+    /// not physical (with what it suggests), samples left out at rest.
+    pub verdicts: Vec<String>,
     pub derivative_method: String,
     pub baseline_terms: Vec<BaselineTerm>,
     pub baseline_holdout_rel_error: f64,
@@ -335,13 +382,107 @@ pub struct CrossCheck {
     pub final_rel_error: f64,
     /// Per finding: relative error on the second record with effects up to this one.
     pub after_each: Vec<(String, f64)>,
+    /// Per finding: true when it makes the second record's error worse than the stage before.
+    pub worsens: Vec<bool>,
 }
 
-/// Run the diagnosis on a record.
+/// Independent segments of the record over which each finding's stability is checked.
+pub const STABILITY_SEGMENTS: usize = 5;
+/// Segments (of `STABILITY_SEGMENTS`) on which a finding must hold to be kept.
+pub const STABILITY_MIN: usize = 4;
+/// Samples in motion the diagnosis needs at least (training and held-out together).
+pub const MIN_MOVING: usize = 200;
+
+/// Run the diagnosis on a record. A record or options it cannot use give a diagnosis with no
+/// finding and the reason as its first verdict (never a panic); `try_diagnose` returns it as
+/// an error instead.
 pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
+    match try_diagnose(rec, opt) {
+        Ok(d) => d,
+        Err(e) => Diagnosis {
+            n: rec.len(),
+            verdicts: vec![e],
+            ..Default::default()
+        },
+    }
+}
+
+/// Check a record and options, then diagnose.
+pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
+    if !(0.0..1.0).contains(&opt.min_holdout_gain) {
+        return Err(format!(
+            "option min_holdout_gain = {}: allowed range [0, 1)",
+            opt.min_holdout_gain
+        ));
+    }
+    if opt.max_effects > EffectKind::ALL.len() {
+        return Err(format!(
+            "option max_effects = {}: allowed range 0 ..= {}",
+            opt.max_effects,
+            EffectKind::ALL.len()
+        ));
+    }
+    if !(100..=10_000_000).contains(&opt.screen_samples) {
+        return Err(format!(
+            "option screen_samples = {}: allowed range 100 ..= 10000000",
+            opt.screen_samples
+        ));
+    }
     let n = rec.len();
+    let lens = [rec.x.len(), rec.f.len(), rec.v.len(), rec.a.len()];
+    if n < 3 || lens.iter().any(|&l| l != n) {
+        return Err(format!(
+            "record: {n} time samples (x {}, f {}, v {}, a {}): at least 3, all columns of equal length",
+            lens[0], lens[1], lens[2], lens[3]
+        ));
+    }
+    let finite = |c: &[f64]| c.iter().all(|v| v.is_finite());
+    if !(finite(&rec.t) && finite(&rec.x) && finite(&rec.f) && finite(&rec.v) && finite(&rec.a))
+        || rec.extra.values().any(|c| c.len() != n || !finite(c))
+    {
+        return Err("record: a column holds a non-finite value or has a different length".into());
+    }
+    let dt = rec.dt();
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(format!("record: mean sample period {dt} s is not positive"));
+    }
+    let rest = effects::at_rest(&rec.x, &rec.v, dt);
+    let moving = rest.iter().filter(|r| !**r).count();
+    if moving < MIN_MOVING {
+        return Err(format!(
+            "record: {moving} of {n} samples in motion (the rest at rest or at the ends): at least {MIN_MOVING} are needed; no finding can be stated"
+        ));
+    }
     let hold = holdout_mask(n);
+    let (mut tr_n, mut ho_n) = (0, 0);
+    for (h, r) in hold.iter().zip(&rest) {
+        if !r {
+            if *h == HELD_OUT {
+                ho_n += 1;
+            } else {
+                tr_n += 1;
+            }
+        }
+    }
+    if tr_n < MIN_MOVING / 2 || ho_n < MIN_MOVING / 4 {
+        return Err(format!(
+            "record: {tr_n} training and {ho_n} held-out samples in motion: at least {} and {} are needed",
+            MIN_MOVING / 2,
+            MIN_MOVING / 4
+        ));
+    }
+    Ok(diagnose_checked(rec, opt))
+}
+
+fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
+    let n = rec.len();
     let ctx = effects::Context::new(rec);
+    let mut hold = holdout_mask(n);
+    for (h, &r) in hold.iter_mut().zip(&ctx.rest) {
+        if r {
+            *h = AT_REST;
+        }
+    }
     let stride = n.div_ceil(opt.screen_samples).max(1);
     let mut chosen: Vec<Effect> = Vec::new();
     let mut cols = effects::build_columns(&ctx, &chosen);
@@ -354,7 +495,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     let sub = effects::SubSignals::new(&ctx, (0..n).step_by(stride).collect());
     let sig = sub.sig();
     let sub_f: Vec<f64> = sub.rows.iter().map(|&i| rec.f[i]).collect();
-    let sub_hold: Vec<bool> = sub.rows.iter().map(|&i| hold[i]).collect();
+    let sub_hold: Vec<u8> = sub.rows.iter().map(|&i| hold[i]).collect();
     let sub_w = HoldWeights::new(&sub_hold);
     let full_w = HoldWeights::new(&hold);
     let mut sub_cols: Vec<Vec<f64>> = cols
@@ -417,7 +558,16 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
                 let nn = extend_normals_dense(&base, &base_refs, &zr, &sub_f, &sub_w);
                 let t = nn.0.solve();
-                if !effects::plausible(eff.kind, &t[base_refs.len()..]) {
+                let nb = base_refs.len();
+                if !effects::plausible(eff.kind, &t[nb..], &t[..nb.min(4)])
+                    || (eff.kind == EffectKind::CurrentLimit
+                        && !effects::clip_consistent(
+                            eff.param,
+                            &sub.bp,
+                            &sub_f,
+                            ctx.base_resid_rms,
+                        ))
+                {
                     return (f64::INFINITY, 0.0);
                 }
                 let rt = nn.0.rss(&t);
@@ -460,12 +610,14 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                     &[0.15, 0.03]
                 };
                 for &width in widths {
-                    let centre = cb.as_ref().unwrap().2.clone();
+                    let Some(centre) = cb.as_ref().map(|c| c.2.clone()) else {
+                        break;
+                    };
                     let fine = effects::refine(&ctx, &centre, width);
                     prefill(&fine, &mut cache);
                     for eff in fine {
                         let (rh, db) = eval(&eff, &mut cache);
-                        if rh < cb.as_ref().unwrap().0 {
+                        if cb.as_ref().is_none_or(|b| rh < b.0) {
                             cb = Some((rh, db, eff));
                         }
                     }
@@ -505,14 +657,120 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
             delta_bic: dbic,
             note: effects::describe(&ctx, &eff),
             holdout_rel_error_after: after,
+            consistency: 0.0,
         });
         ho_rel = after;
+    }
+    // Stability: each finding is tested on STABILITY_SEGMENTS independent consecutive
+    // segments of the screening subsample (each held out in turn, the model fitted on the
+    // others): it holds on a segment when removing it raises that segment's rss by at least
+    // half the selection margin and its fit there is physical; it is kept when it holds on
+    // STABILITY_MIN segments and its leading coefficient keeps its sign on all of them.
+    let n_sub = sub_f.len();
+    let mut spans = Vec::new();
+    let mut at = n_base;
+    for e in &chosen {
+        let k = effects::columns_on(&ctx, &sig, e).len();
+        spans.push((at, at + k));
+        at += k;
+    }
+    let sub_refs: Vec<&[f64]> = sub_cols.iter().map(|v| v.as_slice()).collect();
+    let mut holds = vec![0usize; chosen.len()];
+    let mut signs = vec![(0usize, 0usize); chosen.len()];
+    for sgi in 0..STABILITY_SEGMENTS {
+        let part: Vec<u8> = (0..n_sub)
+            .map(|j| {
+                if sub_hold[j] == AT_REST {
+                    AT_REST
+                } else if j * STABILITY_SEGMENTS / n_sub == sgi {
+                    HELD_OUT
+                } else {
+                    TRAIN
+                }
+            })
+            .collect();
+        let (tr, ho) = normals(&sub_refs, &sub_f, &part, 1);
+        if ho.n < 10 {
+            continue;
+        }
+        let th = tr.solve();
+        let rss_with = ho.rss(&th);
+        for (k, &(a, b)) in spans.iter().enumerate() {
+            let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
+            let (t2, h2) = (tr.select(&keep), ho.select(&keep));
+            let rss_without = h2.rss(&t2.solve());
+            let phys = effects::plausible(chosen[k].kind, &th[a..b], &th[..4.min(n_base)]);
+            if phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain) {
+                holds[k] += 1;
+            }
+            if th[a] > 0.0 {
+                signs[k].0 += 1;
+            } else {
+                signs[k].1 += 1;
+            }
+        }
+    }
+    let kept: Vec<usize> = (0..chosen.len())
+        .filter(|&k| holds[k] >= STABILITY_MIN && (signs[k].0 == 0 || signs[k].1 == 0))
+        .collect();
+    let mut dropped_notes = Vec::new();
+    if kept.len() < chosen.len() {
+        for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
+            dropped_notes.push(format!(
+                "{} ({}) selected on the whole record but held on only {}/{} independent segments{}: not kept",
+                chosen[k].kind.name(),
+                effects::describe(&ctx, &chosen[k]),
+                holds[k],
+                STABILITY_SEGMENTS,
+                if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" }
+            ));
+        }
+        // rebuild the model from the kept findings (sub-blocks of the accumulated normals)
+        let mut idx: Vec<usize> = (0..n_base).collect();
+        let mut new_chosen = Vec::new();
+        let mut new_findings = Vec::new();
+        let mut new_stages = vec![stage_models[0].clone()];
+        let mut new_cols: Vec<(String, Vec<f64>)> = cols[..n_base].to_vec();
+        for &k in &kept {
+            let (a, b) = spans[k];
+            idx.extend(a..b);
+            new_cols.extend(cols[a..b].iter().cloned());
+            new_chosen.push(chosen[k].clone());
+            let (t, h) = (full.0.select(&idx), full.1.select(&idx));
+            new_stages.push(whole_fit(&(t.clone(), h.clone()), &new_cols));
+            let th_cur = t.solve();
+            let mut fnd = findings[k].clone();
+            fnd.holdout_rel_error_after = rel(h.rss(&th_cur), h.ff);
+            fnd.parameters =
+                effects::parameters(&ctx, &new_chosen, &new_cols, &th_cur, new_chosen.len() - 1);
+            new_findings.push(fnd);
+        }
+        full = (full.0.select(&idx), full.1.select(&idx));
+        cols = new_cols;
+        chosen = new_chosen;
+        findings = new_findings;
+        stage_models = new_stages;
+        ho_rel = findings
+            .last()
+            .map_or(baseline_holdout, |f| f.holdout_rel_error_after);
+        holds = kept.iter().map(|&k| holds[k]).collect();
+    }
+    for (f, h) in findings.iter_mut().zip(&holds) {
+        f.consistency = *h as f64 / STABILITY_SEGMENTS as f64;
     }
     // Final model refitted on the whole record.
     let tf = full.0.plus(&full.1);
     let th_full = tf.solve();
     let pred = effects::predict(&cols, &th_full);
-    let residual: Vec<f64> = rec.f.iter().zip(&pred).map(|(a, b)| a - b).collect();
+    // samples at rest are in no fit (static friction is anywhere within its breakaway
+    // level): they carry no residual, so they cannot show as a spectral peak either
+    let residual: Vec<f64> = rec
+        .f
+        .iter()
+        .zip(&pred)
+        .zip(&ctx.rest)
+        .map(|((a, b), &r)| if r { 0.0 } else { a - b })
+        .collect();
     let final_full = rel(tf.rss(&th_full), tf.ff);
     let tb = base_full.0.plus(&base_full.1);
     let baseline_full = rel(tb.rss(&tb.solve()), tb.ff);
@@ -529,6 +787,7 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 pk.freq_hz, pk.ratio
             ),
             holdout_rel_error_after: ho_rel,
+            consistency: 0.0,
         });
     }
     let position_spectrum = report::position_spectrum(rec, &residual);
@@ -552,10 +811,21 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
                 pk.wavelength_m, pk.ratio
             ),
             holdout_rel_error_after: ho_rel,
+            consistency: 0.0,
         });
     }
+    let mut verdicts = baseline_verdicts(&ctx.base_th);
+    let n_rest = ctx.rest.iter().filter(|r| **r).count();
+    if n_rest > 0 {
+        verdicts.push(format!(
+            "{n_rest} of {n} samples at rest (position still within its noise over ±{} samples), within that window of rest or at the record's ends: left out of every fit (friction at rest is static, anywhere within its breakaway level)",
+            effects::REST_HALF_WINDOW
+        ));
+    }
+    verdicts.extend(dropped_notes);
     Diagnosis {
         n,
+        verdicts,
         derivative_method: rec.derivative_method.clone(),
         baseline_terms,
         baseline_holdout_rel_error: baseline_holdout,
@@ -576,9 +846,58 @@ pub fn diagnose(rec: &Record, opt: &Options) -> Diagnosis {
     }
 }
 
+/// The shape checks of `try_diagnose` alone (lengths, finiteness, sample period).
+fn try_diagnose_shape(rec: &Record) -> Result<(), String> {
+    let n = rec.len();
+    let lens = [rec.x.len(), rec.f.len(), rec.v.len(), rec.a.len()];
+    let finite = |c: &[f64]| c.iter().all(|v| v.is_finite());
+    if n < 3
+        || lens.iter().any(|&l| l != n)
+        || !(finite(&rec.t) && finite(&rec.x) && finite(&rec.f) && finite(&rec.v) && finite(&rec.a))
+        || rec.extra.values().any(|c| c.len() != n || !finite(c))
+    {
+        return Err(
+            "record: fewer than 3 samples, columns of different lengths or non-finite values"
+                .into(),
+        );
+    }
+    Ok(())
+}
+
+/// Physical checks of the baseline (inertia, viscous and Coulomb friction are non-negative),
+/// each failed one stated with what it suggests.
+pub fn baseline_verdicts(th: &[f64]) -> Vec<String> {
+    let mut v = Vec::new();
+    let get = |i: usize| th.get(i).copied().unwrap_or(0.0);
+    if get(0) < 0.0 {
+        v.push(format!(
+            "NON-PHYSICAL BASELINE: inertia {:.4e} kg < 0. The force falls with acceleration: on periodic motion a stiffness (force ∝ x, in antiphase with a) fits as a negative mass, so a spring, a resonance above the motion band or a position-dependent force dominates; the catalogue's names are not reliable on this record",
+            get(0)
+        ));
+    }
+    if get(1) < 0.0 {
+        v.push(format!(
+            "NON-PHYSICAL BASELINE: viscous friction {:.4e} N·s/m < 0. The device delivers power in proportion to speed: an active drive (a motor pushing with the motion) or a force channel that leads or lags the position",
+            get(1)
+        ));
+    }
+    if get(2) < 0.0 {
+        v.push(format!(
+            "NON-PHYSICAL BASELINE: Coulomb friction {:.4e} N < 0. The force steps against friction at reversals: play (the force drops at reversals), an active drive or a sign convention of f_N opposite to x_m",
+            get(2)
+        ));
+    }
+    v
+}
+
 /// Evaluate the diagnosed model on a second record: refit nothing, use the coefficients of
 /// the whole-record fit, effects in order of discovery.
 pub fn cross_check(d: &mut Diagnosis, other: &Record) {
+    if d.stage_models.len() != d.effects.len() + 1 || try_diagnose_shape(other).is_err() {
+        // nothing was fitted, or the second record cannot be evaluated
+        d.cross = None;
+        return;
+    }
     let ctx = effects::Context::new(other);
     let ffo: f64 = other.f.iter().map(|v| v * v).sum();
     let err_of = |k: usize| -> f64 {
@@ -601,13 +920,22 @@ pub fn cross_check(d: &mut Diagnosis, other: &Record) {
         rel(rss, ffo)
     };
     let base = err_of(0);
-    let after_each = (1..=d.effects.len())
+    let after_each: Vec<(String, f64)> = (1..=d.effects.len())
         .map(|k| (d.effects[k - 1].kind.name().to_string(), err_of(k)))
+        .collect();
+    let worsens = after_each
+        .iter()
+        .scan(base, |prev, (_, e)| {
+            let w = *e > *prev;
+            *prev = *e;
+            Some(w)
+        })
         .collect();
     d.cross = Some(CrossCheck {
         baseline_rel_error: base,
         final_rel_error: err_of(d.effects.len()),
         after_each,
+        worsens,
     });
 }
 

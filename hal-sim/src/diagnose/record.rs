@@ -55,6 +55,9 @@ impl Record {
     }
     /// Mean sampling period.
     pub fn dt(&self) -> f64 {
+        if self.len() < 2 {
+            return 0.0;
+        }
         (self.t[self.len() - 1] - self.t[0]) / (self.len() - 1) as f64
     }
 }
@@ -188,6 +191,7 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
     }
     let fs = 1.0 / dt;
     let fc = cutoff_hz.unwrap_or(fs / 20.0);
+    check_cutoff(fc, fs)?;
     let (v, a, method) = match (idx("v_m_s"), idx("a_m_s2")) {
         (Some(iv), Some(ia)) => (
             cols[iv].clone(),
@@ -231,12 +235,34 @@ impl Record {
     /// sides of the model, and relative errors become comparable with figures computed that
     /// way.
     pub fn filter_force(&mut self, cutoff_hz: Option<f64>) {
+        if self.len() < 3 {
+            return;
+        }
         let fs = 1.0 / self.dt();
         let fc = cutoff_hz.unwrap_or(fs / 20.0);
+        if check_cutoff(fc, fs).is_err() {
+            return;
+        }
         self.f = filtfilt(&self.f, fc, fs);
         self.derivative_method.push_str(&format!(
             "; force f_N low-passed by the same filter ({fc:.3} Hz, parallel filtering)"
         ));
+    }
+}
+
+/// The derivative (and force) filter's cutoff must lie strictly between 0 and the Nyquist
+/// frequency of the record.
+pub fn check_cutoff(fc: f64, fs: f64) -> Result<(), RecordError> {
+    if fc.is_finite() && fc > 0.0 && fc < 0.5 * fs {
+        Ok(())
+    } else {
+        Err(err(
+            None,
+            format!(
+                "cutoff_hz = {fc}: allowed range (0, {}) Hz, below half the sample rate {fs} Hz",
+                0.5 * fs
+            ),
+        ))
     }
 }
 

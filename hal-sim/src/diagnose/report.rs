@@ -542,6 +542,13 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         d.n,
         rec.dt()
     );
+    for v in &d.verdicts {
+        let _ = writeln!(s, "VERDICT: {v}");
+    }
+    if d.residual.len() != rec.len() {
+        // the record could not be diagnosed: the verdict is the report
+        return s;
+    }
     let _ = writeln!(s, "  derivatives: {}", d.derivative_method);
     let _ = writeln!(s, "  split: 10 blocks, blocks 2,5,8 held out (30 %)");
     let em = d
@@ -582,11 +589,16 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
     for f in &d.findings {
         let _ = write!(
             s,
-            "  {:<30} held-out error after {:6.3} %  rss drop {:5.1} %  dBIC {:9.1}",
+            "  {:<30} held-out error after {:6.3} %  rss drop {:5.1} %  dBIC {:9.1}{}",
             f.effect,
             100.0 * f.holdout_rel_error_after,
             100.0 * f.holdout_rss_drop,
-            f.delta_bic
+            f.delta_bic,
+            if f.effect == "unexplained" {
+                String::new()
+            } else {
+                format!("  held on {:.0} % of segments", 100.0 * f.consistency)
+            }
         );
         let _ = writeln!(s, "  {}", f.note);
         for (k, v) in &f.parameters {
@@ -659,8 +671,17 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
             100.0 * c.baseline_rel_error,
             100.0 * c.final_rel_error
         );
-        for (e, v) in &c.after_each {
-            let _ = writeln!(s, "  after {e:<30} {:.3} %", 100.0 * v);
+        for ((e, v), w) in c.after_each.iter().zip(&c.worsens) {
+            let _ = writeln!(
+                s,
+                "  after {e:<30} {:.3} %{}",
+                100.0 * v,
+                if *w {
+                    "  WORSENS the second record"
+                } else {
+                    ""
+                }
+            );
         }
     }
     s
@@ -694,6 +715,15 @@ pub fn json(d: &Diagnosis) -> String {
     let _ = writeln!(s, "  \"samples\": {},", d.n);
     let _ = writeln!(
         s,
+        "  \"verdicts\": [{}],",
+        d.verdicts
+            .iter()
+            .map(|v| jstr(v))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let _ = writeln!(
+        s,
         "  \"baseline_holdout_rel_error\": {},",
         jnum(d.baseline_holdout_rel_error)
     );
@@ -725,12 +755,13 @@ pub fn json(d: &Diagnosis) -> String {
             .collect();
         let _ = write!(
             s,
-            "{}\n    {{\"effect\": {}, \"parameters\": {{{}}}, \"evidence\": {{\"holdout_rss_drop\": {}, \"delta_bic\": {}, \"note\": {}}}, \"holdout_rel_error_after\": {}}}",
+            "{}\n    {{\"effect\": {}, \"parameters\": {{{}}}, \"evidence\": {{\"holdout_rss_drop\": {}, \"delta_bic\": {}, \"consistency\": {}, \"note\": {}}}, \"holdout_rel_error_after\": {}}}",
             if i > 0 { "," } else { "" },
             jstr(&f.effect),
             params.join(", "),
             jnum(f.holdout_rss_drop),
             jnum(f.delta_bic),
+            jnum(f.consistency),
             jstr(&f.note),
             jnum(f.holdout_rel_error_after)
         );
@@ -771,9 +802,19 @@ pub fn json(d: &Diagnosis) -> String {
         Some(c) => {
             let _ = writeln!(
                 s,
-                "  \"cross_check\": {{\"baseline_rel_error\": {}, \"final_rel_error\": {}}}",
+                "  \"cross_check\": {{\"baseline_rel_error\": {}, \"final_rel_error\": {}, \"after_each\": [{}]}}",
                 jnum(c.baseline_rel_error),
-                jnum(c.final_rel_error)
+                jnum(c.final_rel_error),
+                c.after_each
+                    .iter()
+                    .zip(&c.worsens)
+                    .map(|((e, v), w)| format!(
+                        "{{\"effect\": {}, \"rel_error\": {}, \"worsens\": {w}}}",
+                        jstr(e),
+                        jnum(*v)
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
         }
         None => s.push_str("  \"cross_check\": null\n"),

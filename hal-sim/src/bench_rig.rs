@@ -1,0 +1,544 @@
+//! Imposed-motion bench rig: an independent generator of measured records for the diagnosis.
+//!
+//! It shares no code with `diagnose` (its own random source, trajectories, device physics and
+//! CSV writer): an actuator imposes a motion on the device's rod and a load cell measures the
+//! force. The device is simulated as physics at `SUB` substeps per sample:
+//! inertia, a damping drive (the motor emulating a damper through its current loop),
+//! LuGre friction (presliding and standstill included), a force offset, and at most one hidden
+//! effect: a clipped current loop, a delay of the force channel, a load-path resonance (a mass on
+//! a spring-damper), a Stribeck bump (static above Coulomb), a soft presliding regime, play in
+//! the screw (the device's mass and drive sit behind a gap), or an effect outside the
+//! diagnosis's catalogue (a force disturbance at a frequency unrelated to the motion, or a
+//! thermal drift of the force offset).
+//!
+//! **Observability rule**: a hidden effect is kept only when the force it changes, simulated
+//! with and without it on the same motion, has an rms of at least 5× the force-sensor noise and
+//! at least 3 % of the rms of the force without it; otherwise its parameters are redrawn (at
+//! most 40 draws, then the record is generated with the last draw and flagged
+//! `observable = false`).
+
+use std::f64::consts::TAU;
+use std::fmt::Write as _;
+
+/// Substeps per output sample of the physics integration.
+pub const SUB: usize = 20;
+
+/// xorshift64* random source (independent of the diagnosis's generator).
+pub struct RigRng(u64);
+impl RigRng {
+    pub fn new(seed: u64) -> Self {
+        RigRng(seed.wrapping_mul(0x2545_F491_4F6C_DD1D) | 1)
+    }
+    fn next(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// Uniform in [a, b).
+    pub fn uni(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * ((self.next() >> 11) as f64 * (1.0 / (1u64 << 53) as f64))
+    }
+    /// Standard normal (polar method).
+    pub fn gauss(&mut self) -> f64 {
+        loop {
+            let u = self.uni(-1.0, 1.0);
+            let v = self.uni(-1.0, 1.0);
+            let s = u * u + v * v;
+            if s > 0.0 && s < 1.0 {
+                return u * (-2.0 * s.ln() / s).sqrt();
+            }
+        }
+    }
+    pub fn pick(&mut self, n: usize) -> usize {
+        ((self.next() >> 33) as usize) % n.max(1)
+    }
+}
+
+/// Trajectory families of the imposed motion.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Trajectory {
+    /// Sum of 5 sines, 0.1–2 Hz, random phases.
+    Multisine,
+    /// Triangle in position with rounded reversals (velocity tanh-shaped square wave).
+    RoundedTriangle,
+    /// Minimum-jerk moves between random positions with dwells at rest.
+    PointToPoint,
+    /// Response of a lightly damped structural mode (0.6–2 Hz) to white noise.
+    Narrowband,
+    /// A recorded position (metres, at the record's sample rate), e.g. EMPS's trajectory.
+    Recorded(Vec<f64>),
+}
+
+impl Trajectory {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Trajectory::Multisine => "multisine",
+            Trajectory::RoundedTriangle => "rounded_triangle",
+            Trajectory::PointToPoint => "point_to_point",
+            Trajectory::Narrowband => "narrowband",
+            Trajectory::Recorded(_) => "recorded",
+        }
+    }
+}
+
+/// The hidden effect of a record.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Hidden {
+    None,
+    /// The drive's force saturates at ±limit_n (its current loop clips).
+    ClippedCurrentLoop {
+        limit_n: f64,
+    },
+    /// The force channel lags the position channel by delay_s (acquisition skew).
+    Delay {
+        delay_s: f64,
+    },
+    /// A mass on a spring-damper in the load path.
+    Resonance {
+        mass_kg: f64,
+        freq_hz: f64,
+        zeta: f64,
+    },
+    /// Static friction above Coulomb, decaying with speed (LuGre's Stribeck curve).
+    Stribeck {
+        static_n: f64,
+        vs_m_s: f64,
+    },
+    /// Soft presliding: the LuGre bristle stiffness gives a characteristic displacement.
+    Presliding {
+        x_char_m: f64,
+    },
+    /// Play in the screw of total width.
+    Backlash {
+        width_m: f64,
+    },
+    /// Out of catalogue: a force disturbance at a frequency unrelated to the motion.
+    Hum {
+        freq_hz: f64,
+        amp_n: f64,
+    },
+    /// Out of catalogue: the force offset drifts linearly over the record.
+    Drift {
+        total_n: f64,
+    },
+}
+
+impl Hidden {
+    /// The diagnosis's name for this effect (`unexplained` for effects outside the catalogue,
+    /// None for no effect).
+    pub fn expected(&self) -> Option<&'static str> {
+        Some(match self {
+            Hidden::None => return None,
+            Hidden::ClippedCurrentLoop { .. } => "current_limit",
+            Hidden::Delay { .. } => "lag",
+            Hidden::Resonance { .. } => "compliance",
+            Hidden::Stribeck { .. } => "stribeck",
+            Hidden::Presliding { .. } => "presliding_hysteresis",
+            Hidden::Backlash { .. } => "backlash",
+            Hidden::Hum { .. } | Hidden::Drift { .. } => "unexplained",
+        })
+    }
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Hidden::None => "none",
+            Hidden::ClippedCurrentLoop { .. } => "clipped_current_loop",
+            Hidden::Delay { .. } => "delay",
+            Hidden::Resonance { .. } => "resonance",
+            Hidden::Stribeck { .. } => "stribeck",
+            Hidden::Presliding { .. } => "presliding",
+            Hidden::Backlash { .. } => "backlash",
+            Hidden::Hum { .. } => "hum",
+            Hidden::Drift { .. } => "drift",
+        }
+    }
+    /// Every kind, in the order the long run cycles through them.
+    pub const KINDS: [&'static str; 9] = [
+        "none",
+        "clipped_current_loop",
+        "delay",
+        "resonance",
+        "stribeck",
+        "presliding",
+        "backlash",
+        "hum",
+        "drift",
+    ];
+}
+
+/// Device, sensors and test of one bench record.
+#[derive(Debug, Clone)]
+pub struct RigSpec {
+    pub seed: u64,
+    pub fs: f64,
+    pub samples: usize,
+    pub trajectory: Trajectory,
+    /// Peak displacement, m.
+    pub amplitude_m: f64,
+    pub mass_kg: f64,
+    /// Damping the drive emulates, N·s/m.
+    pub drive_damping: f64,
+    /// Viscous friction, N·s/m.
+    pub viscous: f64,
+    /// Coulomb friction, N.
+    pub coulomb: f64,
+    pub offset_n: f64,
+    pub noise_n: f64,
+    pub quantum_m: f64,
+    pub lead_m: f64,
+    pub hidden: Hidden,
+    /// The observability rule held for the hidden effect.
+    pub observable: bool,
+    /// rms of the force the hidden effect changes, N.
+    pub effect_rms_n: f64,
+}
+
+/// Imposed motion at the substep rate: (x, v, a).
+fn motion(s: &RigSpec, rng: &mut RigRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let n = s.samples * SUB;
+    let h = 1.0 / (s.fs * SUB as f64);
+    let mut x = vec![0.0; n];
+    match &s.trajectory {
+        Trajectory::Multisine => {
+            let comps: Vec<(f64, f64, f64)> = (0..5)
+                .map(|_| (rng.uni(0.1, 2.0), rng.uni(0.0, TAU), rng.uni(0.3, 1.0)))
+                .collect();
+            for (i, xi) in x.iter_mut().enumerate() {
+                let t = i as f64 * h;
+                *xi = comps
+                    .iter()
+                    .map(|c| c.2 * (TAU * c.0 * t + c.1).sin())
+                    .sum();
+            }
+        }
+        Trajectory::RoundedTriangle => {
+            let period = rng.uni(1.5, 4.0);
+            let sharp = rng.uni(3.0, 10.0);
+            let mut p = 0.0;
+            for (i, xi) in x.iter_mut().enumerate() {
+                let t = i as f64 * h;
+                p += (sharp * (TAU * t / period).sin()).tanh() * h;
+                *xi = p;
+            }
+        }
+        Trajectory::PointToPoint => {
+            let mut i = 0;
+            let mut at = 0.0;
+            while i < n {
+                let dwell = (rng.uni(0.3, 1.0) / h) as usize;
+                for xi in x.iter_mut().skip(i).take(dwell) {
+                    *xi = at;
+                }
+                i += dwell;
+                let to = rng.uni(-1.0, 1.0);
+                let len = (rng.uni(0.4, 1.2) / h) as usize;
+                for k in 0..len.min(n.saturating_sub(i)) {
+                    let u = k as f64 / len as f64;
+                    x[i + k] =
+                        at + (to - at) * (10.0 * u.powi(3) - 15.0 * u.powi(4) + 6.0 * u.powi(5));
+                }
+                i += len;
+                at = to;
+            }
+        }
+        Trajectory::Narrowband => {
+            let f0 = rng.uni(0.6, 2.0);
+            let z = rng.uni(0.02, 0.06);
+            let w = TAU * f0;
+            let (mut y, mut yd) = (0.0, 0.0);
+            // white force into the mode, integrated semi-implicitly; a 1 s run-in is discarded
+            let pre = (1.0 / h) as usize;
+            let sd = (1.0 / h).sqrt();
+            for i in 0..n + pre {
+                let u = rng.gauss() * sd;
+                yd += (u - 2.0 * z * w * yd - w * w * y) * h;
+                y += yd * h;
+                if i >= pre {
+                    x[i - pre] = y;
+                }
+            }
+        }
+        Trajectory::Recorded(r) => {
+            // linear interpolation of the recorded samples to the substep rate
+            for (i, xi) in x.iter_mut().enumerate() {
+                let u = i as f64 / SUB as f64;
+                let k = (u as usize).min(r.len().saturating_sub(2));
+                let fr = (u - k as f64).min(1.0);
+                *xi = if r.len() >= 2 {
+                    r[k] + (r[k + 1] - r[k]) * fr
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+    // smooth the substep interpolation / integration (moving average of one sample period,
+    // twice) so that the acceleration is defined, then centre and scale to the amplitude
+    let smooth = |x: &[f64]| -> Vec<f64> {
+        let w = SUB;
+        let mut out = vec![0.0; x.len()];
+        let mut acc = 0.0;
+        for i in 0..x.len() {
+            acc += x[i];
+            if i >= w {
+                acc -= x[i - w];
+            }
+            out[i] = acc / (i + 1).min(w) as f64;
+        }
+        out
+    };
+    if !matches!(s.trajectory, Trajectory::PointToPoint) {
+        x = smooth(&smooth(&x));
+    }
+    let lo = x.iter().cloned().fold(f64::MAX, f64::min);
+    let hi = x.iter().cloned().fold(f64::MIN, f64::max);
+    let (mid, half) = (0.5 * (lo + hi), (0.5 * (hi - lo)).max(1e-12));
+    let k = s.amplitude_m / half;
+    for xi in x.iter_mut() {
+        *xi = (*xi - mid) * k;
+    }
+    let mut v = vec![0.0; n];
+    let mut a = vec![0.0; n];
+    for i in 1..n - 1 {
+        v[i] = (x[i + 1] - x[i - 1]) / (2.0 * h);
+    }
+    for i in 1..n - 1 {
+        a[i] = (v[i + 1] - v[i - 1]) / (2.0 * h);
+    }
+    (x, v, a)
+}
+
+/// LuGre friction state update over a step of displacement dx at speed v (exact for constant
+/// v): z → z_ss + (z − z_ss)·exp(−σ0|dx|/g), z_ss = g·sgn(v)/σ0.
+fn lugre(z: &mut f64, v: f64, h: f64, sigma0: f64, g: f64) {
+    if v != 0.0 {
+        let zss = g * v.signum() / sigma0;
+        *z = zss + (*z - zss) * (-sigma0 * v.abs() * h / g).exp();
+    }
+}
+
+/// Simulate the device force (true, at the substep rate) for motion (x, v, a).
+fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let h = 1.0 / (s.fs * SUB as f64);
+    let dur = n as f64 * h;
+    let fc = s.coulomb;
+    // bristle stiffness: a presliding displacement of 2 µm unless the effect softens it
+    let x_char = match hidden {
+        Hidden::Presliding { x_char_m } => x_char_m,
+        _ => 2e-6,
+    };
+    let sigma0 = fc / x_char;
+    let (fsx, vs) = match hidden {
+        Hidden::Stribeck { static_n, vs_m_s } => (static_n, vs_m_s),
+        _ => (fc, 1.0),
+    };
+    let g = |v: f64| fc + (fsx - fc) * (-(v / vs).powi(2)).exp();
+    let delay = match hidden {
+        Hidden::Delay { delay_s } => (delay_s / h).round() as usize,
+        _ => 0,
+    };
+    let limit = match hidden {
+        Hidden::ClippedCurrentLoop { limit_n } => limit_n,
+        _ => f64::INFINITY,
+    };
+    // play: the device (mass, drive, friction) sits behind a gap of `width`; contact
+    // stiffness and damping put the contact mode at 60 Hz, ζ 0.5
+    let width = match hidden {
+        Hidden::Backlash { width_m } => width_m,
+        _ => 0.0,
+    };
+    let wc = TAU * 60.0;
+    let (kc, cc) = (s.mass_kg * wc * wc, s.mass_kg * wc);
+    let (mut xm, mut vm) = (x[0], v[0]);
+    let mut z = 0.0;
+    let (mut y2, mut yd2) = (x[0], v[0]);
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let t = i as f64 * h;
+        let mut f_cell;
+        if width > 0.0 {
+            // device side integrated: contact force through the gap
+            let d = x[i] - xm;
+            let pen = if d > 0.5 * width {
+                d - 0.5 * width
+            } else if d < -0.5 * width {
+                d + 0.5 * width
+            } else {
+                0.0
+            };
+            let fct = if pen != 0.0 {
+                (kc * pen + cc * (v[i] - vm)).clamp(
+                    if pen > 0.0 { 0.0 } else { f64::MIN },
+                    if pen < 0.0 { 0.0 } else { f64::MAX },
+                )
+            } else {
+                0.0
+            };
+            let fdrive = (s.drive_damping * vm).clamp(-limit, limit);
+            lugre(&mut z, vm, h, sigma0, g(vm));
+            let ffr = sigma0 * z + s.viscous * vm;
+            let am = (fct - fdrive - ffr) / s.mass_kg;
+            vm += am * h;
+            xm += vm * h;
+            f_cell = fct;
+        } else {
+            let fdrive = (s.drive_damping * v[i]).clamp(-limit, limit);
+            lugre(&mut z, v[i], h, sigma0, g(v[i]));
+            f_cell = s.mass_kg * a[i] + fdrive + sigma0 * z + s.viscous * v[i];
+        }
+        f_cell += s.offset_n;
+        match hidden {
+            Hidden::Resonance {
+                mass_kg,
+                freq_hz,
+                zeta,
+            } => {
+                let w = TAU * freq_hz;
+                let (k2, c2) = (mass_kg * w * w, 2.0 * zeta * mass_kg * w);
+                let fs = k2 * (x[i] - y2) + c2 * (v[i] - yd2);
+                yd2 += fs / mass_kg * h;
+                y2 += yd2 * h;
+                f_cell += fs;
+            }
+            Hidden::Hum { freq_hz, amp_n } => f_cell += amp_n * (TAU * freq_hz * t).sin(),
+            Hidden::Drift { total_n } => f_cell += total_n * (t / dur - 0.5),
+            _ => {}
+        }
+        out.push(f_cell);
+    }
+    if delay > 0 {
+        // the force channel lags the position channel (acquisition skew, a load-cell
+        // amplifier's group delay): the measured force at t is the force at t − delay
+        let first = out[0];
+        out.rotate_right(delay.min(n));
+        for o in out.iter_mut().take(delay.min(n)) {
+            *o = first;
+        }
+    }
+    out
+}
+
+fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// Draw the parameters of a hidden effect of `kind` for a device (ranges per kind; the
+/// observability rule then accepts or redraws).
+fn draw_hidden(kind: &str, s: &RigSpec, vmax: f64, rng: &mut RigRng) -> Hidden {
+    match kind {
+        "clipped_current_loop" => Hidden::ClippedCurrentLoop {
+            limit_n: s.drive_damping * vmax * rng.uni(0.45, 0.8),
+        },
+        "delay" => Hidden::Delay {
+            delay_s: rng.uni(0.005, 0.04),
+        },
+        "resonance" => Hidden::Resonance {
+            mass_kg: s.mass_kg * rng.uni(0.2, 0.6),
+            freq_hz: rng.uni(0.8, 3.0),
+            zeta: rng.uni(0.03, 0.15),
+        },
+        "stribeck" => Hidden::Stribeck {
+            static_n: s.coulomb * rng.uni(1.5, 2.5),
+            vs_m_s: vmax * rng.uni(0.03, 0.1),
+        },
+        "presliding" => Hidden::Presliding {
+            x_char_m: s.amplitude_m * rng.uni(0.01, 0.04),
+        },
+        "backlash" => Hidden::Backlash {
+            width_m: s.amplitude_m * rng.uni(0.01, 0.04),
+        },
+        "hum" => Hidden::Hum {
+            freq_hz: rng.uni(6.0, 30.0),
+            amp_n: s.coulomb * rng.uni(0.2, 0.5),
+        },
+        "drift" => Hidden::Drift {
+            total_n: s.coulomb
+                * rng.uni(0.4, 1.0)
+                * if rng.uni(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 },
+        },
+        _ => Hidden::None,
+    }
+}
+
+impl RigSpec {
+    /// A random device and test (seeded) with a hidden effect of `kind` (one of
+    /// `Hidden::KINDS`) on the given trajectory family.
+    pub fn random(seed: u64, kind: &str, trajectory: Trajectory, samples: usize) -> Self {
+        let mut rng = RigRng::new(seed);
+        RigSpec {
+            seed,
+            fs: 1000.0,
+            samples,
+            trajectory,
+            amplitude_m: rng.uni(0.02, 0.06),
+            mass_kg: rng.uni(20.0, 100.0),
+            drive_damping: rng.uni(200.0, 900.0),
+            viscous: rng.uni(20.0, 100.0),
+            coulomb: rng.uni(15.0, 60.0),
+            offset_n: rng.uni(-5.0, 5.0),
+            noise_n: rng.uni(0.2, 2.0),
+            quantum_m: [0.4e-6, 1.6e-6, 6.4e-6][rng.pick(3)],
+            lead_m: 0.016,
+            hidden: Hidden::None,
+            observable: true,
+            effect_rms_n: 0.0,
+        }
+        .with_hidden(kind, seed)
+    }
+
+    fn with_hidden(mut self, kind: &str, seed: u64) -> Self {
+        if kind == "none" {
+            return self;
+        }
+        let mut rng = RigRng::new(seed ^ 0xA5A5_5A5A_1234_8765);
+        let (x, v, a) = motion(&self, &mut RigRng::new(self.seed.wrapping_add(7)));
+        let f0 = device_force(&self, Hidden::None, &x, &v, &a);
+        let vmax = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
+        let f0r = rms(&f0);
+        for _ in 0..40 {
+            let hd = draw_hidden(kind, &self, vmax, &mut rng);
+            let f1 = device_force(&self, hd, &x, &v, &a);
+            let d: Vec<f64> = f1.iter().zip(&f0).map(|(a, b)| a - b).collect();
+            let r = rms(&d);
+            self.hidden = hd;
+            self.effect_rms_n = r;
+            self.observable = r >= 5.0 * self.noise_n && r >= 0.03 * f0r;
+            if self.observable {
+                break;
+            }
+        }
+        self
+    }
+
+    /// The record as CSV text in the diagnosis schema (t_s, x_m, f_N; lead as metadata).
+    pub fn csv(&self) -> String {
+        let (x, v, a) = motion(self, &mut RigRng::new(self.seed.wrapping_add(7)));
+        let f = device_force(self, self.hidden, &x, &v, &a);
+        let mut rng = RigRng::new(self.seed ^ 0x0F0F_F0F0_0F0F_F0F0);
+        let mut out = String::with_capacity(self.samples * 40);
+        let _ = writeln!(
+            out,
+            "# bench rig record, seed {}, trajectory {}, hidden {:?}",
+            self.seed,
+            self.trajectory.name(),
+            self.hidden
+        );
+        let _ = writeln!(
+            out,
+            "# device: mass {} kg, drive damping {} N·s/m, viscous {} N·s/m, Coulomb {} N, offset {} N; noise {} N rms, quantum {} m",
+            self.mass_kg, self.drive_damping, self.viscous, self.coulomb, self.offset_n, self.noise_n, self.quantum_m
+        );
+        let _ = writeln!(out, "# lead_m_per_rev = {}", self.lead_m);
+        out.push_str("t_s,x_m,f_N\n");
+        for i in 0..self.samples {
+            let k = i * SUB;
+            let xq = (x[k] / self.quantum_m).round() * self.quantum_m;
+            let fi = f[k] + self.noise_n * rng.gauss();
+            let _ = writeln!(out, "{:.6},{:.9e},{:.5}", i as f64 / self.fs, xq, fi);
+        }
+        out
+    }
+}
