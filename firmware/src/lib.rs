@@ -40,6 +40,7 @@ pub mod params;
 pub mod pi;
 pub mod protect;
 pub mod selftest;
+pub mod shunt;
 pub mod store;
 pub mod svpwm;
 
