@@ -34,10 +34,12 @@ use crate::fx::Duty;
 /// I_a and I_b are taken at 0.29 µs.
 pub const UNREAD_ABOVE: u16 = 0x7800; // 0.9375·2^15
 
-/// The three phase codes with the phase whose duty `d` exceeds [`UNREAD_ABOVE`] (phase c
-/// when none does: then all three are valid and any two give the same currents) replaced by
+/// The three phase codes with the phase whose duty `d` exceeds [`UNREAD_ABOVE`] replaced by
 /// the one that makes the three currents sum to zero (`zero3` = the sum of the three
-/// zero-current codes).
+/// zero-current codes). When no duty exceeds it all three are valid and are kept: the
+/// three-phase Clarke transform then averages the three converters' noise, and a single
+/// failed sensor shows as a zero-sum error (the supervision's consistency check) rather than
+/// being fed back in full.
 #[inline(always)]
 pub fn two_valid(i: [i32; 3], d: &[Duty; 3], zero3: i32) -> [i32; 3] {
     let [a, b, c] = i;
@@ -45,8 +47,10 @@ pub fn two_valid(i: [i32; 3], d: &[Duty; 3], zero3: i32) -> [i32; 3] {
         [zero3 - b - c, b, c]
     } else if d[1].to_bits() > UNREAD_ABOVE {
         [a, zero3 - a - c, c]
-    } else {
+    } else if d[2].to_bits() > UNREAD_ABOVE {
         [a, b, zero3 - a - b]
+    } else {
+        i
     }
 }
 
@@ -78,17 +82,19 @@ mod tests {
                 [0.2, 0.5, 0.975],
                 [z + 100, z - 30, z - 70],
             ),
-            // None above 0.9375: c from a and b (all valid).
+            // None above 0.9375: all three read as they are.
             (
                 [z + 100, z - 30, z - 71],
                 [0.91, 0.91, 0.1],
-                [z + 100, z - 30, z - 70],
+                [z + 100, z - 30, z - 71],
             ),
         ];
         for (read, d, want) in cases {
             let out = two_valid(read, &[duty(d[0]), duty(d[1]), duty(d[2])], 3 * z);
             assert_eq!(out, want, "duties {d:?}");
-            assert_eq!(out.iter().sum::<i32>(), 3 * z);
+            if d.iter().any(|&x| x > 0.9375) {
+                assert_eq!(out.iter().sum::<i32>(), 3 * z);
+            }
         }
     }
 
