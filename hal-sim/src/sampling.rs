@@ -258,15 +258,19 @@ mod tests {
 
     #[test]
     fn bad_values_are_refused_by_name() {
-        let mut s = ShuntSampling::default();
-        s.settle_s = f64::NAN;
+        let s = ShuntSampling {
+            settle_s: f64::NAN,
+            ..Default::default()
+        };
         let e = ShuntPre::new(&s, &Inverter::default(), 1.0, 1e-3, 50e-6).unwrap_err();
         assert!(
             e.contains("sensors.shunt.settle_s") && e.contains("NaN"),
             "{e}"
         );
-        let mut s = ShuntSampling::default();
-        s.sample_clocks = 1000.0;
+        let s = ShuntSampling {
+            sample_clocks: 1000.0,
+            ..Default::default()
+        };
         let e = ShuntPre::new(&s, &Inverter::default(), 1.0, 1e-3, 50e-6).unwrap_err();
         assert!(e.contains("half a PWM period"), "{e}");
     }
