@@ -403,6 +403,9 @@ pub struct StepConsts {
     /// exceeds `i_span`, i.e. `|code − zero| > ⌊i_trip/amps_per_count⌋`.
     pub i_lo: u32,
     pub i_span: u32,
+    /// Sum of the three phases' zero-current codes (`3·adc_zero_code`): the reconstruction
+    /// of the unread phase (`shunt::two_valid`).
+    pub zero3: i32,
     /// Bus thresholds in codes: over-voltage when `code > ov`, under-voltage when
     /// `code < uv`, brake closes when `code > brake_on`, stays closed while `code > brake_off`.
     pub ov: u32,
@@ -479,6 +482,7 @@ impl Gains {
             )?,
             i_lo: zero.wrapping_sub(n_trip),
             i_span: 2 * n_trip,
+            zero3: 3 * zero as i32,
             ov: floor_code(c.v_bus_ov / c.volts_per_count),
             uv: ceil_code(c.v_bus_uv / c.volts_per_count),
             brake_on: floor_code(c.brake_on_v / c.volts_per_count),

@@ -389,12 +389,17 @@ impl Controller {
         // `memcpy` call when the board builds for size).
         self.rec.sample = RawSample::from_words(s.to_words());
         // Element by element: `map` becomes a loop through the stack when built for size.
-        let [ia, ib, ic] = [s.i_abc[0] as u32, s.i_abc[1] as u32, s.i_abc[2] as u32];
-        // Phase over-current on the raw codes, while they are in registers (protection below).
+        // The two phases whose low-side shunts conducted at the sample (from the duties in
+        // force then: the last step's), the third from the zero sum (`shunt`).
+        let [ia, ib, ic] = crate::shunt::two_valid(
+            [s.i_abc[0] as i32, s.i_abc[1] as i32, s.i_abc[2] as i32],
+            &self.rec.duties,
+            k.zero3,
+        );
+        // Phase over-current on the codes, while they are in registers (protection below).
         let lo = k.i_lo;
-        let off = |c: u32| c.wrapping_sub(lo);
+        let off = |c: i32| (c as u32).wrapping_sub(lo);
         let over_i = off(ia).max(off(ib)).max(off(ic)) > k.i_span;
-        let [ia, ib, ic] = [ia as i32, ib as i32, ic as i32];
         // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
         // change nothing then and bound anything larger.
         let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
@@ -816,6 +821,7 @@ mod tests {
             let mut ctl = Controller::new(&cfg).unwrap();
             ctl.step(&RawSample { i_abc: [a, b, c], v_bus: 2458, encoder: 0 });
             let t = ctl.telemetry();
+            // The first step's duties in force are zero: all three phases are read (`shunt`).
             let i = t.i_abc.map(|x| x.to_num::<f64>());
             // θ = 0 at count 0 (no offset): d = α, q = β. Two roundings of 2^-16 A each plus
             // the f32 constants (relative 1e-7).

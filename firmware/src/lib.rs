@@ -41,6 +41,7 @@ pub mod period;
 pub mod pi;
 pub mod protect;
 pub mod selftest;
+pub mod shunt;
 pub mod store;
 pub mod svpwm;
 

@@ -179,6 +179,34 @@ fn main() {
         sim_s / noisy
     );
 
+    // The board's current sampling (`sensors.shunt`) on against off, timed alternately in
+    // the same run so that both see the same machine load.
+    let mut sc_on = sc.clone();
+    sc_on.sensors.shunt.enabled = true;
+    let mut off = sc.build().expect("scenario");
+    let mut on = sc_on.build().expect("scenario");
+    off.run_for(settle_s);
+    on.run_for(settle_s);
+    let (mut t_off, mut t_on) = (f64::MAX, f64::MAX);
+    for _ in 0..reps {
+        for (sim, best) in [(&mut off, &mut t_off), (&mut on, &mut t_on)] {
+            let t = Instant::now();
+            sim.run_for(sim_s);
+            *best = best.min(t.elapsed().as_secs_f64());
+        }
+    }
+    println!(
+        "  shunt sampling     {:7.1} ns per period on, {:.1} ns off: (a) slowdown {:+.1} % (target ≤ 20 %)",
+        ns(t_on),
+        ns(t_off),
+        100.0 * (t_on / t_off - 1.0)
+    );
+    println!(
+        "  ratios: (b) plant / firmware step = {:.2} (target ≤ 1); (c) real-time factor {:.0}x (target 1,000x on a quiet machine)",
+        plant / fw,
+        sim_s / total
+    );
+
     let t = Instant::now();
     let st = Structure::default();
     let mut n = 0;

@@ -455,6 +455,8 @@ pub struct Sensors {
     pub vbus_noise_v: f64,
     /// Noise seed.
     pub seed: u64,
+    /// Current sampling as the board does it (`crate::sampling`; off by default).
+    pub shunt: crate::sampling::ShuntSampling,
 }
 
 impl Default for Sensors {
@@ -465,6 +467,7 @@ impl Default for Sensors {
             vbus_offset_v: 0.0,
             vbus_noise_v: 0.0,
             seed: 1,
+            shunt: Default::default(),
         }
     }
 }

@@ -18,6 +18,7 @@ use crate::fastmath::{floor_wrap_u16, Gauss, SinCos};
 use crate::plant::{
     Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
 };
+use crate::sampling::ShuntPre;
 use regen_fw::fx::Duty;
 use regen_fw::io::{Actuation, DriveIo, RawSample};
 use regen_fw::{Config, Controller, Mode, Pending, Period, PeriodHw};
@@ -261,6 +262,8 @@ struct State {
     force: f64,
     force_em: f64,
     p_inv: f64,
+    /// The αβ emf at the middle of the last period (the shunt sampling's ripple).
+    e_ab: [f64; 2],
 }
 
 /// Closed-loop simulation.
@@ -273,6 +276,10 @@ pub struct Sim {
     s: State,
     active: Actuation,
     pending: Actuation,
+    /// The actuation of the period that ended last (the shunt windows' opening).
+    before: Actuation,
+    /// Shunt sampling (`crate::sampling`).
+    shunt: ShuntPre,
     exc: ExcitationState,
     noise: u64,
     gauss: Gauss,
@@ -333,6 +340,7 @@ impl Sim {
             }
             .state(),
         };
+        let shunt = ShuntPre::new(&rig.sensors.shunt, &rig.inverter, m.r_ohm, m.l_h, ts)?;
         let mut sim = Sim {
             pre: Pre::new(&rig, cfg, ts),
             gauss: Gauss::default(),
@@ -352,6 +360,8 @@ impl Sim {
             ctl,
             active: Actuation::OFF,
             pending: Actuation::OFF,
+            before: Actuation::OFF,
+            shunt,
             exc,
             flows: Flows::default(),
             stored_start: 0.0,
@@ -569,6 +579,7 @@ impl Sim {
     fn finish_period(&mut self) {
         let act = self.active;
         self.advance(&act);
+        self.before = act;
         self.active = self.pending;
         self.steps += 1;
         if self.rec.is_some() {
@@ -619,8 +630,11 @@ impl Sim {
     }
 
     fn sample_now(&mut self) -> RawSample {
+        let mut i = self.currents();
+        if self.shunt.on {
+            i = self.shunt_read(i);
+        }
         let p = &self.pre;
-        let i = self.currents();
         let mut c: [f64; 3] = core::array::from_fn(|k| i[k] * p.counts_per_amp + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
         if p.noisy {
@@ -634,6 +648,15 @@ impl Sim {
             // Wraps at 2^16 like the hardware counter.
             encoder: floor_wrap_u16(self.s.x * self.pre.counts_per_m),
         }
+    }
+
+    /// The phase currents through the shunts at the converters' instants (`crate::sampling`).
+    #[inline(never)]
+    fn shunt_read(&self, i: [f64; 3]) -> [f64; 3] {
+        let [ea, eb] = self.s.e_ab;
+        let e = [ea, -0.5 * ea + SQRT3_2 * eb, -0.5 * ea - SQRT3_2 * eb];
+        self.shunt
+            .read(i, e, self.s.v_bus, &self.before, &self.active)
     }
 
     /// The sensors' noise (in counts) on the three current codes, then on the bus code.
@@ -669,6 +692,7 @@ impl Sim {
         let (sn, cs) = self.rot_theta.at(xm * p.theta_per_m + p.theta_offset);
         let kw = p.ke * w;
         let e = [-kw * sn, kw * cs];
+        self.s.e_ab = e;
 
         // Electrical period: the averaged inverter inline, everything else out of line.
         let vb0 = self.s.v_bus;

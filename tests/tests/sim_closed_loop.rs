@@ -7,10 +7,16 @@ use hal_sim::plant::{Drive, Excitation, Motion};
 use hal_sim::scenario::Scenario;
 use hal_sim::sim::Energy;
 
-fn check_balance(e: &Energy, what: &str) {
-    // The bound: 0.5 % of the largest energy flow over any run.
+/// The ledger closes to `bound` of the largest energy flow. Each caller's bound is about 3×
+/// the residual measured for its run (printed here; `cargo test -p regen-tests --test
+/// sim_closed_loop -- --nocapture`): what is left is the bus injection's second-order term
+/// and the rounding of sums over 10^4–10^5 periods, both deterministic, so 3× covers
+/// changes of the operating point by other parameters, while any energy flow left out of the
+/// ledger (a loss of 1e-4 of the flows or more) fails it.
+fn check_balance(e: &Energy, what: &str, bound: f64) {
+    println!("{what}: relative residual {:.3e}", e.relative_residual());
     assert!(
-        e.relative_residual().abs() < 5e-3,
+        e.relative_residual().abs() < bound,
         "{what}: residual {:.3e} J = {:.3} % of the flows; ledger {e:#?}",
         e.residual(),
         100.0 * e.relative_residual()
@@ -37,7 +43,7 @@ fn energy_balances_for_imposed_motion_structure_and_brake() {
     let mut sim = sc.build().unwrap();
     sim.run_for(sc.duration_s);
     let e = sim.energy();
-    check_balance(&e, "imposed sine");
+    check_balance(&e, "imposed sine", 2.4e-12); // measured 8.0e-13
     assert!(e.screw_loss > 0.0 && e.friction_loss > 0.0 && e.copper_loss > 0.0);
     assert!(sim.controller().fault().is_none());
 
@@ -51,7 +57,7 @@ fn energy_balances_for_imposed_motion_structure_and_brake() {
     let mut sim = sc.build().unwrap();
     sim.run_for(sc.duration_s);
     let e = sim.energy();
-    check_balance(&e, "tmd with brake");
+    check_balance(&e, "tmd with brake", 3.2e-8); // measured 1.07e-8
     assert!(e.brake > 0.0, "brake never closed: {e:#?}");
     assert!(sim.controller().fault().is_none());
 
@@ -68,7 +74,7 @@ fn energy_balances_for_imposed_motion_structure_and_brake() {
     }
     let mut sim = sc.build().unwrap();
     sim.run_for(sc.duration_s);
-    check_balance(&sim.energy(), "kanai-tajimi");
+    check_balance(&sim.energy(), "kanai-tajimi", 3.4e-7); // measured 1.15e-7
 }
 
 #[test]
@@ -77,10 +83,13 @@ fn tmd_power_matches_harmonic_balance() {
     // the harmonic balance's assumptions hold. Tolerance 3 %: the harmonic balance replaces
     // the Coulomb term by its first harmonic (the neglected odd harmonics carry a few % of
     // the friction force, F_c/(m·a0) = 10 % of the drive), the runs average 2 periods after
-    // 8 s of settling (the envelope of the start-up transient decays with 2m̄/c̄, at most
-    // 1.2 s at 1 kΩ: e^-6.8 leaves 0.1 % of the amplitude), and the firmware's fixed-point speed estimate and current loop add well
-    // under 1 %.
-    for r_l in [10.0, 100.0, 1000.0] {
+    // 8 s of settling (the start-up envelope decays with 2m̄/c̄, at most 1.2 s at 1 kΩ: e^-6.8
+    // leaves 0.1 % of the amplitude), and the firmware's fixed-point speed estimate and
+    // current loop add their part. Measured: +0.243 % (10 Ω), +0.170 % (100 Ω), −0.134 %
+    // (1 kΩ); each bound is 3× its measured deviation (rounded), so a 2 % error of the law's
+    // conductance (a ~1–2 % change of power away from the optimum) fails it. Residual:
+    // measured 1.6e-8, 8.8e-9, 2.7e-9; bound 5e-8 (3× the largest).
+    for (r_l, tol) in [(10.0, 7.3e-3), (100.0, 5.1e-3), (1000.0, 4.0e-3)] {
         let mut sc = Scenario::tmd(r_l);
         sc.duration_s = 12.0;
         sc.settle_s = 8.0;
@@ -97,19 +106,23 @@ fn tmd_power_matches_harmonic_balance() {
             0.5,
             DampingFormula::PerPhasePeak,
         );
+        println!(
+            "R_L {r_l}: dev {:+.4} %, resid {resid:.3e}",
+            100.0 * (p / a.p_load - 1.0)
+        );
         assert!(
-            (p - a.p_load).abs() < 0.03 * a.p_load,
+            (p - a.p_load).abs() < tol * a.p_load,
             "R_L = {r_l}: closed loop {p:.3} W, analytic {:.3} W",
             a.p_load
         );
-        assert!(resid.abs() < 5e-3);
+        assert!(resid.abs() < 5e-8, "R_L = {r_l}: residual {resid:.3e}");
     }
 }
 
 #[test]
 fn shipped_scenarios_parse_and_run() {
     // Every example in hal-sim/scenarios builds; a short piece of each runs with the
-    // energy balanced (0.5 %) and no fault.
+    // energy balanced (3× the largest measured residual) and no fault.
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
     let mut n = 0;
     for f in std::fs::read_dir(&dir).unwrap() {
@@ -120,7 +133,8 @@ fn shipped_scenarios_parse_and_run() {
         let sc = Scenario::from_file(&p).unwrap_or_else(|e| panic!("{e}"));
         let mut sim = sc.build().unwrap();
         sim.run_for(sc.duration_s.min(0.5));
-        check_balance(&sim.energy(), &sc.name);
+        // Measured 3.7e-9 (tmd-306) and 1.4e-12 (the two bench scenarios): 1.1e-8 for all.
+        check_balance(&sim.energy(), &sc.name, 1.1e-8);
         assert!(sim.controller().fault().is_none(), "{}", sc.name);
         assert!(!sim.recorder().unwrap().rows.is_empty());
         n += 1;
@@ -148,7 +162,12 @@ fn switched_inverter_with_dead_time_agrees_with_the_average() {
         (p_sw - p_avg).abs() < 0.02 * p_avg,
         "switched {p_sw} W, averaged {p_avg} W"
     );
-    assert!(r_avg.abs() < 5e-3 && r_sw.abs() < 5e-3, "{r_avg} {r_sw}");
+    println!(
+        "switched: p dev {:+.4} %, resid {r_avg:.3e} {r_sw:.3e}",
+        100.0 * (p_sw / p_avg - 1.0)
+    );
+    // Residuals measured 8.8e-9 and 1.03e-8: bound 3e-8.
+    assert!(r_avg.abs() < 3e-8 && r_sw.abs() < 3e-8, "{r_avg} {r_sw}");
     let copper = |sc: &Scenario| {
         let mut sim = sc.build().unwrap();
         sim.run_for(2.0);
@@ -188,7 +207,7 @@ fn recorded_ground_acceleration_csv_drives_the_structure() {
     b.run_for(3.0);
     let (xa, xb) = (a.motion().0, b.motion().0);
     assert!((xa - xb).abs() < 1e-3 * xa.abs().max(1e-3), "{xa} vs {xb}");
-    check_balance(&b.energy(), "recorded csv");
+    check_balance(&b.energy(), "recorded csv", 2.6e-8); // measured 8.7e-9
 
     let bad = dir.join("bad.csv");
     std::fs::write(&bad, "t,a\n0,0\n0.001,NaN\n").unwrap();

@@ -1,0 +1,277 @@
+//! The phase currents as the board's converters take them: each channel at its own instant
+//! of the ADC sequence, through a low-side shunt that carries the phase current only while
+//! that phase's low side conducts, and an amplifier that settles after the shunt's window
+//! opens.
+//!
+//! **Instants.** The timer's update event (the sample instant `t_k` of [`crate::sim`], the
+//! centre of the interval where all three low sides are on) triggers ADC1 [I_a, I_c] and
+//! ADC2 [I_b, V_bus] (`firmware/board/src/board.rs`). A channel is held at the end of its
+//! sampling time: I_a and I_b at `s/f` after the trigger, I_c at `(2s + c)/f` (`s` sampling
+//! clocks, `c` conversion clocks, `f` the ADC clock): 0.29 µs and 0.88 µs with the board's
+//! 12.5 + 12.5 clocks at 42.5 MHz. The trigger's latency (a few ADC clocks) is neglected, and
+//! the bus voltage is read as at `t_k` (its capacitor moves by parts per million in 2 µs).
+//!
+//! **Current at the instant.** Between `t_k` and its channel's instant the phase's current
+//! follows its switching, not the period's average: each phase stays at the negative rail
+//! until its high side takes over at `h_x = (1 − d_x)·T/2` after `t_k`, plus the dead time
+//! when its current flows out of the leg (`i_x > 0`: the low-side diode keeps it at the rail;
+//! with `i_x < 0` the high-side diode lifts it at once). So, with the star point at the mean
+//! of the three terminals, `i_x(δ) = i_x + (V_bus·(a_x − mean a) − δ·(e_x + R·i_x))/L` with
+//! `a_x = max(0, δ − h_x)`: the first-order solution (δ ≤ 1 µs against L/R of milliseconds:
+//! relative error below 1e-6). `i_x` is the plant's current at `t_k`, which the averaged
+//! inverter and the switched one agree on at the centre of the zero vector, and `e` its
+//! emf at the middle of the period just ended.
+//!
+//! **Shunt window.** The shunt of phase x conducts from the low side's turn-on (the dead
+//! time after the high side's turn-off, `−(1 − d_x⁻)·T/2 + dead`, with the duty `d⁻` of the
+//! period before `t_k`; at `−(1 − d_x⁻)·T/2` when `i_x > 0`, through the low-side diode) to
+//! `h_x` (with the duty `d` in force after `t_k`). Outside that window no current flows
+//! through it. The amplifier is first order with time constant `settle_s`, starting from
+//! zero when the window opens (it has decayed while the high side conducted; pessimistic
+//! for very low duties, whose window covers nearly the whole period anyway) and decaying
+//! towards zero after the window closes: a channel taken at `δ` reads
+//! * `i_x(δ)·(1 − e^(−(δ − t_open)/τ))` inside the window,
+//! * `i_x(h_x)·(1 − e^(−(h_x − t_open)/τ))·e^(−(δ − h_x)/τ)` after it.
+//!
+//! With the gates off the phases are not switched and the currents are read as at `t_k`
+//! (not modelled: the diodes' conduction through the shunts).
+
+use crate::plant::Inverter;
+use regen_fw::fx::Duty;
+use regen_fw::io::Actuation;
+use serde::{Deserialize, Serialize};
+
+/// `[sensors.shunt]`: current sensing as the board does it (off: every phase current read
+/// ideally, at `t_k`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ShuntSampling {
+    /// Sample each channel at its instant of the ADC sequence through its low-side shunt
+    /// window (the model above).
+    pub enabled: bool,
+    /// The shunt amplifier's time constant, s (the IHM08M1's op-amp stage with its output
+    /// filter: ≈ 0.2 µs).
+    pub settle_s: f64,
+    /// ADC kernel clock, Hz (170 MHz / 4).
+    pub adc_clock_hz: f64,
+    /// Sampling time of a current channel, ADC clocks (`board::CURRENT_SAMPLE`).
+    pub sample_clocks: f64,
+    /// Conversion time, ADC clocks (12.5 for 12 bits).
+    pub conversion_clocks: f64,
+}
+
+impl Default for ShuntSampling {
+    fn default() -> Self {
+        ShuntSampling {
+            enabled: false,
+            settle_s: 0.2e-6,
+            adc_clock_hz: 42.5e6,
+            sample_clocks: 12.5,
+            conversion_clocks: 12.5,
+        }
+    }
+}
+
+/// The model's constants for a run.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ShuntPre {
+    pub on: bool,
+    /// Instants of I_a/I_b and of I_c after `t_k`, s.
+    t_ab: f64,
+    t_c: f64,
+    half_ts: f64,
+    dead: f64,
+    inv_tau: f64,
+    inv_l: f64,
+    r: f64,
+}
+
+impl ShuntPre {
+    /// Checks every value (the key, the value and the allowed range in the message).
+    pub fn new(
+        s: &ShuntSampling,
+        inv: &Inverter,
+        r_ohm: f64,
+        l_h: f64,
+        ts: f64,
+    ) -> Result<ShuntPre, String> {
+        let check = |key: &str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(v)
+            } else {
+                Err(format!(
+                    "sensors.shunt.{key} = {v}: must lie in [{lo:e}, {hi:e}]"
+                ))
+            }
+        };
+        let settle = check("settle_s", s.settle_s, 1e-9, 1e-4)?;
+        let f = check("adc_clock_hz", s.adc_clock_hz, 1e5, 1e9)?;
+        let sc = check("sample_clocks", s.sample_clocks, 1.5, 1000.0)?;
+        let cc = check("conversion_clocks", s.conversion_clocks, 1.0, 100.0)?;
+        let t_c = (2.0 * sc + cc) / f;
+        if t_c >= ts / 2.0 {
+            return Err(format!(
+                "sensors.shunt: the I_c instant ({:.3} µs after the trigger, from sample_clocks, conversion_clocks and adc_clock_hz) must lie within half a PWM period ({:.3} µs)",
+                t_c * 1e6,
+                ts / 2.0 * 1e6
+            ));
+        }
+        Ok(ShuntPre {
+            on: s.enabled,
+            t_ab: sc / f,
+            t_c,
+            half_ts: ts / 2.0,
+            dead: inv.dead_time_s.max(0.0),
+            inv_tau: 1.0 / settle,
+            inv_l: 1.0 / l_h,
+            r: r_ohm,
+        })
+    }
+
+    /// The three current channels' readings, A: `i` and `e` the phase currents and emfs at
+    /// `t_k`, `before` and `now` the actuations in force before and after `t_k`.
+    #[inline(never)]
+    pub fn read(
+        &self,
+        i: [f64; 3],
+        e: [f64; 3],
+        v_bus: f64,
+        before: &Actuation,
+        now: &Actuation,
+    ) -> [f64; 3] {
+        if !now.enable {
+            return i;
+        }
+        let duty = |d: Duty| (d.to_bits() as f64 * (1.0 / 32768.0)).min(1.0);
+        let pos: [bool; 3] = core::array::from_fn(|x| i[x] > 0.0);
+        // High side takes over (shunt window closes) at h, the window opened at `open`.
+        let h: [f64; 3] = core::array::from_fn(|x| {
+            (1.0 - duty(now.duties[x])) * self.half_ts + if pos[x] { self.dead } else { 0.0 }
+        });
+        let open: [f64; 3] = core::array::from_fn(|x| {
+            let low_on = if before.enable {
+                -(1.0 - duty(before.duties[x])) * self.half_ts
+            } else {
+                -self.half_ts
+            };
+            low_on + if pos[x] { 0.0 } else { self.dead }
+        });
+        // The terminals' high time up to each instant (all zero while no high side has
+        // taken over, the common case) and its mean.
+        let high = |dl: f64| {
+            let a = h.map(|hy| (dl - hy).max(0.0));
+            let m = (a[0] + a[1] + a[2]) * (1.0 / 3.0);
+            [a[0] - m, a[1] - m, a[2] - m]
+        };
+        let (a_ab, a_c) = (high(self.t_ab), high(self.t_c));
+        let at = |x: usize, dl: f64, ax: f64| {
+            i[x] + (v_bus * ax - dl * (e[x] + self.r * i[x])) * self.inv_l
+        };
+        // 1 − e^(−k), exactly 1 past k = 30 (below 1e-13), without the exponential.
+        let settled = |k: f64| if k > 30.0 { 1.0 } else { 1.0 - (-k).exp() };
+        let read = |x: usize, dl: f64, ax: f64| {
+            let (t0, t1) = (open[x], h[x]);
+            if dl <= t0 {
+                0.0
+            } else if dl <= t1 {
+                at(x, dl, ax) * settled((dl - t0) * self.inv_tau)
+            } else {
+                // Held at the window's end (no high time of its own yet then).
+                let a1 = high(t1)[x];
+                at(x, t1, a1)
+                    * settled((t1 - t0) * self.inv_tau)
+                    * (-(dl - t1) * self.inv_tau).exp()
+            }
+        };
+        [
+            read(0, self.t_ab, a_ab[0]),
+            read(1, self.t_ab, a_ab[1]),
+            read(2, self.t_c, a_c[2]),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn act(d: [f64; 3]) -> Actuation {
+        Actuation {
+            duties: d.map(Duty::from_num),
+            enable: true,
+            brake: false,
+        }
+    }
+
+    fn pre() -> ShuntPre {
+        let inv = Inverter {
+            switched: false,
+            dead_time_s: 0.5e-6,
+        };
+        ShuntPre::new(&ShuntSampling::default(), &inv, 2.41, 6e-3, 50e-6).unwrap()
+    }
+
+    #[test]
+    fn instants_are_the_boards_sequence() {
+        let p = pre();
+        // 12.5 clocks at 42.5 MHz; 37.5 clocks (sample, conversion, sample).
+        assert!((p.t_ab - 12.5 / 42.5e6).abs() < 1e-15);
+        assert!((p.t_c - 37.5 / 42.5e6).abs() < 1e-15);
+    }
+
+    #[test]
+    fn mid_duties_read_the_current_plus_the_zero_vector_ripple() {
+        let p = pre();
+        let (i, e) = ([3.0, -1.0, -2.0], [10.0, -4.0, -6.0]);
+        let a = act([0.5, 0.4, 0.6]);
+        let r = p.read(i, e, 72.0, &a, &a);
+        // All low sides on over both instants: di/dt = −(e + R·i)/L (closed form).
+        for (x, dl) in [(0, p.t_ab), (1, p.t_ab), (2, p.t_c)] {
+            let want = i[x] - dl * (e[x] + 2.41 * i[x]) / 6e-3;
+            assert!((r[x] - want).abs() < 1e-12, "{x}: {} vs {want}", r[x]);
+        }
+    }
+
+    #[test]
+    fn a_closed_window_reads_no_current_and_a_fresh_one_settles() {
+        let p = pre();
+        let i = [3.0, -1.0, -2.0];
+        // Phase c at 0.99 (i_c < 0: no dead time added): its low side is off from 0.25 µs,
+        // before its 0.88 µs instant, so the settled amplifier decays for 0.63 µs. Phase a
+        // was at 0.99 before t_k with i_a > 0 (low-side diode from −0.25 µs): 0.54 µs of
+        // settling at its 0.29 µs instant.
+        let r = p.read(
+            i,
+            [0.0; 3],
+            72.0,
+            &act([0.99, 0.5, 0.2]),
+            &act([0.5, 0.5, 0.99]),
+        );
+        let settle_a = 1.0 - (-(0.25e-6 + p.t_ab) / 0.2e-6).exp();
+        assert!((r[0] / (i[0] * settle_a) - 1.0).abs() < 1e-3, "{r:?}");
+        let h = (1.0 - Duty::from_num(0.99).to_num::<f64>()) * 25e-6; // the U1F15 duty's
+        let keep =
+            (1.0 - (-(h + 0.8 * 25e-6 - 0.5e-6) / 0.2e-6).exp()) * (-(p.t_c - h) / 0.2e-6).exp();
+        assert!((r[2] / (i[2] * keep) - 1.0).abs() < 1e-3, "{r:?} {keep}");
+        assert!(r[2].abs() < 0.1 * i[2].abs());
+    }
+
+    #[test]
+    fn bad_values_are_refused_by_name() {
+        let s = ShuntSampling {
+            settle_s: f64::NAN,
+            ..Default::default()
+        };
+        let e = ShuntPre::new(&s, &Inverter::default(), 1.0, 1e-3, 50e-6).unwrap_err();
+        assert!(
+            e.contains("sensors.shunt.settle_s") && e.contains("NaN"),
+            "{e}"
+        );
+        let s = ShuntSampling {
+            sample_clocks: 1000.0,
+            ..Default::default()
+        };
+        let e = ShuntPre::new(&s, &Inverter::default(), 1.0, 1e-3, 50e-6).unwrap_err();
+        assert!(e.contains("half a PWM period"), "{e}");
+    }
+}
