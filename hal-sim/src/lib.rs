@@ -24,6 +24,7 @@ pub mod lqg;
 pub mod plant;
 pub mod scenario;
 pub mod sim;
+pub mod stage;
 pub mod study;
 
 pub use scenario::Scenario;

@@ -1,0 +1,350 @@
+//! The power stage's hardware protection paths, modelled apart from the firmware: what the
+//! STM32G474's comparators, DACs and TIM1 break inputs do to the gates whatever the firmware
+//! commands, and the pins' state while the MCU is in reset. Design (`docs/protection.md`,
+//! "Hardware paths"):
+//!
+//! * **Phase over-current** (BRK, all six switches off): a comparator per shunt signal with
+//!   its DAC threshold `oc_hw_a`, set from the configuration as the board sets its DAC:
+//!   `1.3·K_e/(p·L)`, above the machine's own short-circuit current `K_e/(p·L)` — BRK has
+//!   priority over BRK2 on the G4, so a lower threshold would open the hardware short above
+//!   the diode onset, where an open bridge rectifies into the bus.
+//! * **Bus over-voltage** (BRK2, idle state chosen by [`Brk2Idle`]): a comparator on its own
+//!   divider (not the ADC's) with threshold `(v_bus_ov + v_abs_max)/2`.
+//! * **Brake chopper** driven by a third comparator with hysteresis (`brake_on_v` /
+//!   `brake_off_v`) through its output pin, independent of the CPU ([`Chopper`]).
+//! * **Digital filter** of the break inputs: a comparator output must stay high `filter_s`
+//!   before the break acts; **arming** only `settle_s` after enable, with the break flags
+//!   cleared then (comparators of this family glitch on enable).
+//! * **Reset**: every gate and the chopper pin low (pulled down): all switches off, no
+//!   chopper, comparators and DACs unconfigured, until the firmware has booted and re-armed.
+//!
+//! Time resolution: the simulator advances one PWM period at a time; a comparator compares the
+//! plant's true bus and phase currents at the end of each period and the break acts from the
+//! next one (latency ≤ one period + `filter_s`, against microseconds on the board: the
+//! model is slower than the hardware, so the fault-injection bounds are conservative).
+//! Glitches shorter than a period ([`Stage::glitch`]) are resolved by their length against
+//! `filter_s`.
+
+use regen_fw::fx::Duty;
+use regen_fw::io::Actuation;
+use regen_fw::Config;
+
+/// What BRK2 (bus over-voltage) does to the gates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Brk2Idle {
+    /// Low sides on, high sides off: an active short circuit in hardware (no power reaches
+    /// the bus, no angle needed; phase current `K_e·ω/|R + jωpL|` < `K_e/(pL)`).
+    Short,
+    /// All off: the body diodes rectify above the onset; only the chopper protects the bus.
+    Open,
+}
+
+/// Who drives the brake chopper.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Chopper {
+    /// The firmware's `Actuation::brake` (stops with the CPU).
+    Firmware,
+    /// A comparator output pin (works while the core is halted, not in reset).
+    Comparator,
+}
+
+/// The stage's rating and the hardware paths' settings.
+#[derive(Clone, Copy, Debug)]
+pub struct StageSpec {
+    /// Absolute maximum of the bus (capacitor/MOSFET rating), V.
+    pub v_abs_max: f64,
+    /// Peak phase current the stage is rated for (stated peak), A.
+    pub i_peak_a: f64,
+    /// Over-current comparator threshold, A.
+    pub oc_hw_a: f64,
+    /// Bus over-voltage comparator threshold, V.
+    pub ov_hw_v: f64,
+    /// Chopper comparator: on above, off below (hysteresis), V.
+    pub brake_on_v: f64,
+    pub brake_off_v: f64,
+    pub brk2: Brk2Idle,
+    pub chopper: Chopper,
+    /// Break inputs' digital filter, s.
+    pub filter_s: f64,
+    /// Comparator/DAC settling before the breaks are armed (flags cleared then), s.
+    pub settle_s: f64,
+    /// From the watchdog's reset to the firmware running again (boot, clocks, peripherals), s.
+    pub boot_s: f64,
+}
+
+impl StageSpec {
+    /// The hardware settings as the board derives them from the firmware's configuration,
+    /// for a stage of absolute maximum `v_abs_max`.
+    pub fn from_config(cfg: &Config, v_abs_max: f64) -> StageSpec {
+        let i_sc = cfg.ke_v_s_per_rad as f64 / (cfg.pole_pairs as f64 * cfg.l_phase_h as f64);
+        let oc = 1.3 * i_sc;
+        StageSpec {
+            v_abs_max,
+            // The short's own current with its full DC offset (2·K_e/(pL)) is the highest
+            // current the stage carries by design; the OC comparator's threshold plus one
+            // period of the steepest rise bounds everything else.
+            i_peak_a: (2.0 * i_sc).max(oc),
+            oc_hw_a: oc,
+            ov_hw_v: 0.5 * (cfg.v_bus_ov as f64 + v_abs_max),
+            brake_on_v: cfg.brake_on_v as f64,
+            brake_off_v: cfg.brake_off_v as f64,
+            brk2: Brk2Idle::Short,
+            chopper: Chopper::Comparator,
+            filter_s: 0.75e-6,
+            settle_s: 10e-6,
+            boot_s: 5e-3,
+        }
+    }
+}
+
+/// The MCU as the stage sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Cpu {
+    Running,
+    /// The core stopped (lockup, debugger): the timer keeps the last compare values, the
+    /// comparators and breaks keep working.
+    Halted,
+    /// In reset or booting until `until_s`: pins at their reset state, nothing armed.
+    Reset {
+        until_s: f64,
+    },
+}
+
+/// The stage's state.
+#[derive(Clone, Debug)]
+pub struct Stage {
+    pub spec: StageSpec,
+    pub cpu: Cpu,
+    /// Break inputs armed (after settling, flags cleared).
+    pub armed: bool,
+    /// Latched break events (cleared only by the firmware re-enabling the outputs).
+    pub brk: bool,
+    pub brk2: bool,
+    pub chopper_on: bool,
+    /// Time the breaks were enabled (arming `settle_s` later).
+    enabled_at: f64,
+    /// Pending output glitch on a break comparator: its length, s, and whether it is on the
+    /// bus comparator (BRK2) or a phase comparator (BRK).
+    glitch: Option<(f64, bool)>,
+    /// Multiplier on the DAC thresholds (a wrong DAC code: fault injection).
+    pub dac_scale: f64,
+    /// The last actuation the firmware gave the timer (held while the core is halted).
+    last: Actuation,
+    /// Time of the first break action, s.
+    pub first_break_s: Option<f64>,
+}
+
+impl Stage {
+    /// The stage as the firmware leaves it after power-up at time `t`: comparators and DACs
+    /// enabled, the breaks armed `settle_s` later.
+    pub fn new(spec: StageSpec, t: f64) -> Stage {
+        Stage {
+            spec,
+            cpu: Cpu::Running,
+            armed: false,
+            brk: false,
+            brk2: false,
+            chopper_on: false,
+            enabled_at: t,
+            glitch: None,
+            dac_scale: 1.0,
+            last: Actuation::OFF,
+            first_break_s: None,
+        }
+    }
+
+    /// A comparator output pulse of `len_s` (enable transient, ringing); `bus` picks the bus
+    /// comparator, else a phase comparator.
+    pub fn glitch(&mut self, len_s: f64, bus: bool) {
+        self.glitch = Some((len_s, bus));
+    }
+
+    /// The core stops now.
+    pub fn halt(&mut self) {
+        if self.cpu == Cpu::Running {
+            self.cpu = Cpu::Halted;
+        }
+    }
+
+    /// The watchdog resets the MCU at `t`: pins to their reset state until `t + boot_s`.
+    pub fn reset(&mut self, t: f64) {
+        self.cpu = Cpu::Reset {
+            until_s: t + self.spec.boot_s,
+        };
+        self.armed = false;
+        self.brk = false;
+        self.brk2 = false;
+        self.chopper_on = false;
+        self.glitch = None;
+    }
+
+    /// Whether the core runs the firmware this period (at time `t`). Ends a reset whose boot
+    /// time has passed: the caller then constructs a fresh controller (power-up), and the
+    /// breaks are enabled again (armed `settle_s` later).
+    pub fn cpu_runs(&mut self, t: f64) -> bool {
+        if let Cpu::Reset { until_s } = self.cpu {
+            if t >= until_s {
+                self.cpu = Cpu::Running;
+                self.enabled_at = t;
+                return true;
+            }
+            return false;
+        }
+        self.cpu == Cpu::Running
+    }
+
+    /// Whether a reset has just ended (the caller must power the controller up).
+    pub fn in_reset(&self) -> bool {
+        matches!(self.cpu, Cpu::Reset { .. })
+    }
+
+    /// The comparators see the plant's true bus `v_bus` and phase currents `i` at time `t`
+    /// (end of a period); latches the breaks and sets the chopper.
+    pub fn observe(&mut self, t: f64, v_bus: f64, i: [f64; 3]) {
+        if self.in_reset() {
+            return;
+        }
+        let s = &self.spec;
+        // Chopper comparator (not a break: no filter; its own hysteresis).
+        let (on, off) = (
+            s.brake_on_v * self.dac_scale,
+            s.brake_off_v * self.dac_scale,
+        );
+        self.chopper_on = v_bus > if self.chopper_on { off } else { on };
+        if !self.armed && t >= self.enabled_at + s.settle_s {
+            // Armed after settling, with the flags set by the enable transient cleared.
+            self.armed = true;
+            self.glitch = None;
+        }
+        let ov = v_bus > s.ov_hw_v * self.dac_scale;
+        let imax = i.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let oc = imax > s.oc_hw_a * self.dac_scale;
+        // A real crossing lasts a whole period (≫ filter_s); a glitch only its length.
+        let (g_oc, g_ov) = match self.glitch.take() {
+            Some((len, bus)) if len >= s.filter_s => (!bus, bus),
+            _ => (false, false),
+        };
+        if self.armed {
+            if (oc || g_oc) && !self.brk {
+                self.brk = true;
+                self.first_break_s.get_or_insert(t);
+            }
+            if (ov || g_ov) && !self.brk2 {
+                self.brk2 = true;
+                self.first_break_s.get_or_insert(t);
+            }
+        }
+    }
+
+    /// What reaches the gates in the next period, from the firmware's actuation `fw`
+    /// (ignored unless the core runs): reset pins, then the breaks (BRK over BRK2), then the
+    /// chopper.
+    pub fn gate(&mut self, fw: &Actuation) -> Actuation {
+        let mut out = match self.cpu {
+            Cpu::Running => {
+                self.last = *fw;
+                *fw
+            }
+            Cpu::Halted => self.last,
+            Cpu::Reset { .. } => return Actuation::OFF,
+        };
+        if self.brk {
+            out.enable = false;
+        } else if self.brk2 {
+            match self.spec.brk2 {
+                Brk2Idle::Short => {
+                    out.enable = true;
+                    out.duties = [Duty::ZERO; 3];
+                }
+                Brk2Idle::Open => out.enable = false,
+            }
+        }
+        if self.spec.chopper == Chopper::Comparator {
+            out.brake = self.chopper_on;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> StageSpec {
+        StageSpec::from_config(&Config::default(), 100.0)
+    }
+
+    #[test]
+    fn thresholds_follow_the_configuration() {
+        let c = Config::default();
+        let s = spec();
+        let i_sc = c.ke_v_s_per_rad as f64 / (c.pole_pairs as f64 * c.l_phase_h as f64);
+        assert!((s.oc_hw_a - 1.3 * i_sc).abs() < 1e-9);
+        assert!((s.ov_hw_v - 0.5 * (c.v_bus_ov as f64 + 100.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn breaks_act_whatever_the_firmware_commands() {
+        let s = spec();
+        let run = Actuation {
+            enable: true,
+            ..Actuation::OFF
+        };
+        let mut st = Stage::new(s, 0.0);
+        st.observe(1e-3, s.ov_hw_v + 1.0, [0.0; 3]);
+        let g = st.gate(&run);
+        assert!(g.enable && g.duties == [Duty::ZERO; 3], "BRK2 short");
+        st.observe(2e-3, 0.0, [s.oc_hw_a + 1.0, 0.0, 0.0]);
+        assert!(!st.gate(&run).enable, "BRK over BRK2: open");
+        // Latched: the cause gone, still off.
+        st.observe(3e-3, 0.0, [0.0; 3]);
+        assert!(!st.gate(&run).enable);
+    }
+
+    #[test]
+    fn filter_and_arming_reject_glitches() {
+        let s = spec();
+        let run = Actuation {
+            enable: true,
+            ..Actuation::OFF
+        };
+        // A long enable transient before arming: cleared at arming.
+        let mut st = Stage::new(s, 0.0);
+        st.glitch(5e-6, true);
+        st.observe(s.settle_s * 0.5, 0.0, [0.0; 3]);
+        st.observe(1e-3, 0.0, [0.0; 3]);
+        assert!(!st.brk2 && st.gate(&run).duties != [Duty::ZERO; 3]);
+        // Armed: a pulse shorter than the filter is ignored, a longer one trips.
+        st.glitch(0.5 * s.filter_s, true);
+        st.observe(2e-3, 0.0, [0.0; 3]);
+        assert!(!st.brk2);
+        st.glitch(2.0 * s.filter_s, true);
+        st.observe(3e-3, 0.0, [0.0; 3]);
+        assert!(st.brk2);
+    }
+
+    #[test]
+    fn halted_core_keeps_its_last_output_and_reset_opens_everything() {
+        let s = spec();
+        let run = Actuation {
+            enable: true,
+            brake: true,
+            ..Actuation::OFF
+        };
+        let mut st = Stage::new(s, 0.0);
+        st.gate(&run);
+        st.halt();
+        assert!(st.gate(&Actuation::OFF).enable, "timer keeps running");
+        st.observe(1e-3, s.brake_on_v + 1.0, [0.0; 3]);
+        assert!(
+            st.gate(&Actuation::OFF).brake,
+            "chopper from its comparator"
+        );
+        st.reset(2e-3);
+        st.observe(2.5e-3, s.v_abs_max, [0.0; 3]);
+        let g = st.gate(&run);
+        assert!(!g.enable && !g.brake, "reset: all off, nothing armed");
+        assert!(!st.cpu_runs(2e-3 + 0.5 * s.boot_s));
+        assert!(st.cpu_runs(2e-3 + s.boot_s));
+    }
+}
