@@ -279,16 +279,17 @@ impl Controller {
         self.prot.rezero();
     }
 
-    /// Latch `f` (with a snapshot of `t`) and go to its safe state. Open dominates: once a
-    /// fault has opened the phases, a later fault never re-enables the gates.
+    /// Latch `f` (with a snapshot of `t`) and go to the safe state `protect::next_mode`
+    /// decides (open dominates, with its stated exceptions above the diode onset).
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
         self.prot.latch(f, self.mode, t);
-        let open = self.fault.is_some() && self.mode == Mode::Idle;
+        let onset = crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>());
+        let mode = crate::protect::next_mode(self.fault.is_some(), self.mode, f, onset);
         if self.fault.is_none() {
             self.fault = Some(f);
         }
-        self.mode = if open { Mode::Idle } else { f.safe_mode() };
+        self.mode = mode;
         self.pi.reset();
         self.refresh_now();
     }
@@ -299,6 +300,8 @@ impl Controller {
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
         let f = if over_current {
             Fault::OverCurrent
+        } else if over_voltage && s.v_bus >= 4095 {
+            Fault::BusSensor
         } else if over_voltage {
             Fault::BusOverVoltage
         } else if self.enc.implausible {

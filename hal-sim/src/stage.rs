@@ -44,8 +44,11 @@ pub enum Brk2Idle {
 pub enum Chopper {
     /// The firmware's `Actuation::brake` (stops with the CPU).
     Firmware,
-    /// A comparator output pin (works while the core is halted, not in reset).
+    /// A comparator output pin of the MCU (works while the core is halted, not in reset),
+    /// OR-ed with the firmware's pin.
     Comparator,
+    /// A comparator outside the MCU (works in reset too), OR-ed with the firmware's pin.
+    External,
 }
 
 /// The stage's rating and the hardware paths' settings.
@@ -70,6 +73,8 @@ pub struct StageSpec {
     pub settle_s: f64,
     /// From the watchdog's reset to the firmware running again (boot, clocks, peripherals), s.
     pub boot_s: f64,
+    /// Independent watchdog timeout: a core stopped this long is reset, s.
+    pub iwdg_s: f64,
 }
 
 impl StageSpec {
@@ -89,10 +94,11 @@ impl StageSpec {
             brake_on_v: cfg.brake_on_v as f64,
             brake_off_v: cfg.brake_off_v as f64,
             brk2: Brk2Idle::Short,
-            chopper: Chopper::Comparator,
+            chopper: Chopper::External,
             filter_s: 0.75e-6,
             settle_s: 10e-6,
             boot_s: 5e-3,
+            iwdg_s: 5e-3,
         }
     }
 }
@@ -201,16 +207,20 @@ impl Stage {
     /// The comparators see the plant's true bus `v_bus` and phase currents `i` at time `t`
     /// (end of a period); latches the breaks and sets the chopper.
     pub fn observe(&mut self, t: f64, v_bus: f64, i: [f64; 3]) {
+        let s = &self.spec;
+        // Chopper comparator (not a break: no filter; its own hysteresis). An MCU comparator
+        // is dead in reset, an external one is not; only the MCU's has a DAC.
+        let scale = if s.chopper == Chopper::External {
+            1.0
+        } else {
+            self.dac_scale
+        };
+        let (on, off) = (s.brake_on_v * scale, s.brake_off_v * scale);
+        let live = s.chopper == Chopper::External || !self.in_reset();
+        self.chopper_on = live && v_bus > if self.chopper_on { off } else { on };
         if self.in_reset() {
             return;
         }
-        let s = &self.spec;
-        // Chopper comparator (not a break: no filter; its own hysteresis).
-        let (on, off) = (
-            s.brake_on_v * self.dac_scale,
-            s.brake_off_v * self.dac_scale,
-        );
-        self.chopper_on = v_bus > if self.chopper_on { off } else { on };
         if !self.armed && t >= self.enabled_at + s.settle_s {
             // Armed after settling, with the flags set by the enable transient cleared.
             self.armed = true;
@@ -246,8 +256,12 @@ impl Stage {
                 *fw
             }
             Cpu::Halted => self.last,
-            Cpu::Reset { .. } => return Actuation::OFF,
+            Cpu::Reset { .. } => Actuation::OFF,
         };
+        if self.in_reset() {
+            out.brake = self.spec.chopper == Chopper::External && self.chopper_on;
+            return out;
+        }
         if self.brk {
             out.enable = false;
         } else if self.brk2 {
@@ -259,8 +273,8 @@ impl Stage {
                 Brk2Idle::Open => out.enable = false,
             }
         }
-        if self.spec.chopper == Chopper::Comparator {
-            out.brake = self.chopper_on;
+        if self.spec.chopper != Chopper::Firmware {
+            out.brake |= self.chopper_on;
         }
         out
     }
@@ -343,7 +357,11 @@ mod tests {
         st.reset(2e-3);
         st.observe(2.5e-3, s.v_abs_max, [0.0; 3]);
         let g = st.gate(&run);
-        assert!(!g.enable && !g.brake, "reset: all off, nothing armed");
+        assert!(!g.enable && !st.brk2, "reset: all off, nothing armed");
+        assert!(g.brake, "the external chopper works in reset");
+        st.spec.chopper = Chopper::Comparator;
+        st.observe(2.6e-3, s.v_abs_max, [0.0; 3]);
+        assert!(!st.gate(&run).brake, "the MCU's comparator does not");
         assert!(!st.cpu_runs(2e-3 + 0.5 * s.boot_s));
         assert!(st.cpu_runs(2e-3 + s.boot_s));
     }
