@@ -284,7 +284,17 @@ impl Controller {
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
         self.prot.latch(f, self.mode, t);
-        let onset = crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>());
+        // With the encoder or the speed in doubt the bus decides: over-voltage while open
+        // is the rectification itself (above the onset); nothing else is taken as above it.
+        let doubt = |g: Fault| g.speed_untrusted();
+        let untrusted = doubt(f)
+            || self.fault.is_some_and(doubt)
+            || self.prot.record().is_some_and(|r| r.later().any(doubt));
+        let onset = if untrusted {
+            f == Fault::BusOverVoltage
+        } else {
+            crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>())
+        };
         let mode = crate::protect::next_mode(self.fault.is_some(), self.mode, f, onset);
         if self.fault.is_none() {
             self.fault = Some(f);
@@ -294,16 +304,31 @@ impl Controller {
         self.refresh_now();
     }
 
+    /// Whether a bus over-voltage is latched (first or later fault).
+    fn ov_latched(&self) -> bool {
+        self.fault == Some(Fault::BusOverVoltage)
+            || self
+                .prot
+                .record()
+                .is_some_and(|r| r.later().any(|g| g == Fault::BusOverVoltage))
+    }
+
     /// Which fault, in order of precedence, once the step has seen that one occurred.
     #[cold]
     #[inline(never)]
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
+        let bus = if !over_voltage {
+            None
+        } else if s.v_bus >= 4095 && !self.ov_latched() {
+            // At the rail without having passed the trip below it: a false reading.
+            Some(Fault::BusSensor)
+        } else {
+            Some(Fault::BusOverVoltage)
+        };
         let f = if over_current {
             Fault::OverCurrent
-        } else if over_voltage && s.v_bus >= 4095 {
-            Fault::BusSensor
-        } else if over_voltage {
-            Fault::BusOverVoltage
+        } else if let Some(b) = bus {
+            b
         } else if self.enc.implausible {
             Fault::EncoderImplausible
         } else if self.mode == Mode::Run {
@@ -320,6 +345,11 @@ impl Controller {
             ..self.telemetry()
         };
         self.trip(f, &t);
+        // An over-current must not hide an over-voltage in the same period (open above the
+        // onset, the diode currents pass the trip while they charge the bus).
+        if let (true, Some(b)) = (over_current, bus) {
+            self.trip(b, &t);
+        }
     }
 
     /// One current-loop period.

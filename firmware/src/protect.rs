@@ -160,6 +160,14 @@ impl Fault {
         }
     }
 
+    /// The measured speed cannot be trusted once this fault is latched.
+    pub fn speed_untrusted(self) -> bool {
+        matches!(
+            self,
+            Fault::EncoderImplausible | Fault::EncoderLoss | Fault::SpeedImplausible
+        )
+    }
+
     fn bit(self) -> u16 {
         1 << self.code()
     }
@@ -565,16 +573,17 @@ pub fn above_onset(cfg: &Config, omega_m: f32) -> bool {
 /// dominates a later fault, except that
 /// * over-voltage while open above the onset shorts (the open bridge is what charges the
 ///   bus; the short stops every watt and needs no angle);
-/// * over-current while shorted above the onset keeps the short (the short's own current,
-///   bounded by `K_e/(p·L)` under the stage's hardware trip; opening would rectify into the
-///   bus); below the onset it opens;
+/// * nothing opens a short above the onset (opening would rectify into the bus): not an
+///   over-current (the short's own current, bounded by `K_e/(p·L)`, under the stage's
+///   hardware trip), nor the current-sensor fault that current causes when it passes the
+///   ADC's range, nor the force or I²t the short costs; below the onset they open;
 /// * a bus reading at the rail opens, from any state: a false over-voltage must not hold a
 ///   short (a true one is caught by the stage's own comparator on its own divider).
 pub fn next_mode(latched: bool, mode: Mode, f: Fault, above_onset: bool) -> Mode {
     match (f, mode) {
         (Fault::BusSensor, _) => Mode::Idle,
         (Fault::BusOverVoltage, Mode::Idle) if above_onset => Mode::Short,
-        (Fault::OverCurrent, Mode::Short) if above_onset => Mode::Short,
+        (_, Mode::Short) if above_onset => Mode::Short,
         _ if latched && mode == Mode::Idle => Mode::Idle,
         _ => f.safe_mode(),
     }
@@ -619,7 +628,15 @@ mod tests {
             next_mode(true, Mode::Idle, BusOverVoltage, true),
             Mode::Short
         );
-        assert_eq!(next_mode(true, Mode::Short, OverCurrent, true), Mode::Short);
+        for f in [
+            OverCurrent,
+            CurrentSensor,
+            OverForce,
+            MachineI2t,
+            BusUnderVoltage,
+        ] {
+            assert_eq!(next_mode(true, Mode::Short, f, true), Mode::Short);
+        }
         assert_eq!(next_mode(true, Mode::Idle, EncoderLoss, true), Mode::Idle);
         // A rail reading never holds a short.
         for m in [Mode::Run, Mode::Short, Mode::Idle] {
