@@ -656,3 +656,44 @@ fn stage_faults() {
 fn stage_faults_long() {
     suite(seeds(1000));
 }
+
+// ---------------------------------------------------------------------------------------
+// The board's voltage class: its scenario family.
+
+/// The `board-72v-*` scenarios load, run without a fault, and keep the bus under the 100 V
+/// stage. Prints, for each, the peak speed against the diode onset (0.112 m/s), the share
+/// of periods the current loop spends at its voltage limit and the mean inverter power over
+/// the run's last part: what fits below the bus and where the emulated load clips.
+#[test]
+fn board_72v_scenarios() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
+    for name in [
+        "board-72v-force-range-1ohm",
+        "board-72v-rise-time",
+        "board-72v-tmd-306",
+    ] {
+        let sc = Scenario::from_file(&dir.join(format!("{name}.toml"))).expect("scenario");
+        let onset = C72.onset(&sc);
+        let mut sim = sc.build().expect("build");
+        let n = (sc.duration_s / sim.period()).round() as u64;
+        let (mut v_pk, mut bus_pk, mut sat, mut p, mut np) = (0.0f64, 0.0f64, 0u64, 0.0, 0u64);
+        for _ in 0..n {
+            sim.step();
+            v_pk = v_pk.max(sim.motion().1.abs());
+            bus_pk = bus_pk.max(sim.v_bus());
+            sat += sim.controller().telemetry().v_saturated as u64;
+            if sim.time() >= sc.settle_s {
+                p += sim.p_inverter();
+                np += 1;
+            }
+        }
+        println!(
+            "{name}: peak speed {v_pk:.3} m/s (onset {onset:.3}), voltage-limited {:.1} % of periods, bus peak {bus_pk:.1} V, mean inverter power {:.2} W, fault {:?}",
+            100.0 * sat as f64 / n as f64,
+            p / np.max(1) as f64,
+            sim.controller().fault().map(|f| f.name())
+        );
+        assert!(bus_pk < C72.v_abs, "{name}: bus {bus_pk:.1} V");
+        assert!(sim.controller().fault().is_none(), "{name}: a fault");
+    }
+}
