@@ -434,11 +434,13 @@ fn unsafe_at_end(fs: &FaultSim, ov: f64, rising: f64) -> Option<String> {
     if st.cpu == Cpu::Halted {
         return Some("core halted, PWM running".into());
     }
-    // Above the trip and still charging over the last 20 ms (with no sink a charged bus
-    // keeps its voltage: that alone is not a state the drive holds).
+    // Above the trip and still charging over the last 5 ms (with no sink a charged bus keeps
+    // its voltage: that alone is not a state the drive holds; a short opened by an
+    // over-current below the onset dumps the winding's energy, ≤ 3/2·L·I_sc²/(C·V) ≈ 14 V
+    // at 420 V, into the bus once: over in a few periods).
     if fs.sim.v_bus() > ov && rising > 0.5 {
         return Some(format!(
-            "bus {:.1} V above the trip at the end, rising {rising:.1} V in 20 ms",
+            "bus {:.1} V above the trip at the end, rising {rising:.1} V in 5 ms",
             fs.sim.v_bus()
         ));
     }
@@ -456,12 +458,18 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
     let ts = sim.period();
     let i_stated = 2.0 * i_sc(&k.sc);
     let mut fs = FaultSim::new(sim, k.inject, k.at_s, seed).with_stage(spec);
-    let n = (k.duration_s / ts).round() as u64;
+    // The nominal end, extended (by up to 0.3 s) to 50 ms after the first protective
+    // action, so the end state is judged after the transients it starts.
+    let n = ((k.duration_s + 0.3) / ts).round() as u64;
     let mut o = Outcome::default();
     let mut rebooted = false;
     let mut started = false;
     let mut v_hist = std::collections::VecDeque::new();
     for _ in 0..n {
+        let t_now = fs.sim.time();
+        if t_now >= k.duration_s && o.t_safe.is_none_or(|t| t_now >= k.at_s + t + 0.05) {
+            break;
+        }
         if !started && fs.sim.time() >= 0.05 {
             started = true;
             fs.sim
@@ -477,14 +485,14 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
             }
         }
         v_hist.push_back(fs.sim.v_bus());
-        if v_hist.len() > 400 {
+        if v_hist.len() > 100 {
             v_hist.pop_front();
         }
         let vb = fs.sim.v_bus();
         let i = fs.sim.currents().iter().fold(0.0f64, |m, x| m.max(x.abs()));
         o.v_peak = o.v_peak.max(vb);
         o.i_peak = o.i_peak.max(i);
-        if !(vb < c.v_abs) {
+        if vb.is_nan() || vb >= c.v_abs {
             return Err(format!("bus {vb:.1} V ≥ {} V at t = {t:.4}", c.v_abs));
         }
         if i > i_stated {
@@ -587,7 +595,11 @@ fn suite(seeds: u64) {
             c.name, c.v_bus, c.ov, c.v_abs
         );
         println!("  kind                      runs  pass  worst t_safe      bus peak  I peak");
-        for kind in KINDS {
+        let only = std::env::var("STAGE_KIND").ok();
+        for kind in KINDS
+            .iter()
+            .filter(|k| only.as_deref().is_none_or(|o| o == **k))
+        {
             let res: Vec<(u64, Result<Outcome, String>)> = (0..seeds)
                 .into_par_iter()
                 .map(|s| {
