@@ -3,18 +3,26 @@
 //! commands, and the pins' state while the MCU is in reset. Design (`docs/protection.md`,
 //! "Hardware paths"):
 //!
-//! * **Phase over-current** (BRK, all six switches off): a comparator per shunt signal with
-//!   its DAC threshold `oc_hw_a`, set from the configuration as the board sets its DAC:
-//!   `1.3·K_e/(p·L)`, above the machine's own short-circuit current `K_e/(p·L)` — BRK has
-//!   priority over BRK2 on the G4, so a lower threshold would open the hardware short above
-//!   the diode onset, where an open bridge rectifies into the bus.
-//! * **Bus over-voltage** (BRK2, idle state chosen by [`Brk2Idle`]): a comparator on its own
-//!   divider (not the ADC's) with threshold `(v_bus_ov + v_abs_max)/2`.
-//! * **Brake chopper** driven by a third comparator with hysteresis (`brake_on_v` /
-//!   `brake_off_v`) through its output pin, independent of the CPU ([`Chopper`]).
-//! * **Digital filter** of the break inputs: a comparator output must stay high `filter_s`
-//!   before the break acts; **arming** only `settle_s` after enable, with the break flags
-//!   cleared then (comparators of this family glitch on enable).
+//! The settings are the `board` helper's (`/work/notes/stage-design.md`,
+//! `regen_fw::io::HwThresholds` on that branch):
+//!
+//! * **Phase over-current** (BRK, all six switches off): one comparator per phase, one-sided
+//!   (a phase current below `−oc_hw_a`: the direction a shoot-through or a phase-to-DC+ short
+//!   drives through a low-side shunt; Σi = 0, so a phase above `+2·oc_hw_a` trips another),
+//!   `oc_hw_a = min(1.1·i_trip_a, 0.95·adc_zero_code·amps_per_count)` (22 A on the board).
+//!   The low-side shunt's conduction window is not modelled (the comparator sees the true
+//!   current at every period's end).
+//! * **Bus over-voltage** (BRK2): `(v_bus_ov + v_abs_max)/2`; the G4's BRK2 can only force
+//!   all six off ([`Brk2Idle::Open`], the board's choice); [`Brk2Idle::Short`] (low sides on,
+//!   not realisable through BRK2 on the G4) is kept as a variant for comparison.
+//! * **Brake chopper** driven by a comparator with hysteresis (`brake_on_v` /
+//!   `brake_off_v`) through its output pin (COMP7 → PC8 on the board), OR-ed with the
+//!   firmware's command, independent of the CPU but dead in reset ([`Chopper::Comparator`]);
+//!   [`Chopper::External`] is the clamp outside the MCU the board needs for the reset gap.
+//! * **Digital filters** of the break inputs: a comparator output must stay high `filter_s`
+//!   (BRK, 0.16 µs) or `filter2_s` (BRK2, 1.5 µs) before the break acts; **arming** only
+//!   `settle_s` after enable, with the break flags cleared then (comparators of this family
+//!   glitch on enable).
 //! * **Reset**: every gate and the chopper pin low (pulled down): all switches off, no
 //!   chopper, comparators and DACs unconfigured, until the firmware has booted and re-armed.
 //!
@@ -67,8 +75,10 @@ pub struct StageSpec {
     pub brake_off_v: f64,
     pub brk2: Brk2Idle,
     pub chopper: Chopper,
-    /// Break inputs' digital filter, s.
+    /// BRK's digital filter (+ comparator delay), s.
     pub filter_s: f64,
+    /// BRK2's digital filter, s.
+    pub filter2_s: f64,
     /// Comparator/DAC settling before the breaks are armed (flags cleared then), s.
     pub settle_s: f64,
     /// From the watchdog's reset to the firmware running again (boot, clocks, peripherals), s.
@@ -82,7 +92,8 @@ impl StageSpec {
     /// for a stage of absolute maximum `v_abs_max`.
     pub fn from_config(cfg: &Config, v_abs_max: f64) -> StageSpec {
         let i_sc = cfg.ke_v_s_per_rad as f64 / (cfg.pole_pairs as f64 * cfg.l_phase_h as f64);
-        let oc = 1.3 * i_sc;
+        let range = cfg.adc_zero_code as f64 * cfg.amps_per_count as f64;
+        let oc = (1.1 * cfg.i_trip_a as f64).min(0.95 * range);
         StageSpec {
             v_abs_max,
             // The short's own current with its full DC offset (2·K_e/(pL)) is the highest
@@ -93,10 +104,11 @@ impl StageSpec {
             ov_hw_v: 0.5 * (cfg.v_bus_ov as f64 + v_abs_max),
             brake_on_v: cfg.brake_on_v as f64,
             brake_off_v: cfg.brake_off_v as f64,
-            brk2: Brk2Idle::Short,
-            chopper: Chopper::External,
-            filter_s: 0.75e-6,
-            settle_s: 10e-6,
+            brk2: Brk2Idle::Open,
+            chopper: Chopper::Comparator,
+            filter_s: 0.16e-6,
+            filter2_s: 1.5e-6,
+            settle_s: 40e-6,
             boot_s: 5e-3,
             iwdg_s: 5e-3,
         }
@@ -227,12 +239,13 @@ impl Stage {
             self.glitch = None;
         }
         let ov = v_bus > s.ov_hw_v * self.dac_scale;
-        let imax = i.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let oc = imax > s.oc_hw_a * self.dac_scale;
-        // A real crossing lasts a whole period (≫ filter_s); a glitch only its length.
+        // One-sided: a phase current below −oc_hw_a.
+        let oc = i.iter().any(|x| -x > s.oc_hw_a * self.dac_scale);
+        // A real crossing lasts a whole period (≫ the filters); a glitch only its length.
         let (g_oc, g_ov) = match self.glitch.take() {
-            Some((len, bus)) if len >= s.filter_s => (!bus, bus),
-            _ => (false, false),
+            Some((len, true)) => (false, len >= s.filter2_s),
+            Some((len, false)) => (len >= s.filter_s, false),
+            None => (false, false),
         };
         if self.armed {
             if (oc || g_oc) && !self.brk {
@@ -292,8 +305,9 @@ mod tests {
     fn thresholds_follow_the_configuration() {
         let c = Config::default();
         let s = spec();
-        let i_sc = c.ke_v_s_per_rad as f64 / (c.pole_pairs as f64 * c.l_phase_h as f64);
-        assert!((s.oc_hw_a - 1.3 * i_sc).abs() < 1e-9);
+        let range = c.adc_zero_code as f64 * c.amps_per_count as f64;
+        assert!((s.oc_hw_a - (1.1 * c.i_trip_a as f64).min(0.95 * range)).abs() < 1e-9);
+        assert!((s.oc_hw_a - 22.0).abs() < 1e-4, "the board's 22 A");
         assert!((s.ov_hw_v - 0.5 * (c.v_bus_ov as f64 + 100.0)).abs() < 1e-9);
     }
 
@@ -304,11 +318,19 @@ mod tests {
             enable: true,
             ..Actuation::OFF
         };
-        let mut st = Stage::new(s, 0.0);
+        let mut st = Stage::new(
+            StageSpec {
+                brk2: Brk2Idle::Short,
+                ..s
+            },
+            0.0,
+        );
         st.observe(1e-3, s.ov_hw_v + 1.0, [0.0; 3]);
         let g = st.gate(&run);
         assert!(g.enable && g.duties == [Duty::ZERO; 3], "BRK2 short");
-        st.observe(2e-3, 0.0, [s.oc_hw_a + 1.0, 0.0, 0.0]);
+        st.observe(1.5e-3, 0.0, [s.oc_hw_a + 1.0, 0.0, 0.0]);
+        assert!(!st.brk, "one-sided: a positive current does not trip");
+        st.observe(2e-3, 0.0, [-s.oc_hw_a - 1.0, 0.0, 0.0]);
         assert!(!st.gate(&run).enable, "BRK over BRK2: open");
         // Latched: the cause gone, still off.
         st.observe(3e-3, 0.0, [0.0; 3]);
@@ -329,10 +351,10 @@ mod tests {
         st.observe(1e-3, 0.0, [0.0; 3]);
         assert!(!st.brk2 && st.gate(&run).duties != [Duty::ZERO; 3]);
         // Armed: a pulse shorter than the filter is ignored, a longer one trips.
-        st.glitch(0.5 * s.filter_s, true);
+        st.glitch(0.5 * s.filter2_s, true);
         st.observe(2e-3, 0.0, [0.0; 3]);
         assert!(!st.brk2);
-        st.glitch(2.0 * s.filter_s, true);
+        st.glitch(2.0 * s.filter2_s, true);
         st.observe(3e-3, 0.0, [0.0; 3]);
         assert!(st.brk2);
     }
@@ -358,10 +380,10 @@ mod tests {
         st.observe(2.5e-3, s.v_abs_max, [0.0; 3]);
         let g = st.gate(&run);
         assert!(!g.enable && !st.brk2, "reset: all off, nothing armed");
-        assert!(g.brake, "the external chopper works in reset");
-        st.spec.chopper = Chopper::Comparator;
+        assert!(!g.brake, "the MCU's comparator is dead in reset");
+        st.spec.chopper = Chopper::External;
         st.observe(2.6e-3, s.v_abs_max, [0.0; 3]);
-        assert!(!st.gate(&run).brake, "the MCU's comparator does not");
+        assert!(st.gate(&run).brake, "an external one is not");
         assert!(!st.cpu_runs(2e-3 + 0.5 * s.boot_s));
         assert!(st.cpu_runs(2e-3 + s.boot_s));
     }

@@ -349,12 +349,22 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
         "watchdog_reset" => Inject::WatchdogReset {
             timeout_s: rng.uni(1e-3, 10e-3),
         },
-        "comparator_false_trip" => Inject::ComparatorFalseTrip {
-            enable_s: rng.uni(1e-6, 8e-6),
-            ring_s: rng.uni(0.05e-6, 0.6e-6),
-            ring_every: 1 + (rng.next() % 20) as u32,
-            bus: rng.next() & 1 == 0,
-        },
+        // Ringing shorter than each break's filter (assumed: 0.02–0.12 µs on a shunt
+        // amplifier against BRK's 0.16 µs, 0.1–1.2 µs on the bus divider against BRK2's
+        // 1.5 µs); the enable transient (1–8 µs) ends within the arming's settling.
+        "comparator_false_trip" => {
+            let bus = rng.next() & 1 == 0;
+            Inject::ComparatorFalseTrip {
+                enable_s: rng.uni(1e-6, 8e-6),
+                ring_s: if bus {
+                    rng.uni(0.1e-6, 1.2e-6)
+                } else {
+                    rng.uni(0.02e-6, 0.12e-6)
+                },
+                ring_every: 1 + (rng.next() % 20) as u32,
+                bus,
+            }
+        }
         "bus_divider_rail" => Inject::BusSensorRail,
         "bus_divider_open" => Inject::BusSensorOpen,
         "dac_wrong_low" => Inject::DacWrong {
