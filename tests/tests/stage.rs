@@ -719,3 +719,59 @@ fn board_72v_scenarios() {
         assert!(sim.controller().fault().is_none(), "{name}: a fault");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// The chopper alone holds an open bridge at any speed.
+
+/// Gates off (the breaks' state, a halted core after its handler), source lost, the chopper
+/// driven by its comparator through the stage model, the brake resistor sized from the
+/// short-circuit current (`R_b = brake_off_v·p·L/K_e`): the bus stays under the stage's
+/// maximum at every speed up to ω_max, in both classes. With the default 50 Ω it does not
+/// (the sweep prints the first speed it fails at).
+#[test]
+fn chopper_holds_open_bridge_to_omega_max() {
+    for c in [C72, C320] {
+        let sc0 = scenario(&c, constant_speed(0.1, 1.0), 1.0);
+        let lead = sc0.screw.lead_m_per_rad;
+        let w_max = sc0.config().expect("config").omega_max_rad_s as f64;
+        let peak_at = |v: f64, r_b: Option<f64>| {
+            let t_run = 0.3;
+            let mut sc = scenario(&c, constant_speed(v, t_run), 1.0);
+            sc.bus.source_v = None;
+            if let Some(r) = r_b {
+                sc.bus.brake_r_ohm = r;
+            }
+            let mut sim = sc.build().expect("scenario");
+            let spec = StageSpec::from_config(sim.controller().config(), c.v_abs);
+            let mut st = hal_sim::stage::Stage::new(spec, 0.0);
+            st.halt();
+            let n = (t_run / sim.period()).round() as u64;
+            let mut peak = 0.0f64;
+            for _ in 0..n {
+                let _ = sim.take_sample();
+                let out = st.gate(&Actuation::OFF);
+                sim.apply_and_advance(&out);
+                st.observe(sim.time(), sim.v_bus(), sim.currents());
+                peak = peak.max(sim.v_bus());
+            }
+            peak
+        };
+        let speeds: Vec<f64> = (1..=16).map(|k| k as f64 / 16.0 * w_max * lead).collect();
+        let sized: Vec<f64> = speeds.par_iter().map(|&v| peak_at(v, None)).collect();
+        let worst = sized.iter().copied().fold(0.0, f64::max);
+        let fails_50 = speeds
+            .par_iter()
+            .map(|&v| (v, peak_at(v, Some(50.0))))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .find(|p| p.1 >= c.v_abs);
+        println!(
+            "{}: chopper with R_b = {:.2} Ω: worst bus {worst:.1} V up to ω_max (stage {} V); with 50 Ω the bus passes the stage at {:?}",
+            c.name,
+            sc0.bus.brake_r_ohm,
+            c.v_abs,
+            fails_50.map(|p| format!("{:.3} m/s ({:.0} V)", p.0, p.1))
+        );
+        assert!(worst < c.v_abs, "{}: {worst:.1} V", c.name);
+    }
+}
