@@ -286,11 +286,7 @@ impl Controller {
         self.prot.latch(f, self.mode, t);
         // With the encoder or the speed in doubt the bus decides: over-voltage while open
         // is the rectification itself (above the onset); nothing else is taken as above it.
-        let doubt = |g: Fault| g.speed_untrusted();
-        let untrusted = doubt(f)
-            || self.fault.is_some_and(doubt)
-            || self.prot.record().is_some_and(|r| r.later().any(doubt));
-        let onset = if untrusted {
+        let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
             f == Fault::BusOverVoltage
         } else {
             crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>())
@@ -304,13 +300,9 @@ impl Controller {
         self.refresh_now();
     }
 
-    /// Whether a bus over-voltage is latched (first or later fault).
-    fn ov_latched(&self) -> bool {
-        self.fault == Some(Fault::BusOverVoltage)
-            || self
-                .prot
-                .record()
-                .is_some_and(|r| r.later().any(|g| g == Fault::BusOverVoltage))
+    /// The latched faults (first and later) as bits `1 << code`.
+    fn latched_bits(&self) -> u16 {
+        self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
@@ -319,7 +311,7 @@ impl Controller {
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
         let bus = if !over_voltage {
             None
-        } else if s.v_bus >= 4095 && !self.ov_latched() {
+        } else if s.v_bus >= 4095 && self.latched_bits() & 1 << Fault::BusOverVoltage.code() == 0 {
             // At the rail without having passed the trip below it: a false reading.
             Some(Fault::BusSensor)
         } else {

@@ -130,7 +130,7 @@ impl Fault {
             Fault::StrokeLimit => "travel outside x_min_m .. x_max_m",
             Fault::LoopOverrun => "current loop overran its period too often",
             Fault::CurrentSensor => "phase currents do not sum to zero (sensor fault)",
-            Fault::BusSensor => "bus reading at the ADC rail (divider or sensor fault)",
+            Fault::BusSensor => "bus reading at ADC rail",
         }
     }
 
@@ -158,14 +158,6 @@ impl Fault {
             | Fault::SpeedImplausible
             | Fault::StrokeLimit => Mode::Short,
         }
-    }
-
-    /// The measured speed cannot be trusted once this fault is latched.
-    pub fn speed_untrusted(self) -> bool {
-        matches!(
-            self,
-            Fault::EncoderImplausible | Fault::EncoderLoss | Fault::SpeedImplausible
-        )
     }
 
     fn bit(self) -> u16 {
@@ -556,8 +548,9 @@ impl Protection {
             Fault::LoopOverrun => (self.bucket > 0).then_some("overruns still being reported"),
             Fault::CurrentSensor => (self.isum_now || self.isum_count > 0)
                 .then_some("phase currents still do not sum to zero"),
-            Fault::BusSensor => (t.v_bus >= crate::fx::Q::from_num(cfg.volts_per_count * 4095.0))
-                .then_some("bus reading still at the ADC rail"),
+            Fault::BusSensor => {
+                (v >= cfg.volts_per_count * 4095.0).then_some("bus reading at rail")
+            }
         }
     }
 }
@@ -567,6 +560,10 @@ impl Protection {
 pub fn above_onset(cfg: &Config, omega_m: f32) -> bool {
     1.732_050_8 * cfg.ke_v_s_per_rad * abs(omega_m) >= 0.9 * cfg.v_bus_ov
 }
+
+/// Faults after which the measured speed is not trusted (bits `1 << code`): encoder
+/// implausible, encoder loss, speed implausible.
+pub const SPEED_DOUBT: u16 = 1 << 4 | 1 << 7 | 1 << 8;
 
 /// The safe state when fault `f` arrives in `mode` with `latched` faults already latched
 /// (`docs/protection.md`, "The rule"): a fresh fault goes to its own safe state; open
@@ -642,6 +639,10 @@ mod tests {
         for m in [Mode::Run, Mode::Short, Mode::Idle] {
             assert_eq!(next_mode(true, m, BusSensor, true), Mode::Idle);
         }
+        assert_eq!(
+            SPEED_DOUBT,
+            EncoderImplausible.bit() | EncoderLoss.bit() | SpeedImplausible.bit()
+        );
         // The onset: √3·K_e·ω = 0.9·v_bus_ov.
         let c = Config::default();
         let w = 0.9 * c.v_bus_ov / (1.732_050_8 * c.ke_v_s_per_rad);

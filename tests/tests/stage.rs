@@ -809,3 +809,58 @@ fn chopper_holds_open_bridge_to_omega_max() {
         assert!(worst < c.v_abs, "{}: {worst:.1} V", c.name);
     }
 }
+
+/// The reference TMD sweep in the 72 V class (`board-72v-tmd-306.toml`, 1 m/s² at 0.5 Hz):
+/// closed-loop power at each load against the harmonic balance (`analytic::tmd_power`,
+/// which knows no bus). Prints power, the balance's velocity amplitude against the diode
+/// onset, and the ratio; where the balance's velocity stays below 0.9× the onset the loop
+/// must match it; above it the bus clips the emulated load.
+#[test]
+fn board_72v_tmd_sweep() {
+    use hal_sim::analytic::{tmd_power, DampingFormula};
+    use hal_sim::plant::Drive;
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
+    let base = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
+    let onset = C72.onset(&base);
+    let Drive::Structure { structure: st, .. } = base.drive.clone() else {
+        panic!("a structure")
+    };
+    let loads = [30.0, 100.0, 306.0, 1000.0, 3000.0];
+    let rows: Vec<(f64, f64, f64, f64)> = loads
+        .par_iter()
+        .map(|&r| {
+            let mut sc = base.clone();
+            sc.law.r_load_ohm = r;
+            let (p, _) = hal_sim::cli::sweep::average_power(&sc).expect("run");
+            let a = tmd_power(
+                r,
+                &sc.machine,
+                &sc.screw,
+                &st,
+                1.0,
+                0.5,
+                DampingFormula::PerPhasePeak,
+            );
+            (r, p, a.p_load, a.velocity_amp)
+        })
+        .collect();
+    let best = rows
+        .iter()
+        .fold(rows[0], |b, x| if x.1 > b.1 { *x } else { b });
+    for &(r, p, pa, v) in &rows {
+        println!(
+            "72v TMD R_L {r:6.0} Ω: sim {p:7.2} W, harmonic balance {pa:7.2} W ({:+.2} %), HB velocity {v:.3} m/s (onset {onset:.3})",
+            100.0 * (p / pa - 1.0)
+        );
+        // Measured +0.33 % at 30 Ω (the only load of the sweep that fits): bounded at 1 %.
+        // Above the onset the loop is voltage-limited and no longer emulates the resistor
+        // (measured −31 % at 306 Ω, +99 % at 3 kΩ): printed, not judged.
+        if v < 0.9 * onset {
+            assert!((p - pa).abs() < 0.01 * pa, "{r} Ω: {p} W against {pa} W");
+        }
+    }
+    println!(
+        "72v TMD: best simulated load {:.0} Ω, {:.2} W",
+        best.0, best.1
+    );
+}
