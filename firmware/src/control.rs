@@ -328,28 +328,48 @@ impl Controller {
         self.prot.rezero();
     }
 
-    /// Latch `f` (with a snapshot of `t`) and go to its safe state. Open dominates: once a
-    /// fault has opened the phases, a later fault never re-enables the gates.
+    /// Latch `f` (with a snapshot of `t`) and go to the safe state `protect::next_mode`
+    /// decides (open dominates, with its stated exceptions above the diode onset).
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
         self.prot.latch(f, self.mode, t);
-        let open = self.fault.is_some() && self.mode == Mode::Idle;
+        // With the encoder or the speed in doubt the bus decides: over-voltage while open
+        // is the rectification itself (above the onset); nothing else is taken as above it.
+        let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
+            f == Fault::BusOverVoltage
+        } else {
+            crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>())
+        };
+        let mode = crate::protect::next_mode(self.fault.is_some(), self.mode, f, onset);
         if self.fault.is_none() {
             self.fault = Some(f);
         }
-        self.mode = if open { Mode::Idle } else { f.safe_mode() };
+        self.mode = mode;
         self.pi.reset();
         self.refresh_now();
+    }
+
+    /// The latched faults (first and later) as bits `1 << code`.
+    fn latched_bits(&self) -> u16 {
+        self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
     /// Which fault, in order of precedence, once the step has seen that one occurred.
     #[cold]
     #[inline(never)]
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
+        let bus = if !over_voltage {
+            None
+        } else if s.v_bus >= 4095 && self.latched_bits() & 1 << Fault::BusOverVoltage.code() == 0 {
+            // At the rail without having passed the trip below it: a false reading.
+            Some(Fault::BusSensor)
+        } else {
+            Some(Fault::BusOverVoltage)
+        };
         let f = if over_current {
             Fault::OverCurrent
-        } else if over_voltage {
-            Fault::BusOverVoltage
+        } else if let Some(b) = bus {
+            b
         } else if self.enc.implausible {
             Fault::EncoderImplausible
         } else if self.mode == Mode::Run {
@@ -366,6 +386,11 @@ impl Controller {
             ..self.telemetry()
         };
         self.trip(f, &t);
+        // An over-current must not hide an over-voltage in the same period (open above the
+        // onset, the diode currents pass the trip while they charge the bus).
+        if let (true, Some(b)) = (over_current, bus) {
+            self.trip(b, &t);
+        }
     }
 
     /// One current-loop period.

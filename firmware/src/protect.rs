@@ -64,6 +64,9 @@ pub enum Fault {
     LoopOverrun = 10,
     /// The three phase currents do not sum to zero (sensor stuck, offset jump, noise).
     CurrentSensor = 11,
+    /// The bus reading jumped to the ADC's rail: a sensor or divider fault, not an
+    /// over-voltage (a true bus passes `v_bus_ov`, below the rail, first).
+    BusSensor = 12,
 }
 
 impl Fault {
@@ -80,6 +83,7 @@ impl Fault {
         Fault::StrokeLimit,
         Fault::LoopOverrun,
         Fault::CurrentSensor,
+        Fault::BusSensor,
     ];
 
     /// Numeric code.
@@ -106,6 +110,7 @@ impl Fault {
             Fault::StrokeLimit => "stroke_limit",
             Fault::LoopOverrun => "loop_overrun",
             Fault::CurrentSensor => "current_sensor",
+            Fault::BusSensor => "bus_sensor",
         }
     }
 
@@ -125,6 +130,7 @@ impl Fault {
             Fault::StrokeLimit => "travel outside x_min_m .. x_max_m",
             Fault::LoopOverrun => "current loop overran its period too often",
             Fault::CurrentSensor => "phase currents do not sum to zero (sensor fault)",
+            Fault::BusSensor => "bus reading at ADC rail",
         }
     }
 
@@ -144,7 +150,8 @@ impl Fault {
             | Fault::OverForce
             | Fault::MachineI2t
             | Fault::LoopOverrun
-            | Fault::CurrentSensor => Mode::Idle,
+            | Fault::CurrentSensor
+            | Fault::BusSensor => Mode::Idle,
             Fault::BusOverVoltage
             | Fault::EncoderImplausible
             | Fault::EncoderLoss
@@ -541,7 +548,41 @@ impl Protection {
             Fault::LoopOverrun => (self.bucket > 0).then_some("overruns still being reported"),
             Fault::CurrentSensor => (self.isum_now || self.isum_count > 0)
                 .then_some("phase currents still do not sum to zero"),
+            Fault::BusSensor => {
+                (v >= cfg.volts_per_count * 4095.0).then_some("bus reading at rail")
+            }
         }
+    }
+}
+
+/// The line-to-line emf `√3·K_e·|ω_m|` reaches 0.9·`v_bus_ov`: an open bridge would
+/// rectify into the bus up to the trip (10 % margin for the speed estimate).
+pub fn above_onset(cfg: &Config, omega_m: f32) -> bool {
+    1.732_050_8 * cfg.ke_v_s_per_rad * abs(omega_m) >= 0.9 * cfg.v_bus_ov
+}
+
+/// Faults after which the measured speed is not trusted (bits `1 << code`): encoder
+/// implausible, encoder loss, speed implausible.
+pub const SPEED_DOUBT: u16 = 1 << 4 | 1 << 7 | 1 << 8;
+
+/// The safe state when fault `f` arrives in `mode` with `latched` faults already latched
+/// (`docs/protection.md`, "The rule"): a fresh fault goes to its own safe state; open
+/// dominates a later fault, except that
+/// * over-voltage while open above the onset shorts (the open bridge is what charges the
+///   bus; the short stops every watt and needs no angle);
+/// * nothing opens a short above the onset (opening would rectify into the bus): not an
+///   over-current (the short's own current, bounded by `K_e/(p·L)`, under the stage's
+///   hardware trip), nor the current-sensor fault that current causes when it passes the
+///   ADC's range, nor the force or I²t the short costs; below the onset they open;
+/// * a bus reading at the rail opens, from any state: a false over-voltage must not hold a
+///   short (a true one is caught by the stage's own comparator on its own divider).
+pub fn next_mode(latched: bool, mode: Mode, f: Fault, above_onset: bool) -> Mode {
+    match (f, mode) {
+        (Fault::BusSensor, _) => Mode::Idle,
+        (Fault::BusOverVoltage, Mode::Idle) if above_onset => Mode::Short,
+        (_, Mode::Short) if above_onset => Mode::Short,
+        _ if latched && mode == Mode::Idle => Mode::Idle,
+        _ => f.safe_mode(),
     }
 }
 
@@ -564,6 +605,49 @@ mod tests {
             v_bus: q(60.0),
             ..Telemetry::default()
         }
+    }
+
+    #[test]
+    fn the_rule_fault_to_safe_state() {
+        use Fault::*;
+        // Fresh faults: their own safe state.
+        for f in Fault::ALL {
+            assert_eq!(next_mode(false, Mode::Run, *f, false), f.safe_mode());
+        }
+        // Open dominates below the onset...
+        assert_eq!(
+            next_mode(true, Mode::Idle, BusOverVoltage, false),
+            Mode::Idle
+        );
+        assert_eq!(next_mode(true, Mode::Short, OverCurrent, false), Mode::Idle);
+        // ...but not above it: OV while open shorts, the short's own OC keeps it.
+        assert_eq!(
+            next_mode(true, Mode::Idle, BusOverVoltage, true),
+            Mode::Short
+        );
+        for f in [
+            OverCurrent,
+            CurrentSensor,
+            OverForce,
+            MachineI2t,
+            BusUnderVoltage,
+        ] {
+            assert_eq!(next_mode(true, Mode::Short, f, true), Mode::Short);
+        }
+        assert_eq!(next_mode(true, Mode::Idle, EncoderLoss, true), Mode::Idle);
+        // A rail reading never holds a short.
+        for m in [Mode::Run, Mode::Short, Mode::Idle] {
+            assert_eq!(next_mode(true, m, BusSensor, true), Mode::Idle);
+        }
+        assert_eq!(
+            SPEED_DOUBT,
+            EncoderImplausible.bit() | EncoderLoss.bit() | SpeedImplausible.bit()
+        );
+        // The onset: √3·K_e·ω = 0.9·v_bus_ov.
+        let c = Config::default();
+        let w = 0.9 * c.v_bus_ov / (1.732_050_8 * c.ke_v_s_per_rad);
+        assert!(above_onset(&c, 1.001 * w) && above_onset(&c, -1.001 * w));
+        assert!(!above_onset(&c, 0.999 * w));
     }
 
     #[test]

@@ -7,7 +7,8 @@
 
 use crate::plant::{Drive, Excitation};
 use crate::sim::Sim;
-use regen_fw::io::RawSample;
+use crate::stage::{Stage, StageSpec};
+use regen_fw::io::{Actuation, RawSample};
 
 /// What goes wrong.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,6 +48,26 @@ pub enum Inject {
     /// The emulated load is switched to `r_load_ohm` (an overload the law commands: the
     /// current goes to its clip).
     Overload { r_load_ohm: f32 },
+    /// The MCU core stops for good (lockup that recurs at every boot): the timer keeps its
+    /// last compare values and only the stage's hardware paths act until the independent
+    /// watchdog resets the MCU (`iwdg_s`); from then on the pins stay at their reset state
+    /// ([`crate::stage`]; needs [`FaultSim::with_stage`]).
+    McuHalt,
+    /// The core stops and the watchdog resets the MCU `timeout_s` later: pins at their reset
+    /// state (all off) for the stage's boot time, then a fresh controller as at power-up
+    /// ([`Sim::power_up`]) and the breaks re-armed.
+    WatchdogReset { timeout_s: f64 },
+    /// The comparators and breaks are enabled again (as at power-up) with an output
+    /// transient of `enable_s` on the bus (or a phase) comparator, then a ringing pulse of
+    /// `ring_s` every `ring_every` periods.
+    ComparatorFalseTrip {
+        enable_s: f64,
+        ring_s: f64,
+        ring_every: u32,
+        bus: bool,
+    },
+    /// Every DAC threshold of the stage multiplied by `scale` (a wrong code).
+    DacWrong { scale: f64 },
 }
 
 impl Inject {
@@ -70,6 +91,10 @@ impl Inject {
             Inject::Overexcite { .. } => "overexcite",
             Inject::Overrun { .. } => "overrun",
             Inject::Overload { .. } => "overload",
+            Inject::McuHalt => "mcu_halt",
+            Inject::WatchdogReset { .. } => "watchdog_reset",
+            Inject::ComparatorFalseTrip { .. } => "comparator_false_trip",
+            Inject::DacWrong { .. } => "dac_wrong",
         }
     }
 }
@@ -86,6 +111,8 @@ pub struct FaultSim {
     counts_per_amp: f64,
     counts_per_volt: f64,
     k: u64,
+    /// The power stage's hardware paths, when modelled ([`FaultSim::with_stage`]).
+    pub stage: Option<Stage>,
 }
 
 impl FaultSim {
@@ -104,7 +131,15 @@ impl FaultSim {
             counts_per_amp,
             counts_per_volt,
             k: 0,
+            stage: None,
         }
+    }
+
+    /// Model the power stage's hardware paths ([`crate::stage`]) under the firmware, enabled
+    /// at the simulation's present time.
+    pub fn with_stage(mut self, spec: StageSpec) -> FaultSim {
+        self.stage = Some(Stage::new(spec, self.sim.time()));
+        self
     }
 
     /// Whether the fault is in force.
@@ -146,6 +181,25 @@ impl FaultSim {
                     .set_config(&c)
                     .map_err(|e| e.to_string())?;
             }
+            Inject::McuHalt | Inject::WatchdogReset { .. } => {
+                self.stage
+                    .as_mut()
+                    .ok_or("mcu_halt / watchdog_reset need the stage model")?
+                    .halt();
+            }
+            Inject::ComparatorFalseTrip { enable_s, bus, .. } => {
+                let t = self.sim.time();
+                let spec = self.stage.as_ref().ok_or("needs the stage model")?.spec;
+                let mut st = Stage::new(spec, t);
+                st.glitch(enable_s, bus);
+                self.stage = Some(st);
+            }
+            Inject::DacWrong { scale } => {
+                self.stage
+                    .as_mut()
+                    .ok_or("needs the stage model")?
+                    .dac_scale = scale;
+            }
             _ => {}
         }
         Ok(())
@@ -157,10 +211,71 @@ impl FaultSim {
             self.active = true;
             self.start()?;
         }
+        if self.stage.is_some() {
+            return self.step_staged();
+        }
         if !self.active {
             self.sim.step();
             return Ok(());
         }
+        self.inject_step();
+        Ok(())
+    }
+
+    /// One period with the stage model between the firmware and the plant.
+    fn step_staged(&mut self) -> Result<(), String> {
+        let t = self.sim.time();
+        let Some(st) = self.stage.as_mut() else {
+            return Ok(());
+        };
+        if st.cpu == crate::stage::Cpu::Halted {
+            match self.inject {
+                Inject::WatchdogReset { timeout_s } if t >= self.at_s + timeout_s => st.reset(t),
+                Inject::McuHalt if t >= self.at_s + st.spec.iwdg_s => {
+                    st.reset(t);
+                    st.cpu = crate::stage::Cpu::Reset {
+                        until_s: f64::INFINITY,
+                    };
+                }
+                _ => {}
+            }
+        }
+        let rebooting = st.in_reset();
+        if st.cpu_runs(t) {
+            if rebooting {
+                self.sim.power_up()?;
+            }
+            if let Inject::ComparatorFalseTrip {
+                ring_s,
+                ring_every,
+                bus,
+                ..
+            } = self.inject
+            {
+                if self.active && (self.k + 1).is_multiple_of(ring_every.max(1) as u64) {
+                    st.glitch(ring_s, bus);
+                }
+            }
+            if self.active {
+                self.inject_step();
+            } else {
+                let st = self.stage.as_mut().expect("checked");
+                self.sim.step_with(|_| {}, |a| *a = st.gate(a));
+            }
+        } else {
+            let _ = self.sim.take_sample();
+            let out = st.gate(&Actuation::OFF);
+            self.sim.apply_and_advance(&out);
+        }
+        let (t, vb, i) = (self.sim.time(), self.sim.v_bus(), self.sim.currents());
+        if let Some(st) = self.stage.as_mut() {
+            st.observe(t, vb, i);
+        }
+        Ok(())
+    }
+
+    /// One period with the injected fault in force (the firmware running).
+    fn inject_step(&mut self) {
         self.k += 1;
         let first = self.k == 1;
         if let Inject::Overrun { every } = self.inject {
@@ -169,12 +284,13 @@ impl FaultSim {
             }
         }
         let inj = self.inject;
-        let (frozen, enc_offset, rng, cpa, cpv) = (
+        let (frozen, enc_offset, rng, cpa, cpv, stage) = (
             &mut self.frozen,
             &mut self.enc_offset,
             &mut self.rng,
             self.counts_per_amp,
             self.counts_per_volt,
+            &mut self.stage,
         );
         self.sim.step_with(
             |s: &mut RawSample| match inj {
@@ -229,11 +345,18 @@ impl FaultSim {
                 Inject::LoadDisconnect { .. }
                 | Inject::Overexcite { .. }
                 | Inject::Overrun { .. }
-                | Inject::Overload { .. } => {}
+                | Inject::Overload { .. }
+                | Inject::McuHalt
+                | Inject::WatchdogReset { .. }
+                | Inject::ComparatorFalseTrip { .. }
+                | Inject::DacWrong { .. } => {}
             },
-            |_| {},
+            |a| {
+                if let Some(st) = stage.as_mut() {
+                    *a = st.gate(a);
+                }
+            },
         );
-        Ok(())
     }
 }
 

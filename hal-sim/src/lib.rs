@@ -27,6 +27,7 @@ pub mod plot;
 pub mod sampling;
 pub mod scenario;
 pub mod sim;
+pub mod stage;
 pub mod study;
 pub mod summary;
 

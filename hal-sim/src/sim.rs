@@ -238,6 +238,14 @@ impl Recorder {
     }
 }
 
+/// The controller as the MCU constructs it at power-up (one place for [`Sim::new`] and a
+/// reboot, [`Sim::power_up`]): validated configuration, then Run.
+fn power_up_controller(cfg: &Config) -> Result<Controller, String> {
+    let mut ctl = Controller::new(cfg).map_err(|e| format!("firmware config: {e}"))?;
+    ctl.set_mode(Mode::Run).map_err(|f| f.name().to_string())?;
+    Ok(ctl)
+}
+
 /// Everything that defines a simulated rig.
 #[derive(Clone, Debug)]
 pub struct Rig {
@@ -308,8 +316,7 @@ impl Sim {
     /// A closed loop of `rig` driven by a controller with configuration `cfg` (the controller
     /// starts in [`Mode::Run`]).
     pub fn new(rig: Rig, cfg: &Config) -> Result<Sim, String> {
-        let mut ctl = Controller::new(cfg).map_err(|e| format!("firmware config: {e}"))?;
-        ctl.set_mode(Mode::Run).map_err(|f| f.name().to_string())?;
+        let ctl = power_up_controller(cfg)?;
         let ts = 1.0 / cfg.pwm_hz as f64;
         let m = &rig.machine;
         if !(m.r_ohm > 0.0 && m.l_h > 0.0 && rig.screw.lead_m_per_rad > 0.0) {
@@ -373,6 +380,14 @@ impl Sim {
         };
         sim.stored_start = sim.stored();
         Ok(sim)
+    }
+
+    /// The MCU boots again (after a watchdog reset, `crate::stage`): a fresh controller,
+    /// constructed exactly as at power-up ([`Sim::new`]); the plant keeps its state.
+    pub fn power_up(&mut self) -> Result<(), String> {
+        let cfg = *self.ctl.config();
+        self.ctl = power_up_controller(&cfg)?;
+        Ok(())
     }
 
     /// Replace the bus (fault injection: load disconnected, brake resistor changed), keeping
