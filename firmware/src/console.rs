@@ -6,7 +6,7 @@
 //! `examples/console_fuzz.rs`).
 //!
 //! Commands: `help`, `list`, `get NAME`, `set NAME VALUE`, `save`, `load`, `defaults`,
-//! `status`, `faults`, `clear`, `mode idle|run|short|open`, `tel CH[,CH…] RATE_HZ`, `tel off`.
+//! `status`, `faults`, `clear`, `mode idle|run|short|open|align`, `tel CH[,CH…] RATE_HZ`, `tel off`.
 //!
 //! Telemetry lines are CSV: a header `# tel t,<ch>,…` then `<t>,<v>,…` per sample (`t` in s
 //! since `tel` was started), readable by any CSV plotting tool after dropping `#` lines.
@@ -18,7 +18,7 @@
 use core::fmt::Write;
 
 use crate::config::Config;
-use crate::control::{Controller, Mode, Telemetry};
+use crate::control::{Controller, Mode, ModeError, Telemetry};
 use crate::numtext::{self, q_f32, Fixed, Num, NumError};
 use crate::params::{self, ParamError, PARAMS};
 
@@ -270,7 +270,7 @@ impl Console {
             "help" if want(0) => {
                 out.s(
                     "commands: help | list | get NAME | set NAME VALUE | save | load | defaults\r\n\
-                     | status | faults | clear | mode idle|run|short|open | tel CH[,CH..] HZ | tel off\r\n",
+                     | status | faults | clear | mode idle|run|short|open|align | tel CH[,CH..] HZ | tel off\r\n",
                 );
                 out.s("tel channels:");
                 for ch in CHANNELS {
@@ -364,6 +364,8 @@ impl Console {
                     .s(ctl.mode().name())
                     .s(" fault=")
                     .s(ctl.fault().map(|f| f.name()).unwrap_or("none"))
+                    .s(" boot=")
+                    .s(ctl.boot().name())
                     .s(" vbus=")
                     .num(q_f32(t.v_bus))
                     .s("V w=")
@@ -457,11 +459,15 @@ impl Console {
                     "run" => Mode::Run,
                     "short" | "brake" => Mode::Short,
                     "open" => Mode::Open,
-                    o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open)")),
+                    "align" => Mode::Align,
+                    o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open|align)")),
                 };
                 match ctl.set_mode(m) {
                     Ok(()) => ok!(.s(" mode ").s(m.name())),
-                    Err(f) => fail!(.s("fault ").s(f.name()).s(" latched: clear it first")),
+                    Err(ModeError::Fault(f)) => {
+                        fail!(.s("fault ").s(f.name()).s(" latched: clear it first"))
+                    }
+                    Err(e) => fail!(.s("mode ").s(m.name()).s(" refused: ").s(e.name())),
                 }
             }
             "tel" if want(1) && a1 == Some("off") => {

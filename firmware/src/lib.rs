@@ -44,5 +44,5 @@ pub mod store;
 pub mod svpwm;
 
 pub use config::{Config, ConfigError, Gains};
-pub use control::{Controller, Mode, Telemetry};
+pub use control::{Boot, Controller, Mode, ModeError, Telemetry};
 pub use io::{Actuation, DriveIo, RawSample};

@@ -22,6 +22,7 @@ pub mod fastmath;
 pub mod faults;
 pub mod lqg;
 pub mod plant;
+pub mod powerup;
 pub mod scenario;
 pub mod sim;
 pub mod study;
