@@ -310,10 +310,10 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
             .unwrap();
         sim.boot().unwrap();
         let z = sim.controller().zero_codes();
-        for k in 0..3 {
+        for (k, zk) in z.iter().enumerate() {
             // The true zero code: nominal + offset in codes, the sampler rounding to nearest.
             let truth = sim.controller().config().adc_zero_code as f64 + d.offset_a[k] / apc;
-            resid.push((z[k] as f64 - truth) * apc);
+            resid.push((*zk as f64 - truth) * apc);
         }
     }
     let (lo, hi) = stats("offset residual after calibration, A", &resid);
