@@ -609,6 +609,12 @@ impl Sim {
         })
     }
 
+    /// The d/q currents the controller measured in its last step, A (its telemetry).
+    pub fn i_dq_measured(&self) -> (f64, f64) {
+        let i = self.ctl.telemetry().i_dq;
+        (i.d.to_num::<f64>(), i.q.to_num::<f64>())
+    }
+
     /// The controller's electrical angle of its last step minus the rotor's at that
     /// sample, rad in (−π, π] (the sample was taken at the start of the period just
     /// simulated, the position then `x − v·Ts` to first order).

@@ -296,7 +296,7 @@ fn re_zeroing_the_encoder_mid_run_latches_instead_of_motoring() {
 fn offsets_calibrated_within_tolerance_refused_beyond() {
     let sc = tmd();
     let apc = sc.firmware.amps_per_count as f64;
-    let mut resid = vec![];
+    let (mut resid, mut i_dq_idle) = (vec![], vec![]);
     for seed in 0..50 {
         let mut sim = sc.build().unwrap();
         let d = sim
@@ -308,7 +308,19 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
             })
             .unwrap()
             .unwrap();
-        sim.boot().unwrap();
+        // Calibration only, then Idle periods (gates off, no current): the step's currents
+        // (the Clarke sums with the zero codes subtracted) read zero to the residual.
+        for _ in 0..regen_fw::control::CAL_PERIODS + 1 {
+            sim.step();
+        }
+        assert_eq!(sim.controller().boot(), Boot::Unaligned, "seed {seed}");
+        let mut i_max = 0f64;
+        for _ in 0..200 {
+            sim.step();
+            let (d, q) = sim.i_dq_measured();
+            i_max = i_max.max(d.hypot(q));
+        }
+        i_dq_idle.push(i_max);
         let z = sim.controller().zero_codes();
         for (k, zk) in z.iter().enumerate() {
             // The true zero code: nominal + offset in codes, the sampler rounding to nearest.
@@ -317,6 +329,10 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
         }
     }
     let (lo, hi) = stats("offset residual after calibration, A", &resid);
+    let (_, i_hi) = stats("|i_dq| measured in Idle after calibration, A", &i_dq_idle);
+    // Per-phase residuals of ±0.5 code give |i_αβ| ≤ (2·0.5 + 0.5 + 0.5)/3·√(1 + 1/3)·apc
+    // ≈ 0.77 code = 9.4 mA; without the subtraction the ±0.15 A offsets read up to ~0.2 A.
+    assert!(i_hi <= 0.77 * apc + 1e-6, "{i_hi}");
     // Rounding to the nearest code: ±0.5 code = ±6.1 mA.
     assert!(
         lo >= -0.5 * apc - 1e-9 && hi <= 0.5 * apc + 1e-9,
