@@ -30,8 +30,9 @@ pub enum Mode {
     /// the bus.
     Open,
     /// Power-up alignment: d-axis current at an imposed angle, two steps a quarter of an
-    /// electrical turn apart (docs/protection.md); back to Idle when done.
-    Align,
+    /// electrical turn apart (docs/protection.md); back to Idle when done. (Discriminant 5:
+    /// the modes that control current are then the odd ones, one bit for the step to test.)
+    Align = 5,
 }
 
 impl Mode {
@@ -111,11 +112,8 @@ struct BootState {
     /// Calibration sums of the three phase codes and their count.
     sum: [u32; 3],
     n_cal: u32,
-    /// Per-phase zero codes in force (`adc_zero_code` until calibrated), and the
-    /// differences the Clarke sums subtract: `2z_a − z_b − z_c` and `z_b − z_c`.
+    /// Per-phase zero codes of the raw converter (`adc_zero_code` until calibrated).
     zero: [i32; 3],
-    z_alpha: i32,
-    z_beta: i32,
     /// Alignment: periods in the present step, periods per step, which step (0, 1).
     n: u32,
     n_step: u32,
@@ -175,23 +173,27 @@ struct StepRecord {
 
 /// The current controller and everything it owns.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Controller {
-    cfg: Config,
+    // `repr(C)` in this order: the step's fields first, so that each lies within the
+    // Thumb-2 load's 12-bit immediate offset of `self` (the configuration, which the step
+    // never reads, last).
     g: Gains,
-    law: Law,
-    mode: Mode,
-    fault: Option<Fault>,
     enc: Encoder,
     pi: CurrentPi,
-    brake: bool,
-    rec: StepRecord,
     /// Slow terms and the tick of their refresh cycle (`REFRESH_ALL` = all at the next step).
     held: HeldTerms,
+    rec: StepRecord,
     slow_tick: u8,
-    /// Protection state (protect.rs): derate factor, supervision, fault record.
-    prot: Protection,
+    mode: Mode,
+    brake: bool,
+    fault: Option<Fault>,
     /// Power-up: offset calibration and alignment.
     bs: BootState,
+    /// Protection state (protect.rs): derate factor, supervision, fault record.
+    prot: Protection,
+    law: Law,
+    cfg: Config,
 }
 
 impl Controller {
@@ -265,7 +267,7 @@ impl Controller {
         let _ = self.set_mode(Mode::Idle);
         self.bs = BootState {
             boot: Boot::Calibrating,
-            zero: [self.cfg.adc_zero_code as i32; 3],
+            zero: self.bs.zero,
             ..BootState::default()
         };
         self.g.enc.offset = Gains::new(&self.cfg).map_or(Angle(0), |g| g.enc.offset);
@@ -276,9 +278,19 @@ impl Controller {
         self.bs.boot
     }
 
-    /// The per-phase zero-current codes in force (calibrated at boot).
+    /// The per-phase zero-current codes of the raw converter (calibrated at boot).
     pub fn zero_codes(&self) -> [i32; 3] {
         self.bs.zero
+    }
+
+    /// What the converter must subtract from each phase's raw code so that zero current
+    /// reads `adc_zero_code`: `zero_codes() − adc_zero_code`. The board programs them into
+    /// the ADC's offset registers (STM32G474 `ADC_OFRy`: OFFSET with OFFSETPOS for a
+    /// negative one, no instruction in the loop) once the calibration is done; the
+    /// simulator applies them in its sample. Zero until calibrated.
+    pub fn adc_offsets(&self) -> [i32; 3] {
+        let n = self.cfg.adc_zero_code as i32;
+        self.bs.zero.map(|z| z - n)
     }
 
     /// The electrical angle of the d axis at count 0 within the turn in force (the aligned
@@ -449,9 +461,12 @@ impl Controller {
         if b.n_cal < CAL_PERIODS {
             return;
         }
-        let z = b.sum.map(|x| ((x + CAL_PERIODS / 2) / CAL_PERIODS) as i32);
-        let tol = (self.cfg.offset_tol_a / self.cfg.amps_per_count) as i32;
         let nominal = self.cfg.adc_zero_code as i32;
+        // The codes were seen through the offsets in force: the raw zero is their mean plus
+        // those offsets.
+        let z = [0, 1, 2]
+            .map(|k| ((b.sum[k] + CAL_PERIODS / 2) / CAL_PERIODS) as i32 + b.zero[k] - nominal);
+        let tol = (self.cfg.offset_tol_a / self.cfg.amps_per_count) as i32;
         if z.iter().any(|&c| (c - nominal).abs() > tol) {
             b.n_cal = 0;
             b.sum = [0; 3];
@@ -460,8 +475,6 @@ impl Controller {
             return;
         }
         b.zero = z;
-        b.z_alpha = 2 * z[0] - z[1] - z[2];
-        b.z_beta = z[1] - z[2];
         b.boot = Boot::Unaligned;
     }
 
@@ -561,7 +574,7 @@ impl Controller {
         let (v, i) = (r.v_dq, r.i_dq);
         let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
         Telemetry {
-            i_abc: [0, 1, 2].map(|k| amps_of_code(g, r.sample.i_abc[k], self.bs.zero[k])),
+            i_abc: r.sample.i_abc.map(|c| amps_of_code(g, c)),
             i_dq: i,
             i_ref: r.i_ref,
             v_dq: v,
@@ -623,7 +636,7 @@ impl Controller {
         // the rest as of the last period.
         let g = &self.g;
         let t = Telemetry {
-            i_abc: [0, 1, 2].map(|k| amps_of_code(g, s.i_abc[k], self.bs.zero[k])),
+            i_abc: s.i_abc.map(|c| amps_of_code(g, c)),
             v_bus: volts_of_code(g, s.v_bus),
             ..self.telemetry()
         };
@@ -659,9 +672,10 @@ impl Controller {
         let [ia, ib, ic] = [ia as i32, ib as i32, ic as i32];
         // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
         // change nothing then and bound anything larger.
-        // The per-phase zero codes (boot calibration) enter as their Clarke sums.
-        let s_alpha = (2 * ia - ib - ic - self.bs.z_alpha).clamp(-8192, 8191);
-        let s_beta = (ib - ic - self.bs.z_beta).clamp(-4096, 4095);
+        // The codes arrive with the boot calibration's per-phase offsets removed by the ADC
+        // ([`Controller::adc_offsets`]): the common zero code cancels here.
+        let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
+        let s_beta = (ib - ic).clamp(-4096, 4095);
         // 8192·apc/3 < 2,731 A: fits.
         let i_ab = AlphaBeta {
             alpha: Q::from_bits(k.alpha_per_code.apply(s_alpha)),
@@ -913,9 +927,9 @@ struct HeldTerms {
 }
 
 /// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
-fn amps_of_code(g: &Gains, code: u16, zero: i32) -> Q {
+fn amps_of_code(g: &Gains, code: u16) -> Q {
     g.amps_per_count
-        .scale(Q::from_bits((code as i32 - zero) << 16))
+        .scale(Q::from_bits((code as i32 - g.adc_zero) << 16))
 }
 
 /// Bus voltage of an ADC code, V (telemetry and fault snapshots).

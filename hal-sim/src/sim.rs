@@ -569,6 +569,7 @@ impl Sim {
             }
             self.step_with(&mut inject, |_| {});
         }
+        self.set_adc_offsets(self.ctl.adc_offsets());
         if let Some(f) = self.ctl.fault() {
             return Err(f.name().to_string());
         }
@@ -607,6 +608,15 @@ impl Sim {
             align_s: t2 - t1,
             tries,
         })
+    }
+
+    /// The converter's per-phase offset registers (codes subtracted from each phase's raw
+    /// code), as the board programs the ADC's with [`Controller::adc_offsets`].
+    pub fn set_adc_offsets(&mut self, o: [i32; 3]) {
+        for (k, ok) in o.iter().enumerate() {
+            self.pre.code_base[k] -= (ok - self.pre.adc_offsets[k]) as f64;
+        }
+        self.pre.adc_offsets = o;
     }
 
     /// The d/q currents the controller measured in its last step, A (its telemetry).
@@ -1277,6 +1287,8 @@ struct Pre {
     code_base: [f64; 3],
     /// The encoder counter's value at the plant's zero position ([`crate::powerup`]).
     enc_start: u16,
+    /// The converter's offset registers in force ([`Sim::set_adc_offsets`]).
+    adc_offsets: [i32; 3],
     noise_i_counts: f64,
     counts_per_volt: f64,
     vcode_base: f64,
@@ -1396,6 +1408,7 @@ impl Pre {
             counts_per_amp,
             counts_per_amp_k: [counts_per_amp; 3],
             enc_start: 0,
+            adc_offsets: [0; 3],
             code_base: core::array::from_fn(|k| {
                 sn.current_offset_a[k] * counts_per_amp + cfg.adc_zero_code as f64 + 0.5
             }),

@@ -308,12 +308,15 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
             })
             .unwrap()
             .unwrap();
-        // Calibration only, then Idle periods (gates off, no current): the step's currents
-        // (the Clarke sums with the zero codes subtracted) read zero to the residual.
+        // Calibration only, then Idle periods (gates off, no current): with the offsets
+        // removed by the converter the step's currents read zero to the residual.
         for _ in 0..regen_fw::control::CAL_PERIODS + 1 {
             sim.step();
         }
         assert_eq!(sim.controller().boot(), Boot::Unaligned, "seed {seed}");
+        // The board's ADC offset registers (Sim::boot does the same).
+        let o = sim.controller().adc_offsets();
+        sim.set_adc_offsets(o);
         let mut i_max = 0f64;
         for _ in 0..200 {
             sim.step();
