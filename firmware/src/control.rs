@@ -134,6 +134,10 @@ struct BootState {
     e_per_count: u32,
     /// The aligned electrical offset, reapplied when the configuration is recompiled.
     offset: Option<Angle>,
+    /// A boot fault found in the step, latched by the next supervision tick (≤ 1 ms; the
+    /// step commands zero current meanwhile): the latch and its snapshot cost more than the
+    /// step's budget.
+    pending: Option<Fault>,
 }
 use crate::protect::{derate_regen, Protection, SUPERVISE_HZ};
 
@@ -329,6 +333,11 @@ impl Controller {
                 return Err(ModeError::Fault(f));
             }
         }
+        if let Some(f) = self.bs.pending {
+            if m != Mode::Idle {
+                return Err(ModeError::Fault(f)); // latched at the next supervision tick
+            }
+        }
         let b = self.bs.boot;
         match m {
             Mode::Run if !matches!(b, Boot::Stored | Boot::Aligned) => {
@@ -398,6 +407,10 @@ impl Controller {
     fn align_period(&mut self, vb: u32) {
         let pos = self.enc.position;
         let b = &mut self.bs;
+        if b.pending.is_some() {
+            self.held.i_ref = Dq::default();
+            return self.refresh_bus(vb);
+        }
         b.n += 1;
         let i_d = (b.n as i32).saturating_mul(b.di).min(b.i_align);
         // The rotor on the d-axis field is a spring with the structure's mass on it and
@@ -439,9 +452,9 @@ impl Controller {
                 }
             }
         }
-        if let Some(f) = fault {
-            let t = self.telemetry();
-            self.trip(f, &t);
+        if fault.is_some() {
+            self.bs.pending = fault;
+            self.held.i_ref = Dq::default();
         }
         self.refresh_bus(vb);
     }
@@ -470,8 +483,8 @@ impl Controller {
         if z.iter().any(|&c| (c - nominal).abs() > tol) {
             b.n_cal = 0;
             b.sum = [0; 3];
-            let t = self.telemetry();
-            self.trip(Fault::CurrentOffset, &t);
+            b.pending = Some(Fault::CurrentOffset);
+            b.boot = Boot::Unaligned; // no further sums until the fault is cleared
             return;
         }
         b.zero = z;
@@ -544,7 +557,9 @@ impl Controller {
         let v = self
             .prot
             .supervise(&self.cfg, self.mode, &t, self.enc.position);
-        if let Some(f) = v.trip {
+        if let Some(f) = self.bs.pending.take() {
+            self.trip(f, &t);
+        } else if let Some(f) = v.trip {
             self.trip(f, &t);
         } else if self.bs.boot == Boot::Aligned && self.mode == Mode::Run {
             self.trim_angle();

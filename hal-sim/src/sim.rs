@@ -232,7 +232,7 @@ pub struct BootTimes {
 }
 
 /// Alignment attempts of [`Sim::boot`], and the seconds in the safe state between them.
-pub const ALIGN_TRIES: u32 = 3;
+pub const ALIGN_TRIES: u32 = 5;
 pub const ALIGN_RETRY_S: f64 = 0.5;
 
 /// Everything that defines a simulated rig.
@@ -570,6 +570,10 @@ impl Sim {
             self.step_with(&mut inject, |_| {});
         }
         self.set_adc_offsets(self.ctl.adc_offsets());
+        // A boot fault found in the step latches at the next supervision tick.
+        for _ in 0..self.sup_every {
+            self.step_with(&mut inject, |_| {});
+        }
         if let Some(f) = self.ctl.fault() {
             return Err(f.name().to_string());
         }

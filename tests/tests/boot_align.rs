@@ -106,9 +106,10 @@ fn alignment_from_100_power_ups_then_harmonic_balance_power() {
     let (a0_min, a0_max) = stats("angle error right after alignment, deg", &ang0);
     let (a_min, a_max) = stats("angle error at 12 s (after the emf trim), deg", &ang);
     let (d_min, d_max) = stats("power vs harmonic balance, relative", &dev);
-    // Boot time: 102 ms calibration + 0.6 s alignment per try, retried after 0.5 s in the
-    // short: ≤ 0.1024 + 3·0.6 + 2·0.5 = 2.9 s by construction.
-    assert!(t_max <= 2.91, "{t_max}");
+    // Boot time: 102 ms calibration + 1 ms to the supervision tick + 0.6 s alignment per
+    // try, retried after 0.5 s in the short: ≤ 0.1034 + 5·0.6 + 4·0.5 = 5.11 s by
+    // construction.
+    assert!(t_max <= 5.11, "{t_max}");
     // Right after alignment the rotor lags its field by the structure's load (asin(F·l/T):
     // up to 22° at the excitation's 400 N): measured above; the bound is the physics' 22°
     // plus the settle window's 11°.
@@ -195,7 +196,7 @@ fn sabotaged_alignments_latch_their_faults() {
         // The check step ends 0.6 s after alignment starts (0.1 s calibration before); a
         // reversed or half-count encoder may spend align_moving retries (0.6 + 0.5 s each),
         // a frozen one never moves: 0.7024 s exactly.
-        let bound = if name == "dead" { 0.71 } else { 2.91 };
+        let bound = if name == "dead" { 0.71 } else { 5.11 };
         assert!(t_max < bound, "{name}: {t_max}");
     }
 }
