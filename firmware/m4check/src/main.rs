@@ -86,12 +86,14 @@ fn boot_paths(cfg: &Config) {
             }
             // 400 periods per step: the quarter turn (500 counts) in the second one.
             s.encoder = if run == 0 {
-                7u16.wrapping_add(k.saturating_sub(400).min(500))
+                7u16.wrapping_add(k.saturating_sub(400).min(100) * 5)
             } else {
                 7u16.wrapping_add(k)
             };
             black_box(regen_step_boot(&mut ctl, &s));
         }
+        // A boot fault found by the step latches at the supervision tick.
+        ctl.supervise();
     }
 }
 
