@@ -73,6 +73,10 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   done
   zline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step 2>&1 | grep insnwin | tail -n1)
   echo "instructions per current-loop step as the board builds it (opt-level z, bit identity OK): min $(echo "$zline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$zline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
+  bline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step_boot 2>&1 | grep insnwin | tail -n1)
+  echo "instructions per power-up step (offset calibration, alignment, its faults) as the board builds it: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
+  bline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_boot 2>&1 | grep insnwin | tail -n1)
+  echo "instructions per power-up step at opt-level 3: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
 else
   echo "instruction count skipped: $tools not found"
 fi

@@ -99,6 +99,19 @@ pub struct Config {
     pub x_max_m: f32,
     /// Largest tolerated |i_a + i_b + i_c|, A (sensor consistency).
     pub i_sum_tol_a: f32,
+    /// Power-up alignment (docs/protection.md): d-axis current of each step, A.
+    pub align_i_a: f32,
+    /// Power-up alignment: duration of each of its two steps (ramp over the first half, then
+    /// hold and settle check), s.
+    pub align_time_s: f32,
+    /// Power-up alignment: largest travel from where it started before `align_moving`, m.
+    pub align_travel_m: f32,
+    /// Boot calibration: largest |zero-current code − adc_zero_code| of a phase, A.
+    pub offset_tol_a: f32,
+    /// Angle plausibility: largest angle of the loop's back-emf from the q axis, degrees.
+    pub angle_tol_deg: f32,
+    /// Angle plausibility: judged only above this encoder back-emf K_e·|ω|, V.
+    pub angle_emf_min_v: f32,
     /// Overrun bucket size: more than this many current-loop overruns beyond one per
     /// millisecond trip `loop_overrun`.
     pub overrun_max: u16,
@@ -175,6 +188,12 @@ impl Default for Config {
             x_max_m: 0.5,
             i_sum_tol_a: 0.5,
             overrun_max: 10,
+            align_i_a: 1.9,
+            align_time_s: 0.4,
+            align_travel_m: 0.004,
+            offset_tol_a: 0.5,
+            angle_tol_deg: 45.0,
+            angle_emf_min_v: 5.0,
             law: LawKind::Resistor,
             r_load_ohm: 306.0,
             law_rate_hz: 1_000.0,
@@ -249,6 +268,11 @@ impl Config {
             self.i_trip_a > self.i_max_a,
             "i_trip_a",
             "must exceed i_max_a",
+        )?;
+        check(
+            self.align_i_a < self.i_trip_a,
+            "align_i_a",
+            "must be below i_trip_a",
         )?;
         check(
             self.v_bus_uv < self.v_bus_ov,
@@ -625,7 +649,7 @@ mod tests {
     #[test]
     fn differs_covers_every_field() {
         let names = field_names();
-        assert_eq!(names.len(), 48, "{names:?}");
+        assert_eq!(names.len(), 54, "{names:?}");
         for n in &names {
             assert!(
                 n == "opt" || PARAMS.iter().any(|p| p.name == n.as_str()),

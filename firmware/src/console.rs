@@ -23,7 +23,7 @@
 use core::fmt::Write;
 
 use crate::config::Config;
-use crate::control::{Controller, Mode, Telemetry};
+use crate::control::{Controller, Mode, ModeError, Telemetry};
 use crate::numtext::{self, q_f32, Fixed, Num, NumError};
 use crate::params::{self, ParamError, PARAMS};
 use crate::protect::Fault;
@@ -61,8 +61,8 @@ pub static COMMANDS: &[(&str, &str, &str)] = &[
     ("clear", "", "clear the fault once its cause is gone"),
     (
         "mode",
-        "idle|run|short|open",
-        "idle, open: gates off; run: harvest; short: phases shorted",
+        "idle|run|short|open|align",
+        "idle, open: gates off; run: harvest; short: phases shorted; align: find the angle",
     ),
     ("tel", "CH[,CH..] HZ|off", "stream channels as CSV t,v1,.."),
 ];
@@ -636,6 +636,7 @@ impl Console {
                 out.s("\r\n")
                     .col("fault", 10)
                     .s(ctl.fault().map_or("none", |f| f.name()));
+                out.s("\r\n").col("boot", 10).s(ctl.boot().name());
                 for (label, v, unit) in [
                     ("vbus", q_f32(t.v_bus), "V"),
                     ("speed", q_f32(t.omega_m), "rad/s"),
@@ -733,11 +734,15 @@ impl Console {
                     "run" => Mode::Run,
                     "short" => Mode::Short,
                     "open" => Mode::Open,
-                    o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open)")),
+                    "align" => Mode::Align,
+                    o => fail!(.s("unknown mode '").clip(o).s("' (idle|run|short|open|align)")),
                 };
                 match ctl.set_mode(m) {
                     Ok(()) => ok!(.s(" mode ").s(m.name())),
-                    Err(f) => fail!(.s("fault ").s(f.name()).s(" latched: clear it first")),
+                    Err(ModeError::Fault(f)) => {
+                        fail!(.s("fault ").s(f.name()).s(" latched: clear it first"))
+                    }
+                    Err(e) => fail!(.s("mode ").s(m.name()).s(" refused: ").s(e.name())),
                 }
             }
             "tel" if want(1) && a1 == Some("off") => {
@@ -1157,7 +1162,7 @@ mod tests {
     fn list_filters_by_pattern_and_shows_the_factory_default() {
         struct Factory(Config);
         impl ParamStore for Factory {
-            fn save(&mut self, _: &Config) -> Result<(), &'static str> {
+            fn save(&mut self, _: &Config) -> Result<Saved, &'static str> {
                 Err("no")
             }
             fn load(&mut self) -> Result<Config, &'static str> {

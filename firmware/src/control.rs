@@ -30,6 +30,10 @@ pub enum Mode {
     /// Current controlled to zero: open terminals emulated even when the back-emf exceeds
     /// the bus.
     Open,
+    /// Power-up alignment: d-axis current at an imposed angle, two steps a quarter of an
+    /// electrical turn apart (docs/protection.md); back to Idle when done. (Discriminant 5:
+    /// the modes that control current are then the odd ones, one bit for the step to test.)
+    Align = 5,
 }
 
 impl Mode {
@@ -40,11 +44,102 @@ impl Mode {
             Mode::Run => "run",
             Mode::Short => "short",
             Mode::Open => "open",
+            Mode::Align => "align",
         }
     }
 }
 
 pub use crate::protect::Fault;
+
+/// Power-up state of the commutation angle and the current offsets (`status` shows it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Boot {
+    /// The stored `encoder_offset_rad` is trusted: the encoder count is referenced to the
+    /// rotor by construction (what [`Controller::new`] assumes; the board calls
+    /// [`Controller::require_alignment`] at power-up).
+    #[default]
+    Stored,
+    /// Measuring each phase's zero-current code, gates off (Run refused).
+    Calibrating,
+    /// Offsets calibrated; the angle is unknown: Run refused until `mode align` succeeds.
+    Unaligned,
+    /// Alignment running ([`Mode::Align`]).
+    Aligning,
+    /// Aligned by the power-up procedure.
+    Aligned,
+}
+
+impl Boot {
+    /// Console name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Boot::Stored => "stored",
+            Boot::Calibrating => "calibrating",
+            Boot::Unaligned => "unaligned",
+            Boot::Aligning => "aligning",
+            Boot::Aligned => "aligned",
+        }
+    }
+}
+
+/// Why a mode request was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModeError {
+    /// A fault is latched (only its safe mode or Idle may be chosen).
+    Fault(Fault),
+    /// Run (or Align) needs the boot sequence to have reached a state it has not.
+    Boot(Boot),
+}
+
+impl ModeError {
+    /// Console words.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModeError::Fault(f) => f.name(),
+            ModeError::Boot(Boot::Calibrating) => "calibrating current offsets",
+            ModeError::Boot(_) => "not aligned: mode align first",
+        }
+    }
+}
+
+/// Periods of the boot offset calibration (gates off): 2,048, 102 ms at 20 kHz; the mean
+/// of 2,048 codes is exact to the rounding of the sum's quotient (±0.5 code).
+pub const CAL_PERIODS: u32 = 2048;
+
+/// Offset calibration and alignment state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct BootState {
+    boot: Boot,
+    /// Calibration sums of the three phase codes and their count.
+    sum: [u32; 3],
+    n_cal: u32,
+    /// Per-phase zero codes of the raw converter (`adc_zero_code` until calibrated).
+    zero: [i32; 3],
+    /// Alignment: periods in the present step, periods per step, which step (0, 1).
+    n: u32,
+    n_step: u32,
+    step: u8,
+    /// d-current ramp increment per period and the step current (Q16.16 bits).
+    di: i32,
+    /// Damping conductance during alignment, 1/R (a short circuit's).
+    g_short: Gain,
+    i_align: i32,
+    /// Encoder position at the start, at the settle-window start, at the end of step 0.
+    p_start: i32,
+    p_settle: i32,
+    p_a: i32,
+    /// Counts allowed for travel; the quarter turn's expected counts.
+    travel: i32,
+    quarter: i32,
+    /// The encoder's electrical angle per count, kept while alignment imposes the angle.
+    e_per_count: u32,
+    /// The aligned electrical offset, reapplied when the configuration is recompiled.
+    offset: Option<Angle>,
+    /// A boot fault found in the step, latched by the next supervision tick (≤ 1 ms; the
+    /// step commands zero current meanwhile): the latch and its snapshot cost more than the
+    /// step's budget.
+    pending: Option<Fault>,
+}
 use crate::protect::{derate_regen, Protection, SUPERVISE_HZ};
 
 /// What the loop measured and commanded in its last period (SI units in fixed point), as
@@ -100,21 +195,27 @@ impl Compiled {
 
 /// The current controller and everything it owns.
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Controller {
-    cfg: Config,
+    // `repr(C)` in this order: the step's fields first, so that each lies within the
+    // Thumb-2 load's 12-bit immediate offset of `self` (the configuration, which the step
+    // never reads, last).
     g: Gains,
-    law: Law,
-    mode: Mode,
-    fault: Option<Fault>,
     enc: Encoder,
     pi: CurrentPi,
-    brake: bool,
-    rec: StepRecord,
     /// Slow terms and the tick of their refresh cycle (`REFRESH_ALL` = all at the next step).
     held: HeldTerms,
+    rec: StepRecord,
     slow_tick: u8,
+    mode: Mode,
+    brake: bool,
+    fault: Option<Fault>,
+    /// Power-up: offset calibration and alignment.
+    bs: BootState,
     /// Protection state (protect.rs): derate factor, supervision, fault record.
     prot: Protection,
+    law: Law,
+    cfg: Config,
 }
 
 impl Controller {
@@ -146,6 +247,10 @@ impl Controller {
             held: HeldTerms::default(),
             slow_tick: REFRESH_ALL,
             prot: Protection::default(),
+            bs: BootState {
+                zero: [cfg.adc_zero_code as i32; 3],
+                ..BootState::default()
+            },
         })
     }
 
@@ -182,7 +287,61 @@ impl Controller {
         }
         self.cfg = c.cfg;
         self.g = c.g;
+        self.apply_angle();
         self.refresh_now();
+    }
+
+    /// The angle overrides on the compiled encoder constants: the aligned offset, and while
+    /// aligning the imposed angle (no angle per count).
+    fn apply_angle(&mut self) {
+        let e = &mut self.g.enc;
+        if let Some(o) = self.bs.offset {
+            e.offset = o;
+        }
+        if self.mode == Mode::Align {
+            self.bs.e_per_count = e.e_per_count;
+            e.e_per_count = 0;
+            e.offset = Angle((self.bs.step as u32) << 30);
+        }
+    }
+
+    /// Power-up: forget the angle and the offsets, go Idle, and calibrate the per-phase zero
+    /// codes over the next [`CAL_PERIODS`] Idle periods; Run is refused until `mode align`
+    /// has succeeded (docs/protection.md).
+    pub fn require_alignment(&mut self) {
+        let _ = self.set_mode(Mode::Idle);
+        self.bs = BootState {
+            boot: Boot::Calibrating,
+            zero: self.bs.zero,
+            ..BootState::default()
+        };
+        self.g.enc.offset = Gains::new(&self.cfg).map_or(Angle(0), |g| g.enc.offset);
+    }
+
+    /// Power-up state.
+    pub fn boot(&self) -> Boot {
+        self.bs.boot
+    }
+
+    /// The per-phase zero-current codes of the raw converter (calibrated at boot).
+    pub fn zero_codes(&self) -> [i32; 3] {
+        self.bs.zero
+    }
+
+    /// What the converter must subtract from each phase's raw code so that zero current
+    /// reads `adc_zero_code`: `zero_codes() − adc_zero_code`. The board programs them into
+    /// the ADC's offset registers (STM32G474 `ADC_OFRy`: OFFSET with OFFSETPOS for a
+    /// negative one, no instruction in the loop) once the calibration is done; the
+    /// simulator applies them in its sample. Zero until calibrated.
+    pub fn adc_offsets(&self) -> [i32; 3] {
+        let n = self.cfg.adc_zero_code as i32;
+        self.bs.zero.map(|z| z - n)
+    }
+
+    /// The electrical angle of the d axis at count 0 within the turn in force (the aligned
+    /// one once aligned).
+    pub fn angle_offset(&self) -> Angle {
+        self.g.enc.offset
     }
 
     /// The configuration in force.
@@ -204,7 +363,7 @@ impl Controller {
 
     /// Request a mode. Refused (returns the fault) while a fault is latched, except for the
     /// fault's own safe mode and Idle.
-    pub fn set_mode(&mut self, m: Mode) -> Result<(), Fault> {
+    pub fn set_mode(&mut self, m: Mode) -> Result<(), ModeError> {
         if let Some(f) = self.fault {
             // Open dominates: after a later fault that opened the phases, only Idle.
             let opened = self
@@ -212,15 +371,165 @@ impl Controller {
                 .record()
                 .is_some_and(|r| r.later().any(|g| g.safe_mode() == Mode::Idle));
             if m != Mode::Idle && (m != f.safe_mode() || opened) {
-                return Err(f);
+                return Err(ModeError::Fault(f));
             }
         }
+        if let Some(f) = self.bs.pending {
+            if m != Mode::Idle {
+                return Err(ModeError::Fault(f)); // latched at the next supervision tick
+            }
+        }
+        let b = self.bs.boot;
+        match m {
+            Mode::Run if !matches!(b, Boot::Stored | Boot::Aligned) => {
+                return Err(ModeError::Boot(b))
+            }
+            Mode::Align if b == Boot::Calibrating => return Err(ModeError::Boot(b)),
+            _ => {}
+        }
         if m != self.mode {
+            if self.mode == Mode::Align {
+                self.end_align(None);
+            }
             self.pi.reset();
             self.mode = m;
+            if m == Mode::Align {
+                self.start_align();
+            }
             self.refresh_now();
         }
         Ok(())
+    }
+
+    /// Enter alignment: step 0 at the imposed angle 0, the d current ramping from zero.
+    #[cold]
+    fn start_align(&mut self) {
+        let (c, b) = (&self.cfg, &mut self.bs);
+        b.boot = Boot::Aligning;
+        b.offset = None;
+        b.step = 0;
+        b.n = 0;
+        b.n_step = ((c.align_time_s * c.pwm_hz) as u32).max(8);
+        b.i_align = crate::numtext::q_of(c.align_i_a).to_bits();
+        b.di = (b.i_align / (b.n_step / 2) as i32).max(1);
+        b.g_short = crate::laws::Resistor::new(c.r_phase_ohm, 0.0).conductance;
+        b.p_start = self.enc.position;
+        let per_m = c.encoder_cpr as f32 / (c.lead_m_per_rad * core::f32::consts::TAU);
+        b.travel = (c.align_travel_m * per_m).min(1e9) as i32;
+        b.quarter = (c.encoder_cpr / (4 * c.pole_pairs as u32).max(1)) as i32;
+        self.held.i_ref = Dq::default();
+        self.held.ff = Dq::default();
+        self.held.advance = Rotation::default();
+        self.held.tick_or = REFRESH_ALL;
+        self.g.enc.offset = Angle(0);
+        self.apply_angle();
+    }
+
+    /// Leave alignment: the angle per count restored, the offset found (or the stored
+    /// one's place kept for a failed or aborted alignment, and Unaligned).
+    #[cold]
+    fn end_align(&mut self, offset: Option<Angle>) {
+        let b = &mut self.bs;
+        self.g.enc.e_per_count = b.e_per_count;
+        b.offset = offset;
+        b.boot = if offset.is_some() {
+            Boot::Aligned
+        } else {
+            Boot::Unaligned
+        };
+        self.g.enc.offset = offset.unwrap_or(Angle(0));
+        self.held.i_ref = Dq::default();
+    }
+
+    /// One alignment period (from the step's slow-term slot): ramp, hold, settle and travel
+    /// checks, then the quarter-turn check and the offset.
+    #[cold]
+    #[inline(never)]
+    fn align_period(&mut self, vb: u32) {
+        let pos = self.enc.position;
+        let b = &mut self.bs;
+        if b.pending.is_some() {
+            self.held.i_ref = Dq::default();
+            return self.refresh_bus(vb);
+        }
+        b.n += 1;
+        let i_d = (b.n as i32).saturating_mul(b.di).min(b.i_align);
+        // The rotor on the d-axis field is a spring with the structure's mass on it and
+        // little friction (ζ ≈ 0.01 on the reference TMD); the q current of a short circuit,
+        // −K_e·ω_m/R, damps it as the short would (ζ ≈ 0.7 there) while the angles are close.
+        let g = &self.g;
+        let e_q = g.k.ke_per_vel.scale(self.enc.vel);
+        self.held.i_ref = Dq {
+            d: Q::from_bits(i_d),
+            q: -clamp_sym(b.g_short.scale(e_q), g.i_max),
+        };
+        let mut fault = None;
+        if pos.wrapping_sub(b.p_start).unsigned_abs() > b.travel as u32 {
+            fault = Some(Fault::AlignMoving);
+        } else if b.n == b.n_step - b.n_step / 4 {
+            b.p_settle = pos;
+        } else if b.n >= b.n_step {
+            // Settled: the last quarter of the step moved less than an eighth of the
+            // quarter turn (11° electrical).
+            let settle = (b.quarter / 8).max(1);
+            if pos.wrapping_sub(b.p_settle).abs() > settle {
+                fault = Some(Fault::AlignMoving);
+            } else if b.step == 0 {
+                b.p_a = pos;
+                b.step = 1;
+                b.n = b.n_step / 2; // current already at full: hold only
+                self.g.enc.offset = Angle(1 << 30);
+            } else {
+                let moved = pos.wrapping_sub(b.p_a);
+                if (moved - b.quarter).abs() > (b.quarter / 4).max(1) {
+                    fault = Some(Fault::AlignCheck);
+                } else {
+                    // The d axis sits at +90° electrical at this count.
+                    let per = b.e_per_count;
+                    let o = Angle((1u32 << 30).wrapping_sub(self.enc.in_turn.wrapping_mul(per)));
+                    self.end_align(Some(o));
+                    self.mode = Mode::Idle;
+                    self.pi.reset();
+                }
+            }
+        }
+        if fault.is_some() {
+            self.bs.pending = fault;
+            self.held.i_ref = Dq::default();
+        }
+        self.refresh_bus(vb);
+    }
+
+    /// Idle period during the boot calibration: sum the phase codes (gates off, so the
+    /// currents are zero unless the line back-emf exceeds the bus); after [`CAL_PERIODS`]
+    /// the rounded means become the zero codes, or `current_offset` latches.
+    #[cold]
+    #[inline(never)]
+    fn calibrate(&mut self) {
+        let s = self.rec.sample;
+        let b = &mut self.bs;
+        for k in 0..3 {
+            b.sum[k] += (s.i_abc[k] as u32).min(CODE_MAX);
+        }
+        b.n_cal += 1;
+        if b.n_cal < CAL_PERIODS {
+            return;
+        }
+        let nominal = self.cfg.adc_zero_code as i32;
+        // The codes were seen through the offsets in force: the raw zero is their mean plus
+        // those offsets.
+        let z = [0, 1, 2]
+            .map(|k| ((b.sum[k] + CAL_PERIODS / 2) / CAL_PERIODS) as i32 + b.zero[k] - nominal);
+        let tol = (self.cfg.offset_tol_a / self.cfg.amps_per_count) as i32;
+        if z.iter().any(|&c| (c - nominal).abs() > tol) {
+            b.n_cal = 0;
+            b.sum = [0; 3];
+            b.pending = Some(Fault::CurrentOffset);
+            b.boot = Boot::Unaligned; // no further sums until the fault is cleared
+            return;
+        }
+        b.zero = z;
+        b.boot = Boot::Unaligned;
     }
 
     pub fn mode(&self) -> Mode {
@@ -251,6 +560,12 @@ impl Controller {
                     return Err(why);
                 }
             }
+        }
+        if matches!(self.fault, Some(Fault::CurrentOffset)) {
+            self.bs.boot = Boot::Calibrating; // measure again
+        }
+        if matches!(self.fault, Some(Fault::AngleImplausible)) && self.bs.boot == Boot::Aligned {
+            self.bs.boot = Boot::Unaligned; // the angle is not trusted: align again
         }
         self.fault = None;
         self.prot.forget();
@@ -291,8 +606,29 @@ impl Controller {
         let v = self
             .prot
             .supervise(&self.cfg, self.mode, &t, self.enc.position);
-        if let Some(f) = v.trip {
+        if let Some(f) = self.bs.pending.take() {
             self.trip(f, &t);
+        } else if let Some(f) = v.trip {
+            self.trip(f, &t);
+        } else if self.bs.boot == Boot::Aligned && self.mode == Mode::Run {
+            self.trim_angle();
+        }
+    }
+
+    /// After a power-up alignment, the offset follows the emf's angle (protect.rs): the
+    /// d-axis alignment leaves the rotor lagging its field by the structure's load
+    /// (asin(F·l/T_align): 18° electrical at 325 N on the reference TMD). Each supervision
+    /// tick moves the offset by 1/200 of the error (τ = 0.2 s), at most 2 mrad (2 rad/s):
+    /// far slower than the plausibility check latches a large error (20 ms).
+    #[cold]
+    fn trim_angle(&mut self) {
+        let e = self.prot.angle_err;
+        let step = (e * (1.0 / 200.0)).clamp(-2e-3, 2e-3);
+        // rad → angle LSB (2^32 per turn).
+        let d = (step * (4_294_967_296.0 / core::f32::consts::TAU)) as i32;
+        if let Some(o) = self.bs.offset.as_mut() {
+            o.0 = o.0.wrapping_sub(d as u32);
+            self.g.enc.offset = *o;
         }
     }
 
@@ -333,6 +669,9 @@ impl Controller {
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
         self.prot.latch(f, self.mode, t);
+        if self.mode == Mode::Align {
+            self.end_align(None);
+        }
         // With the encoder or the speed in doubt the bus decides: over-voltage while open
         // is the rectification itself (above the onset); nothing else is taken as above it.
         let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
@@ -350,7 +689,7 @@ impl Controller {
     }
 
     /// The latched faults (first and later) as bits `1 << code`.
-    fn latched_bits(&self) -> u16 {
+    fn latched_bits(&self) -> u32 {
         self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
@@ -427,6 +766,8 @@ impl Controller {
         let over_i = off(ia).max(off(ib)).max(off(ic)) > k.i_span;
         // For 12-bit codes 2a − b − c ∈ ±8190 and b − c ∈ ±4095: the clamps (one SSAT each)
         // change nothing then and bound anything larger.
+        // The codes arrive with the boot calibration's per-phase offsets removed by the ADC
+        // ([`Controller::adc_offsets`]): the common zero code cancels here.
         let s_alpha = (2 * ia - ib - ic).clamp(-8192, 8191);
         let s_beta = (ib - ic).clamp(-4096, 4095);
         // 8192·apc/3 < 2,731 A: fits.
@@ -459,7 +800,7 @@ impl Controller {
         self.rec.i_dq = i_dq;
         self.rec.theta_e = theta_e;
 
-        if !matches!(self.mode, Mode::Run | Mode::Open) {
+        if !matches!(self.mode, Mode::Run | Mode::Open | Mode::Align) {
             return self.step_off();
         }
         // Slow terms: the back-emf and the law's current reference (limited to
@@ -523,6 +864,9 @@ impl Controller {
     #[cold]
     #[inline(never)]
     fn step_off(&mut self) -> Actuation {
+        if self.bs.boot == Boot::Calibrating && self.mode == Mode::Idle {
+            self.calibrate();
+        }
         let (duties, enable) = if self.mode == Mode::Short {
             ([Duty::ZERO; 3], true)
         } else {
@@ -609,6 +953,9 @@ impl Controller {
     /// serves the request before any step runs the loop.)
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
+        if self.mode == Mode::Align {
+            return self.align_period(vb);
+        }
         if self.setup_law() {
             self.refresh_law(i_dq, vb);
             return;
@@ -640,6 +987,11 @@ impl Controller {
     /// from its own sample. Other laws advance their state once per step, so they refresh at
     /// the next step (and every step).
     fn refresh_now(&mut self) {
+        if self.mode == Mode::Align {
+            // Alignment's own terms, every period from the next step on.
+            self.slow_tick = REFRESH_ALL;
+            return;
+        }
         if matches!(self.law, Law::Resistor(_)) {
             let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
             self.refresh_all(i_dq, vb);

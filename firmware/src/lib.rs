@@ -46,6 +46,6 @@ pub mod store;
 pub mod svpwm;
 
 pub use config::{Config, ConfigError, Gains};
-pub use control::{Compiled, Controller, Mode, Telemetry};
+pub use control::{Boot, Compiled, Controller, Mode, ModeError, Telemetry};
 pub use io::{Actuation, DriveIo, RawSample};
 pub use period::{Pending, Period, PeriodHw, Slot};

@@ -390,6 +390,54 @@ pub static PARAMS: &[Param] = &[
         "loop overruns tolerated beyond one per ms"
     ),
     real!(
+        align_i_a,
+        "A",
+        0.1,
+        1_000.0,
+        true,
+        "power-up alignment d current"
+    ),
+    real!(
+        align_time_s,
+        "s",
+        0.02,
+        10.0,
+        true,
+        "power-up alignment, each of 2 steps"
+    ),
+    real!(
+        align_travel_m,
+        "m",
+        1e-5,
+        1.0,
+        true,
+        "largest travel while aligning"
+    ),
+    real!(
+        offset_tol_a,
+        "A",
+        0.0,
+        1_000.0,
+        true,
+        "largest phase zero-current offset at boot"
+    ),
+    real!(
+        angle_tol_deg,
+        "deg",
+        10.0,
+        90.0,
+        true,
+        "largest angle of the emf from the q axis"
+    ),
+    real!(
+        angle_emf_min_v,
+        "V",
+        0.1,
+        2_000.0,
+        true,
+        "angle check only above this emf"
+    ),
+    real!(
         m_max,
         "1",
         0.1,

@@ -32,6 +32,10 @@ pub const EMF_REL_TOL: f32 = 0.5;
 pub const EMF_TICKS: u16 = 20;
 /// Supervision ticks (ms) the phase-current sum must accumulate to trip (leaky count).
 pub const ISUM_TICKS: u16 = 5;
+/// Supervision ticks (net, leaky) of an emf off the q axis before `angle_implausible`: 20 ms,
+/// a tenth of a period of the fastest structural motion (5 Hz) while the PI (1 kHz) and the
+/// emf settle within a few ms.
+pub const ANGLE_TICKS: u16 = 20;
 /// I²t state (1 = the machine's rated temperature rise) below which a trip may be cleared.
 pub const I2T_CLEAR: f32 = 0.8;
 /// The filtered force must fall below this fraction of `f_trip_n` to clear an over-force trip.
@@ -67,6 +71,18 @@ pub enum Fault {
     /// The bus reading jumped to the ADC's rail: a sensor or divider fault, not an
     /// over-voltage (a true bus passes `v_bus_ov`, below the rail, first).
     BusSensor = 12,
+    /// The back-emf the current loop needs lies more than `angle_tol_deg` from the q axis of
+    /// the angle in use (commutation angle wrong: the law would motor).
+    AngleImplausible = 13,
+    /// Power-up alignment: the rotor did not settle, or travelled beyond `align_travel_m`
+    /// (rotor driven by the structure).
+    AlignMoving = 14,
+    /// Power-up alignment: the quarter-turn check step moved the rotor by the wrong angle
+    /// (rotor blocked, encoder dead or reversed, wrong pole count or counts per turn).
+    AlignCheck = 15,
+    /// Boot calibration: a phase's zero-current code lies more than `offset_tol_a` from
+    /// `adc_zero_code`.
+    CurrentOffset = 16,
 }
 
 impl Fault {
@@ -84,6 +100,10 @@ impl Fault {
         Fault::LoopOverrun,
         Fault::CurrentSensor,
         Fault::BusSensor,
+        Fault::AngleImplausible,
+        Fault::AlignMoving,
+        Fault::AlignCheck,
+        Fault::CurrentOffset,
     ];
 
     /// Numeric code.
@@ -111,6 +131,10 @@ impl Fault {
             Fault::LoopOverrun => "loop_overrun",
             Fault::CurrentSensor => "current_sensor",
             Fault::BusSensor => "bus_sensor",
+            Fault::AngleImplausible => "angle_implausible",
+            Fault::AlignMoving => "align_moving",
+            Fault::AlignCheck => "align_check",
+            Fault::CurrentOffset => "current_offset",
         }
     }
 
@@ -131,6 +155,10 @@ impl Fault {
             Fault::LoopOverrun => "current loop overran its period too often",
             Fault::CurrentSensor => "phase currents do not sum to zero (sensor fault)",
             Fault::BusSensor => "bus reading at ADC rail",
+            Fault::AngleImplausible => "back-emf off the q axis by more than angle_tol_deg",
+            Fault::AlignMoving => "rotor moved during alignment (not settled or too far)",
+            Fault::AlignCheck => "alignment check step moved the rotor by the wrong angle",
+            Fault::CurrentOffset => "a phase's zero-current code beyond offset_tol_a",
         }
     }
 
@@ -142,7 +170,8 @@ impl Fault {
     ///   late) and current-sensor faults (the over-current check itself is blind).
     /// * Shorted ([`Mode::Short`], low sides on): over-voltage (no energy reaches the bus),
     ///   encoder faults and implausible speed (the short needs no angle), stroke limit (brake
-    ///   hardest before the end stop).
+    ///   hardest before the end stop), a wrong angle and a failed alignment (the short damps
+    ///   the structure without an angle, so a moving structure slows down for a retry).
     pub fn safe_mode(self) -> Mode {
         match self {
             Fault::OverCurrent
@@ -151,16 +180,20 @@ impl Fault {
             | Fault::MachineI2t
             | Fault::LoopOverrun
             | Fault::CurrentSensor
-            | Fault::BusSensor => Mode::Idle,
+            | Fault::BusSensor
+            | Fault::CurrentOffset => Mode::Idle,
             Fault::BusOverVoltage
             | Fault::EncoderImplausible
             | Fault::EncoderLoss
             | Fault::SpeedImplausible
-            | Fault::StrokeLimit => Mode::Short,
+            | Fault::StrokeLimit
+            | Fault::AngleImplausible
+            | Fault::AlignMoving
+            | Fault::AlignCheck => Mode::Short,
         }
     }
 
-    fn bit(self) -> u16 {
+    fn bit(self) -> u32 {
         1 << self.code()
     }
 }
@@ -191,7 +224,7 @@ pub struct Record {
     pub fault: Fault,
     pub snap: Snapshot,
     /// Faults that tripped after the first one (bit `code`).
-    pub later: u16,
+    pub later: u32,
 }
 
 impl Record {
@@ -224,10 +257,11 @@ pub struct Verdict {
 }
 
 /// Order in which faults found in the same supervision tick are reported (cause first).
-const PRIORITY: [Fault; 7] = [
+const PRIORITY: [Fault; 8] = [
     Fault::CurrentSensor,
     Fault::SpeedImplausible,
     Fault::EncoderLoss,
+    Fault::AngleImplausible,
     Fault::LoopOverrun,
     Fault::StrokeLimit,
     Fault::OverForce,
@@ -253,6 +287,11 @@ pub struct Protection {
     /// I²t state: per-unit winding temperature rise, settles at (|i|/i2t_cont_a)².
     i2t: f32,
     emf_count: u16,
+    /// Leaky count of ticks with the emf off the q axis (angle plausibility).
+    angle_count: u16,
+    /// The loop's angle minus the rotor's from the emf, rad (small-angle; 0 when not judged
+    /// this tick or beyond `angle_tol_deg`).
+    pub angle_err: f32,
     isum_count: u16,
     isum_now: bool,
     record: Option<Record>,
@@ -273,6 +312,8 @@ impl Default for Protection {
             omega_raw: 0.0,
             i2t: 0.0,
             emf_count: 0,
+            angle_count: 0,
+            angle_err: 0.0,
             isum_count: 0,
             isum_now: false,
             record: None,
@@ -378,6 +419,7 @@ impl Protection {
     /// Forget the record (the controller checked the cause is gone).
     pub fn forget(&mut self) {
         self.record = None;
+        self.angle_count = 0;
     }
 
     /// One supervision tick over the loop's last telemetry and the encoder's multi-turn
@@ -399,7 +441,7 @@ impl Protection {
         // Faults found this tick (bit per code); the reported one is chosen by cause
         // priority at the end: a sensor that lies (current sum, encoder) before what is
         // computed from it (force, I²t), so that a fault is named by its cause.
-        let mut found: u16 = 0;
+        let mut found: u32 = 0;
         let mut set = |f: Fault| found |= f.bit();
 
         // Bus management: derate factor, linear from 1 at derate_start_v to 0 at
@@ -486,10 +528,32 @@ impl Protection {
             let eq = q_f32(t.v_dq.q) - r * i_q - we * l * i_d;
             let w_abs = if omega < 0.0 { -omega } else { omega };
             let lim = cfg.ke_v_s_per_rad * w_abs * (1.0 + EMF_REL_TOL) + cfg.enc_emf_tol_v;
-            ed * ed + eq * eq > lim * lim
+            let e2 = ed * ed + eq * eq;
+            // Angle plausibility: the emf must lie within angle_tol_deg of +q (for ω > 0; of
+            // −q for ω < 0), judged once the encoder's emf exceeds angle_emf_min_v:
+            // eq·sgn ω < cos(tol)·|e|, squared to avoid a root.
+            let eqs = if omega < 0.0 { -eq } else { eq };
+            let c = cos_deg(cfg.angle_tol_deg);
+            let off_q = eqs < 0.0 || eqs * eqs < c * c * e2;
+            let judged = cfg.ke_v_s_per_rad * w_abs > cfg.angle_emf_min_v;
+            // The loop's angle minus the rotor's, small-angle: the emf (0, E) of the rotor
+            // frame reads (E·sin ε, E·cos ε) in the loop's.
+            self.angle_err = if judged && !off_q {
+                let eds = if omega < 0.0 { -ed } else { ed };
+                eds / eqs
+            } else {
+                0.0
+            };
+            (e2 > lim * lim, judged && off_q)
         } else {
-            false
+            self.angle_err = 0.0;
+            (false, false)
         };
+        self.angle_count = leaky(self.angle_count, mismatch.1);
+        if self.angle_count >= ANGLE_TICKS {
+            set(Fault::AngleImplausible);
+        }
+        let mismatch = mismatch.0;
         self.emf_count = leaky(self.emf_count, mismatch);
         if self.emf_count >= EMF_TICKS {
             set(Fault::EncoderLoss);
@@ -551,6 +615,10 @@ impl Protection {
             Fault::BusSensor => {
                 (v >= cfg.volts_per_count * 4095.0).then_some("bus reading at rail")
             }
+            // Cleared, the drive must align again (the controller forgets its angle); a
+            // cleared offset fault recalibrates (the controller restarts the calibration).
+            Fault::AngleImplausible | Fault::AlignMoving | Fault::AlignCheck => None,
+            Fault::CurrentOffset => None,
         }
     }
 }
@@ -563,7 +631,7 @@ pub fn above_onset(cfg: &Config, omega_m: f32) -> bool {
 
 /// Faults after which the measured speed is not trusted (bits `1 << code`): encoder
 /// implausible, encoder loss, speed implausible.
-pub const SPEED_DOUBT: u16 = 1 << 4 | 1 << 7 | 1 << 8;
+pub const SPEED_DOUBT: u32 = 1 << 4 | 1 << 7 | 1 << 8;
 
 /// The safe state when fault `f` arrives in `mode` with `latched` faults already latched
 /// (`docs/protection.md`, "The rule"): a fresh fault goes to its own safe state; open
@@ -587,6 +655,13 @@ pub fn next_mode(latched: bool, mode: Mode, f: Fault, above_onset: bool) -> Mode
 }
 
 /// Leaky persistence count: +1 when the condition holds, −1 otherwise (floor 0).
+/// cos of an angle in degrees in [0, 90] (Taylor series to x^10: error < 1e-7 there).
+fn cos_deg(deg: f32) -> f32 {
+    let x = deg * (core::f32::consts::PI / 180.0);
+    let x2 = x * x;
+    1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0))))
+}
+
 fn leaky(n: u16, cond: bool) -> u16 {
     if cond {
         n.saturating_add(1)

@@ -243,7 +243,7 @@ impl FaultSim {
         let rebooting = st.in_reset();
         if st.cpu_runs(t) {
             if rebooting {
-                self.sim.power_up()?;
+                self.sim.reboot()?;
             }
             if let Inject::ComparatorFalseTrip {
                 ring_s,

@@ -24,6 +24,7 @@ pub mod faults;
 pub mod lqg;
 pub mod plant;
 pub mod plot;
+pub mod powerup;
 pub mod sampling;
 pub mod scenario;
 pub mod sim;

@@ -22,6 +22,7 @@
 //! ```
 
 use crate::plant::{Bus, Drive, Excitation, Inverter, Losses, Machine, Motion, Screw, Sensors};
+use crate::powerup::PowerUp;
 use crate::sim::{Channel, Rig, Sim};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
@@ -213,6 +214,10 @@ pub struct Scenario {
     pub losses: Losses,
     #[serde(default)]
     pub sensors: Sensors,
+    /// Power-up models ([`crate::powerup`]): all off by default; on, the build runs the
+    /// firmware's boot sequence (offset calibration, alignment) before the run.
+    #[serde(default)]
+    pub powerup: PowerUp,
     #[serde(default)]
     pub firmware: FirmwareSpec,
     #[serde(default)]
@@ -263,6 +268,7 @@ impl Scenario {
             inverter: Inverter::default(),
             losses: Losses::default(),
             sensors: Sensors::default(),
+            powerup: PowerUp::default(),
             firmware: FirmwareSpec::default(),
             law: LawSpec {
                 r_load_ohm,
@@ -317,6 +323,7 @@ impl Scenario {
         }
         self.law_kind()?;
         self.config()?;
+        self.powerup.check()?;
         Ok(())
     }
 
@@ -645,6 +652,11 @@ impl Scenario {
             sensors: self.sensors,
         };
         let mut sim = Sim::new(rig, &self.config()?)?;
+        if sim.power_up(&self.powerup)?.is_some() {
+            // A boot that fails leaves its fault latched (and the drive in its safe mode)
+            // for the run to show.
+            let _ = sim.boot();
+        }
         let ch: Vec<Channel> = self
             .record
             .channels

@@ -246,6 +246,19 @@ fn power_up_controller(cfg: &Config) -> Result<Controller, String> {
     Ok(ctl)
 }
 
+/// Seconds of the boot sequence ([`Sim::boot`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BootTimes {
+    pub calibrate_s: f64,
+    /// From the first alignment's start to the last one's end (retries included).
+    pub align_s: f64,
+    pub tries: u32,
+}
+
+/// Alignment attempts of [`Sim::boot`], and the seconds in the safe state between them.
+pub const ALIGN_TRIES: u32 = 5;
+pub const ALIGN_RETRY_S: f64 = 0.5;
+
 /// Everything that defines a simulated rig.
 #[derive(Clone, Debug)]
 pub struct Rig {
@@ -310,6 +323,8 @@ pub struct Sim {
     /// exact energy sum, overrun count) and its console mailbox, as on the board.
     per: Period,
     mail: Pending,
+    /// The power-up models were applied ([`Sim::power_up`]): a reboot calibrates and aligns.
+    powered_up: bool,
 }
 
 impl Sim {
@@ -377,16 +392,22 @@ impl Sim {
             ts,
             per: Period::NEW,
             mail: Pending::EMPTY,
+            powered_up: false,
         };
         sim.stored_start = sim.stored();
         Ok(sim)
     }
 
     /// The MCU boots again (after a watchdog reset, `crate::stage`): a fresh controller,
-    /// constructed exactly as at power-up ([`Sim::new`]); the plant keeps its state.
-    pub fn power_up(&mut self) -> Result<(), String> {
+    /// constructed exactly as at power-up ([`Sim::new`]); the plant keeps its state. With the
+    /// power-up models on ([`Sim::power_up`]) the fresh controller calibrates and needs
+    /// alignment again ([`Controller::require_alignment`], then [`Sim::boot`]).
+    pub fn reboot(&mut self) -> Result<(), String> {
         let cfg = *self.ctl.config();
         self.ctl = power_up_controller(&cfg)?;
+        if self.powered_up {
+            self.ctl.require_alignment();
+        }
         Ok(())
     }
 
@@ -538,6 +559,137 @@ impl Sim {
         e
     }
 
+    /// Apply the power-up models ([`crate::powerup`]) of `p` (nothing when none is on): the
+    /// rotor's angle and the encoder's start value, the current sensors' offsets and gains
+    /// drawn from `p.seed`; the controller is told it powered up
+    /// ([`Controller::require_alignment`]: Idle, offsets to calibrate, alignment needed).
+    /// Returns the draw. Refused (nothing changed) for values out of range.
+    pub fn power_up(
+        &mut self,
+        p: &crate::powerup::PowerUp,
+    ) -> Result<Option<crate::powerup::Draw>, String> {
+        p.check()?;
+        if !p.any() {
+            return Ok(None);
+        }
+        let d = p.draw();
+        if p.random_angle {
+            let m = &mut self.rig.machine;
+            // The rotor's electrical angle at the plant's zero position (the encoder's
+            // count 0 within its first turn is wherever the counter starts).
+            let th = (m.pole_pairs as f64 * d.theta_m0).rem_euclid(std::f64::consts::TAU);
+            m.angle_offset_rad = th;
+            self.pre.theta_offset = th;
+            self.pre.enc_start = d.encoder_start;
+        }
+        let cpa = self.pre.counts_per_amp;
+        for k in 0..3 {
+            self.pre.code_base[k] += d.offset_a[k] * cpa;
+            self.pre.counts_per_amp_k[k] = cpa * (1.0 + d.gain_rel[k]);
+        }
+        self.ctl.require_alignment();
+        self.powered_up = true;
+        Ok(Some(d))
+    }
+
+    /// The firmware's boot sequence as the board runs it: Idle periods until the offsets are
+    /// calibrated, then `mode align` until it ends, then `mode run`; each bounded in time.
+    /// An alignment that finds the rotor moving (`align_moving`) is retried up to
+    /// [`ALIGN_TRIES`] times after [`ALIGN_RETRY_S`] in its safe state (the short circuit
+    /// damps the structure meanwhile). Returns the times and tries, or the fault or refusal
+    /// that stopped it (the drive left in its safe mode).
+    pub fn boot(&mut self) -> Result<BootTimes, String> {
+        self.boot_with(|_| {})
+    }
+
+    /// [`Sim::boot`] with every sample passed through `inject` (fault injection).
+    pub fn boot_with(
+        &mut self,
+        mut inject: impl FnMut(&mut RawSample),
+    ) -> Result<BootTimes, String> {
+        use regen_fw::Boot;
+        let t0 = self.s.t;
+        let n_cal = regen_fw::control::CAL_PERIODS as u64 + 2;
+        for _ in 0..n_cal {
+            if self.ctl.boot() != Boot::Calibrating {
+                break;
+            }
+            self.step_with(&mut inject, |_| {});
+        }
+        self.set_adc_offsets(self.ctl.adc_offsets());
+        // A boot fault found in the step latches at the next supervision tick.
+        for _ in 0..self.ctl.supervise_every() {
+            self.step_with(&mut inject, |_| {});
+        }
+        if let Some(f) = self.ctl.fault() {
+            return Err(f.name().to_string());
+        }
+        let t1 = self.s.t;
+        let mut tries = 0;
+        while self.ctl.boot() != Boot::Stored && self.ctl.boot() != Boot::Aligned {
+            tries += 1;
+            self.ctl
+                .set_mode(Mode::Align)
+                .map_err(|e| e.name().to_string())?;
+            // Two steps of align_time_s each (the second holds for half of it), plus margin.
+            let n = (3.0 * self.ctl.config().align_time_s as f64 / self.ts) as u64 + 10;
+            for _ in 0..n {
+                if self.ctl.mode() != Mode::Align {
+                    break;
+                }
+                self.step_with(&mut inject, |_| {});
+            }
+            match self.ctl.fault() {
+                None => {}
+                Some(regen_fw::control::Fault::AlignMoving) if tries < ALIGN_TRIES => {
+                    for _ in 0..(ALIGN_RETRY_S / self.ts) as u64 {
+                        self.step_with(&mut inject, |_| {});
+                    }
+                    self.ctl.clear_fault().map_err(|e| e.to_string())?;
+                }
+                Some(f) => return Err(f.name().to_string()),
+            }
+        }
+        let t2 = self.s.t;
+        self.ctl
+            .set_mode(Mode::Run)
+            .map_err(|e| e.name().to_string())?;
+        Ok(BootTimes {
+            calibrate_s: t1 - t0,
+            align_s: t2 - t1,
+            tries,
+        })
+    }
+
+    /// The converter's per-phase offset registers (codes subtracted from each phase's raw
+    /// code), as the board programs the ADC's with [`Controller::adc_offsets`].
+    pub fn set_adc_offsets(&mut self, o: [i32; 3]) {
+        for (k, ok) in o.iter().enumerate() {
+            self.pre.code_base[k] -= (ok - self.pre.adc_offsets[k]) as f64;
+        }
+        self.pre.adc_offsets = o;
+    }
+
+    /// The d/q currents the controller measured in its last step, A (its telemetry).
+    pub fn i_dq_measured(&self) -> (f64, f64) {
+        let i = self.ctl.telemetry().i_dq;
+        (i.d.to_num::<f64>(), i.q.to_num::<f64>())
+    }
+
+    /// The controller's electrical angle of its last step minus the rotor's at that
+    /// sample, rad in (−π, π] (the sample was taken at the start of the period just
+    /// simulated, the position then `x − v·Ts` to first order).
+    pub fn angle_error(&self) -> f64 {
+        let th_c = self.ctl.telemetry().theta_e.0 as f64 / 4_294_967_296.0 * std::f64::consts::TAU;
+        let th = self.theta_e(self.s.x - self.s.v * self.ts);
+        let e = (th_c - th).rem_euclid(std::f64::consts::TAU);
+        if e > std::f64::consts::PI {
+            e - std::f64::consts::TAU
+        } else {
+            e
+        }
+    }
+
     /// One PWM period: sample, controller step, plant advance.
     pub fn step(&mut self) {
         self.step_with(|_| {}, |_| {})
@@ -650,7 +802,8 @@ impl Sim {
             i = self.shunt_read(i);
         }
         let p = &self.pre;
-        let mut c: [f64; 3] = core::array::from_fn(|k| i[k] * p.counts_per_amp + p.code_base[k]);
+        let mut c: [f64; 3] =
+            core::array::from_fn(|k| i[k] * p.counts_per_amp_k[k] + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
         if p.noisy {
             self.add_noise(&mut c, &mut vc);
@@ -661,7 +814,8 @@ impl Sim {
             i_abc: [adc_code(c[0]), adc_code(c[1]), adc_code(c[2])],
             v_bus: adc_code(vc),
             // Wraps at 2^16 like the hardware counter.
-            encoder: floor_wrap_u16(self.s.x * self.pre.counts_per_m),
+            encoder: floor_wrap_u16(self.s.x * self.pre.counts_per_m)
+                .wrapping_add(self.pre.enc_start),
         }
     }
 
@@ -1197,7 +1351,14 @@ struct BusK {
 struct Pre {
     // Sensors.
     counts_per_amp: f64,
+    /// Codes per ampere of each phase (`counts_per_amp` with its gain error,
+    /// [`crate::powerup`]).
+    counts_per_amp_k: [f64; 3],
     code_base: [f64; 3],
+    /// The encoder counter's value at the plant's zero position ([`crate::powerup`]).
+    enc_start: u16,
+    /// The converter's offset registers in force ([`Sim::set_adc_offsets`]).
+    adc_offsets: [i32; 3],
     noise_i_counts: f64,
     counts_per_volt: f64,
     vcode_base: f64,
@@ -1315,6 +1476,9 @@ impl Pre {
         let mass = st.mass_kg;
         Pre {
             counts_per_amp,
+            counts_per_amp_k: [counts_per_amp; 3],
+            enc_start: 0,
+            adc_offsets: [0; 3],
             code_base: core::array::from_fn(|k| {
                 sn.current_offset_a[k] * counts_per_amp + cfg.adc_zero_code as f64 + 0.5
             }),

@@ -19,6 +19,7 @@
 
 use hal_sim::faults::{FaultSim, Inject};
 use hal_sim::plant::Motion;
+use hal_sim::plot::{Plot, Series};
 use hal_sim::scenario::Scenario;
 use hal_sim::stage::{Cpu, StageSpec};
 use rayon::prelude::*;
@@ -215,21 +216,18 @@ fn gates_off_sweep() {
             "{}: open bridge, no sink: the bus passes the stage's {:.0} V at {:?} m/s",
             c.name, c.v_abs, over
         );
-        plots.push(hal_sim::cli::output::Series {
-            name: format!("{} bus, peak", c.name),
-            points: pts.clone(),
-            markers: true,
-        });
-        plots.push(hal_sim::cli::output::Series {
-            name: format!("{} onset {:.3} m/s", c.name, v_onset),
-            points: vec![(v_onset, 0.0), (v_onset, c.v_abs)],
-            markers: false,
-        });
-        plots.push(hal_sim::cli::output::Series {
-            name: format!("{} stage maximum", c.name),
-            points: vec![(0.0, c.v_abs), (w_max * lead, c.v_abs)],
-            markers: false,
-        });
+        plots.push(Series::markers(
+            format!("{} bus, peak", c.name),
+            pts.clone(),
+        ));
+        plots.push(Series::line(
+            format!("{} onset {:.3} m/s", c.name, v_onset),
+            vec![(v_onset, 0.0), (v_onset, c.v_abs)],
+        ));
+        plots.push(Series::line(
+            format!("{} stage maximum", c.name),
+            vec![(0.0, c.v_abs), (w_max * lead, c.v_abs)],
+        ));
     }
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
     hal_sim::cli::output::write_csv(
@@ -244,15 +242,15 @@ fn gates_off_sweep() {
         &rows,
     )
     .expect("csv");
-    let p = hal_sim::cli::output::plot_svg(
-        &dir.join("gates_off_sweep.svg"),
+    let mut plot = Plot::new(
         "Gates off, no sink: peak bus against imposed speed",
-        "speed, m/s",
-        "peak bus, V",
-        &plots,
-        false,
-    )
-    .expect("svg");
+        "imposed speed (m/s)",
+        "peak bus voltage (V)",
+    );
+    plot.series = plots;
+    let p = plot
+        .write_svg(&dir.join("gates_off_sweep.svg"))
+        .expect("svg");
     println!("written {} and gates_off_sweep.csv", p.display());
 }
 

@@ -65,6 +65,57 @@ pub fn regen_install(ctl: &mut Controller, c: &Compiled) {
     ctl.install(c)
 }
 
+/// A step of the power-up sequence (offset calibration in Idle, alignment), counted on a
+/// controller of its own before the replay (`boot_paths`): not in the digest.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_boot(ctl: &mut Controller, s: &RawSample) -> Actuation {
+    ctl.step(black_box(s))
+}
+
+/// The boot paths: calibration (2,048 Idle periods), then two alignments with 20 ms steps,
+/// the first followed by an encoder that turns the quarter turn (aligned), the second by
+/// one that runs away (align_moving), each step through `regen_step_boot`.
+fn boot_paths(cfg: &Config) {
+    let cfg = Config {
+        align_time_s: 0.02,
+        ..*cfg
+    };
+    let Ok(mut ctl) = Controller::new(&cfg) else {
+        exit(6)
+    };
+    ctl.require_alignment();
+    let z = cfg.adc_zero_code;
+    let mut s = RawSample {
+        i_abc: [z, z + 3, z - 2],
+        v_bus: 2458,
+        encoder: 7,
+    };
+    for _ in 0..regen_fw::control::CAL_PERIODS + 2 {
+        black_box(regen_step_boot(&mut ctl, &s));
+    }
+    for run in 0..2u16 {
+        let _ = ctl.clear_fault();
+        if ctl.set_mode(Mode::Align).is_err() {
+            exit(7);
+        }
+        for k in 0..1000u16 {
+            if ctl.mode() != Mode::Align {
+                break;
+            }
+            // 400 periods per step: the quarter turn (500 counts) in the second one.
+            s.encoder = if run == 0 {
+                7u16.wrapping_add(k.saturating_sub(400).min(100) * 5)
+            } else {
+                7u16.wrapping_add(k)
+            };
+            black_box(regen_step_boot(&mut ctl, &s));
+        }
+        // A boot fault found by the step latches at the supervision tick.
+        ctl.supervise();
+    }
+}
+
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
 /// separately from the step.
 #[no_mangle]
@@ -161,6 +212,7 @@ fn main() -> ! {
     if ctl.set_mode(Mode::Run).is_err() {
         exit(4);
     }
+    boot_paths(&cfg);
     let half = VECTORS.len() / STEP_BYTES / 2;
     let every = ctl.supervise_every() as usize;
     let mut k = 0usize;

@@ -1,0 +1,138 @@
+//! What the board faces at power-up (docs/simulator.md, "Power-up"): the rotor at an
+//! arbitrary angle against an encoder counter at an arbitrary start value, and per-phase
+//! current-sensor offset and gain errors. Each is drawn from its own seeded generator and each
+//! is off by default (the reference scenarios keep their ideal sensors and their stored
+//! commutation offset); the `[powerup]` scenario table switches them on.
+//!
+//! Tolerances drawn (uniform within ±, per phase, independently):
+//! * offset ±`offset_a` (0.15 A suggested for the board: ±12 codes at 12.2 mA per code, i.e.
+//!   ±10 mV at a 3.3 V, 12-bit ADC input: a shunt amplifier's output offset of a few mV plus
+//!   the ADC's offset error of a few LSB);
+//! * gain ±`gain_rel` (0.02 suggested: a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain).
+//!
+//! The firmware calibrates the offsets at boot (gates off); gain errors are not calibrated
+//! (no reference current at boot) and remain as a per-phase scale error.
+
+use serde::{Deserialize, Serialize};
+
+/// The `[powerup]` scenario table.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PowerUp {
+    /// Rotor at a random mechanical angle and the encoder counter at a random start value:
+    /// the firmware starts unaligned and must run its boot sequence.
+    pub random_angle: bool,
+    /// Per-phase current offset errors drawn within ±this, A (0 = none).
+    pub offset_a: f64,
+    /// Per-phase current gain errors drawn within ±this, relative (0 = none).
+    pub gain_rel: f64,
+    /// Seed of the draws.
+    pub seed: u64,
+}
+
+impl Default for PowerUp {
+    fn default() -> Self {
+        PowerUp {
+            random_angle: false,
+            offset_a: 0.0,
+            gain_rel: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+/// One draw of the power-up conditions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Draw {
+    /// Rotor mechanical angle at power-up relative to the plant's zero, rad, in [0, 2π).
+    pub theta_m0: f64,
+    /// Encoder counter's start value.
+    pub encoder_start: u16,
+    /// Per-phase current offsets, A, and relative gain errors.
+    pub offset_a: [f64; 3],
+    pub gain_rel: [f64; 3],
+}
+
+impl PowerUp {
+    /// Any model on.
+    pub fn any(&self) -> bool {
+        self.random_angle || self.offset_a != 0.0 || self.gain_rel != 0.0
+    }
+
+    /// Refuse values outside their ranges, naming the key, the value and the range.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.offset_a.is_finite() && (0.0..=100.0).contains(&self.offset_a)) {
+            return Err(format!(
+                "powerup.offset_a = {}: must lie in [0, 100] A",
+                self.offset_a
+            ));
+        }
+        if !(self.gain_rel.is_finite() && (0.0..=0.5).contains(&self.gain_rel)) {
+            return Err(format!(
+                "powerup.gain_rel = {}: must lie in [0, 0.5]",
+                self.gain_rel
+            ));
+        }
+        Ok(())
+    }
+
+    /// The draw for this seed (splitmix64; shares nothing with the sensor-noise generator).
+    pub fn draw(&self) -> Draw {
+        let mut st = self.seed;
+        let mut u = move || {
+            st = st.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = st;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            (z >> 11) as f64 / (1u64 << 53) as f64 // [0, 1)
+        };
+        let theta_m0 = u() * std::f64::consts::TAU;
+        let encoder_start = (u() * 65_536.0) as u16;
+        let offset_a = [0; 3].map(|_| (2.0 * u() - 1.0) * self.offset_a);
+        let gain_rel = [0; 3].map(|_| (2.0 * u() - 1.0) * self.gain_rel);
+        Draw {
+            theta_m0,
+            encoder_start,
+            offset_a,
+            gain_rel,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn draws_cover_their_ranges_and_depend_on_the_seed() {
+        let p = PowerUp {
+            random_angle: true,
+            offset_a: 0.15,
+            gain_rel: 0.02,
+            seed: 7,
+        };
+        let ds: Vec<Draw> = (0..2000).map(|s| PowerUp { seed: s, ..p }.draw()).collect();
+        let max = |f: &dyn Fn(&Draw) -> f64| ds.iter().map(f).fold(f64::MIN, f64::max);
+        let min = |f: &dyn Fn(&Draw) -> f64| ds.iter().map(f).fold(f64::MAX, f64::min);
+        // 2,000 uniform draws: the extremes lie within 0.5 % of the range's ends (chance of
+        // missing one end: (1 − 0.005)^2000 ≈ 4e-5).
+        assert!(max(&|d| d.theta_m0) > 0.995 * std::f64::consts::TAU);
+        assert!(min(&|d| d.theta_m0) < 0.005 * std::f64::consts::TAU);
+        assert!(max(&|d| d.offset_a[2]) > 0.149 && max(&|d| d.offset_a[2]) <= 0.15);
+        assert!(min(&|d| d.gain_rel[0]) < -0.0199 && min(&|d| d.gain_rel[0]) >= -0.02);
+        assert!(max(&|d| d.encoder_start as f64) > 65_000.0);
+        assert_ne!(ds[0], ds[1]);
+        assert_eq!(
+            PowerUp { seed: 3, ..p }.draw(),
+            PowerUp { seed: 3, ..p }.draw()
+        );
+        assert!(PowerUp {
+            offset_a: f64::NAN,
+            ..p
+        }
+        .check()
+        .unwrap_err()
+        .contains("powerup.offset_a"));
+    }
+}
