@@ -301,8 +301,15 @@ mod tests {
         }
     }
 
+    /// A running controller against the mock, whose currents follow no machine: the angle
+    /// plausibility check (which would rightly find its emf off the q axis) is set beyond any
+    /// emf the mock's speed gives, so these tests see the period's mechanics only.
     fn running() -> Controller {
-        let mut ctl = Controller::new(&Config::default()).unwrap();
+        let cfg = Config {
+            angle_emf_min_v: 2_000.0,
+            ..Config::default()
+        };
+        let mut ctl = Controller::new(&cfg).unwrap();
         ctl.set_mode(Mode::Run).unwrap();
         ctl
     }

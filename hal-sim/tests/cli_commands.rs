@@ -298,7 +298,7 @@ fn diagnose_refuses_unit_slips_and_bad_cutoffs() {
     );
     refused(
         &regen(&["diagnose", &good, "--cutoff-hz", "600"]),
-        &["--cutoff-hz = 600", "(0, 500"],
+        &["cutoff_hz = 600", "(0, 500", "good.csv"],
     );
     refused(
         &regen(&["diagnose", &good, "--min-gain", "2"]),

@@ -127,18 +127,10 @@ pub fn cli_main(args: DiagnoseArgs) -> Result<(), Box<dyn std::error::Error>> {
     if let Some(d) = &args.plots {
         crate::cli::output::check_out_dir(d).map_err(|e| e.replace("--out", "--plots"))?;
     }
+    // The reader refuses a cutoff at or above the record's Nyquist frequency
+    // (`record::check_cutoff`).
     let mut rec = read_csv(&args.file, args.cutoff_hz)?;
     check_units(&rec, &args.file)?;
-    if let Some(fc) = args.cutoff_hz {
-        let nyq = 0.5 / rec.dt();
-        if fc >= nyq {
-            return Err(format!(
-                "--cutoff-hz = {fc}: must lie in (0, {nyq}) Hz, below the Nyquist frequency of {}",
-                args.file.display()
-            )
-            .into());
-        }
-    }
     if args.filter_force {
         rec.filter_force(args.cutoff_hz);
     }
