@@ -121,7 +121,7 @@ struct BootState {
     step: u8,
     /// d-current ramp increment per period and the step current (Q16.16 bits).
     di: i32,
-    /// Damping conductance during alignment, 1/R (a short circuit's).
+    /// Damping gain during alignment, −1/R (a short circuit's).
     g_short: Gain,
     i_align: i32,
     /// Encoder position at the start, at the settle-window start, at the end of step 0.
@@ -412,7 +412,7 @@ impl Controller {
         b.n_step = ((c.align_time_s * c.pwm_hz) as u32).max(8);
         b.i_align = crate::numtext::q_of(c.align_i_a).to_bits();
         b.di = (b.i_align / (b.n_step / 2) as i32).max(1);
-        b.g_short = crate::laws::Resistor::new(c.r_phase_ohm, 0.0).conductance;
+        b.g_short = crate::laws::Resistor::new(c.r_phase_ohm, 0.0).neg_conductance;
         b.p_start = self.enc.position;
         let per_m = c.encoder_cpr as f32 / (c.lead_m_per_rad * core::f32::consts::TAU);
         b.travel = (c.align_travel_m * per_m).min(1e9) as i32;
@@ -461,7 +461,7 @@ impl Controller {
         let e_q = g.k.ke_per_vel.scale(self.enc.vel);
         self.held.i_ref = Dq {
             d: Q::from_bits(i_d),
-            q: -clamp_sym(b.g_short.scale(e_q), g.i_max),
+            q: clamp_sym(b.g_short.scale(e_q), g.i_max),
         };
         let mut fault = None;
         if pos.wrapping_sub(b.p_start).unsigned_abs() > b.travel as u32 {
@@ -893,7 +893,7 @@ impl Controller {
         let mut law = match &self.law {
             Law::Resistor(r) if self.mode == Mode::Run => *r,
             Law::Resistor(_) => Resistor {
-                conductance: Gain::ZERO,
+                neg_conductance: Gain::ZERO,
             },
             _ => return self.refresh_all(i_dq, vb),
         };
@@ -1245,8 +1245,8 @@ mod tests {
         });
         let g = Gains::new(&new).unwrap();
         let e_q = g.k.ke_per_vel.scale(vel);
-        let cond = crate::laws::Resistor::new(new.r_phase_ohm, 2.0).conductance;
-        let want = -clamp_sym(cond.scale(e_q), g.i_max);
+        let cond = crate::laws::Resistor::new(new.r_phase_ohm, 2.0).neg_conductance;
+        let want = clamp_sym(cond.scale(e_q), g.i_max);
         assert!(want != Q::ZERO);
         assert_eq!(ctl.telemetry().i_ref.q, want);
         let r = ctl.held.v_lim.radius().to_num::<f64>();
@@ -1256,15 +1256,12 @@ mod tests {
         // reference the law's for the speed of that step, and the tick cycle resumes.
         let c = spin(&mut ctl, c + 3, 40);
         if let Law::Resistor(r) = ctl.law_mut() {
-            r.conductance = cond;
+            r.neg_conductance = cond;
         }
         assert_eq!(ctl.slow_tick, 0);
         spin(&mut ctl, c, 1);
         let e_q = g.k.ke_per_vel.scale(ctl.enc.vel);
-        assert_eq!(
-            ctl.telemetry().i_ref.q,
-            -clamp_sym(cond.scale(e_q), g.i_max)
-        );
+        assert_eq!(ctl.telemetry().i_ref.q, clamp_sym(cond.scale(e_q), g.i_max));
         assert!(ctl.slow_tick < SLOW_DIV);
         // Open mode: zero reference from the request on.
         ctl.set_mode(Mode::Open).unwrap();

@@ -12,8 +12,10 @@ use crate::fx::{Gain, Q};
 /// Emulated-resistance law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Resistor {
-    /// 1/(R + R_L), siemens.
-    pub conductance: Gain,
+    /// −1/(R + R_L), siemens: the command is this gain times the back-emf, with no negation
+    /// in the loop (the gain's product saturates at the sign it has, so the command's sign
+    /// holds at any emf).
+    pub neg_conductance: Gain,
 }
 
 impl Resistor {
@@ -27,7 +29,7 @@ impl Resistor {
             0.0
         };
         Resistor {
-            conductance: Gain::from_f32(g),
+            neg_conductance: Gain::from_f32(-g),
         }
     }
 }
@@ -37,7 +39,7 @@ impl CommandLaw for Resistor {
     fn command(&mut self, inp: &LawInput) -> Dq {
         Dq {
             d: Q::ZERO,
-            q: self.conductance.scale(inp.e_q).saturating_neg(),
+            q: self.neg_conductance.scale(inp.e_q),
         }
     }
 }
