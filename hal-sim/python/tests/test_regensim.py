@@ -101,7 +101,11 @@ def test_bad_set_same_message_as_cli_sweep(regen, tmp_path, key, value):
         return
     with pytest.raises(rs.RegenError) as e:
         sc.set(key, value)
-    assert str(e.value) == cli_error(err)
+    # The CLI names its own argument first (`--param KEY --values V: `), then the same message.
+    msg = cli_error(err)
+    prefix = f"--param {key} --values "
+    assert msg.startswith(prefix), msg
+    assert msg.split(": ", 1)[1] == str(e.value)
     assert sc.to_toml() == before  # refused: nothing changed
 
 
