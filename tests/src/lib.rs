@@ -1,1 +1,36 @@
-//! Integration tests live in tests/tests/.
+//! Integration tests live in tests/tests/. This library holds what several of them share and
+//! what shares nothing with the code under test: the seeded draws of the fault-injection and
+//! stage suites.
+
+/// splitmix64: a seeded stream of uniforms.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [lo, hi).
+    pub fn uni(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Log-uniform in [lo, hi).
+    pub fn log_uni(&mut self, lo: f64, hi: f64) -> f64 {
+        self.uni(lo.ln(), hi.ln()).exp()
+    }
+    /// Uniform in 0 … n−1.
+    pub fn pick(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+    /// ±1 with equal odds.
+    pub fn sign(&mut self) -> f64 {
+        if self.next_u64() & 1 == 0 {
+            1.0
+        } else {
+            -1.0
+        }
+    }
+}

@@ -26,36 +26,9 @@ use hal_sim::scenario::Scenario;
 use rayon::prelude::*;
 use regen_fw::protect::{Fault, EMF_TICKS, ISUM_TICKS, SUPERVISE_HZ};
 use regen_fw::Mode;
+use regen_tests::Rng;
 
 const V_ABS_MAX: f64 = 450.0;
-
-/// splitmix64: a seeded stream of uniforms.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uni(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn log_uni(&mut self, lo: f64, hi: f64) -> f64 {
-        (self.uni(lo.ln(), hi.ln())).exp()
-    }
-    fn pick(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn sign(&mut self) -> f64 {
-        if self.next() & 1 == 0 {
-            1.0
-        } else {
-            -1.0
-        }
-    }
-}
 
 /// What a run must show.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -118,7 +91,7 @@ fn imposed(rng: &mut Rng, r_min: f64, r_max: f64) -> Scenario {
     sc.record.channels.clear();
     sc.sensors.current_noise_a = 0.02;
     sc.sensors.vbus_noise_v = 0.2;
-    sc.sensors.seed = rng.next();
+    sc.sensors.seed = rng.next_u64();
     sc
 }
 
@@ -167,7 +140,7 @@ fn case(kind: &str, seed: u64) -> Case {
             imposed(&mut rng, 5.0, 300.0),
             Inject::CurrentOpen {
                 phase: rng.pick(3),
-                high: rng.next() & 1 == 0,
+                high: rng.next_u64() & 1 == 0,
             },
             Expect::Trip {
                 fault: Fault::OverCurrent,

@@ -26,6 +26,7 @@ use rayon::prelude::*;
 use regen_fw::io::Actuation;
 use regen_fw::protect::Fault;
 use regen_fw::Mode;
+use regen_tests::Rng;
 
 #[derive(Clone, Copy, Debug)]
 struct Class {
@@ -64,24 +65,6 @@ const C320: Class = Class {
     derate: (395.0, 415.0),
     volts_full_scale: 450.0,
 };
-
-/// splitmix64.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uni(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn log_uni(&mut self, lo: f64, hi: f64) -> f64 {
-        self.uni(lo.ln(), hi.ln()).exp()
-    }
-}
 
 /// Short-circuit current K_e/(p·L) of the scenario's machine, A.
 fn i_sc(sc: &Scenario) -> f64 {
@@ -361,7 +344,7 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
         // amplifier against BRK's 0.16 µs, 0.1–1.2 µs on the bus divider against BRK2's
         // 1.5 µs); the enable transient (1–8 µs) ends within the arming's settling.
         "comparator_false_trip" => {
-            let bus = rng.next() & 1 == 0;
+            let bus = rng.next_u64() & 1 == 0;
             Inject::ComparatorFalseTrip {
                 enable_s: rng.uni(1e-6, 8e-6),
                 ring_s: if bus {
@@ -369,7 +352,7 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
                 } else {
                     rng.uni(0.02e-6, 0.12e-6)
                 },
-                ring_every: 1 + (rng.next() % 20) as u32,
+                ring_every: 1 + (rng.next_u64() % 20) as u32,
                 bus,
             }
         }
@@ -389,8 +372,8 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
             Inject::LoadDisconnect { brake_open: false }
         }
         "current_open" => Inject::CurrentOpen {
-            phase: (rng.next() % 3) as usize,
-            high: rng.next() & 1 == 0,
+            phase: (rng.next_u64() % 3) as usize,
+            high: rng.next_u64() & 1 == 0,
         },
         "encoder_stuck" => {
             // The emf check's range: not voltage-limited, emf well above its tolerance:
@@ -399,31 +382,32 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
             Inject::EncoderStuck
         }
         "encoder_runaway" => Inject::EncoderRunaway {
-            counts_per_step: 200 + (rng.next() % 800) as i32,
+            counts_per_step: 200 + (rng.next_u64() % 800) as i32,
         },
         "overrun" => Inject::Overrun {
-            every: 1 + (rng.next() % 10) as u32,
+            every: 1 + (rng.next_u64() % 10) as u32,
         },
         "current_stuck" => Inject::CurrentStuck {
-            phase: (rng.next() % 3) as usize,
+            phase: (rng.next_u64() % 3) as usize,
         },
         "current_noise" => Inject::CurrentNoise {
-            phase: (rng.next() % 3) as usize,
+            phase: (rng.next_u64() % 3) as usize,
             sigma_a: rng.uni(1.0, 3.0),
         },
         "current_offset" => Inject::CurrentOffset {
-            phase: (rng.next() % 3) as usize,
-            offset_a: rng.uni(1.0, 3.0) * if rng.next() & 1 == 0 { 1.0 } else { -1.0 },
+            phase: (rng.next_u64() % 3) as usize,
+            offset_a: rng.uni(1.0, 3.0) * if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 },
         },
         "bus_sensor_stuck" => Inject::BusSensorStuck,
         "bus_sensor_noise" => Inject::BusSensorNoise {
             sigma_v: rng.uni(0.5, 2.0) * c.v_bus / 100.0,
         },
         "encoder_glitch" => Inject::EncoderGlitch {
-            counts: (2000 + (rng.next() % 20000) as i32) * if rng.next() & 1 == 0 { 1 } else { -1 },
+            counts: (2000 + (rng.next_u64() % 20000) as i32)
+                * if rng.next_u64() & 1 == 0 { 1 } else { -1 },
         },
         "encoder_noise" => Inject::EncoderNoise {
-            counts: 1 + (rng.next() % 10) as u16,
+            counts: 1 + (rng.next_u64() % 10) as u16,
         },
         "overload" => Inject::Overload {
             r_load_ohm: rng.uni(0.0, 1.0) as f32,
@@ -441,7 +425,7 @@ fn case(c: &Class, kind: &str, seed: u64) -> Case {
     );
     // Imposed speeds beyond the rating in some kinds: the force check is not under test.
     sc.law.set.insert("f_trip_n".into(), f64::INFINITY);
-    sc.sensors.seed = rng.next();
+    sc.sensors.seed = rng.next_u64();
     Case {
         sc,
         inject,
