@@ -65,7 +65,7 @@ const MEASURES: &[Measure] = &[
     },
     Measure {
         what: "model diagnosis of 10⁶ samples",
-        target: "< 2 s (one core)",
+        target: "< 1 s (one core)",
         program: "cargo",
         args: &["bench", "-p", "hal-sim", "--bench", "diagnose"],
         dir: ".",
