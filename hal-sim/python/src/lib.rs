@@ -341,12 +341,15 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
         }
     }
     d.set_item("channels", ch)?;
-    d.set_item("energy", energy_dict(py, &o.energy)?)?;
-    d.set_item("energy_at_settle", energy_dict(py, &o.energy_at_settle)?)?;
-    d.set_item("fault", o.fault)?;
+    d.set_item("energy", energy_dict(py, &o.summary.energy)?)?;
+    d.set_item(
+        "energy_at_settle",
+        energy_dict(py, &o.summary.energy_at_settle)?,
+    )?;
+    d.set_item("fault", o.summary.fault)?;
     d.set_item("faults_text", o.faults_text.clone())?;
-    d.set_item("steps", o.steps)?;
-    d.set_item("settle_step", o.settle_step)?;
+    d.set_item("steps", o.summary.steps)?;
+    d.set_item("settle_step", o.summary.settle_step)?;
     let period = 1.0 / f64::from(sc.firmware.pwm_hz);
     d.set_item("period_s", period)?;
     d.set_item("wall_s", o.wall_s)?;
@@ -364,15 +367,15 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
     s.set_item("fault_t_s", r.fault_t_s)?;
     s.set_item("wall_s", o.wall_s)?;
     s.set_item("real_time_factor", sc.duration_s / o.wall_s.max(1e-12))?;
-    s.set_item("energy_residual_j", o.energy.residual())?;
-    s.set_item("energy_residual_rel", o.energy.relative_residual())?;
-    s.set_item("fault", o.fault)?;
+    s.set_item("energy_residual_j", o.summary.energy.residual())?;
+    s.set_item("energy_residual_rel", o.summary.energy.relative_residual())?;
+    s.set_item("fault", o.summary.fault)?;
     // Mean power of every flow after settle_s, W: ΔE over the periods after the settle step.
-    let span = (o.steps - o.settle_step) as f64 * period;
+    let span = (o.summary.steps - o.summary.settle_step) as f64 * period;
     if span > 0.0 {
-        for ((k, a), (_, b)) in energy_fields(&o.energy)
+        for ((k, a), (_, b)) in energy_fields(&o.summary.energy)
             .into_iter()
-            .zip(energy_fields(&o.energy_at_settle))
+            .zip(energy_fields(&o.summary.energy_at_settle))
         {
             if !k.starts_with("stored") {
                 s.set_item(format!("p_{k}_w"), (a - b) / span)?;

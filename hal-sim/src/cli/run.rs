@@ -46,20 +46,12 @@ pub fn check_window(w: &Option<Vec<f64>>, duration_s: f64) -> Result<Option<(f64
     Ok(Some((a, b)))
 }
 
-/// What one closed-loop run leaves: its summary, the ledger at the end and at `settle_s`, the
-/// latched fault with the console's decoding, the recorded channels. `regen run` prints and
-/// writes it; the Python module (`hal-sim/python`) returns it.
+/// What one closed-loop run leaves: its summary (the ledger at the end and at `settle_s`, the
+/// latched fault and when, the figures `regen run` prints), the console's decoding of the
+/// fault, the recorded channels and the wall time. `regen run` prints and writes it; the
+/// Python module (`hal-sim/python`) returns it.
 pub struct RunOutcome {
     pub summary: RunSummary,
-    /// Energy ledger at the end of the run, J.
-    pub energy: Energy,
-    /// Energy ledger after the PWM period nearest `settle_s`, J (averages are taken after it).
-    pub energy_at_settle: Energy,
-    /// PWM periods simulated, and the one `energy_at_settle` was read after.
-    pub steps: u64,
-    pub settle_step: u64,
-    /// Name of the latched firmware fault, if any.
-    pub fault: Option<&'static str>,
     /// The console's `faults` reply (snapshot at the trip, safe state, later faults).
     pub faults_text: Option<String>,
     /// Recorded channels (None when the scenario records none).
@@ -75,8 +67,7 @@ pub fn simulate(sc: &Scenario, progress: &mut dyn FnMut(f64)) -> Result<RunOutco
     let t = std::time::Instant::now();
     let summary = run_to_end(sc, &mut sim, progress);
     let wall_s = t.elapsed().as_secs_f64();
-    let fault = sim.controller().fault().map(|f| f.name());
-    let faults_text = fault.map(|_| {
+    let faults_text = summary.fault.map(|_| {
         let mut out = String::new();
         let _ = regen_fw::console::Console::new().execute(
             "faults",
@@ -87,12 +78,7 @@ pub fn simulate(sc: &Scenario, progress: &mut dyn FnMut(f64)) -> Result<RunOutco
         out
     });
     Ok(RunOutcome {
-        energy: summary.energy,
-        energy_at_settle: summary.energy_at_settle,
-        steps: summary.steps,
-        settle_step: summary.settle_step,
         summary,
-        fault,
         faults_text,
         recorder: sim.take_recorder(),
         wall_s,
@@ -171,7 +157,7 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         // The console's decoding: snapshot at the trip, safe state, later faults.
         print!("{text}");
     }
-    println!("{}", exact_ledger_line(&o.energy));
+    println!("{}", exact_ledger_line(&s.energy));
     print!("{}", s.text());
     Ok(())
 }
@@ -186,7 +172,8 @@ mod tests {
         let mut sc = Scenario::tmd(306.0);
         sc.duration_s = 0.5;
         sc.settle_s = 0.1837;
-        let o = simulate(&sc, &mut |_| {}).unwrap();
+        let run = simulate(&sc, &mut |_| {}).unwrap();
+        let o = &run.summary;
         let mut sim = sc.build().unwrap();
         let settle = (sc.settle_s / sim.period()).round() as u64;
         let n = (sc.duration_s / sim.period()).round() as u64;
@@ -200,7 +187,7 @@ mod tests {
         }
         assert_eq!(o.energy, sim.energy());
         assert!(o.energy_at_settle.external_work < o.energy.external_work);
-        let rec = o.recorder.unwrap();
+        let rec = run.recorder.unwrap();
         assert_eq!(rec.rows.len() as u64, n / sc.record.every);
     }
 }
