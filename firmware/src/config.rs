@@ -431,11 +431,11 @@ pub struct StepConsts {
     /// of the unread phase (`shunt::two_valid`).
     pub zero3: i32,
     /// Bus thresholds in codes: over-voltage when `code > ov`, under-voltage when
-    /// `code < uv`, brake closes when `code > brake_on`, stays closed while `code > brake_off`.
+    /// `code < uv`; the brake chopper's, indexed by its state: it closes when
+    /// `code > brake[0]` (on), stays closed while `code > brake[1]` (off).
     pub ov: u32,
     pub uv: u32,
-    pub brake_on: u32,
-    pub brake_off: u32,
+    pub brake: [u32; 2],
     /// Back-emf per speed estimate: `K_e·2π·f_pwm/cpr`, V per (count per step).
     pub ke_per_vel: Gain,
     /// `ω_e·L` per speed estimate: `L·p·2π·f_pwm/cpr`, Ω per (count per step).
@@ -509,8 +509,10 @@ impl Gains {
             zero3: 3 * zero as i32,
             ov: floor_code(c.v_bus_ov / c.volts_per_count),
             uv: ceil_code(c.v_bus_uv / c.volts_per_count),
-            brake_on: floor_code(c.brake_on_v / c.volts_per_count),
-            brake_off: floor_code(c.brake_off_v / c.volts_per_count),
+            brake: [
+                floor_code(c.brake_on_v / c.volts_per_count),
+                floor_code(c.brake_off_v / c.volts_per_count),
+            ],
             ke_per_vel: Gain::from_f32(c.ke_v_s_per_rad * rad_s_per_count_step),
             wl_per_vel: Gain::from_f32(c.l_phase_h * c.pole_pairs as f32 * rad_s_per_count_step),
             adv_per_vel,

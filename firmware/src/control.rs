@@ -22,14 +22,14 @@ use crate::svpwm::{inv_bus, modulate_scaled, CENTRED};
 pub enum Mode {
     /// Gate drivers off: no control (phases open, diodes may rectify).
     #[default]
-    Idle,
+    Idle = 0,
     /// The command law runs.
-    Run,
+    Run = 1,
     /// Phases shorted through the low-side switches: the machine brakes on its own resistance.
-    Short,
+    Short = 2,
     /// Current controlled to zero: open terminals emulated even when the back-emf exceeds
     /// the bus.
-    Open,
+    Open = 3,
     /// Power-up alignment: d-axis current at an imposed angle, two steps a quarter of an
     /// electrical turn apart (docs/protection.md); back to Idle when done. (Discriminant 5:
     /// the modes that control current are then the odd ones, one bit for the step to test.)
@@ -787,7 +787,8 @@ impl Controller {
         // Under-voltage is a fault only in Run: `trip_on` decides (keeps the test cheap).
         let under_v = vb < k.uv;
         // Brake chopper with hysteresis (independent of mode: it protects the bus).
-        self.brake = vb > if self.brake { k.brake_off } else { k.brake_on };
+        // (The threshold indexed by the state: one load, no select.)
+        self.brake = vb > k.brake[self.brake as usize];
         if over_i | over_v | self.enc.implausible | under_v {
             self.trip_on(s, over_i, over_v);
         }
@@ -800,7 +801,9 @@ impl Controller {
         self.rec.i_dq = i_dq;
         self.rec.theta_e = theta_e;
 
-        if !matches!(self.mode, Mode::Run | Mode::Open | Mode::Align) {
+        // Run, Open and Align control current: the odd discriminants, one bit to test
+        // (`matches!` becomes a range check and a bit-mask test: 4 instructions more).
+        if self.mode as u8 & 1 == 0 {
             return self.step_off();
         }
         // Slow terms: the back-emf and the law's current reference (limited to
@@ -1220,6 +1223,16 @@ mod tests {
             });
         }
         c0.wrapping_add(3 * n)
+    }
+
+    /// The step tests one bit for "this mode controls current" (`step`): the odd
+    /// discriminants must be exactly Run, Open and Align.
+    #[test]
+    fn current_controlling_modes_are_the_odd_ones() {
+        for m in [Mode::Idle, Mode::Run, Mode::Short, Mode::Open, Mode::Align] {
+            let controls = matches!(m, Mode::Run | Mode::Open | Mode::Align);
+            assert_eq!(m as u8 & 1 == 1, controls, "{m:?}");
+        }
     }
 
     #[test]
