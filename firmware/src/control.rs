@@ -115,12 +115,19 @@ struct BootState {
     n_cal: u32,
     /// Per-phase zero codes of the raw converter (`adc_zero_code` until calibrated).
     zero: [i32; 3],
-    /// Alignment: periods in the present step, periods per step, which step (0, 1).
+    /// Alignment: refresh cycles (of [`SLOW_DIV`] periods) in the present step, cycles per
+    /// step, the cycle where the settle window starts, which step (0, 1).
     n: u32,
     n_step: u32,
+    n_settle: u32,
     step: u8,
-    /// d-current ramp increment per period and the step current (Q16.16 bits).
+    /// Both steps passed: the offset found is in `offset`; the next supervision tick ends
+    /// the alignment (Idle, Aligned).
+    done: bool,
+    /// d-current ramp increment per cycle, the step current and the present d reference
+    /// (Q16.16 bits).
     di: i32,
+    i_d: i32,
     /// Damping gain during alignment, −1/R (a short circuit's).
     g_short: Gain,
     i_align: i32,
@@ -128,9 +135,13 @@ struct BootState {
     p_start: i32,
     p_settle: i32,
     p_a: i32,
-    /// Counts allowed for travel; the quarter turn's expected counts.
+    /// Counts allowed for travel; the quarter turn's expected counts, the counts allowed
+    /// for motion in the settle window (an eighth of it) and for the quarter turn's error
+    /// (a quarter of it).
     travel: i32,
     quarter: i32,
+    settle: i32,
+    quarter_tol: i32,
     /// The encoder's electrical angle per count, kept while alignment imposes the angle.
     e_per_count: u32,
     /// The aligned electrical offset, reapplied when the configuration is recompiled.
@@ -408,19 +419,26 @@ impl Controller {
         b.boot = Boot::Aligning;
         b.offset = None;
         b.step = 0;
+        b.done = false;
         b.n = 0;
-        b.n_step = ((c.align_time_s * c.pwm_hz) as u32).max(8);
+        b.n_step = ((c.align_time_s * c.pwm_hz) as u32 / SLOW_DIV as u32).max(8);
+        b.n_settle = b.n_step - b.n_step / 4;
         b.i_align = crate::numtext::q_of(c.align_i_a).to_bits();
         b.di = (b.i_align / (b.n_step / 2) as i32).max(1);
+        b.i_d = 0;
         b.g_short = crate::laws::Resistor::new(c.r_phase_ohm, 0.0).neg_conductance;
         b.p_start = self.enc.position;
         let per_m = c.encoder_cpr as f32 / (c.lead_m_per_rad * core::f32::consts::TAU);
         b.travel = (c.align_travel_m * per_m).min(1e9) as i32;
         b.quarter = (c.encoder_cpr / (4 * c.pole_pairs as u32).max(1)) as i32;
+        b.settle = (b.quarter / 8).max(1);
+        b.quarter_tol = (b.quarter / 4).max(1);
+        // Alignment's own cycle (ticks ALIGN … ALIGN + 3, `step`); the feed-forward and the
+        // advance stay zero: the imposed frame does not turn.
         self.held.i_ref = Dq::default();
         self.held.ff = Dq::default();
         self.held.advance = Rotation::default();
-        self.held.tick_or = REFRESH_ALL;
+        self.held.tick_or = ALIGN;
         self.g.enc.offset = Angle(0);
         self.apply_angle();
     }
@@ -441,63 +459,89 @@ impl Controller {
         self.held.i_ref = Dq::default();
     }
 
-    /// One alignment period (from the step's slow-term slot): ramp, hold, settle and travel
-    /// checks, then the quarter-turn check and the offset.
-    #[cold]
-    #[inline(never)]
-    fn align_period(&mut self, vb: u32) {
+    /// Alignment, tick ALIGN: the current reference, the d current of the ramp and the
+    /// damping q current. The rotor on the d-axis field is a spring with the structure's mass
+    /// on it and little friction (ζ ≈ 0.01 on the reference TMD); the q current of a short
+    /// circuit, −K_e·ω_m/R, damps it as the short would (ζ ≈ 0.7 there) while the angles are
+    /// close. Zero once a fault is pending.
+    #[inline(always)]
+    fn align_ref(&mut self) {
+        let b = &self.bs;
+        self.held.i_ref = if b.pending.is_some() {
+            Dq::default()
+        } else {
+            let g = &self.g;
+            let e_q = g.k.ke_per_vel.scale(self.enc.vel);
+            Dq {
+                d: Q::from_bits(b.i_d),
+                q: clamp_sym(b.g_short.scale(e_q), g.i_max),
+            }
+        };
+    }
+
+    /// Alignment, tick ALIGN + 1: the next cycle of the step (the d current's ramp) and the
+    /// travel check.
+    #[inline(always)]
+    fn align_ramp(&mut self) {
         let pos = self.enc.position;
         let b = &mut self.bs;
-        if b.pending.is_some() {
-            self.held.i_ref = Dq::default();
-            return self.refresh_bus(vb);
+        if b.pending.is_some() | b.done {
+            return;
         }
         b.n += 1;
-        let i_d = (b.n as i32).saturating_mul(b.di).min(b.i_align);
-        // The rotor on the d-axis field is a spring with the structure's mass on it and
-        // little friction (ζ ≈ 0.01 on the reference TMD); the q current of a short circuit,
-        // −K_e·ω_m/R, damps it as the short would (ζ ≈ 0.7 there) while the angles are close.
-        let g = &self.g;
-        let e_q = g.k.ke_per_vel.scale(self.enc.vel);
-        self.held.i_ref = Dq {
-            d: Q::from_bits(i_d),
-            q: clamp_sym(b.g_short.scale(e_q), g.i_max),
-        };
-        let mut fault = None;
+        b.i_d = (b.n as i32).saturating_mul(b.di).min(b.i_align);
         if pos.wrapping_sub(b.p_start).unsigned_abs() > b.travel as u32 {
-            fault = Some(Fault::AlignMoving);
-        } else if b.n == b.n_step - b.n_step / 4 {
+            b.pending = Some(Fault::AlignMoving);
+            self.held.i_ref = Dq::default();
+        }
+    }
+
+    /// Alignment, tick ALIGN + 3: the settle window, the end of a step and the quarter-turn
+    /// check; the offset found is put in force by the next supervision tick
+    /// ([`Controller::supervise`]), as a fault found here is latched there.
+    #[inline(always)]
+    fn align_check(&mut self) {
+        let pos = self.enc.position;
+        let b = &mut self.bs;
+        if b.pending.is_some() | b.done {
+            return;
+        }
+        if b.n == b.n_settle {
             b.p_settle = pos;
         } else if b.n >= b.n_step {
             // Settled: the last quarter of the step moved less than an eighth of the
             // quarter turn (11° electrical).
-            let settle = (b.quarter / 8).max(1);
-            if pos.wrapping_sub(b.p_settle).abs() > settle {
-                fault = Some(Fault::AlignMoving);
+            let fault = if pos.wrapping_sub(b.p_settle).abs() > b.settle {
+                Fault::AlignMoving
             } else if b.step == 0 {
                 b.p_a = pos;
                 b.step = 1;
                 b.n = b.n_step / 2; // current already at full: hold only
                 self.g.enc.offset = Angle(1 << 30);
+                return;
+            } else if (pos.wrapping_sub(b.p_a) - b.quarter).abs() > b.quarter_tol {
+                Fault::AlignCheck
             } else {
-                let moved = pos.wrapping_sub(b.p_a);
-                if (moved - b.quarter).abs() > (b.quarter / 4).max(1) {
-                    fault = Some(Fault::AlignCheck);
-                } else {
-                    // The d axis sits at +90° electrical at this count.
-                    let per = b.e_per_count;
-                    let o = Angle((1u32 << 30).wrapping_sub(self.enc.in_turn.wrapping_mul(per)));
-                    self.end_align(Some(o));
-                    self.mode = Mode::Idle;
-                    self.pi.reset();
-                }
-            }
-        }
-        if fault.is_some() {
-            self.bs.pending = fault;
+                // The d axis sits at +90° electrical at this count.
+                let per = b.e_per_count;
+                b.offset = Some(Angle(
+                    (1u32 << 30).wrapping_sub(self.enc.in_turn.wrapping_mul(per)),
+                ));
+                b.done = true;
+                return;
+            };
+            b.pending = Some(fault);
             self.held.i_ref = Dq::default();
         }
-        self.refresh_bus(vb);
+    }
+
+    /// The supervision tick's end of a successful alignment: the offset found in force,
+    /// Idle.
+    #[cold]
+    fn finish_align(&mut self) {
+        self.end_align(self.bs.offset);
+        self.mode = Mode::Idle;
+        self.pi.reset();
     }
 
     /// Idle period during the boot calibration: sum the phase codes (gates off, so the
@@ -606,6 +650,9 @@ impl Controller {
         let v = self
             .prot
             .supervise(&self.cfg, self.mode, &t, self.enc.position);
+        if self.bs.done && self.mode == Mode::Align {
+            self.finish_align();
+        }
         if let Some(f) = self.bs.pending.take() {
             self.trip(f, &t);
         } else if let Some(f) = v.trip {
@@ -654,7 +701,9 @@ impl Controller {
     }
 
     pub fn law_mut(&mut self) -> &mut Law {
-        self.slow_tick = 0; // the law may change: its terms at the next step (tick 0)
+        if self.mode != Mode::Align {
+            self.slow_tick = 0; // the law may change: its terms at the next step (tick 0)
+        }
         &mut self.law
     }
 
@@ -822,12 +871,18 @@ impl Controller {
         // request (configuration or mode change, trip) is served where it is made
         // (`refresh_now`, outside the step's normal path), so no period pays for all of
         // them; `law_mut` makes the next step the law's tick (tick 0).
+        // Alignment runs a cycle of its own through the same table (ticks ALIGN … ALIGN + 3:
+        // reference, ramp and travel, bus, checks), so that no period of it pays for more
+        // than one group either.
         let t = self.slow_tick;
         match t {
             0 => self.refresh_law(i_dq, vb),
             1 => self.refresh_ff(),
-            2 => self.refresh_bus(vb),
+            2 | ALIGN_BUS => self.refresh_bus(vb),
             3 => self.refresh_advance(),
+            ALIGN => self.align_ref(),
+            ALIGN_RAMP => self.align_ramp(),
+            ALIGN_CHECK => self.align_check(),
             _ => self.refresh_all(i_dq, vb),
         }
         self.slow_tick = ((t + 1) & (SLOW_DIV - 1)) | self.held.tick_or;
@@ -957,7 +1012,9 @@ impl Controller {
     #[inline(never)]
     fn refresh_all(&mut self, i_dq: Dq, vb: u32) {
         if self.mode == Mode::Align {
-            return self.align_period(vb);
+            // (Not reached: alignment keeps its own cycle.)
+            self.held.tick_or = ALIGN;
+            return self.align_ref();
         }
         if self.setup_law() {
             self.refresh_law(i_dq, vb);
@@ -991,8 +1048,8 @@ impl Controller {
     /// the next step (and every step).
     fn refresh_now(&mut self) {
         if self.mode == Mode::Align {
-            // Alignment's own terms, every period from the next step on.
-            self.slow_tick = REFRESH_ALL;
+            // Alignment's own cycle, from its bus terms on.
+            self.slow_tick = ALIGN_BUS;
             return;
         }
         if matches!(self.law, Law::Resistor(_)) {
@@ -1010,8 +1067,14 @@ impl Controller {
 /// Periods per refresh of the slow terms under the resistor law (a power of two, ≥ 4: the
 /// four groups take ticks 0 … 3).
 const SLOW_DIV: u8 = 4;
-/// `slow_tick` value that refreshes every slow term at the next step (any value ≥ 4 does).
-const REFRESH_ALL: u8 = SLOW_DIV;
+/// `slow_tick` value that refreshes every slow term at the next step (any value ≥ 8 does).
+const REFRESH_ALL: u8 = 2 * SLOW_DIV;
+/// Alignment's cycle (`tick_or` = ALIGN): its reference, its ramp and travel check, the bus
+/// terms, its settle and quarter-turn checks.
+const ALIGN: u8 = SLOW_DIV;
+const ALIGN_RAMP: u8 = ALIGN + 1;
+const ALIGN_BUS: u8 = ALIGN + 2;
+const ALIGN_CHECK: u8 = ALIGN + 3;
 
 /// Current reference, feed-forward, bus terms and angle advance, held between refreshes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -1025,7 +1088,8 @@ struct HeldTerms {
     /// `inv_bus(V_bus)·2^8`.
     inv8: i32,
     advance: Rotation,
-    /// 0 under the resistor law (tick cycle), REFRESH_ALL under the others (every period).
+    /// 0 under the resistor law (tick cycle), ALIGN while aligning, REFRESH_ALL under the
+    /// other laws (every period).
     tick_or: u8,
 }
 

@@ -15,6 +15,7 @@ use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
 use regen_fw::svpwm::{inv_bus, modulate_limited};
+use regen_fw::control::{Boot, Fault};
 use regen_fw::{Actuation, Compiled, Config, Controller, Mode, RawSample};
 
 static VECTORS: &[u8] = include_bytes!("../vectors.bin");
@@ -106,15 +107,29 @@ fn boot_paths(cfg: &Config) {
                 break;
             }
             // 400 periods per step: the quarter turn (500 counts) in the second one.
+            // (The second run continues from the first one's count: a runaway, not a jump the
+            // encoder check would take for a glitch.)
             s.encoder = if run == 0 {
                 7u16.wrapping_add(k.saturating_sub(400).min(100) * 5)
             } else {
-                7u16.wrapping_add(k)
+                507u16.wrapping_add(k)
             };
             black_box(regen_step_boot(&mut ctl, s));
+            // Supervision every 20 periods, as the period routine runs it: it latches a boot
+            // fault the step found and ends a successful alignment.
+            if k % 20 == 19 {
+                ctl.supervise();
+            }
         }
-        // A boot fault found by the step latches at the supervision tick.
-        ctl.supervise();
+        // The first run aligns, the second latches align_moving.
+        let ok = if run == 0 {
+            ctl.boot() == Boot::Aligned
+        } else {
+            ctl.fault() == Some(Fault::AlignMoving)
+        };
+        if !ok {
+            exit(8);
+        }
     }
 }
 
