@@ -77,6 +77,10 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   echo "instructions per power-up step (offset calibration, alignment, its faults) as the board builds it: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
   bline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_boot 2>&1 | grep insnwin | tail -n1)
   echo "instructions per power-up step at opt-level 3: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  tline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step_trip 2>&1 | grep insnwin | tail -n1)
+  echo "instructions of a step that latches an instantaneous fault (over-current; the snapshot, the safe mode and the slow terms in the step) as the board builds it: min $(echo "$tline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$tline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
+  iline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_install 2>&1 | grep insnwin | tail -n1)
+  echo "the configuration swap between two steps as the board builds it: $(echo "$iline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: the swap within the step budget, 400)"
 else
   echo "instruction count skipped: $tools not found"
 fi

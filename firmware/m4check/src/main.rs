@@ -39,6 +39,17 @@ pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
     ctl.step(black_box(s))
 }
 
+/// A step that finds an instantaneous fault (an over-current code) and latches it there:
+/// counted on copies of the controller every 1,000 steps of the replay, not in the digest.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16) -> Actuation {
+    // (By value, and a third argument: a body of its own, not folded with the other steps.)
+    let mut s = s;
+    s.i_abc[1] = black_box(code);
+    ctl.step(&s)
+}
+
 /// The configuration change of the recorded run (R_L 306 → 2 Ω halfway) done at once, as
 /// `set_config` does: validation, the gains, and the slow terms refreshed. Counted on a copy;
 /// the loop itself takes the change as `regen_compile` (the console's task) then
@@ -252,6 +263,12 @@ fn main() -> ! {
             let mut copy = c.clone();
             let _ = copy.law_mut();
             black_box(regen_step_refresh(&mut copy, s));
+            // Full-scale phase current: over-current, latched in the step.
+            let mut copy = c.clone();
+            black_box(regen_step_trip(&mut copy, *s, 4095));
+            if copy.fault().is_none() {
+                bad_cfg = true;
+            }
         }
         k += 1;
         let a = regen_step(c, s);
