@@ -1299,6 +1299,50 @@ mod tests {
         }
     }
 
+    /// A rotor dragged away during the ramp latches `align_moving` by the travel check, one
+    /// alignment cycle (4 periods) and at most one supervision tick (20 periods) after it
+    /// passes `align_travel_m`, long before the settle check could (the last quarter of the
+    /// step).
+    #[test]
+    fn alignment_travel_beyond_its_limit_latches_at_once() {
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        ctl.require_alignment();
+        let z = cfg.adc_zero_code;
+        let mut s = RawSample {
+            i_abc: [z; 3],
+            v_bus: 2458,
+            encoder: 0,
+        };
+        for _ in 0..CAL_PERIODS {
+            ctl.step(&s);
+        }
+        assert_eq!(ctl.boot(), Boot::Unaligned);
+        ctl.set_mode(Mode::Align).unwrap();
+        // 0.004 m at 0.016 m per 10,000 counts: 2,500 counts; passed after 1,251 periods at
+        // 2 counts per period.
+        let per_m = cfg.encoder_cpr as f64 / (cfg.lead_m_per_rad as f64 * core::f64::consts::TAU);
+        let travel = (cfg.align_travel_m as f64 * per_m) as u32;
+        let cross = travel / 2 + 1;
+        let settle_start = (cfg.align_time_s * cfg.pwm_hz) as u32 * 3 / 4;
+        assert!(cross + 24 < settle_start);
+        let mut k = 0u32;
+        while ctl.fault().is_none() && k < settle_start {
+            s.encoder = (2 * k) as u16;
+            ctl.step(&s);
+            if k % 20 == 19 {
+                ctl.supervise();
+            }
+            k += 1;
+        }
+        assert_eq!(ctl.fault(), Some(Fault::AlignMoving));
+        assert!(
+            k >= cross && k <= cross + 4 + 20,
+            "latched at period {k}, limit passed at {cross}"
+        );
+        assert_eq!(ctl.boot(), Boot::Unaligned);
+    }
+
     #[test]
     fn refresh_requests_are_served_at_once() {
         // A configuration change (R_L 306 → 2 Ω) is served by `set_config` itself: the very
