@@ -579,10 +579,17 @@ impl Controller {
 
     /// A trip the hardware took by itself (a comparator through the timer's break input:
     /// the bridge is already off): latched as the software's own trip of that kind, with the
-    /// last period's telemetry.
+    /// last period's telemetry, and the mode is the one the break holds the gates in, open
+    /// (the G4's BRK2 cannot short; a firmware short is opened by BRK), whatever the rule
+    /// would choose: the outputs stay off until the firmware re-enables them.
+    #[cold]
     pub fn hardware_trip(&mut self, f: Fault) {
         let t = self.telemetry();
         self.trip(f, &t);
+        if self.mode != Mode::Idle {
+            self.mode = Mode::Idle;
+            self.refresh_now();
+        }
     }
 
     /// The board's timer saw the current loop finish after its period ended.

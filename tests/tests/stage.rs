@@ -582,8 +582,11 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
             "bus_under_voltage within 2 periods",
         )?,
         "dac_wrong_low" => need(
-            st.brk2 && o.t_safe.is_some_and(|t| t <= 2.0 * ts),
-            "BRK2 within 2 periods",
+            st.brk2
+                && o.t_safe.is_some_and(|t| t <= 2.0 * ts)
+                && latched(ctl, Fault::BusOverVoltage)
+                && ctl.mode() == Mode::Idle,
+            "BRK2 within 2 periods, reported to the firmware: bus_over_voltage, open",
         )?,
         "source_lost_full_power" => need(
             ctl.fault().is_none() && o.v_peak < c.derate.0 as f64,
@@ -611,6 +614,80 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
         _ => {}
     }
     Ok(o)
+}
+
+/// `f` is latched, first or later.
+fn latched(ctl: &regen_fw::Controller, f: Fault) -> bool {
+    ctl.fault() == Some(f)
+        || ctl
+            .protection()
+            .record()
+            .is_some_and(|r| r.later().any(|g| g == f))
+}
+
+/// A break the stage takes reaches the firmware as the board's period routine reads it
+/// (the timer's flag → `Controller::hardware_trip`): the named fault latches within two
+/// periods of the comparator's crossing and the mode is open, as the break holds the gates,
+/// both from Run (a bus comparator pulse longer than BRK2's filter, then a phase one longer
+/// than BRK's) and from the firmware's own short (opened by BRK: the mode says open, not
+/// short). Breaks on purpose: no report (the mode stays run) or a report as the rule's
+/// trip (bus over-voltage → short while BRK2 holds the gates off) fail it.
+#[test]
+fn breaks_reach_the_firmware() {
+    for (bus, from_short, want) in [
+        (true, false, Fault::BusOverVoltage),
+        (false, false, Fault::OverCurrent),
+        (false, true, Fault::OverCurrent),
+    ] {
+        let sc = scenario(&C72, constant_speed(0.05, 0.2), 30.0);
+        let sim = sc.build().expect("scenario");
+        let spec = StageSpec::from_config(sim.controller().config(), C72.v_abs);
+        let ts = sim.period();
+        // An injection that never comes: the stage alone under the firmware.
+        let mut fs = FaultSim::new(sim, Inject::Overrun { every: 1 }, 1e9, 1).with_stage(spec);
+        while fs.sim.time() < 0.1 {
+            fs.step().expect("step");
+        }
+        assert_eq!(fs.sim.controller().mode(), Mode::Run);
+        if from_short {
+            fs.sim
+                .controller_mut()
+                .set_mode(Mode::Short)
+                .expect("short");
+            fs.step().expect("step");
+        }
+        fs.stage.as_mut().expect("stage").glitch(
+            if bus {
+                2.0 * spec.filter2_s
+            } else {
+                2.0 * spec.filter_s
+            },
+            bus,
+        );
+        let t0 = fs.sim.time();
+        while fs.sim.controller().fault().is_none() && fs.sim.time() < t0 + 10.0 * ts {
+            fs.step().expect("step");
+        }
+        let st = fs.stage.as_ref().expect("stage");
+        let ctl = fs.sim.controller();
+        let dt = fs.sim.time() - t0;
+        println!(
+            "break {} from {}: {:?} in {:?} after {:.0} µs",
+            if bus { "BRK2" } else { "BRK" },
+            if from_short { "short" } else { "run" },
+            ctl.fault(),
+            ctl.mode(),
+            dt * 1e6
+        );
+        assert!(if bus { st.brk2 } else { st.brk });
+        assert_eq!(ctl.fault(), Some(want));
+        assert_eq!(ctl.mode(), Mode::Idle, "the mode agrees with the gates");
+        // Observed at the end of the glitch's period, read at the end of the next one.
+        assert!(dt <= 2.0 * ts + 1e-9, "{dt}");
+        // The bridge stays off until the firmware re-enables it.
+        fs.step().expect("step");
+        assert_eq!(fs.sim.controller().mode(), Mode::Idle);
+    }
 }
 
 fn suite(seeds: u64) {
