@@ -1037,9 +1037,9 @@ fn board_72v_tmd_sweep() {
     );
     assert_eq!(best.0, best_hb.0, "optimum");
     // Below the clip the deviation falls steadily with the speed, +3.42 % at 10 Ω
-    // (0.006 m/s) to +0.24 % at 400 Ω: the balance replaces the Coulomb friction by its
-    // equivalent damping 4F_c/(πẊ), coarsest where the friction is a large share of the
-    // force. Bounded at 3× the worst (10 %), and at the optimum, where the loop matters,
+    // (0.006 m/s) to +0.24 % at 400 Ω: most likely the balance's replacing the Coulomb
+    // friction by its equivalent damping 4F_c/(πẊ), coarsest where the friction is a large
+    // share of the force (not isolated). Bounded at 3× the worst (10 %), and at the optimum, where the loop matters,
     // at 3× its +0.42 % (1.3 %).
     assert!(worst < 0.10, "{worst}");
     let dev_opt = (best_hb.1 / best_hb.2 - 1.0).abs();
