@@ -77,6 +77,13 @@ pub struct Config {
     pub derate_start_v: f32,
     /// Bus voltage where the regenerative current reaches zero, V.
     pub derate_end_v: f32,
+    /// Flux braking (docs/protection.md, "Bus management"): largest d-axis current burning
+    /// regenerated power in the winding, A (0 = off). Bounded at run time by the current
+    /// limit (`|i_dq| ≤ i_max_a`) and the voltage circle.
+    pub flux_brake_a: f32,
+    /// Regenerated power the bus takes up to `brake_on_v`, W (`inf` = all of it); the
+    /// share falls linearly to zero at `derate_start_v`, and flux braking burns the rest.
+    pub max_regen_power_w: f32,
     /// Force trip, N: the low-pass filtered electromagnetic force above it trips `over_force`
     /// (`inf` = off, for experiments beyond the rating). Default 1.2× the device rating
     /// f_rat = 1,076 N (the rated torque 2.74 N·m over the lead).
@@ -178,6 +185,8 @@ impl Default for Config {
             brake_off_v: 82.0,
             derate_start_v: 88.0,
             derate_end_v: 93.0,
+            flux_brake_a: 1.9,
+            max_regen_power_w: f32::INFINITY,
             f_trip_n: 1_300.0,
             f_filter_s: 0.01,
             i2t_cont_a: 2.0,
@@ -568,7 +577,7 @@ impl Gains {
 }
 
 /// 1/√3, correctly rounded to `f32` (`f32::sqrt` is not in `core`).
-const INV_SQRT3: f32 = 0.577_350_26;
+pub(crate) const INV_SQRT3: f32 = 0.577_350_26;
 
 /// The angle of `r` radians (|r| ≤ 2π, validated), in integers: `r·2^32` is exact in `f32`
 /// (power-of-two scaling) and fits an `i64`; times 2^64/2π (rounded) and shifted back gives
@@ -651,7 +660,7 @@ mod tests {
     #[test]
     fn differs_covers_every_field() {
         let names = field_names();
-        assert_eq!(names.len(), 54, "{names:?}");
+        assert_eq!(names.len(), 56, "{names:?}");
         for n in &names {
             assert!(
                 n == "opt" || PARAMS.iter().any(|p| p.name == n.as_str()),

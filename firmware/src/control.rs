@@ -151,7 +151,7 @@ struct BootState {
     /// step's budget.
     pending: Option<Fault>,
 }
-use crate::protect::{derate_regen, Protection, SUPERVISE_HZ};
+use crate::protect::{bus_action, Protection, SUPERVISE_HZ};
 
 /// What the loop measured and commanded in its last period (SI units in fixed point), as
 /// [`Controller::telemetry`] returns it.
@@ -623,10 +623,17 @@ impl Controller {
 
     /// A trip the hardware took by itself (a comparator through the timer's break input:
     /// the bridge is already off): latched as the software's own trip of that kind, with the
-    /// last period's telemetry.
+    /// last period's telemetry, and the mode is the one the break holds the gates in, open
+    /// (the G4's BRK2 cannot short; a firmware short is opened by BRK), whatever the rule
+    /// would choose: the outputs stay off until the firmware re-enables them.
+    #[cold]
     pub fn hardware_trip(&mut self, f: Fault) {
         let t = self.telemetry();
         self.trip(f, &t);
+        if self.mode != Mode::Idle {
+            self.mode = Mode::Idle;
+            self.refresh_now();
+        }
     }
 
     /// The board's timer saw the current loop finish after its period ended.
@@ -968,7 +975,7 @@ impl Controller {
             d: clamp_sym(c.d, g.i_max),
             q: clamp_sym(c.q, g.i_max),
         };
-        self.held.i_ref = derated(r, e_q, self.prot.derate);
+        self.held.i_ref = derated(r, e_q, &self.prot);
     }
 
     /// Tick 1: the feed-forward from the held back-emf and reference.
@@ -1025,7 +1032,7 @@ impl Controller {
         self.held.e_q = e_q;
         self.held.i_ref = if self.mode == Mode::Run {
             let r = other_law(&mut self.law, &self.enc, &self.g, e_q, i_dq, vb);
-            derated(r, e_q, self.prot.derate)
+            derated(r, e_q, &self.prot)
         } else {
             Dq::default()
         };
@@ -1107,10 +1114,12 @@ fn volts_of_code(g: &Gains, code: u16) -> Q {
 /// Protection hook (protect.rs): bus derating of a regenerative reference (`e_q` has the
 /// sign of the speed). At the factor 1 (no derating, the normal case) the product is the
 /// reference itself (Q16.16 `x·1 = x` exactly), so it is skipped.
+/// Flux braking's d current is added on the same path (`protect::bus_action`): the common
+/// path tests one flag, set by the supervision when either is in force.
 #[inline(always)]
-fn derated(r: Dq, e_q: Q, derate: Q) -> Dq {
-    if derate != Q::ONE {
-        derate_regen(r, e_q, derate)
+fn derated(r: Dq, e_q: Q, p: &Protection) -> Dq {
+    if p.act {
+        bus_action(r, e_q, p)
     } else {
         r
     }

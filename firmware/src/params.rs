@@ -309,6 +309,22 @@ pub static PARAMS: &[Param] = &[
         "regenerative current zero at this bus voltage (<= v_bus_ov)"
     ),
     real!(
+        flux_brake_a,
+        "A",
+        0.0,
+        1_000.0,
+        true,
+        "flux braking: largest d current burning regen power in the winding (0 = off)"
+    ),
+    real!(
+        max_regen_power_w,
+        "W",
+        0.0,
+        f32::INFINITY,
+        true,
+        "regen power the bus takes below brake_on_v (0 at derate_start_v; inf = all)"
+    ),
+    real!(
         f_trip_n,
         "N",
         1.0,

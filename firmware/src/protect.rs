@@ -246,8 +246,15 @@ pub mod warn {
     pub const BRAKING: u8 = 2;
     /// The I²t estimate is above [`super::I2T_CLEAR`].
     pub const HOT: u8 = 4;
+    /// Flux braking burns regenerated power in the winding.
+    pub const FLUX: u8 = 8;
     /// Names, bit by bit.
-    pub const NAMES: [(u8, &str); 3] = [(DERATING, "derating"), (BRAKING, "braking"), (HOT, "hot")];
+    pub const NAMES: [(u8, &str); 4] = [
+        (DERATING, "derating"),
+        (BRAKING, "braking"),
+        (HOT, "hot"),
+        (FLUX, "flux_braking"),
+    ];
 }
 
 /// What a supervision tick decided.
@@ -273,6 +280,11 @@ const PRIORITY: [Fault; 8] = [
 pub struct Protection {
     /// Factor applied to a regenerative q-current reference (1 = none), Q16.16 in [0, 1].
     pub derate: Q,
+    /// Flux braking's d-current reference (≤ 0), A ([`flux_brake_id`]).
+    pub flux_id: Q,
+    /// A bus action in force (`derate` ≠ 1 or `flux_id` ≠ 0): the one flag the loop tests
+    /// before applying either ([`bus_action`]).
+    pub act: bool,
     /// Overruns reported since the last supervision tick.
     overruns: u16,
     /// Leaky overrun bucket: + overruns, − 1 per tick.
@@ -303,6 +315,8 @@ impl Default for Protection {
     fn default() -> Self {
         Protection {
             derate: Q::ONE,
+            flux_id: Q::ZERO,
+            act: false,
             overruns: 0,
             bucket: 0,
             ticks: 0,
@@ -320,6 +334,102 @@ impl Default for Protection {
             warnings: 0,
         }
     }
+}
+
+/// The bus actions on a current reference, when [`Protection::act`] says one is in force
+/// (out of line: the loop's common path pays only the flag's test): the derate factor on a
+/// regenerative q current ([`derate_regen`]) and flux braking's d current added.
+#[cold]
+#[inline(never)]
+pub fn bus_action(r: Dq, omega_m: Q, p: &Protection) -> Dq {
+    let r = derate_regen(r, omega_m, p.derate);
+    Dq {
+        d: r.d.saturating_add(p.flux_id),
+        q: r.q,
+    }
+}
+
+/// √x for x ≥ 0 (0 for anything else, NaN included) in `f32` without libm: a bit-level first
+/// guess (≤ 6 % off) and four Newton steps (quadratic: 4e-3, 8e-6, below 1 ULP), with
+/// correctly rounded `+ ÷ ×` only, so host and board agree bit for bit.
+fn sqrt_f32(x: f32) -> f32 {
+    if x.is_nan() || x <= 0.0 {
+        return 0.0;
+    }
+    if x == f32::INFINITY {
+        return x;
+    }
+    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
+    for _ in 0..4 {
+        y = 0.5 * (y + x / y);
+    }
+    y
+}
+
+/// Flux braking's d current, A (≤ 0), from the bus voltage `v_bus`, the shaft speed `omega`
+/// (rad/s) and the q current `i_q` (A) of the last period.
+///
+/// The power the machine sends to the bus at a d current `i_d` is (amplitude-invariant
+/// frame, steady state: the `ω_e·L` cross terms carry no power)
+/// `P = −3/2·(e_q·i_q + R·i_q²) − 3/2·R·i_d² = P₀ − 3/2·R·i_d²`, `e_q = K_e·ω`. The bus takes
+/// `P_acc = min(P₀, max_regen_power_w)·w(v_bus)`, `w` = 1 up to `brake_on_v` falling linearly
+/// to 0 at `derate_start_v` (the chopper has not held the bus: a growing share is burnt, all
+/// of it from `derate_start_v` on, where the derating starts too), so
+/// `i_d² = (P₀ − P_acc)/(3/2·R)` burns the rest, bounded by
+/// * `flux_brake_a` (0 = off) and the current limit: `i_d² ≤ i_max_a² − i_q²`;
+/// * the voltage circle (at 0.9 of `m_max·V_bus/√3`, margin for the PI): with
+///   `v_d = R·i_d − ω_e·L·i_q`, `v_q = R·i_q + ω_e·L·i_d + e_q`, `|v|² ≤ v_lim²` is a quadratic
+///   in `i_d` whose lower root bounds it. The sign is negative (against the magnet's flux):
+///   it lowers `v_q` at any speed's sign, so flux braking never needs more voltage than
+///   the loop has; where even `i_d = 0` does not fit, the `i_d` of least voltage is the
+///   bound.
+pub fn flux_brake_id(cfg: &Config, v_bus: f32, omega: f32, i_q: f32) -> f32 {
+    if cfg.flux_brake_a.is_nan() || cfg.flux_brake_a <= 0.0 {
+        return 0.0;
+    }
+    let w = if v_bus <= cfg.brake_on_v {
+        1.0
+    } else if v_bus >= cfg.derate_start_v {
+        0.0
+    } else {
+        (cfg.derate_start_v - v_bus) / (cfg.derate_start_v - cfg.brake_on_v)
+    };
+    let r = cfg.r_phase_ohm;
+    let e = cfg.ke_v_s_per_rad * omega;
+    let p0 = -1.5 * (e * i_q + r * i_q * i_q);
+    let cap = if p0 < cfg.max_regen_power_w {
+        p0
+    } else {
+        cfg.max_regen_power_w
+    };
+    let p_acc = if w > 0.0 { cap * w } else { 0.0 };
+    let excess = p0 - p_acc;
+    if excess.is_nan() || excess <= 0.0 {
+        return 0.0;
+    }
+    let want = excess / (1.5 * r);
+    let fb = cfg.flux_brake_a;
+    let room = cfg.i_max_a * cfg.i_max_a - i_q * i_q;
+    let mut lim = if room < fb * fb { room } else { fb * fb };
+    // The voltage circle.
+    let x = cfg.pole_pairs as f32 * omega * cfg.l_phase_h;
+    let v_lim = 0.9 * cfg.m_max * v_bus * crate::config::INV_SQRT3;
+    let (a0, b0) = (-x * i_q, r * i_q + e);
+    let a = r * r + x * x;
+    let b = r * a0 + x * b0;
+    let c = a0 * a0 + b0 * b0 - v_lim * v_lim;
+    let disc = b * b - a * c;
+    let lo = if disc >= 0.0 {
+        (-b - sqrt_f32(disc)) / a
+    } else {
+        -b / a
+    };
+    let v_room = if lo < 0.0 { lo * lo } else { 0.0 };
+    if v_room < lim {
+        lim = v_room;
+    }
+    let i2 = if want < lim { want } else { lim };
+    -sqrt_f32(i2)
 }
 
 /// Apply the derate factor to a current reference: the q component is scaled when it
@@ -456,6 +566,14 @@ impl Protection {
             0.0
         };
         self.derate = crate::numtext::q_of(k);
+        // Flux braking: the d current that burns what the bus cannot take.
+        let id = if controlled {
+            flux_brake_id(cfg, v_bus, omega, i_q)
+        } else {
+            0.0
+        };
+        self.flux_id = crate::numtext::q_of(id);
+        self.act = self.derate != Q::ONE || self.flux_id != Q::ZERO;
 
         // I²t: dθ/dt = ((|i|/I_cont)² − θ)/τ (first-order winding temperature rise, per unit
         // of the rise at the continuous current), forward Euler at 1 kHz (τ ≥ 0.1 s ≫ 1 ms).
@@ -565,6 +683,9 @@ impl Protection {
         }
         if t.brake {
             w |= warn::BRAKING;
+        }
+        if self.flux_id != Q::ZERO {
+            w |= warn::FLUX;
         }
         if self.i2t > I2T_CLEAR {
             w |= warn::HOT;
@@ -747,6 +868,104 @@ mod tests {
         assert_eq!(derate_regen(r, q(10.0), half).d, q(0.3));
         // ω < 0, i_q < 0: motoring → untouched.
         assert_eq!(derate_regen(r, q(-10.0), half), r);
+    }
+
+    /// Flux braking over a grid of bus voltages, speeds (both signs) and q currents, judged
+    /// by the machine's steady-state voltage equations written out here (cross terms
+    /// included, which the function's power balance drops): the d current is never
+    /// positive, keeps |i_dq| within i_max_a and the voltage within 0.9 of the circle; where
+    /// neither bound is reached, the bus receives exactly the power it takes
+    /// (`P = −3/2·(v_d·i_d + v_q·i_q)` = `max_regen_power_w·w(v_bus)`, 1e-4 relative + 1 mW:
+    /// f32 rounding of a difference of terms ≤ 100 W); off (0 A) gives none. Breaks: the
+    /// factor 3/2 dropped, the current bound or the voltage bound removed each fail it.
+    #[test]
+    fn flux_braking_burns_what_the_bus_cannot_take() {
+        let cfg = Config {
+            max_regen_power_w: 20.0,
+            ..Config::default()
+        };
+        let (r, l, p, ke) = (
+            cfg.r_phase_ohm as f64,
+            cfg.l_phase_h as f64,
+            cfg.pole_pairs as f64,
+            cfg.ke_v_s_per_rad as f64,
+        );
+        let (mut balanced, mut by_i, mut by_v) = (0, 0, 0);
+        for vb in [80.0f32, 85.0, 86.0, 87.0, 88.0, 90.0] {
+            for w in [-60.0f32, -30.0, -10.0, -2.0, 0.0, 3.0, 15.0, 40.0, 55.0] {
+                for iq in [-1.9f32, -1.2, -0.6, -0.2, 0.0, 0.3, 1.5] {
+                    let id = flux_brake_id(&cfg, vb, w, iq) as f64;
+                    let (wf, iqf) = (w as f64, iq as f64);
+                    assert!(id <= 0.0);
+                    let x = p * wf * l;
+                    let vd = r * id - x * iqf;
+                    let vq = r * iqf + x * id + ke * wf;
+                    let v = (vd * vd + vq * vq).sqrt();
+                    let v_lim = 0.9 * cfg.m_max as f64 * vb as f64 / 3f64.sqrt();
+                    let i_lim = cfg.i_max_a as f64;
+                    let i = (id * id + iqf * iqf).sqrt();
+                    if id == 0.0 {
+                        continue;
+                    }
+                    assert!(i <= i_lim * (1.0 + 1e-5), "{vb} {w} {iq}: |i| {i}");
+                    // Within the circle, or (already outside at i_d = 0) nearer to it.
+                    let v0 = ((x * iqf).powi(2) + (r * iqf + ke * wf).powi(2)).sqrt();
+                    assert!(
+                        v <= v_lim * (1.0 + 1e-4) || v < v0,
+                        "{vb} {w} {iq}: |v| {v}"
+                    );
+                    let wv = ((cfg.derate_start_v - vb) / (cfg.derate_start_v - cfg.brake_on_v))
+                        .clamp(0.0, 1.0) as f64;
+                    let p0 = -1.5 * (r * iqf + ke * wf) * iqf;
+                    let p_acc = p0.min(cfg.max_regen_power_w as f64) * wv;
+                    let p_bus = -1.5 * (vd * id + vq * iqf);
+                    if i >= i_lim * (1.0 - 1e-4) {
+                        by_i += 1;
+                        assert!(p_bus >= p_acc - 1e-3);
+                    } else if v >= v_lim * (1.0 - 1e-4) {
+                        by_v += 1;
+                        assert!(p_bus >= p_acc - 1e-3);
+                    } else {
+                        balanced += 1;
+                        assert!(
+                            (p_bus - p_acc).abs() <= 1e-4 * p_acc + 1e-3,
+                            "{vb} {w} {iq}: bus gets {p_bus} W, takes {p_acc} W"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            balanced > 10 && by_i > 3 && by_v > 0,
+            "{balanced} {by_i} {by_v}"
+        );
+        let off = Config {
+            flux_brake_a: 0.0,
+            ..cfg
+        };
+        assert_eq!(flux_brake_id(&off, 90.0, 40.0, -1.0), 0.0);
+        // The default takes everything below brake_on_v, a falling share above, nothing
+        // from derate_start_v on (10 rad/s, −0.3 A: 3.9 W, 1.04 A of d current at most).
+        let d = Config::default();
+        let at = |v: f32| flux_brake_id(&d, v, 10.0, -0.3) as f64;
+        let p0 = -1.5 * (r * -0.3 + ke * 10.0) * -0.3;
+        assert_eq!(at(d.brake_on_v), 0.0);
+        let mid = 0.5 * (d.brake_on_v + d.derate_start_v);
+        assert!((1.5 * r * at(mid).powi(2) / (0.5 * p0) - 1.0).abs() < 1e-4);
+        assert!((1.5 * r * at(d.derate_start_v).powi(2) / p0 - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn sqrt_without_libm() {
+        for x in [0.0f32, 1e-12, 0.25, 2.0, 3.7, 1e3, 5.5e7, 3e30] {
+            let y = sqrt_f32(x);
+            assert!(
+                (y as f64 - (x as f64).sqrt()).abs() <= 2e-7 * (x as f64).sqrt(),
+                "{x}"
+            );
+        }
+        assert_eq!(sqrt_f32(-1.0), 0.0);
+        assert_eq!(sqrt_f32(f32::NAN), 0.0);
     }
 
     #[test]

@@ -269,7 +269,20 @@ impl FaultSim {
         }
         let (t, vb, i) = (self.sim.time(), self.sim.v_bus(), self.sim.currents());
         if let Some(st) = self.stage.as_mut() {
+            let was = (st.brk, st.brk2);
             st.observe(t, vb, i);
+            // A break latched while the core runs sets the timer's flag, which the firmware's
+            // period reads (the board's `trip::take_trip`): the fault latches and the mode
+            // follows the gates the break holds off. A halted core never reads it; a reset
+            // clears it.
+            if st.cpu == crate::stage::Cpu::Running {
+                if st.brk && !was.0 {
+                    self.sim.report_break(regen_fw::protect::Fault::OverCurrent);
+                } else if st.brk2 && !was.1 {
+                    self.sim
+                        .report_break(regen_fw::protect::Fault::BusOverVoltage);
+                }
+            }
         }
         Ok(())
     }

@@ -118,6 +118,10 @@ pub struct FirmwareSpec {
     /// Regenerative derating band (between the brake and the over-voltage trip).
     pub derate_start_v: f32,
     pub derate_end_v: f32,
+    /// Flux braking's largest d current, A (0 = off), and the regenerated power the bus
+    /// takes below `brake_on_v`, W (`inf` = all of it).
+    pub flux_brake_a: f32,
+    pub max_regen_power_w: f32,
     pub ff_emf: bool,
     pub ff_decouple: bool,
     pub delay_comp: bool,
@@ -150,6 +154,8 @@ impl Default for FirmwareSpec {
             brake_off_v: 370.0,
             derate_start_v: 395.0,
             derate_end_v: 415.0,
+            flux_brake_a: c.flux_brake_a,
+            max_regen_power_w: c.max_regen_power_w,
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
             delay_comp: c.delay_comp,
@@ -363,6 +369,8 @@ impl Scenario {
             brake_off_v: f.brake_off_v,
             derate_start_v: f.derate_start_v,
             derate_end_v: f.derate_end_v,
+            flux_brake_a: f.flux_brake_a,
+            max_regen_power_w: f.max_regen_power_w,
             law: self.law_kind()?,
             r_load_ohm: self.law.r_load_ohm as f32,
             ..Config::default()

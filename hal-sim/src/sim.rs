@@ -325,6 +325,9 @@ pub struct Sim {
     mail: Pending,
     /// The power-up models were applied ([`Sim::power_up`]): a reboot calibrates and aligns.
     powered_up: bool,
+    /// A break the stage model latched, not yet read by the period (the timer's break flag,
+    /// [`Sim::report_break`]).
+    break_flag: Option<regen_fw::protect::Fault>,
 }
 
 impl Sim {
@@ -393,6 +396,7 @@ impl Sim {
             per: Period::NEW,
             mail: Pending::EMPTY,
             powered_up: false,
+            break_flag: None,
         };
         sim.stored_start = sim.stored();
         Ok(sim)
@@ -405,6 +409,7 @@ impl Sim {
     pub fn reboot(&mut self) -> Result<(), String> {
         let cfg = *self.ctl.config();
         self.ctl = power_up_controller(&cfg)?;
+        self.break_flag = None; // the reset clears the timer's flags
         if self.powered_up {
             self.ctl.require_alignment();
         }
@@ -712,9 +717,20 @@ impl Sim {
         let mut out = self.per.step(&mut self.ctl, &sample);
         on_actuation(&mut out);
         PlantIo(self).apply(&out);
-        self.per
-            .finish(&mut self.ctl, &mut self.mail, &mut SimTimer);
+        let mut hw = SimTimer(self.break_flag.take());
+        self.per.finish(&mut self.ctl, &mut self.mail, &mut hw);
         self.finish_period();
+    }
+
+    /// The power stage's break latched (`crate::stage`: a comparator through the timer's
+    /// break input): the timer's flag, read by the next period's end as the board's period
+    /// routine reads TIM1's (`PeriodHw::tripped`) and latched as `fault`
+    /// ([`regen_fw::Controller::hardware_trip`]). An over-current break (BRK) keeps
+    /// precedence over a bus one (BRK2) reported in the same period, as on the board.
+    pub fn report_break(&mut self, fault: regen_fw::protect::Fault) {
+        if self.break_flag != Some(regen_fw::protect::Fault::OverCurrent) {
+            self.break_flag = Some(fault);
+        }
     }
 
     /// The period's state: energy sum, period and overrun counts, supervision countdown.
@@ -1548,9 +1564,14 @@ pub fn p_only(ctl: &mut Controller) {
 struct PlantIo<'a>(&'a mut Sim);
 
 /// The simulator's timer as the period sees it: never late (the simulated loop has no
-/// clock), PWM frequency fixed by the plant's period.
-struct SimTimer;
-impl PeriodHw for SimTimer {}
+/// clock), PWM frequency fixed by the plant's period; its break flag is the one the stage
+/// model reported ([`Sim::report_break`]).
+struct SimTimer(Option<regen_fw::protect::Fault>);
+impl PeriodHw for SimTimer {
+    fn tripped(&mut self) -> Option<regen_fw::protect::Fault> {
+        self.0.take()
+    }
+}
 
 impl DriveIo for PlantIo<'_> {
     fn sample(&mut self) -> RawSample {

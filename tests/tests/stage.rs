@@ -582,8 +582,11 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
             "bus_under_voltage within 2 periods",
         )?,
         "dac_wrong_low" => need(
-            st.brk2 && o.t_safe.is_some_and(|t| t <= 2.0 * ts),
-            "BRK2 within 2 periods",
+            st.brk2
+                && o.t_safe.is_some_and(|t| t <= 2.0 * ts)
+                && latched(ctl, Fault::BusOverVoltage)
+                && ctl.mode() == Mode::Idle,
+            "BRK2 within 2 periods, reported to the firmware: bus_over_voltage, open",
         )?,
         "source_lost_full_power" => need(
             ctl.fault().is_none() && o.v_peak < c.derate.0 as f64,
@@ -611,6 +614,80 @@ fn run(c: &Class, kind: &str, seed: u64) -> Result<Outcome, String> {
         _ => {}
     }
     Ok(o)
+}
+
+/// `f` is latched, first or later.
+fn latched(ctl: &regen_fw::Controller, f: Fault) -> bool {
+    ctl.fault() == Some(f)
+        || ctl
+            .protection()
+            .record()
+            .is_some_and(|r| r.later().any(|g| g == f))
+}
+
+/// A break the stage takes reaches the firmware as the board's period routine reads it
+/// (the timer's flag → `Controller::hardware_trip`): the named fault latches within two
+/// periods of the comparator's crossing and the mode is open, as the break holds the gates,
+/// both from Run (a bus comparator pulse longer than BRK2's filter, then a phase one longer
+/// than BRK's) and from the firmware's own short (opened by BRK: the mode says open, not
+/// short). Breaks on purpose: no report (the mode stays run) or a report as the rule's
+/// trip (bus over-voltage → short while BRK2 holds the gates off) fail it.
+#[test]
+fn breaks_reach_the_firmware() {
+    for (bus, from_short, want) in [
+        (true, false, Fault::BusOverVoltage),
+        (false, false, Fault::OverCurrent),
+        (false, true, Fault::OverCurrent),
+    ] {
+        let sc = scenario(&C72, constant_speed(0.05, 0.2), 30.0);
+        let sim = sc.build().expect("scenario");
+        let spec = StageSpec::from_config(sim.controller().config(), C72.v_abs);
+        let ts = sim.period();
+        // An injection that never comes: the stage alone under the firmware.
+        let mut fs = FaultSim::new(sim, Inject::Overrun { every: 1 }, 1e9, 1).with_stage(spec);
+        while fs.sim.time() < 0.1 {
+            fs.step().expect("step");
+        }
+        assert_eq!(fs.sim.controller().mode(), Mode::Run);
+        if from_short {
+            fs.sim
+                .controller_mut()
+                .set_mode(Mode::Short)
+                .expect("short");
+            fs.step().expect("step");
+        }
+        fs.stage.as_mut().expect("stage").glitch(
+            if bus {
+                2.0 * spec.filter2_s
+            } else {
+                2.0 * spec.filter_s
+            },
+            bus,
+        );
+        let t0 = fs.sim.time();
+        while fs.sim.controller().fault().is_none() && fs.sim.time() < t0 + 10.0 * ts {
+            fs.step().expect("step");
+        }
+        let st = fs.stage.as_ref().expect("stage");
+        let ctl = fs.sim.controller();
+        let dt = fs.sim.time() - t0;
+        println!(
+            "break {} from {}: {:?} in {:?} after {:.0} µs",
+            if bus { "BRK2" } else { "BRK" },
+            if from_short { "short" } else { "run" },
+            ctl.fault(),
+            ctl.mode(),
+            dt * 1e6
+        );
+        assert!(if bus { st.brk2 } else { st.brk });
+        assert_eq!(ctl.fault(), Some(want));
+        assert_eq!(ctl.mode(), Mode::Idle, "the mode agrees with the gates");
+        // Observed at the end of the glitch's period, read at the end of the next one.
+        assert!(dt <= 2.0 * ts + 1e-9, "{dt}");
+        // The bridge stays off until the firmware re-enables it.
+        fs.step().expect("step");
+        assert_eq!(fs.sim.controller().mode(), Mode::Idle);
+    }
 }
 
 fn suite(seeds: u64) {
@@ -792,57 +869,223 @@ fn chopper_holds_open_bridge_to_omega_max() {
     }
 }
 
-/// The reference TMD sweep in the 72 V class (`board-72v-tmd-306.toml`, 1 m/s² at 0.5 Hz):
-/// closed-loop power at each load against the harmonic balance (`analytic::tmd_power`,
-/// which knows no bus). Prints power, the balance's velocity amplitude against the diode
-/// onset, and the ratio; where the balance's velocity stays below 0.9× the onset the loop
-/// must match it; above it the bus clips the emulated load.
+/// The speed amplitude at which the emulated load `r_load` clips in class `c`: the voltage the
+/// resistor law needs, `|v| = e·√(R_L² + (ω_e·L)²)/(R + R_L)` (back-emf `e = K_e·ω` less
+/// `R·i`, with `i = e/(R + R_L)`, and the reactance's drop), reaches the loop's circle
+/// `m_max·V_bus/√3`, m/s. (Fixed point in ω: ω_e·L is ≈ 1 Ω there against R_L ≥ 10 Ω.)
+fn clip_speed(c: &Class, sc: &Scenario, r_load: f64) -> f64 {
+    let m = &sc.machine;
+    let m_max = sc.config().expect("config").m_max as f64;
+    let v_max = m_max * c.v_bus / 3f64.sqrt();
+    let mut w = 0.0;
+    for _ in 0..20 {
+        let x = m.pole_pairs as f64 * w * m.l_h;
+        w = v_max * (m.r_ohm + r_load) / (m.ke_v_s_per_rad * (r_load * r_load + x * x).sqrt());
+    }
+    w * sc.screw.lead_m_per_rad
+}
+
+/// The reference TMD sweep in the 72 V class (`board-72v-tmd-306.toml` at 0.5 Hz) at the
+/// excitation that fits the bus: the largest `a₀` (to 0.01 m/s²) whose harmonic-balance
+/// velocity at the balance's optimal load stays at 0.8 of that load's clip speed
+/// ([`clip_speed`]; 20 % for the bus ripple, the PI's headroom and the friction's
+/// harmonics). At each load of the reference grid (10 Ω … 1 kΩ, then 1.5 and 3 kΩ):
+/// closed-loop power against the harmonic balance (`analytic::tmd_power`, which knows no
+/// bus), and the share of periods the current loop spends at its voltage limit. Where the
+/// balance's velocity is below 0.9 of the clip speed the loop must match the balance and
+/// never be voltage-limited; above the clip speed it must be (the closed form says where
+/// the emulated load clips). The simulated optimum must be the balance's grid optimum.
+/// Figure and CSV in `CARGO_TARGET_TMPDIR` (`board_72v_tmd_sweep.{svg,csv}`, copied to
+/// docs/figures/).
 #[test]
 fn board_72v_tmd_sweep() {
     use hal_sim::analytic::{tmd_power, DampingFormula};
-    use hal_sim::plant::Drive;
+    use hal_sim::plant::{Drive, Excitation};
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
     let base = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
     let onset = C72.onset(&base);
     let Drive::Structure { structure: st, .. } = base.drive.clone() else {
         panic!("a structure")
     };
-    let loads = [30.0, 100.0, 306.0, 1000.0, 3000.0];
-    let rows: Vec<(f64, f64, f64, f64)> = loads
+    let hb = |r: f64, a0: f64| {
+        tmd_power(
+            r,
+            &base.machine,
+            &base.screw,
+            &st,
+            a0,
+            0.5,
+            DampingFormula::PerPhasePeak,
+        )
+    };
+    // The balance's optimal load (golden section on ln R_L; it moves little with a₀ through
+    // the friction).
+    let r_opt = |a0: f64| {
+        let (mut lo, mut hi) = (10f64.ln(), 10_000f64.ln());
+        let g = 0.5 * (5f64.sqrt() - 1.0);
+        for _ in 0..60 {
+            let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+            if hb(x1.exp(), a0).p_load > hb(x2.exp(), a0).p_load {
+                hi = x2;
+            } else {
+                lo = x1;
+            }
+        }
+        (0.5 * (lo + hi)).exp()
+    };
+    let fits = |a0: f64| {
+        let r = r_opt(a0);
+        hb(r, a0).velocity_amp <= 0.8 * clip_speed(&C72, &base, r)
+    };
+    let mut a0 = 0.01;
+    while fits(a0 + 0.01) {
+        a0 += 0.01;
+    }
+    let a0 = (a0 * 100.0f64).round() / 100.0;
+    let ro = r_opt(a0);
+    // Where the emulated load clips: the balance's velocity meets the clip speed (bisection
+    // on ln R_L above the optimum, where the velocity rises with R_L).
+    let (mut lo, mut hi) = (ro.ln(), 1e5f64.ln());
+    for _ in 0..60 {
+        let m = 0.5 * (lo + hi);
+        if hb(m.exp(), a0).velocity_amp < clip_speed(&C72, &base, m.exp()) {
+            lo = m;
+        } else {
+            hi = m;
+        }
+    }
+    let r_clip = lo.exp();
+    println!(
+        "72v TMD: a0 = {a0} m/s² (balance optimum {ro:.0} Ω, {:.3} m/s against its clip speed {:.3} m/s; onset {onset:.3} m/s); the emulated load clips from {r_clip:.0} Ω",
+        hb(ro, a0).velocity_amp,
+        clip_speed(&C72, &base, ro)
+    );
+    let mut loads = hal_sim::cli::sweep::DEFAULT_LOADS.to_vec();
+    loads.extend([1500.0, 3000.0]);
+    // (R_L, simulated power, balance power, balance velocity, clip speed, voltage-limited share)
+    let rows: Vec<(f64, f64, f64, f64, f64, f64)> = loads
         .par_iter()
         .map(|&r| {
             let mut sc = base.clone();
+            sc.record.channels.clear();
             sc.law.r_load_ohm = r;
-            let (p, _) = hal_sim::cli::sweep::average_power(&sc).expect("run");
-            let a = tmd_power(
+            if let Drive::Structure {
+                excitation: Excitation::Sine { a0_m_s2, .. },
+                ..
+            } = &mut sc.drive
+            {
+                *a0_m_s2 = a0;
+            }
+            let mut sim = sc.build().expect("build");
+            let n = (sc.duration_s / sim.period()).round() as u64;
+            let n_settle = (sc.settle_s / sim.period()).round() as u64;
+            let (mut e0, mut sat) = (0.0, 0u64);
+            for k in 1..=n {
+                sim.step();
+                if k == n_settle {
+                    e0 = sim.energy().to_inverter;
+                }
+                if k > n_settle {
+                    sat += sim.controller().telemetry().v_saturated as u64;
+                }
+            }
+            assert!(sim.controller().fault().is_none(), "{r} Ω: a fault");
+            let span = (n - n_settle) as f64 * sim.period();
+            let p = (sim.energy().to_inverter - e0) / span;
+            let a = hb(r, a0);
+            (
                 r,
-                &sc.machine,
-                &sc.screw,
-                &st,
-                1.0,
-                0.5,
-                DampingFormula::PerPhasePeak,
-            );
-            (r, p, a.p_load, a.velocity_amp)
+                p,
+                a.p_load,
+                a.velocity_amp,
+                clip_speed(&C72, &base, r),
+                sat as f64 / (n - n_settle) as f64,
+            )
         })
         .collect();
+    let mut worst: f64 = 0.0;
+    for &(r, p, pa, v, vc, sat) in &rows {
+        let dev = p / pa - 1.0;
+        println!(
+            "72v TMD {a0} m/s² R_L {r:6.0} Ω: sim {p:6.3} W, harmonic balance {pa:6.3} W ({:+.2} %), balance velocity {v:.3} m/s, clip speed {vc:.3} m/s, voltage-limited {:.1} %",
+            100.0 * dev,
+            100.0 * sat
+        );
+        if v < 0.9 * vc {
+            worst = worst.max(dev.abs());
+            assert_eq!(sat, 0.0, "{r} Ω: voltage-limited below the clip speed");
+        } else if v > vc {
+            assert!(
+                sat > 0.05,
+                "{r} Ω: clips by the closed form, not in the loop ({sat})"
+            );
+        }
+    }
     let best = rows
         .iter()
         .fold(rows[0], |b, x| if x.1 > b.1 { *x } else { b });
-    for &(r, p, pa, v) in &rows {
-        println!(
-            "72v TMD R_L {r:6.0} Ω: sim {p:7.2} W, harmonic balance {pa:7.2} W ({:+.2} %), HB velocity {v:.3} m/s (onset {onset:.3})",
-            100.0 * (p / pa - 1.0)
-        );
-        // Measured +0.33 % at 30 Ω (the only load of the sweep that fits): bounded at 1 %.
-        // Above the onset the loop is voltage-limited and no longer emulates the resistor
-        // (measured −31 % at 306 Ω, +99 % at 3 kΩ): printed, not judged.
-        if v < 0.9 * onset {
-            assert!((p - pa).abs() < 0.01 * pa, "{r} Ω: {p} W against {pa} W");
-        }
-    }
+    let best_hb = rows
+        .iter()
+        .fold(rows[0], |b, x| if x.2 > b.2 { *x } else { b });
     println!(
-        "72v TMD: best simulated load {:.0} Ω, {:.2} W",
-        best.0, best.1
+        "72v TMD: best simulated load {:.0} Ω, {:.3} W; balance's grid optimum {:.0} Ω, {:.3} W; worst deviation below the clip {:.2} %",
+        best.0,
+        best.1,
+        best_hb.0,
+        best_hb.2,
+        100.0 * worst
     );
+    assert_eq!(best.0, best_hb.0, "optimum");
+    // Below the clip the deviation falls steadily with the speed, +3.42 % at 10 Ω
+    // (0.006 m/s) to +0.24 % at 400 Ω: most likely the balance's replacing the Coulomb
+    // friction by its equivalent damping 4F_c/(πẊ), coarsest where the friction is a large
+    // share of the force (not isolated). Bounded at 3× the worst (10 %), and at the optimum, where the loop matters,
+    // at 3× its +0.42 % (1.3 %).
+    assert!(worst < 0.10, "{worst}");
+    let dev_opt = (best_hb.1 / best_hb.2 - 1.0).abs();
+    assert!(dev_opt < 0.013, "at the optimum: {dev_opt}");
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let csv: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| vec![a0, r.0, r.1, r.2, r.3, r.4, r.5])
+        .collect();
+    hal_sim::cli::output::write_csv(
+        &out.join("board_72v_tmd_sweep.csv"),
+        &[
+            "a0_m_s2",
+            "r_load_ohm",
+            "sim_power_w",
+            "harmonic_balance_w",
+            "hb_velocity_m_s",
+            "clip_speed_m_s",
+            "voltage_limited_share",
+        ],
+        &csv,
+    )
+    .expect("csv");
+    let mut plot = Plot::new(
+        format!("Reference TMD on the 72 V bus, a0 = {a0} m/s² at 0.5 Hz"),
+        "load resistance R_L (Ω, log scale)",
+        "mean harvested power (W)",
+    );
+    plot.xlog = true;
+    let pmax = rows.iter().map(|r| r.1.max(r.2)).fold(0.0, f64::max);
+    plot.series = vec![
+        Series::markers(
+            "closed loop (firmware on the simulator)",
+            rows.iter().map(|r| (r.0, r.1)).collect(),
+        ),
+        Series::line(
+            "harmonic balance (no bus)",
+            rows.iter().map(|r| (r.0, r.2)).collect(),
+        ),
+        Series::line(
+            format!("emulated load clips from {r_clip:.0} Ω"),
+            vec![(r_clip, 0.0), (r_clip, 1.05 * pmax)],
+        ),
+    ];
+    let p = plot
+        .write_svg(&out.join("board_72v_tmd_sweep.svg"))
+        .expect("svg");
+    println!("written {} and board_72v_tmd_sweep.csv", p.display());
 }

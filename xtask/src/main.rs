@@ -105,6 +105,41 @@ const MEASURES: &[Measure] = &[
         markers: &["R_L ", "stopped:"],
         slow: false,
     },
+    Measure {
+        what: "flux braking: 72 V TMD (0.5 m/s², 100 Ω), sink and brake lost",
+        target: "bus held below derate_start_v with it; bus_over_voltage without",
+        program: "cargo",
+        args: &[
+            "test",
+            "-p",
+            "regen-tests",
+            "--test",
+            "flux",
+            "--",
+            "--nocapture",
+        ],
+        dir: ".",
+        markers: &["flux braking on:", "flux braking off:"],
+        slow: false,
+    },
+    Measure {
+        what: "reference TMD in the 72 V class: excitation that fits, optimum, clip",
+        target: "optimum = the harmonic balance's; no clip below the closed form's clip speed",
+        program: "cargo",
+        args: &[
+            "test",
+            "-p",
+            "regen-tests",
+            "--test",
+            "stage",
+            "board_72v_tmd_sweep",
+            "--",
+            "--nocapture",
+        ],
+        dir: ".",
+        markers: &["72v TMD:"],
+        slow: false,
+    },
 ];
 
 /// The lines of `out` that contain one of `markers` (all of `out`'s last line if none given).
