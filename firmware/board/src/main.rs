@@ -85,16 +85,16 @@ async fn main(spawner: embassy_executor::Spawner) {
     if recovered {
         defmt::warn!("store: a double word torn by a power cut during a save was zeroed");
     }
-    let (cfg, boot_msg): (Config, &'static str) = match flash.held {
-        Ok(c) => (c, "parameters loaded from flash"),
-        Err(StoreFault::Empty) => {
+    let (cfg, boot_msg): (Config, &'static str) = match flash.fault {
+        None => (flash.held, "parameters loaded from flash"),
+        Some(StoreFault::Empty) => {
             defmt::warn!("parameter store empty: defaults in use");
             (
                 Config::default(),
                 "store empty: DEFAULT parameters (fault store_empty)",
             )
         }
-        Err(StoreFault::Invalid) => {
+        Some(StoreFault::Invalid) => {
             defmt::warn!("stored parameters invalid: defaults in use");
             (
                 Config::default(),
