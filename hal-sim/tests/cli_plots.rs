@@ -180,8 +180,37 @@ fn every_plot_has_round_ticks_and_data() {
         "--plots",
         diag.to_str().unwrap(),
     ]);
+    // The regime map at the device's rated current (1.94 A): the strongest excitations clip,
+    // and the map marks those points.
+    let study = d.join("study");
+    regen(&[
+        "study",
+        "regimes",
+        "--out",
+        study.to_str().unwrap(),
+        "--points",
+        "6",
+        "--secs",
+        "20",
+        "--i-max",
+        "1.94",
+    ]);
+    let map = std::fs::read_to_string(study.join("regimes.svg")).unwrap();
+    let legend = texts(&map);
+    for want in [
+        "one-way nets most",
+        "two-way nets most",
+        "no law nets power",
+        "a law at its current limit in ≥ 1 % of the periods",
+    ] {
+        assert!(
+            legend.iter().any(|t| t == want),
+            "`{want}` not in {legend:?}"
+        );
+    }
     let n = check_dir(&run, &keep, "run-")
         + check_dir(&sweep, &keep, "")
-        + check_dir(&diag, &keep, "diagnose-");
-    assert!(n >= 9, "{n} plots checked");
+        + check_dir(&diag, &keep, "diagnose-")
+        + check_dir(&study, &keep, "study-");
+    assert!(n >= 10, "{n} plots checked");
 }
