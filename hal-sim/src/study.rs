@@ -1273,6 +1273,34 @@ mod tests {
         assert_eq!(rows.iter().filter(|r| r.best).count(), 3 * 2);
     }
 
+    /// The progress callback sees every simulated second of every run once: its ticks add up
+    /// to `regime_study_seconds`, and a run of 32 s ticks at least 32 times.
+    #[test]
+    fn regime_progress_counts_every_simulated_second() {
+        use std::sync::Mutex;
+        let seen = Mutex::new((0.0f64, 0usize));
+        let rows = regime_study(
+            LinModel::reference(),
+            LossModel::typical(),
+            &[1e-3, 1e-1],
+            2.0,
+            1,
+            50.0,
+            &|s| {
+                let mut g = seen.lock().unwrap();
+                g.0 += s;
+                g.1 += 1;
+            },
+        )
+        .unwrap();
+        assert_eq!(rows.len(), 2);
+        let (total, calls) = *seen.lock().unwrap();
+        let want = regime_study_seconds(2, 2.0);
+        // Each run's periods are counted exactly once; the sum of k·dt rounds at 1e-12.
+        assert!((total - want).abs() < 1e-9 * want, "{total} s of {want} s");
+        assert!(calls >= 6 * 32, "{calls} ticks");
+    }
+
     #[test]
     fn bad_catalogue_is_refused() {
         let dir = std::env::temp_dir().join(format!("laws-cat-{}", std::process::id()));
