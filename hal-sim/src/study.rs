@@ -954,7 +954,8 @@ pub struct StudyArgs {
 #[derive(clap::Subcommand, Debug)]
 pub enum StudyKind {
     /// Broadband excitation swept over intensity: net power of the best fixed resistor, the
-    /// one-way and the two-way law with a drive loss model; writes regimes.csv + regimes.svg.
+    /// one-way and the two-way law with a drive loss model, and where the two-way drive pays;
+    /// writes regimes.csv and the map regimes.svg.
     Regimes {
         /// Output directory.
         #[arg(long, default_value = "regen-out/study")]
@@ -962,9 +963,10 @@ pub enum StudyKind {
         /// Number of intensities (log-spaced).
         #[arg(long, default_value_t = 12)]
         points: usize,
-        /// Lowest and highest white-noise intensity q_w, m²/s³.
+        /// Lowest white-noise intensity q_w of the Kanai–Tajimi excitation, m²/s³.
         #[arg(long, default_value_t = 1e-4)]
         q_min: f64,
+        /// Highest white-noise intensity q_w, m²/s³.
         #[arg(long, default_value_t = 1.0)]
         q_max: f64,
         /// Simulated seconds per point (after 30 s settling).
@@ -982,6 +984,7 @@ pub enum StudyKind {
         /// Top of the map's extra-standby axis, W.
         #[arg(long, default_value_t = 10.0)]
         extra_max: f64,
+        /// Seed of the excitation noise (every law and intensity sees the same).
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Current limit, A (default: high enough that no law is clipped; the device's rated
@@ -989,7 +992,7 @@ pub enum StudyKind {
         #[arg(long, default_value_t = 50.0)]
         i_max: f32,
         /// No progress bar (it is also hidden when stderr is not a terminal).
-        #[arg(long)]
+        #[arg(short, long)]
         quiet: bool,
     },
     /// Device sizing: indices and predicted power for every machine × screw × lead.
@@ -1001,8 +1004,8 @@ pub enum StudyKind {
         #[arg(long, default_value = "regen-out/study/sizing.csv")]
         out: PathBuf,
     },
-    /// Design the two-way controller for the reference model and print it as `set opt.*`
-    /// lines and a TOML table.
+    /// Design the two-way controller for the reference model and print its predicted power
+    /// and the design as a TOML `[opt]` table (a scenario's `[law.opt]`).
     Design {
         /// Conduction resistance to weight, Ω.
         #[arg(long, default_value_t = 0.0)]
@@ -1216,10 +1219,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
                     r.indices[3], r.r_opt, r.power_w, if r.best { "◀ best lead" } else { "" }
                 );
             }
-            if let Some(d) = path.parent() {
-                std::fs::create_dir_all(d).map_err(|e| e.to_string())?;
-            }
-            std::fs::write(path, csv).map_err(|e| e.to_string())?;
+            crate::cli::output::write(path, &csv).map_err(|e| format!("--out {e}"))?;
             let _ = writeln!(out, "wrote {}", path.display());
         }
         StudyKind::Design { r_on } => {

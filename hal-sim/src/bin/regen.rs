@@ -8,7 +8,9 @@ use hal_sim::cli;
 #[command(
     name = "regen",
     version,
-    about = "Regenerative transducer simulator and tools"
+    about = "Regenerative transducer simulator and tools",
+    after_help = "Without a command: the reference TMD power sweep (as `regen sweep`), written to regen-out/. \
+                  `regen help COMMAND` for a command's options."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -17,11 +19,13 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Device sizing indices (eq. 6–12).
+    /// Device sizing indices of the reference device (Cassidy et al. 2011, eq. 6–12).
     Sizing(cli::sizing::SizingArgs),
-    /// One closed-loop scenario run → CSV, plots, energy ledger.
+    /// One closed-loop scenario run: mean harvested power, peak force, energy balance, faults;
+    /// CSV and plots.
     Run(cli::run::RunArgs),
-    /// Sweep a parameter over closed-loop runs in parallel (default: the TMD power sweep).
+    /// Sweep a parameter over closed-loop runs in parallel: the best point and any that
+    /// faulted; CSV and plot (default: the reference TMD power sweep).
     Sweep(cli::sweep::SweepArgs),
     /// Studies of the command laws (regimes of two-way flow, device sizing, LQG design).
     Study(hal_sim::study::StudyArgs),

@@ -51,11 +51,11 @@ pub struct ServeArgs {
     /// Scenario file (TOML). Default: the reference TMD at 306 Ω (as
     /// hal-sim/scenarios/tmd-306.toml). Its duration is ignored: see --duration.
     pub scenario: Option<PathBuf>,
-    /// Simulated seconds per wall-clock second: 1 = real time, 20 = twenty times faster,
-    /// `max` = as fast as the machine can.
+    /// Simulated seconds per wall-clock second, (0, 1e6]: 1 = real time, 20 = twenty times
+    /// faster; `max` = as fast as the machine can.
     #[arg(long, default_value = "1", allow_negative_numbers = true)]
     pub speed: String,
-    /// Stop after this many simulated seconds (default: run until Ctrl-C).
+    /// Stop after this many simulated seconds, (0, 1e9] (default: run until Ctrl-C).
     #[arg(long, allow_negative_numbers = true)]
     pub duration: Option<f64>,
     /// Also create a symbolic link to the pseudo-terminal at this path (a stable name for
