@@ -1,8 +1,8 @@
 //! Host studies of the command laws on a compact linear model, and the `study` subcommand.
 //!
 //! # The compact model ([`Sim`])
-//! The simulator proper (`hal_sim::sim`, PWM-level plant with the full controller) was not
-//! available when these studies were written, so they run on a compact averaged model: the
+//! The studies run hundreds of closed-loop runs, so they use a compact averaged model rather
+//! than the simulator proper (`hal_sim::sim`, PWM-level plant with the full controller): the
 //! TMD + screw + excitation ODE of [`crate::lqg::LinModel`] (plus optional Coulomb friction),
 //! with the **unchanged firmware law** (`regen_fw::laws::Law`, fixed point) called once per
 //! loop period and the current loop taken as ideal (`i_q` equals the command, limited to
