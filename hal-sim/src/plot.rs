@@ -234,6 +234,9 @@ impl Plot {
             .y_desc(&self.ylabel)
             .x_labels(if self.xlog { LOG_KEYS } else { 8 })
             .y_labels(if self.ylog { LOG_KEYS } else { 8 })
+            // A log axis already has a line at every integer multiple.
+            .x_max_light_lines(if self.xlog { 0 } else { 4 })
+            .y_max_light_lines(if self.ylog { 0 } else { 4 })
             .x_label_formatter(&|v| log_tick(self.xlog, snap(*v, xlo, xhi)))
             .y_label_formatter(&|v| log_tick(self.ylog, snap(*v, ylo, yhi)))
             .label_style(("sans-serif", 14))

@@ -214,3 +214,35 @@ fn every_plot_has_round_ticks_and_data() {
         + check_dir(&study, &keep, "study-");
     assert!(n >= 10, "{n} plots checked");
 }
+
+/// The figures shown in the README and docs/laws.md, from the real commands with their
+/// defaults (the main job; `study regimes` at the device's rated current), checked like the
+/// others: `REGEN_FIGURES=$PWD/docs/figures cargo test -p hal-sim --test cli_plots -- --ignored`
+/// (≈ 1 min).
+#[test]
+#[ignore]
+fn docs_figures_from_the_real_commands() {
+    let d = std::env::temp_dir().join(format!("regen-docs-plots-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let keep = std::env::var_os("REGEN_FIGURES").map(PathBuf::from);
+    if let Some(k) = &keep {
+        std::fs::create_dir_all(k).unwrap();
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_regen"))
+        .current_dir(&d)
+        .output()
+        .expect("spawn regen");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let study = d.join("study");
+    regen(&[
+        "study",
+        "regimes",
+        "--out",
+        study.to_str().unwrap(),
+        "--i-max",
+        "1.937",
+    ]);
+    let n = check_dir(&d.join("regen-out"), &keep, "") + check_dir(&study, &keep, "study-");
+    assert_eq!(n, 2, "{n} plots checked");
+}
