@@ -470,3 +470,22 @@ fn serve_answers_client_on_a_pty() {
         "{rest}"
     );
 }
+
+/// A usage error (unknown command or option, a number that does not parse, a missing
+/// argument) is one line naming what is wrong, exit status 2, no usage block.
+#[test]
+fn usage_errors_are_one_line() {
+    for (args, want) in [
+        (&["sweep", "--values", "abc"][..], "'abc' for '--values"),
+        (&["run"][..], "<SCENARIO>"),
+        (&["frob"][..], "'frob'"),
+        (&["run", "x.toml", "--bogus"][..], "'--bogus'"),
+    ] {
+        let o = regen(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "{args:?}: {err}");
+        assert!(lines[0].contains(want), "{args:?}: {}", lines[0]);
+    }
+}

@@ -40,8 +40,33 @@ enum Command {
     Client(cli::client::ClientArgs),
 }
 
+/// Parse the command line; a usage error is one line (clap's message and tip, without the
+/// usage block) and exit status 2; help and version print as clap formats them.
+fn parse() -> Cli {
+    use clap::error::ErrorKind;
+    match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
+            e.exit()
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        Err(e) => {
+            // clap's message up to its usage block, on one line.
+            let text = e.render().to_string();
+            let msg: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            eprintln!("{}; see `regen help`", msg.join(" "));
+            std::process::exit(2);
+        }
+    }
+}
+
 fn main() {
-    let c = Cli::parse();
+    let c = parse();
     let r = match c.command {
         Some(Command::Sizing(a)) => cli::sizing::run(&a),
         Some(Command::Run(a)) => cli::run::run(&a),
