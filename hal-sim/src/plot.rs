@@ -8,6 +8,8 @@
 //! quantiles, widened by a quarter of their span) and the outliers are drawn on the frame as
 //! red triangles, counted in the legend. A time window (`--window`) zooms on an event.
 //! Faulted points (a sweep's runs that latched a fault) are drawn as red crosses.
+//! A map (the regime study's) is drawn as [`Cells`]: filled rectangles, one colour and one
+//! legend entry per class, under the series.
 //!
 //! The SVG text is left to the viewer's sans-serif font, so no font ships with the tools; the
 //! PNGs under `docs/figures/` are rendered from these SVGs with `resvg` and the DejaVu Sans
@@ -61,6 +63,15 @@ impl Series {
     }
 }
 
+/// One class of a map: filled rectangles `[x0, y0, x1, y1]` in data coordinates, drawn in
+/// `colour` (RGB) with a legend entry `name`.
+#[derive(Clone, Debug)]
+pub struct Cells {
+    pub name: String,
+    pub colour: (u8, u8, u8),
+    pub rects: Vec<[f64; 4]>,
+}
+
 /// A plot: title, axis labels (with units), axes, series, and an optional x window.
 #[derive(Clone, Debug)]
 pub struct Plot {
@@ -74,6 +85,14 @@ pub struct Plot {
     pub window: Option<(f64, f64)>,
     /// Width and height, px.
     pub size: (u32, u32),
+    /// Map cells drawn under the series (they set the ranges with the series' points).
+    pub cells: Vec<Cells>,
+    /// Fixed y range (default: the robust range of the data).
+    pub y_range: Option<(f64, f64)>,
+    /// Series colours (RGB) in place of the default palette, by series index.
+    pub colours: Vec<(u8, u8, u8)>,
+    /// Legend text of the faulted points' mark.
+    pub fault_label: String,
 }
 
 const COLOURS: [RGBColor; 6] = [
@@ -101,6 +120,10 @@ impl Plot {
             series: Vec::new(),
             window: None,
             size: (900, 540),
+            cells: Vec::new(),
+            y_range: None,
+            colours: Vec::new(),
+            fault_label: "fault latched".into(),
         }
     }
 
@@ -138,15 +161,26 @@ impl Plot {
     fn draw(&self, root: &DrawingArea<SVGBackend, plotters::coord::Shift>) -> Result<(), String> {
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let pts: Vec<Vec<(f64, f64, bool)>> = self.series.iter().map(|s| self.visible(s)).collect();
-        let xs: Vec<f64> = pts.iter().flatten().map(|p| p.0).collect();
+        let mut xs: Vec<f64> = pts.iter().flatten().map(|p| p.0).collect();
         // Faulted points do not set the range (a run that tripped says nothing about the
         // scale of the others): they are drawn on the frame when outside it.
-        let ys: Vec<f64> = pts.iter().flatten().filter(|p| !p.2).map(|p| p.1).collect();
+        let mut ys: Vec<f64> = pts.iter().flatten().filter(|p| !p.2).map(|p| p.1).collect();
+        let corners = self.cells.iter().flat_map(|c| c.rects.iter());
+        for r in corners {
+            xs.extend([r[0], r[2]]);
+            ys.extend([r[1], r[3]]);
+        }
         let (x0, x1) = match self.window {
             Some((a, b)) => (a, b),
+            // A map fills its frame.
+            None if !self.cells.is_empty() => bounds(&xs),
             None => full_range(&xs, self.xlog),
         };
-        let (y0, y1) = robust_range(&ys, self.ylog);
+        let (y0, y1) = match self.y_range {
+            Some(r) => r,
+            None if !self.cells.is_empty() => bounds(&ys),
+            None => robust_range(&ys, self.ylog),
+        };
         match (self.xlog, self.ylog) {
             (false, false) => self.chart(root, x0..x1, y0..y1, &pts),
             (true, false) => self.chart(root, (x0..x1).log_scale(), y0..y1, &pts),
@@ -179,16 +213,40 @@ impl Plot {
         let (xd, yd) = (ch.x_range(), ch.y_range());
         let (xlo, xhi) = (xd.start, xd.end);
         let (ylo, yhi) = (yd.start, yd.end);
+        // Map cells first: the grid is drawn over them.
+        for c in &self.cells {
+            let col = RGBColor(c.colour.0, c.colour.1, c.colour.2);
+            ch.draw_series(c.rects.iter().map(|r| {
+                Rectangle::new(
+                    [
+                        (r[0].clamp(xlo, xhi), r[1].clamp(ylo, yhi)),
+                        (r[2].clamp(xlo, xhi), r[3].clamp(ylo, yhi)),
+                    ],
+                    col.filled(),
+                )
+            }))
+            .map_err(e)?
+            .label(&c.name)
+            .legend(move |(x, y)| Rectangle::new([(x + 4, y - 6), (x + 20, y + 6)], col.filled()));
+        }
         ch.configure_mesh()
             .x_desc(&self.xlabel)
             .y_desc(&self.ylabel)
-            .x_labels(8)
-            .y_labels(8)
-            .x_label_formatter(&|v| tick(snap(*v, xlo, xhi)))
-            .y_label_formatter(&|v| tick(snap(*v, ylo, yhi)))
+            .x_labels(if self.xlog { LOG_KEYS } else { 8 })
+            .y_labels(if self.ylog { LOG_KEYS } else { 8 })
+            // A log axis already has a line at every integer multiple.
+            .x_max_light_lines(if self.xlog { 0 } else { 4 })
+            .y_max_light_lines(if self.ylog { 0 } else { 4 })
+            .x_label_formatter(&|v| log_tick(self.xlog, snap(*v, xlo, xhi)))
+            .y_label_formatter(&|v| log_tick(self.ylog, snap(*v, ylo, yhi)))
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 15))
-            .light_line_style(RGBColor(0xee, 0xee, 0xee))
+            // A map's cells are not crossed by the fine grid.
+            .light_line_style(if self.cells.is_empty() {
+                RGBColor(0xee, 0xee, 0xee).to_rgba()
+            } else {
+                TRANSPARENT
+            })
             .bold_line_style(RGBColor(0xcc, 0xcc, 0xcc))
             .draw()
             .map_err(e)?;
@@ -197,7 +255,10 @@ impl Plot {
         let mut any_fault = false;
         let mut outliers = Vec::new();
         for (k, (s, p)) in self.series.iter().zip(pts).enumerate() {
-            let c = COLOURS[k % COLOURS.len()];
+            let c = self
+                .colours
+                .get(k)
+                .map_or(COLOURS[k % COLOURS.len()], |&(r, g, b)| RGBColor(r, g, b));
             let shape = k % 3;
             let line = matches!(s.style, Style::Line | Style::LineMarkers);
             let marks = matches!(s.style, Style::Markers | Style::LineMarkers);
@@ -286,7 +347,7 @@ impl Plot {
         if any_fault {
             ch.draw_series(std::iter::empty::<Cross<(f64, f64), i32>>())
                 .map_err(e)?
-                .label("fault latched")
+                .label(&self.fault_label)
                 .legend(|(x, y)| Cross::new((x + 12, y), 6, FAULT.stroke_width(3)));
         }
         if !outliers.is_empty() {
@@ -300,7 +361,7 @@ impl Plot {
             .label(format!("{n} point(s) beyond the range, drawn on the frame"))
             .legend(|(x, y)| TriangleMarker::new((x + 12, y), 6, FAULT.filled()));
         }
-        if !self.series.is_empty() {
+        if !self.series.is_empty() || !self.cells.is_empty() {
             ch.configure_series_labels()
                 .position(corner)
                 .background_style(WHITE.mix(0.85))
@@ -352,6 +413,21 @@ impl Plot {
             3 => SeriesLabelPosition::LowerLeft,
             _ => SeriesLabelPosition::UpperRight,
         }
+    }
+}
+
+/// The smallest and largest finite value.
+fn bounds(v: &[f64]) -> (f64, f64) {
+    let (lo, hi) = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    if lo < hi {
+        (lo, hi)
+    } else {
+        pad(lo, hi, false)
     }
 }
 
@@ -419,6 +495,22 @@ pub fn robust_range(v: &[f64], log: bool) -> (f64, f64) {
         };
         pad(lo, hi, log)
     }
+}
+
+/// Labels asked of a log axis: enough that plotters places its grid at 1, 2, … 9 × 10ⁿ over
+/// up to about three decades (over more, at the powers of ten only).
+const LOG_KEYS: usize = 30;
+
+/// A tick label; on a log axis only at 1, 2 and 5 × 10ⁿ (the grid lines between unlabelled).
+fn log_tick(log: bool, v: f64) -> String {
+    if log && v > 0.0 {
+        let m = v / 10f64.powf(v.log10().floor());
+        let m = (m * 1e6).round() / 1e6;
+        if ![1.0, 2.0, 5.0, 10.0].contains(&m) {
+            return String::new();
+        }
+    }
+    tick(v)
 }
 
 /// A tick computed as start + k·step that should be 0 but carries rounding noise (1e-17 on

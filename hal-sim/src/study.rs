@@ -1,8 +1,8 @@
 //! Host studies of the command laws on a compact linear model, and the `study` subcommand.
 //!
 //! # The compact model ([`Sim`])
-//! The simulator proper (`hal_sim::sim`, PWM-level plant with the full controller) was not
-//! available when these studies were written, so they run on a compact averaged model: the
+//! The studies run hundreds of closed-loop runs, so they use a compact averaged model rather
+//! than the simulator proper (`hal_sim::sim`, PWM-level plant with the full controller): the
 //! TMD + screw + excitation ODE of [`crate::lqg::LinModel`] (plus optional Coulomb friction),
 //! with the **unchanged firmware law** (`regen_fw::laws::Law`, fixed point) called once per
 //! loop period and the current loop taken as ideal (`i_q` equals the command, limited to
@@ -122,6 +122,8 @@ pub struct Sim {
     pub s: [f64; 4],
     pub i_q: f64,
     pub ledger: Ledger,
+    /// Loop periods whose command the current limit `i_max` clipped.
+    pub limited_periods: u64,
     ke_gain: Gain,
     phase: f64,
     rng: u64,
@@ -162,6 +164,7 @@ impl Sim {
             s: [0.0; 4],
             i_q: 0.0,
             ledger: Ledger::default(),
+            limited_periods: 0,
             ke_gain: Gain::from_f32(cfg.ke_v_s_per_rad),
             phase: 0.0,
             rng: seed,
@@ -204,7 +207,9 @@ impl Sim {
             },
             v_bus: q(self.v_bus as f32),
         });
-        let i = (cmd.q.to_num::<f64>()).clamp(-self.i_max, self.i_max);
+        let i_cmd = cmd.q.to_num::<f64>();
+        let i = i_cmd.clamp(-self.i_max, self.i_max);
+        self.limited_periods += (i != i_cmd) as u64;
         self.i_q = i;
         if self.t == 0.0 && self.ledger == Ledger::default() {
             self.ledger.stored_start = self.stored();
@@ -300,11 +305,22 @@ impl Sim {
 
     /// Run for `secs`; returns the mean terminal power over that span, W.
     pub fn run(&mut self, secs: f64) -> f64 {
+        self.run_with(secs, &mut |_| {})
+    }
+
+    /// As [`Sim::run`], calling `tick` with the simulated seconds done after every simulated
+    /// second and at the end (progress of a long study).
+    pub fn run_with(&mut self, secs: f64, tick: &mut dyn FnMut(f64)) -> f64 {
         let e0 = self.ledger.e_terminal;
         let n = (secs / self.dt).round() as u64;
-        for _ in 0..n {
+        let per_s = (1.0 / self.dt).round().max(1.0) as u64;
+        for k in 1..=n {
             self.step();
+            if k % per_s == 0 {
+                tick(per_s as f64 * self.dt);
+            }
         }
+        tick((n % per_s) as f64 * self.dt);
         (self.ledger.e_terminal - e0) / (n as f64 * self.dt)
     }
 }
@@ -398,16 +414,47 @@ pub fn broadband_run(
     settle_s: f64,
     secs: f64,
 ) -> (f64, f64, f64) {
-    let mut sim = Sim::new(model, cfg, Excitation::KanaiTajimi { seed }).unwrap();
+    let r = broadband_run_with(model, cfg, loss, seed, settle_s, secs, &mut |_| {}).unwrap();
+    (r.p_terminal, r.p_drive, r.p_back)
+}
+
+/// What [`broadband_run_with`] measured over the averaging time.
+#[derive(Clone, Copy, Debug)]
+pub struct Broadband {
+    /// Mean terminal power, W.
+    pub p_terminal: f64,
+    /// Mean drive loss, W.
+    pub p_drive: f64,
+    /// Mean back-flow (drive into the machine), W.
+    pub p_back: f64,
+    /// Fraction of the loop periods (settling included) whose command the current limit
+    /// clipped.
+    pub limited: f64,
+}
+
+/// As [`broadband_run`], calling `tick` with the simulated seconds done (settling included)
+/// after every simulated second, and reporting how often the current limit clipped.
+pub fn broadband_run_with(
+    model: LinModel,
+    cfg: &Config,
+    loss: LossModel,
+    seed: u64,
+    settle_s: f64,
+    secs: f64,
+    tick: &mut dyn FnMut(f64),
+) -> Result<Broadband, String> {
+    let mut sim = Sim::new(model, cfg, Excitation::KanaiTajimi { seed })?;
     sim.loss = loss;
-    sim.run(settle_s);
+    sim.run_with(settle_s, tick);
     let l0 = sim.ledger;
-    let p = sim.run(secs);
-    (
-        p,
-        (sim.ledger.e_drive - l0.e_drive) / secs,
-        (sim.ledger.e_terminal_back - l0.e_terminal_back) / secs,
-    )
+    let p = sim.run_with(secs, tick);
+    let periods = ((settle_s / sim.dt).round() + (secs / sim.dt).round()).max(1.0);
+    Ok(Broadband {
+        p_terminal: p,
+        p_drive: (sim.ledger.e_drive - l0.e_drive) / secs,
+        p_back: (sim.ledger.e_terminal_back - l0.e_terminal_back) / secs,
+        limited: sim.limited_periods as f64 / periods,
+    })
 }
 
 /// One row of the regime study.
@@ -425,11 +472,16 @@ pub struct RegimeRow {
     /// Extra standby power the two-way drive may spend and still win, W (negative: it loses
     /// even with no extra standby).
     pub break_even_extra_w: f64,
+    /// Per law, the fraction of the loop periods whose command the current limit clipped
+    /// (the linear design assumes none).
+    pub limited: [f64; 3],
 }
 
 /// Broadband regime study: for each intensity, net power of the best fixed resistor (chosen
 /// on the analytic model including `r_on`), the one-way and the two-way law (designed on the
-/// same model), each simulated with the same seeded noise.
+/// same model), each simulated with the same seeded noise (30 s of settling, then `secs`).
+/// `tick` is called with the simulated seconds done, from the parallel runs, after every
+/// simulated second of each ([`regime_study_seconds`] in all).
 pub fn regime_study(
     base: LinModel,
     loss: LossModel,
@@ -437,6 +489,7 @@ pub fn regime_study(
     secs: f64,
     seed: u64,
     i_max: f32,
+    tick: &(dyn Fn(f64) + Sync),
 ) -> Result<Vec<RegimeRow>, String> {
     let spec = LqgSpec {
         model: base,
@@ -449,31 +502,42 @@ pub fn regime_study(
         p_logic_w: 0.0,
         ..loss
     };
-    let rows: Vec<RegimeRow> = q_ws
-        .par_iter()
+    let lim = |c: Config| Config {
+        i_max_a: i_max,
+        i_trip_a: i_max * 1.2 + 1.0,
+        ..c
+    };
+    let cfgs = [
+        lim(study_config(LawKind::Resistor, r_best as f32)),
+        lim(Config {
+            opt: d.params,
+            ..study_config(LawKind::OneWay, 0.0)
+        }),
+        lim(Config {
+            opt: d.params,
+            ..study_config(LawKind::TwoWay, 0.0)
+        }),
+    ];
+    for c in &cfgs {
+        c.validate()
+            .map_err(|e| format!("--i-max = {i_max}: {e}"))?;
+    }
+    q_ws.par_iter()
         .map(|&q_w| {
             let model = LinModel { q_w, ..base };
-            let mut out = [(0.0, 0.0); 3];
-            let lim = |c: Config| Config {
-                i_max_a: i_max,
-                i_trip_a: i_max * 1.2 + 1.0,
-                ..c
-            };
-            let cfgs = [
-                lim(study_config(LawKind::Resistor, r_best as f32)),
-                lim(Config {
-                    opt: d.params,
-                    ..study_config(LawKind::OneWay, 0.0)
-                }),
-                lim(Config {
-                    opt: d.params,
-                    ..study_config(LawKind::TwoWay, 0.0)
-                }),
-            ];
+            let mut out = [(0.0, 0.0, 0.0); 3];
             for (o, cfg) in out.iter_mut().zip(cfgs.iter()) {
-                let (p, l, _) = broadband_run(model, cfg, no_logic, seed, 30.0, secs);
-                // conduction through R_on is part of the loss model
-                *o = (p, l);
+                // Conduction through R_on is part of the loss model.
+                let r = broadband_run_with(
+                    model,
+                    cfg,
+                    no_logic,
+                    seed,
+                    REGIME_SETTLE_S,
+                    secs,
+                    &mut |s| tick(s),
+                )?;
+                *o = (r.p_terminal, r.p_drive, r.limited);
             }
             let gross = [out[0].0, out[1].0, out[2].0];
             let lossv = [out[0].1, out[1].1, out[2].1];
@@ -483,8 +547,8 @@ pub fn regime_study(
                 gross[2] - lossv[2] - loss.p_logic_w,
             ];
             let best_other = net[0].max(net[1]).max(0.0);
-            let a_rms = kt_accel_rms(&model);
-            RegimeRow {
+            let a_rms = kt_accel_rms(&model)?;
+            Ok(RegimeRow {
                 q_w,
                 a_rms,
                 r_best,
@@ -492,39 +556,166 @@ pub fn regime_study(
                 loss: lossv,
                 net,
                 break_even_extra_w: net[2] - best_other,
-            }
+                limited: [out[0].2, out[1].2, out[2].2],
+            })
         })
-        .collect();
-    Ok(rows)
+        .collect()
+}
+
+/// Settling time of each regime run before its average, s.
+pub const REGIME_SETTLE_S: f64 = 30.0;
+
+/// Simulated seconds [`regime_study`] runs in all: three laws per intensity, each settling
+/// then averaging.
+pub fn regime_study_seconds(points: usize, secs: f64) -> f64 {
+    3.0 * points as f64 * (REGIME_SETTLE_S + secs)
 }
 
 /// RMS base acceleration of the Kanai–Tajimi process, m/s² (analytic, Lyapunov).
-pub fn kt_accel_rms(m: &LinModel) -> f64 {
+pub fn kt_accel_rms(m: &LinModel) -> Result<f64, String> {
     use nalgebra::DMatrix;
     let (wg, zg) = (m.omega_g, m.zeta_g);
     let f = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -wg * wg, -2.0 * zg * wg]);
     let g = DMatrix::from_column_slice(2, 1, &[0.0, -1.0]);
-    let x = lqg::lyap(&f, &(&g * g.transpose() * m.q_w)).unwrap();
+    let x = lqg::lyap(&f, &(&g * g.transpose() * m.q_w))
+        .ok_or("Kanai–Tajimi filter: the Lyapunov equation has no solution")?;
     let c = DMatrix::from_row_slice(1, 2, &[wg * wg, 2.0 * zg * wg]);
-    (&c * &x * c.transpose())[(0, 0)].sqrt()
+    Ok((&c * &x * c.transpose())[(0, 0)].sqrt())
 }
 
-/// Write the regime CSV and an SVG map (x: RMS base acceleration, y: extra standby power of
-/// the two-way drive; colour: which law nets most; white: nothing nets power).
+/// Fraction of clipped loop periods above which a regime point is marked current-limited.
+pub const LIMITED_MARK: f64 = 0.01;
+
+/// The laws of the regime study, in [`RegimeRow`]'s order, as the CSV and the map name them.
+const REGIME_LAWS: [&str; 3] = ["resistor", "one_way", "two_way"];
+
+/// The laws that hit the current limit in at least [`LIMITED_MARK`] of the periods, joined by
+/// `+` (`none` when no law did).
+pub fn limited_laws(r: &RegimeRow) -> String {
+    let v: Vec<&str> = REGIME_LAWS
+        .iter()
+        .zip(r.limited)
+        .filter(|(_, f)| *f >= LIMITED_MARK)
+        .map(|(n, _)| *n)
+        .collect();
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join("+")
+    }
+}
+
+/// The regime map (x: RMS base acceleration, log; y: extra standby power of the two-way
+/// drive; cells coloured by the law that nets most, grey where none nets power; the two-way
+/// drive's break-even line, its current-limited points marked).
+pub fn regime_plot(rows: &[RegimeRow], extra_max: f64) -> crate::plot::Plot {
+    use crate::plot::{Cells, Plot, Series, Style};
+    let mut p = Plot::new(
+        "Regime map: which law nets most power on broadband excitation (compact model)",
+        "RMS base acceleration, m/s² (log)",
+        "extra standby power of the two-way drive, W",
+    );
+    p.xlog = true;
+    p.y_range = Some((0.0, extra_max));
+    let classes = [
+        ("fixed resistor nets most", (0x4e, 0x79, 0xa7)),
+        ("one-way nets most", (0x59, 0xa1, 0x4f)),
+        ("two-way nets most", (0xed, 0xc9, 0x48)),
+        ("no law nets power", (0xdd, 0xdd, 0xdd)),
+    ];
+    let mut cells: Vec<Cells> = classes
+        .iter()
+        .map(|(n, c)| Cells {
+            name: n.to_string(),
+            colour: *c,
+            rects: Vec::new(),
+        })
+        .collect();
+    let mut sorted: Vec<&RegimeRow> = rows.iter().filter(|r| r.a_rms > 0.0).collect();
+    sorted.sort_by(|a, b| a.a_rms.total_cmp(&b.a_rms));
+    let n = sorted.len();
+    // Column edges: geometric midpoints, the outer ones half a step beyond.
+    let edge = |k: usize| -> f64 {
+        let a = |j: usize| sorted[j].a_rms;
+        match (k, n) {
+            (_, 1) => a(0) * if k == 0 { 0.9 } else { 1.1 },
+            (0, _) => a(0) * (a(0) / a(1)).sqrt(),
+            (k, _) if k == n => a(n - 1) * (a(n - 1) / a(n - 2)).sqrt(),
+            (k, _) => (a(k - 1) * a(k)).sqrt(),
+        }
+    };
+    const NY: usize = 80;
+    for (ix, r) in sorted.iter().enumerate() {
+        let (x0, x1) = (edge(ix), edge(ix + 1));
+        let mut run: Option<(usize, usize)> = None; // (class, first cell)
+        for iy in 0..=NY {
+            let class = (iy < NY).then(|| {
+                let extra = extra_max * (iy as f64 + 0.5) / NY as f64;
+                let v = [r.net[0], r.net[1], r.net[2] - extra];
+                let (best, k) = (0..3).fold((f64::NEG_INFINITY, 3), |b, k| {
+                    if v[k] > b.0 {
+                        (v[k], k)
+                    } else {
+                        b
+                    }
+                });
+                if best > 0.0 {
+                    k
+                } else {
+                    3
+                }
+            });
+            // Contiguous cells of one class become one rectangle.
+            if let Some((c, first)) = run {
+                if class != Some(c) {
+                    let y = |j: usize| extra_max * j as f64 / NY as f64;
+                    cells[c].rects.push([x0, y(first), x1, y(iy)]);
+                    run = None;
+                }
+            }
+            if let (None, Some(c)) = (run, class) {
+                run = Some((c, iy));
+            }
+        }
+    }
+    p.cells = cells.into_iter().filter(|c| !c.rects.is_empty()).collect();
+    p.series.push(Series {
+        style: Style::LineMarkers,
+        faulted: sorted
+            .iter()
+            .map(|r| r.limited.iter().any(|&f| f >= LIMITED_MARK))
+            .collect(),
+        ..Series::line(
+            "two-way break-even: extra standby it may spend and still net most",
+            sorted
+                .iter()
+                .map(|r| (r.a_rms, r.break_even_extra_w))
+                .collect(),
+        )
+    });
+    p.colours = vec![(0, 0, 0)];
+    p.fault_label = format!(
+        "a law at its current limit in ≥ {} % of the periods",
+        LIMITED_MARK * 100.0
+    );
+    p
+}
+
+/// Write `regimes.csv` and the map `regimes.svg` into `dir`; returns the two paths. Errors
+/// name the path.
 pub fn write_regime(
     rows: &[RegimeRow],
     extra_max: f64,
     dir: &std::path::Path,
-) -> std::io::Result<()> {
+) -> Result<[PathBuf; 2], String> {
     use std::fmt::Write as _;
-    std::fs::create_dir_all(dir)?;
     let mut csv = String::from(
-        "q_w,a_rms_m_s2,r_best_ohm,gross_resistor_w,gross_one_way_w,gross_two_way_w,loss_resistor_w,loss_one_way_w,loss_two_way_w,net_resistor_w,net_one_way_w,net_two_way_w,two_way_break_even_extra_w\n",
+        "q_w,a_rms_m_s2,r_best_ohm,gross_resistor_w,gross_one_way_w,gross_two_way_w,loss_resistor_w,loss_one_way_w,loss_two_way_w,net_resistor_w,net_one_way_w,net_two_way_w,two_way_break_even_extra_w,limited_resistor,limited_one_way,limited_two_way,current_limited\n",
     );
     for r in rows {
         let _ = writeln!(
             csv,
-            "{:.6e},{:.5},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5}",
+            "{:.6e},{:.5},{:.3},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{}",
             r.q_w,
             r.a_rms,
             r.r_best,
@@ -537,100 +728,17 @@ pub fn write_regime(
             r.net[0],
             r.net[1],
             r.net[2],
-            r.break_even_extra_w
+            r.break_even_extra_w,
+            r.limited[0],
+            r.limited[1],
+            r.limited[2],
+            limited_laws(r)
         );
     }
-    std::fs::write(dir.join("regimes.csv"), csv)?;
-    // Map: cells of (row, extra).
-    let ny = 40;
-    let (w, h, x0, y0) = (640.0, 400.0, 70.0, 20.0);
-    let cw = w / rows.len().max(1) as f64;
-    let ch = h / ny as f64;
-    let mut svg = format!(
-        "<svg xmlns='http://www.w3.org/2000/svg' width='{}' height='{}' font-family='sans-serif' font-size='11'>\n",
-        w + x0 + 150.0,
-        h + y0 + 50.0
-    );
-    for (ix, r) in rows.iter().enumerate() {
-        for iy in 0..ny {
-            let extra = extra_max * (iy as f64 + 0.5) / ny as f64;
-            let n2 = r.net[2] - extra;
-            let (best, col) = [
-                (r.net[0], "#4e79a7"),
-                (r.net[1], "#59a14f"),
-                (n2, "#e15759"),
-            ]
-            .iter()
-            .fold(
-                (f64::MIN, "#ffffff"),
-                |b, &(v, c)| if v > b.0 { (v, c) } else { b },
-            );
-            let col = if best <= 0.0 { "#ffffff" } else { col };
-            let _ = writeln!(
-                svg,
-                "<rect x='{:.1}' y='{:.1}' width='{:.1}' height='{:.1}' fill='{}'/>",
-                x0 + ix as f64 * cw,
-                y0 + h - (iy as f64 + 1.0) * ch,
-                cw + 0.5,
-                ch + 0.5,
-                col
-            );
-        }
-        if ix % 2 == 0 {
-            let _ = writeln!(
-                svg,
-                "<text x='{:.1}' y='{:.1}' text-anchor='middle'>{:.2}</text>",
-                x0 + (ix as f64 + 0.5) * cw,
-                y0 + h + 14.0,
-                r.a_rms
-            );
-        }
-    }
-    for k in 0..=4 {
-        let v = extra_max * k as f64 / 4.0;
-        let _ = writeln!(
-            svg,
-            "<text x='{:.1}' y='{:.1}' text-anchor='end'>{:.1}</text>",
-            x0 - 4.0,
-            y0 + h - h * k as f64 / 4.0 + 4.0,
-            v
-        );
-    }
-    let _ = writeln!(
-        svg,
-        "<text x='{:.1}' y='{:.1}' text-anchor='middle'>RMS base acceleration, m/s²</text>",
-        x0 + w / 2.0,
-        y0 + h + 32.0
-    );
-    let _ = writeln!(
-        svg,
-        "<text x='12' y='{:.1}' transform='rotate(-90 12 {:.1})' text-anchor='middle'>extra standby power of the two-way drive, W</text>",
-        y0 + h / 2.0,
-        y0 + h / 2.0
-    );
-    for (k, (name, col)) in [
-        ("fixed resistor", "#4e79a7"),
-        ("one-way", "#59a14f"),
-        ("two-way", "#e15759"),
-        ("none nets > 0", "#ffffff"),
-    ]
-    .iter()
-    .enumerate()
-    {
-        let y = y0 + 20.0 * k as f64;
-        let _ = writeln!(
-            svg,
-            "<rect x='{:.1}' y='{:.1}' width='12' height='12' fill='{}' stroke='#000'/><text x='{:.1}' y='{:.1}'>{}</text>",
-            x0 + w + 10.0,
-            y,
-            col,
-            x0 + w + 28.0,
-            y + 10.0,
-            name
-        );
-    }
-    svg.push_str("</svg>\n");
-    std::fs::write(dir.join("regimes.svg"), svg)
+    let csv_path = dir.join("regimes.csv");
+    crate::cli::output::write(&csv_path, &csv)?;
+    let svg = regime_plot(rows, extra_max).write_svg(&dir.join("regimes.svg"))?;
+    Ok([csv_path, svg])
 }
 
 // ---------------------------------------------------------------------------------------
@@ -846,7 +954,8 @@ pub struct StudyArgs {
 #[derive(clap::Subcommand, Debug)]
 pub enum StudyKind {
     /// Broadband excitation swept over intensity: net power of the best fixed resistor, the
-    /// one-way and the two-way law with a drive loss model; writes regimes.csv + regimes.svg.
+    /// one-way and the two-way law with a drive loss model, and where the two-way drive pays;
+    /// writes regimes.csv and the map regimes.svg.
     Regimes {
         /// Output directory.
         #[arg(long, default_value = "regen-out/study")]
@@ -854,9 +963,10 @@ pub enum StudyKind {
         /// Number of intensities (log-spaced).
         #[arg(long, default_value_t = 12)]
         points: usize,
-        /// Lowest and highest white-noise intensity q_w, m²/s³.
+        /// Lowest white-noise intensity q_w of the Kanai–Tajimi excitation, m²/s³.
         #[arg(long, default_value_t = 1e-4)]
         q_min: f64,
+        /// Highest white-noise intensity q_w, m²/s³.
         #[arg(long, default_value_t = 1.0)]
         q_max: f64,
         /// Simulated seconds per point (after 30 s settling).
@@ -874,12 +984,16 @@ pub enum StudyKind {
         /// Top of the map's extra-standby axis, W.
         #[arg(long, default_value_t = 10.0)]
         extra_max: f64,
+        /// Seed of the excitation noise (every law and intensity sees the same).
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Current limit, A (default: high enough that no law is clipped; the device's rated
         /// 1.94 A clips the strongest excitations).
         #[arg(long, default_value_t = 50.0)]
         i_max: f32,
+        /// No progress bar (it is also hidden when stderr is not a terminal).
+        #[arg(short, long)]
+        quiet: bool,
     },
     /// Device sizing: indices and predicted power for every machine × screw × lead.
     Sizing {
@@ -890,13 +1004,63 @@ pub enum StudyKind {
         #[arg(long, default_value = "regen-out/study/sizing.csv")]
         out: PathBuf,
     },
-    /// Design the two-way controller for the reference model and print it as `set opt.*`
-    /// lines and a TOML table.
+    /// Design the two-way controller for the reference model and print its predicted power
+    /// and the design as a TOML `[opt]` table (a scenario's `[law.opt]`).
     Design {
         /// Conduction resistance to weight, Ω.
         #[arg(long, default_value_t = 0.0)]
         r_on: f64,
     },
+}
+
+/// The regime study's answer in words: from which intensity the two-way drive nets most and
+/// how much extra standby it may then spend; where no law nets power; which points hit the
+/// current limit.
+pub fn regime_answer(rows: &[RegimeRow]) -> String {
+    let mut sorted: Vec<&RegimeRow> = rows.iter().collect();
+    sorted.sort_by(|a, b| a.a_rms.total_cmp(&b.a_rms));
+    let wins: Vec<&&RegimeRow> = sorted
+        .iter()
+        .filter(|r| r.break_even_extra_w > 0.0)
+        .collect();
+    let mut s = match (wins.first(), wins.last()) {
+        (Some(a), Some(b)) => format!(
+            "answer: the two-way drive nets most in {} of {} intensities, from a_rms = {:.3} m/s² \
+             (it may spend up to {:.3} W more standby there) to {:.3} m/s² (up to {:.3} W)",
+            wins.len(),
+            sorted.len(),
+            a.a_rms,
+            a.break_even_extra_w,
+            b.a_rms,
+            b.break_even_extra_w
+        ),
+        _ => format!(
+            "answer: the two-way drive nets most at none of the {} intensities",
+            sorted.len()
+        ),
+    };
+    let dead: Vec<&&RegimeRow> = sorted
+        .iter()
+        .filter(|r| r.net.iter().all(|&p| p <= 0.0))
+        .collect();
+    if let Some(d) = dead.last() {
+        s += &format!(
+            "; no law nets power up to a_rms = {:.3} m/s² ({} point(s))",
+            d.a_rms,
+            dead.len()
+        );
+    }
+    let lim = sorted
+        .iter()
+        .filter(|r| r.limited.iter().any(|&f| f >= LIMITED_MARK))
+        .count();
+    if lim > 0 {
+        s += &format!(
+            "; {lim} point(s) hit the current limit in ≥ {} % of the periods (marked in the map)",
+            LIMITED_MARK * 100.0
+        );
+    }
+    s
 }
 
 /// Run a study; returns the text to print. (Comparisons are written `!(x > 0)` on purpose:
@@ -918,6 +1082,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
             extra_max,
             seed,
             i_max,
+            quiet,
         } => {
             if !(*i_max > 0.0 && *i_max <= 500.0) {
                 return Err(format!("--i-max = {i_max}: must be in (0, 500] A"));
@@ -957,20 +1122,41 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
             let qs: Vec<f64> = (0..*points)
                 .map(|k| q_min * (q_max / q_min).powf(k as f64 / (*points - 1) as f64))
                 .collect();
-            let rows = regime_study(LinModel::reference(), loss, &qs, *secs, *seed, *i_max)?;
-            write_regime(&rows, *extra_max, dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            let bar = crate::cli::progress::Progress::new(
+                "study regimes",
+                regime_study_seconds(*points, *secs),
+                *quiet,
+            );
+            let rows = regime_study(
+                LinModel::reference(),
+                loss,
+                &qs,
+                *secs,
+                *seed,
+                *i_max,
+                &|s| bar.advance(s),
+            );
+            bar.finish();
+            let rows = rows?;
+            let [csv, svg] = write_regime(&rows, *extra_max, dir)?;
             let _ = writeln!(
                 out,
-                "a_rms m/s²  net R / one-way / two-way W   two-way may spend extra W"
+                "a_rms m/s²   net power, W: resistor   one-way   two-way   two-way may spend extra W   current-limited"
             );
             for r in &rows {
                 let _ = writeln!(
                     out,
-                    "{:8.3}   {:9.3} {:9.3} {:9.3}   {:9.3}",
-                    r.a_rms, r.net[0], r.net[1], r.net[2], r.break_even_extra_w
+                    "{:10.4}   {:20.3} {:9.3} {:9.3}   {:25.3}   {}",
+                    r.a_rms,
+                    r.net[0],
+                    r.net[1],
+                    r.net[2],
+                    r.break_even_extra_w,
+                    limited_laws(r)
                 );
             }
-            let _ = writeln!(out, "wrote {}/regimes.csv and regimes.svg", dir.display());
+            let _ = writeln!(out, "{}", regime_answer(&rows));
+            let _ = writeln!(out, "wrote {} and {}", csv.display(), svg.display());
         }
         StudyKind::Sizing {
             catalogue,
@@ -1033,10 +1219,7 @@ pub fn run(args: &StudyArgs) -> Result<String, String> {
                     r.indices[3], r.r_opt, r.power_w, if r.best { "◀ best lead" } else { "" }
                 );
             }
-            if let Some(d) = path.parent() {
-                std::fs::create_dir_all(d).map_err(|e| e.to_string())?;
-            }
-            std::fs::write(path, csv).map_err(|e| e.to_string())?;
+            crate::cli::output::write(path, &csv).map_err(|e| format!("--out {e}"))?;
             let _ = writeln!(out, "wrote {}", path.display());
         }
         StudyKind::Design { r_on } => {
@@ -1088,6 +1271,69 @@ mod tests {
         assert_eq!(rows.len(), 3 * (5 + 3));
         // Exactly one best lead per machine–screw pair.
         assert_eq!(rows.iter().filter(|r| r.best).count(), 3 * 2);
+    }
+
+    /// The progress callback sees every simulated second of every run once: its ticks add up
+    /// to `regime_study_seconds`, and a run of 32 s ticks at least 32 times.
+    #[test]
+    fn regime_progress_counts_every_simulated_second() {
+        use std::sync::Mutex;
+        let seen = Mutex::new((0.0f64, 0usize));
+        let rows = regime_study(
+            LinModel::reference(),
+            LossModel::typical(),
+            &[1e-3, 1e-1],
+            2.0,
+            1,
+            50.0,
+            &|s| {
+                let mut g = seen.lock().unwrap();
+                g.0 += s;
+                g.1 += 1;
+            },
+        )
+        .unwrap();
+        assert_eq!(rows.len(), 2);
+        let (total, calls) = *seen.lock().unwrap();
+        let want = regime_study_seconds(2, 2.0);
+        // Each run's periods are counted exactly once; the sum of k·dt rounds at 1e-12.
+        assert!((total - want).abs() < 1e-9 * want, "{total} s of {want} s");
+        assert!(calls >= 6 * 32, "{calls} ticks");
+    }
+
+    /// The map's cells: with net powers resistor 1 W, one-way 2 W, two-way 9.5 W, the two-way
+    /// drive nets most while its extra standby is under 9.5 − 2 = 7.5 W, the one-way above; a
+    /// point where all three are negative is "no law nets power" at every height.
+    #[test]
+    fn regime_map_cells_follow_the_break_even() {
+        let row = |a_rms: f64, net: [f64; 3]| RegimeRow {
+            q_w: 0.0,
+            a_rms,
+            r_best: 0.0,
+            gross: net,
+            loss: [0.0; 3],
+            net,
+            break_even_extra_w: net[2] - net[0].max(net[1]).max(0.0),
+            limited: [0.0, 0.0, 0.02],
+        };
+        let rows = [row(0.1, [-1.0, -1.0, -0.5]), row(1.0, [1.0, 2.0, 9.5])];
+        let p = regime_plot(&rows, 10.0);
+        let class = |name: &str| p.cells.iter().find(|c| c.name == name).unwrap();
+        let two = class("two-way nets most");
+        let one = class("one-way nets most");
+        let none = class("no law nets power");
+        assert!(p.cells.iter().all(|c| c.name != "fixed resistor nets most"));
+        // A cell is 10 W / 80 = 0.125 W high and classed at its centre: the boundary lies
+        // within half a cell of 7.5 W (a 2 % error in the standby term moves it 0.15 W).
+        assert_eq!(two.rects.len(), 1);
+        assert!(two.rects[0][1] == 0.0 && (two.rects[0][3] - 7.5).abs() <= 0.0625);
+        assert!((one.rects[0][1] - 7.5).abs() <= 0.0625 && one.rects[0][3] == 10.0);
+        assert_eq!(none.rects.len(), 1);
+        assert!(none.rects[0][1] == 0.0 && none.rects[0][3] == 10.0);
+        // Columns meet at the geometric mean of their accelerations.
+        assert!((none.rects[0][2] - 0.1f64.sqrt()).abs() < 1e-12);
+        assert_eq!(p.series[0].faulted, [true, true]);
+        assert!(limited_laws(&rows[1]) == "two_way");
     }
 
     #[test]

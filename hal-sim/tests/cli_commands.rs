@@ -323,3 +323,169 @@ fn sizing_and_design_print_their_answer() {
     let o = regen(&["study", "design"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// `regen client` and `regen serve` refuse bad input with one line naming the key, the value
+/// and the range, before opening anything.
+#[test]
+fn client_and_serve_refuse_bad_input() {
+    let d = tmp("client-serve");
+    refused(
+        &regen(&["client", "/nonexistent/tty", "status"]),
+        &["port /nonexistent/tty", "cannot open"],
+    );
+    refused(
+        &regen(&["client", "/nonexistent/tty", "status", "--timeout", "0"]),
+        &["--timeout = 0", "(0, 3600] s"],
+    );
+    refused(
+        &regen(&["client", "/nonexistent/tty", "status", "--timeout", "nan"]),
+        &["--timeout = NaN", "(0, 3600] s"],
+    );
+    refused(
+        &regen(&["client", "/nonexistent/tty", "status", "--listen", "-1"]),
+        &["--listen = -1", "[0, 86400] s"],
+    );
+    refused(
+        &regen(&["client", "/nonexistent/tty", "status", "--baud", "0"]),
+        &["--baud = 0", "[50, 4000000] Bd"],
+    );
+    refused(
+        &regen(&[
+            "client",
+            "/nonexistent/tty",
+            "--script",
+            "/nonexistent/s.txt",
+        ]),
+        &["--script /nonexistent/s.txt"],
+    );
+    refused(
+        &regen(&["client", "/nonexistent/tty"]),
+        &["nothing to do", "--script"],
+    );
+    #[cfg(unix)]
+    {
+        refused(
+            &regen(&["serve", "--speed", "0"]),
+            &["--speed = 0", "(0, 1e6]", "`max`"],
+        );
+        refused(
+            &regen(&["serve", "--speed", "-2"]),
+            &["--speed = -2", "(0, 1e6]"],
+        );
+        refused(
+            &regen(&["serve", "--speed", "fast"]),
+            &["--speed = fast", "(0, 1e6]"],
+        );
+        refused(
+            &regen(&["serve", "--duration", "-1"]),
+            &["--duration = -1", "(0, 1e9] simulated s"],
+        );
+        refused(
+            &regen(&["serve", "/nonexistent/s.toml"]),
+            &["/nonexistent/s.toml"],
+        );
+        let bad = scenario(
+            &d,
+            "bad.toml",
+            &TMD.replace("freq_hz = 0.5", "freq_hz = nan"),
+        );
+        refused(
+            &regen(&["serve", &bad]),
+            &["drive.excitation.freq_hz = NaN", "(0, 1000] Hz"],
+        );
+        refused(
+            &regen(&["serve", "--duration", "1", "--link", "/nonexistent/dir/tty"]),
+            &["--link /nonexistent/dir/tty"],
+        );
+    }
+}
+
+/// `regen serve` on a pty with `regen client` talking to it: an answer, a refusal with the
+/// range and the current value (exit 1, the error printed once), and the server's summary
+/// after Ctrl-C.
+#[cfg(unix)]
+#[test]
+fn serve_answers_client_on_a_pty() {
+    use std::io::{BufRead, BufReader, Read};
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_regen"))
+        .args(["serve", "--speed", "10", "--duration", "600"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn regen serve");
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let mut first = String::new();
+    out.read_line(&mut first).unwrap();
+    let pty = first
+        .split("console on ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no pty path in {first:?}"))
+        .trim()
+        .to_string();
+    let client = |args: &[&str]| {
+        let mut a = vec!["client", pty.as_str(), "--timeout", "10"];
+        a.extend_from_slice(args);
+        regen(&a)
+    };
+    let o = client(&["get r_load_ohm", "status"]);
+    let s = String::from_utf8_lossy(&o.stdout).to_string();
+    let result = std::panic::catch_unwind(|| {
+        assert!(
+            o.status.success(),
+            "{s}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(s.contains("r_load_ohm = 306"), "{s}");
+        let o = client(&["set r_load_ohm -5"]);
+        let s = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(1), "{s}");
+        let errors: Vec<&str> = s.lines().filter(|l| l.starts_with("error:")).collect();
+        assert_eq!(errors.len(), 1, "{s}");
+        assert!(
+            errors[0].contains("r_load_ohm") && errors[0].contains("-5"),
+            "{}",
+            errors[0]
+        );
+        assert!(
+            o.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    });
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGINT,
+    )
+    .unwrap();
+    let mut rest = String::new();
+    out.read_to_string(&mut rest).unwrap();
+    let status = child.wait().unwrap();
+    if let Err(e) = result {
+        std::panic::resume_unwind(e);
+    }
+    assert!(status.success(), "{rest}");
+    assert!(
+        rest.contains("stopped:") && rest.contains("real time"),
+        "{rest}"
+    );
+}
+
+/// A usage error (unknown command or option, a number that does not parse, a missing
+/// argument) is one line naming what is wrong, exit status 2, no usage block.
+#[test]
+fn usage_errors_are_one_line() {
+    for (args, want) in [
+        (&["sweep", "--values", "abc"][..], "'abc' for '--values"),
+        (&["run"][..], "<SCENARIO>"),
+        (&["frob"][..], "'frob'"),
+        (&["run", "x.toml", "--bogus"][..], "'--bogus'"),
+    ] {
+        let o = regen(args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "{args:?}: {err}");
+        assert!(lines[0].contains(want), "{args:?}: {}", lines[0]);
+    }
+}

@@ -180,8 +180,69 @@ fn every_plot_has_round_ticks_and_data() {
         "--plots",
         diag.to_str().unwrap(),
     ]);
+    // The regime map at the device's rated current (1.94 A): the strongest excitations clip,
+    // and the map marks those points.
+    let study = d.join("study");
+    regen(&[
+        "study",
+        "regimes",
+        "--out",
+        study.to_str().unwrap(),
+        "--points",
+        "6",
+        "--secs",
+        "20",
+        "--i-max",
+        "1.94",
+    ]);
+    let map = std::fs::read_to_string(study.join("regimes.svg")).unwrap();
+    let legend = texts(&map);
+    for want in [
+        "one-way nets most",
+        "two-way nets most",
+        "no law nets power",
+        "a law at its current limit in ≥ 1 % of the periods",
+    ] {
+        assert!(
+            legend.iter().any(|t| t == want),
+            "`{want}` not in {legend:?}"
+        );
+    }
     let n = check_dir(&run, &keep, "run-")
         + check_dir(&sweep, &keep, "")
-        + check_dir(&diag, &keep, "diagnose-");
-    assert!(n >= 9, "{n} plots checked");
+        + check_dir(&diag, &keep, "diagnose-")
+        + check_dir(&study, &keep, "study-");
+    assert!(n >= 10, "{n} plots checked");
+}
+
+/// The figures shown in the README and docs/laws.md, from the real commands with their
+/// defaults (the main job; `study regimes` at the device's rated current), checked like the
+/// others: `REGEN_FIGURES=$PWD/docs/figures cargo test -p hal-sim --test cli_plots -- --ignored`
+/// (≈ 1 min).
+#[test]
+#[ignore]
+fn docs_figures_from_the_real_commands() {
+    let d = std::env::temp_dir().join(format!("regen-docs-plots-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let keep = std::env::var_os("REGEN_FIGURES").map(PathBuf::from);
+    if let Some(k) = &keep {
+        std::fs::create_dir_all(k).unwrap();
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_regen"))
+        .current_dir(&d)
+        .output()
+        .expect("spawn regen");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let study = d.join("study");
+    regen(&[
+        "study",
+        "regimes",
+        "--out",
+        study.to_str().unwrap(),
+        "--i-max",
+        "1.937",
+    ]);
+    let n = check_dir(&d.join("regen-out"), &keep, "") + check_dir(&study, &keep, "study-");
+    assert_eq!(n, 2, "{n} plots checked");
 }

@@ -8,7 +8,8 @@
 //! is always written. The commands run one after another (the machine is shared; the benches
 //! compare figures measured in the same run). Without `--quick` it takes ≈ 10–20 min on a
 //! loaded 2-core machine, most of it the release builds (fat LTO) and the board image;
-//! `--quick` skips the board image, QEMU and the benches (≈ 2 min).
+//! `--quick` skips the board image, QEMU and the benches (≈ 2 min) and keeps their rows as the
+//! previous run wrote them.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -203,12 +204,26 @@ fn root() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("."))
 }
 
+/// The row of the table `text` whose first cell is `what`, if any.
+fn previous_row(text: &str, what: &str) -> Option<String> {
+    let head = format!("| {what} |");
+    text.lines()
+        .find(|l| l.starts_with(&head))
+        .map(str::to_string)
+}
+
 fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
     let root = root();
     let t_all = Instant::now();
     let mut rows = Vec::new();
+    let previous = std::fs::read_to_string(out_path).unwrap_or_default();
     for m in MEASURES {
         if quick && m.slow {
+            // The row the previous run wrote, as it was; or a row saying it was skipped.
+            if let Some(r) = previous_row(&previous, m.what) {
+                rows.push(r);
+                continue;
+            }
             rows.push(format!(
                 "| {} | {} | skipped (`--quick`) | `{}{} {}` | |",
                 m.what,
@@ -284,10 +299,16 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
          Written by `cargo xtask figures{}` (do not edit: run it again) in {:.0} s on {host}, \
          {cores} cores. Each figure is the output line of the command next to it, quoted as \
          printed; speeds depend on the machine and its load (best of several runs where the \
-         bench says so).\n\n\
+         bench says so).{}\n\n\
          | what | target | measured | command | time |\n| --- | --- | --- | --- | --- |\n{}\n",
         if quick { " --quick" } else { "" },
         t_all.elapsed().as_secs_f64(),
+        if quick {
+            " The rows `--quick` does not measure (board image, M4 check, benches) are kept as \
+             the previous run wrote them."
+        } else {
+            ""
+        },
         rows.join("\n")
     );
     std::fs::write(out_path, text).map_err(|e| format!("{}: {e}", out_path.display()))?;
@@ -334,6 +355,17 @@ fn main() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quick_keeps_the_previous_rows() {
+        let t = "# Figures\n\n| what | target |\n| console fuzz | x | 1 |\n| board image flash and static RAM | y | 74372 |\n";
+        assert_eq!(
+            previous_row(t, "board image flash and static RAM").as_deref(),
+            Some("| board image flash and static RAM | y | 74372 |")
+        );
+        assert_eq!(previous_row(t, "board image"), None);
+        assert_eq!(previous_row("", "console fuzz"), None);
+    }
 
     #[test]
     fn quotes_only_marked_lines_and_escapes_pipes() {

@@ -8,7 +8,9 @@ use hal_sim::cli;
 #[command(
     name = "regen",
     version,
-    about = "Regenerative transducer simulator and tools"
+    about = "Regenerative transducer simulator and tools",
+    after_help = "Without a command: the reference TMD power sweep (as `regen sweep`), written to regen-out/. \
+                  `regen help COMMAND` for a command's options."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -17,11 +19,13 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Device sizing indices (eq. 6–12).
+    /// Device sizing indices of the reference device (Cassidy et al. 2011, eq. 6–12).
     Sizing(cli::sizing::SizingArgs),
-    /// One closed-loop scenario run → CSV, plots, energy ledger.
+    /// One closed-loop scenario run: mean harvested power, peak force, energy balance, faults;
+    /// CSV and plots.
     Run(cli::run::RunArgs),
-    /// Sweep a parameter over closed-loop runs in parallel (default: the TMD power sweep).
+    /// Sweep a parameter over closed-loop runs in parallel: the best point and any that
+    /// faulted; CSV and plot (default: the reference TMD power sweep).
     Sweep(cli::sweep::SweepArgs),
     /// Studies of the command laws (regimes of two-way flow, device sizing, LQG design).
     Study(hal_sim::study::StudyArgs),
@@ -36,8 +40,33 @@ enum Command {
     Client(cli::client::ClientArgs),
 }
 
+/// Parse the command line; a usage error is one line (clap's message and tip, without the
+/// usage block) and exit status 2; help and version print as clap formats them.
+fn parse() -> Cli {
+    use clap::error::ErrorKind;
+    match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
+            e.exit()
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => e.exit(),
+        Err(e) => {
+            // clap's message up to its usage block, on one line.
+            let text = e.render().to_string();
+            let msg: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            eprintln!("{}; see `regen help`", msg.join(" "));
+            std::process::exit(2);
+        }
+    }
+}
+
 fn main() {
-    let c = Cli::parse();
+    let c = parse();
     let r = match c.command {
         Some(Command::Sizing(a)) => cli::sizing::run(&a),
         Some(Command::Run(a)) => cli::run::run(&a),

@@ -24,18 +24,19 @@ pub struct ClientArgs {
     pub port: String,
     /// Commands, one per argument: `regen client /dev/pts/3 "set r_load_ohm 306" status`.
     pub commands: Vec<String>,
-    /// Baud rate (ignored by a pseudo-terminal).
+    /// Baud rate, 50 … 4,000,000 (ignored by a pseudo-terminal).
     #[arg(long, default_value_t = 115_200)]
     pub baud: u32,
     /// Commands from a file, one per line; blank lines and `#` comments are skipped. Run after
     /// the COMMAND arguments.
     #[arg(long)]
     pub script: Option<PathBuf>,
-    /// Seconds to wait for each reply's `ok`/`error:` line.
-    #[arg(long, default_value_t = 2.0)]
+    /// Seconds to wait for each reply's `ok`/`error:` line, (0, 3600].
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     pub timeout: f64,
-    /// After the last command, keep printing what arrives (telemetry) for this many seconds.
-    #[arg(long, default_value_t = 0.0)]
+    /// After the last command, keep printing what arrives (telemetry) for this many seconds,
+    /// [0, 86400].
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub listen: f64,
     /// Go on after an error reply (the exit status is still 1).
     #[arg(long)]
@@ -117,7 +118,7 @@ impl Client {
         let port = serialport::new(path, baud)
             .timeout(Duration::from_millis(20))
             .open()
-            .map_err(|e| format!("{path}: {e}"))?;
+            .map_err(|e| format!("port {path}: cannot open as a serial port: {e}"))?;
         let _ = port.clear(serialport::ClearBuffer::All);
         Ok(Client {
             port,
@@ -226,20 +227,34 @@ pub fn script_commands(text: &str) -> Vec<String> {
         .collect()
 }
 
+/// The checks of the command line's numbers (comparisons written to refuse NaN).
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn check_args(a: &ClientArgs) -> Result<(), String> {
+    if !(a.timeout > 0.0 && a.timeout <= 3600.0) {
+        return Err(format!("--timeout = {}: must be in (0, 3600] s", a.timeout));
+    }
+    if !(a.listen >= 0.0 && a.listen <= 86_400.0) {
+        return Err(format!("--listen = {}: must be in [0, 86400] s", a.listen));
+    }
+    if !(50..=4_000_000).contains(&a.baud) {
+        return Err(format!("--baud = {}: must be in [50, 4000000] Bd", a.baud));
+    }
+    Ok(())
+}
+
 pub fn run(a: &ClientArgs) -> Result<(), String> {
+    check_args(a)?;
     let mut cmds = a.commands.clone();
     if let Some(p) = &a.script {
-        let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+        let text =
+            std::fs::read_to_string(p).map_err(|e| format!("--script {}: {e}", p.display()))?;
         cmds.extend(script_commands(&text));
     }
-    if !(a.timeout.is_finite() && a.timeout > 0.0) {
-        return Err("--timeout: a positive number of seconds".into());
-    }
-    if !(a.listen.is_finite() && a.listen >= 0.0) {
-        return Err("--listen: a number of seconds ≥ 0".into());
-    }
     if cmds.is_empty() && a.listen == 0.0 {
-        return Err("nothing to do: give commands, --script or --listen".into());
+        return Err(
+            "nothing to do: give commands (`regen client PORT status`), --script FILE or --listen S"
+                .into(),
+        );
     }
     let mut c = Client::open(&a.port, a.baud, Duration::from_secs_f64(a.timeout))?;
     let mut refused = 0;

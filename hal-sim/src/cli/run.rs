@@ -20,7 +20,7 @@ pub struct RunArgs {
     /// Zoom the time plot on an event: `T0,T1` in seconds.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub window: Option<Vec<f64>>,
-    /// No progress bar.
+    /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long, short)]
     pub quiet: bool,
 }

@@ -51,12 +51,12 @@ pub struct ServeArgs {
     /// Scenario file (TOML). Default: the reference TMD at 306 Ω (as
     /// hal-sim/scenarios/tmd-306.toml). Its duration is ignored: see --duration.
     pub scenario: Option<PathBuf>,
-    /// Simulated seconds per wall-clock second: 1 = real time, 20 = twenty times faster,
-    /// `max` = as fast as the machine can.
-    #[arg(long, default_value = "1", value_parser = parse_speed)]
-    pub speed: f64,
-    /// Stop after this many simulated seconds (default: run until Ctrl-C).
-    #[arg(long)]
+    /// Simulated seconds per wall-clock second, (0, 1e6]: 1 = real time, 20 = twenty times
+    /// faster; `max` = as fast as the machine can.
+    #[arg(long, default_value = "1", allow_negative_numbers = true)]
+    pub speed: String,
+    /// Stop after this many simulated seconds, (0, 1e9] (default: run until Ctrl-C).
+    #[arg(long, allow_negative_numbers = true)]
     pub duration: Option<f64>,
     /// Also create a symbolic link to the pseudo-terminal at this path (a stable name for
     /// scripts), removed on exit.
@@ -64,13 +64,21 @@ pub struct ServeArgs {
     pub link: Option<PathBuf>,
 }
 
-fn parse_speed(s: &str) -> Result<f64, String> {
+/// Highest finite `--speed`.
+pub const SPEED_MAX: f64 = 1e6;
+/// Longest `--duration`, simulated s.
+pub const DURATION_MAX: f64 = 1e9;
+
+/// `--speed`: a number in (0, [`SPEED_MAX`]] or `max` (infinite: as fast as possible).
+pub fn parse_speed(s: &str) -> Result<f64, String> {
     if s == "max" {
         return Ok(f64::INFINITY);
     }
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!("'{s}': a positive number or `max`")),
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= SPEED_MAX => Ok(v),
+        _ => Err(format!(
+            "--speed = {s}: must be in (0, {SPEED_MAX:e}] simulated s per wall-clock s, or `max`"
+        )),
     }
 }
 
@@ -105,7 +113,7 @@ impl Server {
     /// as fast as possible).
     pub fn open(drive: SimDrive, speed: f64) -> Result<Server, String> {
         if speed.is_nan() || speed <= 0.0 {
-            return Err("speed must be positive".into());
+            return Err(format!("speed = {speed}: must be > 0"));
         }
         let (master, slave) =
             serialport::TTYPort::pair().map_err(|e| format!("pseudo-terminal: {e}"))?;
@@ -305,6 +313,14 @@ fn catch_signals() -> Result<(), String> {
 }
 
 pub fn run(a: &ServeArgs) -> Result<(), String> {
+    let speed = parse_speed(&a.speed)?;
+    if let Some(d) = a.duration {
+        if !(d > 0.0 && d <= DURATION_MAX) {
+            return Err(format!(
+                "--duration = {d}: must be in (0, {DURATION_MAX:e}] simulated s"
+            ));
+        }
+    }
     let sc = match &a.scenario {
         Some(p) => Scenario::from_file(p)?,
         None => {
@@ -313,21 +329,16 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
             s
         }
     };
-    if let Some(d) = a.duration {
-        if !(d.is_finite() && d > 0.0) {
-            return Err("--duration: a positive number of simulated seconds".into());
-        }
-    }
     let drive = SimDrive::from_scenario(&sc)?;
-    let mut srv = Server::open(drive, a.speed)?;
+    let mut srv = Server::open(drive, speed)?;
     catch_signals()?;
     if let Some(l) = &a.link {
         let _ = std::fs::remove_file(l);
         std::os::unix::fs::symlink(srv.path(), l)
             .map_err(|e| format!("--link {}: {e}", l.display()))?;
     }
-    let speed = if a.speed.is_finite() {
-        format!("{}× real time", a.speed)
+    let speed = if speed.is_finite() {
+        format!("{speed}× real time")
     } else {
         "as fast as possible".into()
     };

@@ -22,13 +22,14 @@ pub struct SweepArgs {
     /// Parameter to sweep: r_load_ohm, a0_m_s2, freq_hz, ke_v_s_per_rad, current_bw_hz.
     #[arg(long, default_value = "r_load_ohm")]
     pub param: String,
-    /// Values (comma separated); default: 13 loads from 10 Ω to 1 kΩ including 306 Ω.
+    /// Values, comma separated, in the parameter's unit (its name's suffix: ohm, m_s2 = m/s²,
+    /// hz, v_s_per_rad); default for r_load_ohm: 13 loads from 10 Ω to 1 kΩ including 306 Ω.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub values: Vec<f64>,
     /// Output directory.
     #[arg(long, default_value = "regen-out")]
     pub out: PathBuf,
-    /// No progress bar.
+    /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long, short)]
     pub quiet: bool,
 }
