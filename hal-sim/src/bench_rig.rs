@@ -248,11 +248,20 @@ fn motion(s: &RigSpec, rng: &mut RigRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
             let z = rng.uni(0.02, 0.06);
             let w = TAU * f0;
             let (mut y, mut yd) = (0.0, 0.0);
-            // white force into the mode, integrated semi-implicitly; a 1 s run-in is discarded
+            // white force into the mode, band-limited to the structure's excitation band (a
+            // critically damped 2nd-order low-pass at 5·f0: wind and traffic loads are
+            // band-limited; unfiltered, the mode's acceleration would carry the white force up
+            // to the substep rate, a band set by the integration step, not by the motion),
+            // integrated semi-implicitly; a 1 s run-in is discarded
+            let wb = TAU * 5.0 * f0;
+            let (mut u1, mut u1d) = (0.0, 0.0);
             let pre = (1.0 / h) as usize;
             let sd = (1.0 / h).sqrt();
             for i in 0..n + pre {
-                let u = rng.gauss() * sd;
+                let e = rng.gauss() * sd;
+                u1d += (wb * wb * (e - u1) - 2.0 * wb * u1d) * h;
+                u1 += u1d * h;
+                let u = u1;
                 yd += (u - 2.0 * z * w * yd - w * w * y) * h;
                 y += yd * h;
                 if i >= pre {

@@ -948,10 +948,11 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         EffectKind::CurrentLimit => ctx.clip_levels.iter().map(|&l| mk(l)).collect(),
         EffectKind::Backlash | EffectKind::PreslidingHysteresis => {
             let stroke = 2.0 * ctx.x_half;
-            let lo = (4.0 * ctx.x_quantum).max(stroke / 2000.0);
+            // from the position resolution (4 quanta) up: below it no transition is resolved
+            let lo = (4.0 * ctx.x_quantum).max(stroke * 1e-6);
             let hi = stroke / 10.0;
             if hi > 1.5 * lo {
-                logspace(lo, hi, 10).into_iter().map(mk).collect()
+                logspace(lo, hi, 16).into_iter().map(mk).collect()
             } else {
                 vec![]
             }
@@ -969,6 +970,28 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         }
         _ => vec![mk(0.0)],
     }
+}
+
+/// True when `e` is a periodic effect (cogging or position-periodic friction) whose wavelength
+/// lies within 3 % of a periodic effect in `chosen` (the same spatial cause: one name).
+pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
+    let periodic = |k: EffectKind| {
+        matches!(
+            k,
+            EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+        )
+    };
+    periodic(e.kind)
+        && chosen
+            .iter()
+            .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
+}
+
+/// True when a scanned parameter's optimum `p` lies strictly inside the scanned range
+/// [`lo`, `hi`] (relative margin 1e-9 for rounding): only then is it bracketed by worse fits
+/// on both sides, i.e. identified by the record.
+pub fn interior(p: f64, lo: f64, hi: f64) -> bool {
+    p > lo * (1.0 + 1e-9) && p < hi * (1.0 - 1e-9)
 }
 
 /// Local refinement grid around a coarse best value.
