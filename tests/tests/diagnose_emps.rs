@@ -160,6 +160,23 @@ fn emps_validation_pulses_where_the_model_misses_and_parallel_filtering() {
         100.0 * c.baseline_rel_error,
         100.0 * c.final_rel_error
     );
+    println!(
+        "parallel filtering: held-out {:.2} % -> {:.2} %",
+        100.0 * d.baseline_holdout_rel_error,
+        100.0 * d.final_holdout_rel_error
+    );
+    for v in &d.verdicts {
+        println!("  verdict: {v}");
+    }
+    for f in &d.findings {
+        println!(
+            "  finding {} {:?} held-out after {:.3} %, consistency {:.0} %",
+            f.effect,
+            f.parameters,
+            100.0 * f.holdout_rel_error_after,
+            100.0 * f.consistency
+        );
+    }
     for (name, e) in &c.after_each {
         println!("  validation after {name}: {:.2} %", 100.0 * e);
     }
