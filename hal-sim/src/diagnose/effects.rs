@@ -890,13 +890,21 @@ fn dahl_walk(x: &[f64], xc: f64, end: usize, mut emit: impl FnMut(usize, f64)) {
     let mut z = 0.0f64;
     let mut prev = x.first().copied().unwrap_or(0.0);
     let ixc = 1.0 / xc.max(1e-300);
+    // a quantised position repeats its step sizes: the last step's decay factor is reused
+    // when the step repeats (the same value, so the result is identical)
+    let (mut last_adx, mut last_e) = (f64::NAN, 0.0);
     for (i, &xi) in x[..end].iter().enumerate() {
         let dx = xi - prev;
         prev = xi;
         if dx != 0.0 {
             let s = dx.signum();
             if z != s {
-                z = s + (z - s) * (-dx.abs() * ixc).exp();
+                let adx = dx.abs();
+                if adx != last_adx {
+                    last_adx = adx;
+                    last_e = (-adx * ixc).exp();
+                }
+                z = s + (z - s) * last_e;
             }
         }
         emit(i, z);
