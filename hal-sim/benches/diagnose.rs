@@ -1,4 +1,4 @@
-//! Time to diagnose a 1,000,000-sample record (target: under 2 s on one core). Prints the
+//! Time to diagnose a 1,000,000-sample record (target: under 1 s on one core). Prints the
 //! figure; run with `cargo bench -p hal-sim --bench diagnose`.
 use hal_sim::diagnose::synth::{self, SynthSpec};
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
@@ -36,7 +36,7 @@ fn main() {
         t_diag.as_secs_f64()
     );
     println!(
-        "total: {:.3} s wall (target < 2 s, one core)",
+        "total: {:.3} s wall (target < 1 s, one core)",
         (t_read + t_diag).as_secs_f64()
     );
     if let (Some(a), Some(b)) = (c0, c1) {

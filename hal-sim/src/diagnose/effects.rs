@@ -744,10 +744,15 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
         EffectKind::PreslidingHysteresis => {
             // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
             // force becomes Fc·z: column z − sgn v (coefficient Fc)
-            let z = dahl(&ctx.rec.x, e.param);
             let y = match s.rows {
-                None => map(&|i| z[i] - sg[i]),
-                Some(r) => map(&|j| z[r[j]] - sg[j]),
+                None => {
+                    let z = dahl(&ctx.rec.x, e.param);
+                    map(&|i| z[i] - sg[i])
+                }
+                Some(r) => {
+                    let z = dahl_at(&ctx.rec.x, e.param, r);
+                    map(&|j| z[j] - sg[j])
+                }
             };
             vec![col("dahl_minus_sgn", y)]
         }
@@ -857,20 +862,53 @@ pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
 /// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
 /// z → sgn(dx) + (z − sgn(dx))·exp(−|dx|/xc) over each step (exact for the model).
 pub fn dahl(x: &[f64], xc: f64) -> Vec<f64> {
-    let mut z = 0.0f64;
     let mut out = Vec::with_capacity(x.len());
+    dahl_walk(x, xc, x.len(), |_, z| out.push(z));
+    out
+}
+
+/// The Dahl state of `dahl` at the given ascending sample indices only (the path is walked up
+/// to the last of them; no full-length array).
+pub fn dahl_at(x: &[f64], xc: f64, rows: &[usize]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(rows.len());
+    let mut k = 0;
+    let end = rows.last().map_or(0, |r| r + 1).min(x.len());
+    dahl_walk(x, xc, end, |i, z| {
+        while k < rows.len() && rows[k] == i {
+            out.push(z);
+            k += 1;
+        }
+    });
+    out
+}
+
+/// Walk the Dahl state over the first `end` samples of `x`, calling `emit(i, z)` per sample.
+/// Once the state has converged to the direction of motion it equals ±1 exactly (the remaining
+/// deviation rounds away below half an ulp of 1) and stays there while the direction holds, so
+/// the exponential is evaluated only in the transitions after reversals.
+fn dahl_walk(x: &[f64], xc: f64, end: usize, mut emit: impl FnMut(usize, f64)) {
+    let mut z = 0.0f64;
     let mut prev = x.first().copied().unwrap_or(0.0);
     let ixc = 1.0 / xc.max(1e-300);
-    for &xi in x {
+    // a quantised position repeats its step sizes: the last step's decay factor is reused
+    // when the step repeats (the same value, so the result is identical)
+    let (mut last_adx, mut last_e) = (f64::NAN, 0.0);
+    for (i, &xi) in x[..end].iter().enumerate() {
         let dx = xi - prev;
         prev = xi;
         if dx != 0.0 {
             let s = dx.signum();
-            z = s + (z - s) * (-dx.abs() * ixc).exp();
+            if z != s {
+                let adx = dx.abs();
+                if adx != last_adx {
+                    last_adx = adx;
+                    last_e = (-adx * ixc).exp();
+                }
+                z = s + (z - s) * last_e;
+            }
         }
-        out.push(z);
+        emit(i, z);
     }
-    out
 }
 
 /// The candidates to screen (one per kind; the grid supplies the parameter).
@@ -948,10 +986,11 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         EffectKind::CurrentLimit => ctx.clip_levels.iter().map(|&l| mk(l)).collect(),
         EffectKind::Backlash | EffectKind::PreslidingHysteresis => {
             let stroke = 2.0 * ctx.x_half;
-            let lo = (4.0 * ctx.x_quantum).max(stroke / 2000.0);
+            // from the position resolution (4 quanta) up: below it no transition is resolved
+            let lo = (4.0 * ctx.x_quantum).max(stroke * 1e-6);
             let hi = stroke / 10.0;
             if hi > 1.5 * lo {
-                logspace(lo, hi, 10).into_iter().map(mk).collect()
+                logspace(lo, hi, 16).into_iter().map(mk).collect()
             } else {
                 vec![]
             }
@@ -969,6 +1008,28 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         }
         _ => vec![mk(0.0)],
     }
+}
+
+/// True when `e` is a periodic effect (cogging or position-periodic friction) whose wavelength
+/// lies within 3 % of a periodic effect in `chosen` (the same spatial cause: one name).
+pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
+    let periodic = |k: EffectKind| {
+        matches!(
+            k,
+            EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+        )
+    };
+    periodic(e.kind)
+        && chosen
+            .iter()
+            .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
+}
+
+/// True when a scanned parameter's optimum `p` lies strictly inside the scanned range
+/// [`lo`, `hi`] (relative margin 1e-9 for rounding): only then is it bracketed by worse fits
+/// on both sides, i.e. identified by the record.
+pub fn interior(p: f64, lo: f64, hi: f64) -> bool {
+    p > lo * (1.0 + 1e-9) && p < hi * (1.0 - 1e-9)
 }
 
 /// Local refinement grid around a coarse best value.
@@ -1119,5 +1180,37 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
             e.param
         ),
         _ => String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Monotone motion from z = 0: the Dahl state is the closed form 1 − exp(−x/x_c); after a
+    /// reversal at x_r with state z_r, z = −1 + (z_r + 1)·exp(−(x_r − x)/x_c). `dahl_at` gives
+    /// the same values at the requested rows (the skipped exponentials change nothing).
+    #[test]
+    fn dahl_matches_closed_form() {
+        let xc = 2e-4;
+        let mut x: Vec<f64> = (0..3000).map(|i| 1e-6 * i as f64).collect();
+        let xr = *x.last().unwrap();
+        x.extend((1..3000).map(|i| xr - 1e-6 * i as f64));
+        let z = dahl(&x, xc);
+        let zr = 1.0 - (-xr / xc).exp();
+        for (i, &xi) in x.iter().enumerate() {
+            let want = if i < 3000 {
+                1.0 - (-xi / xc).exp()
+            } else {
+                -1.0 + (zr + 1.0) * (-(xr - xi) / xc).exp()
+            };
+            assert!((z[i] - want).abs() < 1e-12, "{i}: {} vs {want}", z[i]);
+        }
+        let rows: Vec<usize> = (0..x.len()).step_by(7).collect();
+        let za = dahl_at(&x, xc, &rows);
+        assert_eq!(za.len(), rows.len());
+        for (k, &r) in rows.iter().enumerate() {
+            assert_eq!(za[k], z[r]);
+        }
     }
 }

@@ -79,9 +79,12 @@ impl Normal {
             n: 0,
         }
     }
-    /// Least squares solution (columns scaled to unit diagonal, Cholesky, tiny ridge against
-    /// exact collinearity).
+    /// Least squares solution (see `solve_sym`: SVD, minimum norm when rank deficient).
     pub fn solve(&self) -> Vec<f64> {
+        solve_sym(&self.g, &self.b, self.m).th
+    }
+    /// Least squares solution with its rank and condition number.
+    pub fn solve_full(&self) -> LsSolution {
         solve_sym(&self.g, &self.b, self.m)
     }
     /// Normal equations of a subset of the columns (indices into this set, in order).
@@ -125,57 +128,91 @@ impl Normal {
     }
 }
 
-/// Solve G th = b for symmetric positive semi-definite G (m x m).
-pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> Vec<f64> {
+/// Singular values of the scaled Gram matrix below this fraction of the largest are treated
+/// as zero (a design-matrix direction with a singular value below 1e-5 of the largest: columns
+/// collinear to within the rounding of the accumulated sums, whose coefficient the data does
+/// not determine).
+pub const RCOND: f64 = 1e-10;
+
+/// A least-squares solution with its numerical quality.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LsSolution {
+    /// Coefficients (minimum-norm among the solutions when the columns are rank deficient).
+    pub th: Vec<f64>,
+    /// Numerical rank of the column set (singular values of the scaled Gram matrix above
+    /// `RCOND` times the largest).
+    pub rank: usize,
+    /// Condition number of the column set (design matrix, columns scaled to unit norm):
+    /// sqrt of the ratio of the extreme singular values of the scaled Gram matrix kept in the
+    /// rank (∞ when no column carries energy).
+    pub condition: f64,
+}
+
+/// Solve the normal equations G th = b (G symmetric positive semi-definite, m x m) by the
+/// singular value decomposition of nalgebra: columns scaled to unit diagonal (so the
+/// threshold is independent of the units), singular values below `RCOND` of the largest
+/// dropped (pseudo-inverse: the minimum-norm least-squares solution), rank and condition
+/// number reported. A column with no energy gets coefficient 0.
+pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> LsSolution {
     let d: Vec<f64> = (0..m)
         .map(|i| {
             let v = g[i * m + i];
-            if v > 0.0 {
+            if v > 0.0 && v.is_finite() {
                 1.0 / v.sqrt()
             } else {
                 0.0
             }
         })
         .collect();
-    let mut a = vec![0.0; m * m];
-    for i in 0..m {
-        for j in 0..m {
-            a[i * m + j] = g[i * m + j] * d[i] * d[j];
-        }
-        a[i * m + i] += 1e-10;
+    if m == 0 {
+        return LsSolution {
+            th: vec![],
+            rank: 0,
+            condition: 1.0,
+        };
     }
-    // Cholesky
-    let mut l = vec![0.0; m * m];
-    for i in 0..m {
-        for j in 0..=i {
-            let mut s = a[i * m + j];
-            for k in 0..j {
-                s -= l[i * m + k] * l[j * m + k];
-            }
-            if i == j {
-                l[i * m + i] = if s > 1e-14 { s.sqrt() } else { 1e30 };
-            } else {
-                l[i * m + j] = s / l[j * m + j];
-            }
-        }
+    let a = nalgebra::DMatrix::from_fn(m, m, |i, j| g[i * m + j] * d[i] * d[j]);
+    let rhs = nalgebra::DVector::from_fn(m, |i, _| b[i] * d[i]);
+    if !(a.iter().all(|v| v.is_finite()) && rhs.iter().all(|v| v.is_finite())) {
+        return LsSolution {
+            th: vec![0.0; m],
+            rank: 0,
+            condition: f64::INFINITY,
+        };
     }
-    let mut y = vec![0.0; m];
-    for i in 0..m {
-        let mut s = b[i] * d[i];
-        for k in 0..i {
-            s -= l[i * m + k] * y[k];
-        }
-        y[i] = s / l[i * m + i];
+    // a bounded number of iterations: None (no convergence) is stated as rank 0, never a panic
+    let Some(svd) = nalgebra::linalg::SVD::try_new(a, true, true, f64::EPSILON, 10_000) else {
+        return LsSolution {
+            th: vec![0.0; m],
+            rank: 0,
+            condition: f64::INFINITY,
+        };
+    };
+    let smax = svd.singular_values.max();
+    if smax <= 0.0 {
+        return LsSolution {
+            th: vec![0.0; m],
+            rank: 0,
+            condition: f64::INFINITY,
+        };
     }
-    let mut x = vec![0.0; m];
-    for i in (0..m).rev() {
-        let mut s = y[i];
-        for k in i + 1..m {
-            s -= l[k * m + i] * x[k];
-        }
-        x[i] = s / l[i * m + i];
+    let tol = RCOND * smax;
+    let kept: Vec<f64> = svd
+        .singular_values
+        .iter()
+        .copied()
+        .filter(|s| *s > tol)
+        .collect();
+    let smin = kept.iter().copied().fold(f64::MAX, f64::min);
+    let x = match svd.solve(&rhs, tol) {
+        Ok(x) => x,
+        Err(_) => nalgebra::DVector::zeros(m),
+    };
+    LsSolution {
+        th: (0..m).map(|i| x[i] * d[i]).collect(),
+        rank: kept.len(),
+        condition: (smax / smin).sqrt(),
     }
-    (0..m).map(|i| x[i] * d[i]).collect()
 }
 
 /// Normal equations of `cols` against `f` on the training (mask false) and held-out (mask
@@ -374,6 +411,11 @@ pub struct Diagnosis {
     pub position_spectrum: report::PositionSpectrum,
     /// Error of the final model on a second record (cross-test), when given.
     pub cross: Option<CrossCheck>,
+    /// Numerical rank of the final model's columns on the whole record (= `model.len()` when
+    /// every coefficient is determined by the data).
+    pub fit_rank: usize,
+    /// Condition number of the final model's design matrix (columns scaled to unit norm).
+    pub fit_condition: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -552,6 +594,11 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64) {
+                // one cause, one name: a wavelength already named (cogging or periodic
+                // friction, within 3 %) is not named again under the other periodic name
+                if effects::same_wavelength(eff, &chosen) {
+                    return (f64::INFINITY, 0.0);
+                }
                 let z = cache
                     .entry((eff.kind as usize, eff.param.to_bits()))
                     .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
@@ -594,6 +641,12 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                 }
             };
             let coarse = effects::grid(&ctx, cand);
+            // the scanned range: an optimum on its edge is not bracketed (the profile of the
+            // fit over the parameter still falls beyond the range the record resolves), so the
+            // parameter is not identified and the effect is not named
+            let (p_lo, p_hi) = coarse.iter().fold((f64::MAX, f64::MIN), |(a, b), e| {
+                (a.min(e.param), b.max(e.param))
+            });
             prefill(&coarse, &mut cache);
             let mut cb: Option<(f64, f64, Effect)> = None;
             for eff in coarse {
@@ -622,6 +675,14 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                         }
                     }
                 }
+            }
+            if cand.kind.scanned()
+                && coarse_len_gt1(p_lo, p_hi)
+                && cb
+                    .as_ref()
+                    .is_some_and(|c| !effects::interior(c.2.param, p_lo, p_hi))
+            {
+                cb = None;
             }
             if let Some(c) = cb {
                 if best.as_ref().is_none_or(|b| c.0 < b.0) {
@@ -760,7 +821,9 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     }
     // Final model refitted on the whole record.
     let tf = full.0.plus(&full.1);
-    let th_full = tf.solve();
+    let sol = tf.solve_full();
+    let (fit_rank, fit_condition) = (sol.rank, sol.condition);
+    let th_full = sol.th;
     let pred = effects::predict(&cols, &th_full);
     // samples at rest are in no fit (static friction is anywhere within its breakaway
     // level): they carry no residual, so they cannot show as a spectral peak either
@@ -792,6 +855,28 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     }
     let position_spectrum = report::position_spectrum(rec, &residual);
     for pk in position_spectrum.peaks.iter().filter(|p| p.unexplained) {
+        // a residual peak at a wavelength already named is that finding's remainder (a ripple
+        // not purely sinusoidal, or whose amplitude varies along the stroke), not a second
+        // cause: stated on the finding, not named again
+        let probe = Effect {
+            kind: EffectKind::Cogging,
+            param: pk.wavelength_m,
+        };
+        if let Some(k) = chosen.iter().position(|c| {
+            matches!(
+                c.kind,
+                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+            ) && effects::same_wavelength(&probe, std::slice::from_ref(c))
+        }) {
+            let name = chosen[k].kind.name();
+            if let Some(f) = findings.iter_mut().find(|f| f.effect == name) {
+                f.note.push_str(&format!(
+                    "; the residual still shows {:.3} N at {:.4e} m (a ripple not purely sinusoidal or varying along the stroke)",
+                    pk.amplitude, pk.wavelength_m
+                ));
+            }
+            continue;
+        }
         let matches = if pk.matches.is_empty() {
             String::new()
         } else {
@@ -823,6 +908,12 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
         ));
     }
     verdicts.extend(dropped_notes);
+    if fit_rank < cols.len() {
+        verdicts.push(format!(
+            "RANK-DEFICIENT FIT: the final model's {} columns have numerical rank {fit_rank} (condition number {fit_condition:.3e}): some coefficients are not determined by this record (the minimum-norm solution is reported); the motion does not separate those terms",
+            cols.len()
+        ));
+    }
     Diagnosis {
         n,
         verdicts,
@@ -843,6 +934,8 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
         spectrum_peaks,
         position_spectrum,
         cross: None,
+        fit_rank,
+        fit_condition,
     }
 }
 
@@ -939,6 +1032,90 @@ pub fn cross_check(d: &mut Diagnosis, other: &Record) {
     });
 }
 
+/// True when a scanned range has more than one value (an edge can be told from the interior).
+fn coarse_len_gt1(lo: f64, hi: f64) -> bool {
+    hi > lo
+}
+
 fn refs(c: &[(String, Vec<f64>)]) -> Vec<&[f64]> {
     c.iter().map(|(_, v)| v.as_slice()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gram matrix and right-hand side of columns `c` against `y`.
+    fn normal_eq(c: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let m = c.len();
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let g = (0..m * m).map(|k| dot(&c[k / m], &c[k % m])).collect();
+        let b = c.iter().map(|ci| dot(ci, y)).collect();
+        (g, b)
+    }
+
+    /// Straight line through noisy points: the closed-form slope Sxy/Sxx and intercept
+    /// ȳ − slope·x̄, with columns of very different scale (x in µm-sized units, offset 1).
+    #[test]
+    fn line_fit_matches_closed_form() {
+        let x: Vec<f64> = (0..50).map(|i| 1e-6 * i as f64).collect();
+        let y: Vec<f64> = x
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| 3.0 + 2.5e5 * x + if i % 2 == 0 { 0.1 } else { -0.07 })
+            .collect();
+        let n = x.len() as f64;
+        let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+        let sxy: f64 = x.iter().zip(&y).map(|(a, b)| (a - mx) * (b - my)).sum();
+        let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+        let slope = sxy / sxx;
+        let icpt = my - slope * mx;
+        let (g, b) = normal_eq(&[vec![1.0; x.len()], x.clone()], &y);
+        let s = solve_sym(&g, &b, 2);
+        assert_eq!(s.rank, 2);
+        // both within rounding of the closed form (relative 1e-9: the normal equations square
+        // the design's condition, here about 1.7e2, so about 3e4 ulp of headroom)
+        assert!((s.th[0] / icpt - 1.0).abs() < 1e-9, "{:?} vs {icpt}", s.th);
+        assert!(
+            (s.th[1] / slope - 1.0).abs() < 1e-9,
+            "{:?} vs {slope}",
+            s.th
+        );
+    }
+
+    /// Two unit-norm columns at cosine c: the design's condition number is
+    /// sqrt((1 + c)/(1 − c)) (eigenvalues 1 ± c of the Gram matrix).
+    #[test]
+    fn condition_number_matches_closed_form() {
+        for c in [0.0, 0.5, 0.9, 0.999] {
+            let g = [1.0, c, c, 1.0];
+            let s = solve_sym(&g, &[1.0, 0.0], 2);
+            let want = ((1.0 + c) / (1.0 - c)).sqrt();
+            assert!(
+                (s.condition / want - 1.0).abs() < 1e-9,
+                "{c}: {s:?} vs {want}"
+            );
+            // and the solution is the inverse Gram's first column: (1, −c)/(1 − c²)
+            assert!((s.th[0] - 1.0 / (1.0 - c * c)).abs() < 1e-6 * s.th[0].abs());
+            assert!((s.th[1] + c / (1.0 - c * c)).abs() < 1e-6 * s.th[0].abs());
+        }
+    }
+
+    /// The same column twice: rank 1, the minimum-norm solution splits the coefficient
+    /// equally (no 1e30 pivot, no blow-up); a column of zeros gets 0; a NaN gives rank 0.
+    #[test]
+    fn rank_deficient_is_minimum_norm() {
+        let u: Vec<f64> = (0..20).map(|i| (i as f64 * 0.7).sin()).collect();
+        let y: Vec<f64> = u.iter().map(|v| 4.0 * v).collect();
+        let (g, b) = normal_eq(&[u.clone(), u.clone(), vec![0.0; 20]], &y);
+        let s = solve_sym(&g, &b, 3);
+        assert_eq!(s.rank, 1, "{s:?}");
+        assert!(
+            (s.th[0] - 2.0).abs() < 1e-9 && (s.th[1] - 2.0).abs() < 1e-9,
+            "{s:?}"
+        );
+        assert_eq!(s.th[2], 0.0);
+        let s = solve_sym(&[f64::NAN], &[1.0], 1);
+        assert_eq!((s.th[0], s.rank), (0.0, 0));
+    }
 }
