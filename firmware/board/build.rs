@@ -13,4 +13,8 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=--nmagic");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
+    // Identical code folding: functions that compile to the same bytes (monomorphisations
+    // over types of one layout, drop glue, closures) are kept once. Rust makes no promise
+    // that distinct functions have distinct addresses, so folding all of them is sound.
+    println!("cargo:rustc-link-arg-bins=--icf=all");
 }

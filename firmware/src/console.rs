@@ -550,7 +550,7 @@ impl Console {
                         .col(Num(p.max).text().as_str(), 10)
                         .col(Num((p.get)(&f)).text().as_str(), 11)
                         .s(if p.runtime { "rt   " } else { "idle " })
-                        .s(p.desc)
+                        .s(p.desc())
                         .s("\r\n");
                 }
                 ok!(.s(" ").uint(n as u32).s(" of ").uint(PARAMS.len() as u32))

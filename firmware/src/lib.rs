@@ -27,6 +27,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod align;
 pub mod config;
 pub mod console;
 pub mod control;

@@ -34,6 +34,9 @@ pub struct Param {
     pub max: f32,
     /// May be changed while the drive is in `Run` (otherwise only in Idle/Short/Open).
     pub runtime: bool,
+    /// The description (`Param::desc`); not in the board's image (`target_os = "none"`), for
+    /// flash: the descriptions are ≈ 2 KB of the 64 KiB, and `docs/console.md` has them.
+    #[cfg(not(target_os = "none"))]
     pub desc: &'static str,
     pub get: fn(&Config) -> f32,
     pub set: fn(&mut Config, f32),
@@ -77,19 +80,6 @@ impl core::fmt::Display for ParamError {
     }
 }
 
-/// A description as the image carries it: on the board (`target_os = "none"`) none, for flash
-/// (the descriptions are ≈ 1.9 KB of the 64 KiB; they are in `docs/console.md`), on the host
-/// the text. `list` shows it when there is one.
-macro_rules! desc {
-    ($d:expr) => {
-        if cfg!(target_os = "none") {
-            ""
-        } else {
-            $d
-        }
-    };
-}
-
 macro_rules! real {
     ($field:ident, $unit:expr, $min:expr, $max:expr, $rt:expr, $desc:expr) => {
         Param {
@@ -99,7 +89,8 @@ macro_rules! real {
             min: $min,
             max: $max,
             runtime: $rt,
-            desc: desc!($desc),
+            #[cfg(not(target_os = "none"))]
+            desc: $desc,
             get: |c| c.$field,
             set: |c, v| c.$field = v,
         }
@@ -114,7 +105,8 @@ macro_rules! int {
             min: $min,
             max: $max,
             runtime: $rt,
-            desc: desc!($desc),
+            #[cfg(not(target_os = "none"))]
+            desc: $desc,
             get: |c| c.$field as f32,
             set: |c, v| c.$field = v as $ty,
         }
@@ -129,7 +121,8 @@ macro_rules! flag {
             min: 0.0,
             max: 1.0,
             runtime: $rt,
-            desc: desc!($desc),
+            #[cfg(not(target_os = "none"))]
+            desc: $desc,
             get: |c| if c.$field { 1.0 } else { 0.0 },
             set: |c, v| c.$field = v != 0.0,
         }
@@ -153,6 +146,7 @@ pub static PARAMS: &[Param] = &[
         min: 0.0,
         max: 255.0,
         runtime: false,
+        #[cfg(not(target_os = "none"))]
         desc: "command law code (0 resistor, 1 impedance, 2 tracking, 3 two-way, 4 one-way)",
         get: |c| c.law as u8 as f32,
         set: |c, v| {
@@ -524,6 +518,18 @@ pub fn find(name: &str) -> Option<&'static Param> {
 }
 
 impl Param {
+    /// The description (`list` shows it when there is one).
+    #[cfg(not(target_os = "none"))]
+    pub fn desc(&self) -> &'static str {
+        self.desc
+    }
+
+    /// The description: none in the board's image.
+    #[cfg(target_os = "none")]
+    pub fn desc(&self) -> &'static str {
+        ""
+    }
+
     /// The default, read from `Config::default()`.
     pub fn default_value(&self) -> f32 {
         (self.get)(&Config::default())

@@ -255,9 +255,9 @@ pub struct BootTimes {
     pub tries: u32,
 }
 
-/// Alignment attempts of [`Sim::boot`], and the seconds in the safe state between them.
-pub const ALIGN_TRIES: u32 = 5;
-pub const ALIGN_RETRY_S: f64 = 0.5;
+/// Alignment attempts of [`Sim::boot`], and the seconds in the safe state between them
+/// (the firmware's retry, `regen_fw::align`, which the board runs too).
+pub use regen_fw::align::{ALIGN_RETRY_S, ALIGN_TRIES};
 
 /// Everything that defines a simulated rig.
 #[derive(Clone, Debug)]
@@ -625,31 +625,38 @@ impl Sim {
             return Err(f.name().to_string());
         }
         let t1 = self.s.t;
-        let mut tries = 0;
-        while self.ctl.boot() != Boot::Stored && self.ctl.boot() != Boot::Aligned {
-            tries += 1;
+        // The user's `mode align` (the board's console), then the retries the board's
+        // supervision runs (`regen_fw::align`, the same code), posted to the mailbox.
+        let mut retry = regen_fw::align::AlignRetry::NEW;
+        let align = self.ctl.boot() != Boot::Stored && self.ctl.boot() != Boot::Aligned;
+        if align {
             self.ctl
                 .set_mode(Mode::Align)
                 .map_err(|e| e.name().to_string())?;
-            // Two steps of align_time_s each (the second holds for half of it), plus margin.
-            let n = (3.0 * self.ctl.config().align_time_s as f64 / self.ts) as u64 + 10;
-            for _ in 0..n {
-                if self.ctl.mode() != Mode::Align {
-                    break;
-                }
-                self.step_with(&mut inject, |_| {});
-            }
-            match self.ctl.fault() {
-                None => {}
-                Some(regen_fw::control::Fault::AlignMoving) if tries < ALIGN_TRIES => {
-                    for _ in 0..(ALIGN_RETRY_S / self.ts) as u64 {
-                        self.step_with(&mut inject, |_| {});
-                    }
-                    self.ctl.clear_fault().map_err(|e| e.to_string())?;
-                }
-                Some(f) => return Err(f.name().to_string()),
-            }
         }
+        // Each alignment: two steps of align_time_s (the second holds for half of it), the
+        // wait in the safe state, and margin.
+        let per_try = (3.0 * self.ctl.config().align_time_s as f64 / self.ts) as u64
+            + (ALIGN_RETRY_S as f64 / self.ts) as u64
+            + 10;
+        let mut n = 0;
+        while self.ctl.boot() != Boot::Stored && self.ctl.boot() != Boot::Aligned {
+            match retry.poll(&self.ctl, self.per.periods) {
+                regen_fw::align::Retry::Post => regen_fw::align::post(&mut self.mail),
+                regen_fw::align::Retry::Waiting => {}
+                regen_fw::align::Retry::Nothing => {
+                    if let Some(f) = self.ctl.fault() {
+                        return Err(f.name().to_string());
+                    }
+                }
+            }
+            n += 1;
+            if n > per_try * ALIGN_TRIES as u64 {
+                return Err("alignment did not end".to_string());
+            }
+            self.step_with(&mut inject, |_| {});
+        }
+        let tries = if align { 1 + retry.retries() } else { 0 };
         let t2 = self.s.t;
         self.ctl
             .set_mode(Mode::Run)

@@ -43,6 +43,9 @@ pub struct BoardIo {
     /// The chopper comparator's threshold code, and whether the software forces it on.
     pub chop: u16,
     pub brake: bool,
+    /// The current offsets programmed into the converters (`Controller::adc_offsets` once
+    /// written, see [`set_adc_offsets`]).
+    pub offsets: [i32; 3],
 }
 
 impl DriveIo for BoardIo {
@@ -127,5 +130,56 @@ pub fn on_sample() {
         };
         let mut mail = PENDING.borrow_ref_mut(cs);
         st.per.run(&mut st.ctl, &mut mail, &mut st.io);
+        // Calibrated offsets are removed by the converters, as the simulator's sample does
+        // (`Sim::set_adc_offsets`): written here, right after a sample, the period the
+        // calibration ends (the next trigger is a period away).
+        let o = st.ctl.adc_offsets();
+        if o != st.io.offsets && set_adc_offsets(o) {
+            st.io.offsets = o;
+        }
     });
+}
+
+/// Program the converters' offset registers (RM0440 ADC_OFRy) so that each phase's code
+/// reads `raw − o[k]`: OFR1 of ADC1 for I_a and OFR2 for I_c, OFR1 of ADC2 for I_b, each on
+/// the channel its injected rank converts (read back from JSQR), saturated to 0 … 4095
+/// (SATEN) as the simulator clamps its codes. OFRy may only be written with no injected
+/// conversion running: the injected conversions are stopped (JADSTP), written, and started
+/// again (JADSTART) for the next trigger. `false` (nothing written) if a stop did not
+/// complete within ≈ 2 µs; the caller tries again the next period.
+#[inline(never)]
+fn set_adc_offsets(o: [i32; 3]) -> bool {
+    use embassy_stm32::pac::adc::vals::Adstp;
+    let adcs = [pac::ADC1, pac::ADC2];
+    for adc in adcs {
+        adc.cr().modify(|w| w.set_jadstp(Adstp::STOP));
+    }
+    for adc in adcs {
+        let mut n = 0;
+        while adc.cr().read().jadstart() {
+            n += 1;
+            if n > 256 {
+                return false;
+            }
+        }
+    }
+    // Each written with constant register indices (no index check left in the image).
+    #[inline(always)]
+    fn write(adc: pac::adc::Adc, rank: usize, reg: usize, v: i32) {
+        let ch = adc.jsqr().read().jsq(rank);
+        adc.ofr(reg).write(|w| {
+            w.set_offset(v.unsigned_abs().min(0xFFF) as u16);
+            w.set_offsetpos(v < 0);
+            w.set_saten(true);
+            w.set_offset1_ch(ch);
+            w.set_offset_en(v != 0);
+        });
+    }
+    write(pac::ADC1, 0, 0, o[0]); // I_a: ADC1 rank 1
+    write(pac::ADC2, 0, 0, o[1]); // I_b: ADC2 rank 1
+    write(pac::ADC1, 1, 1, o[2]); // I_c: ADC1 rank 2
+    for adc in adcs {
+        adc.cr().modify(|w| w.set_jadstart(true));
+    }
+    true
 }

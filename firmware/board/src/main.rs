@@ -85,16 +85,16 @@ async fn main(spawner: embassy_executor::Spawner) {
     if recovered {
         defmt::warn!("store: a double word torn by a power cut during a save was zeroed");
     }
-    let (cfg, boot_msg): (Config, &'static str) = match flash.held {
-        Ok(c) => (c, "parameters loaded from flash"),
-        Err(StoreFault::Empty) => {
+    let (cfg, boot_msg): (Config, &'static str) = match flash.fault {
+        None => (flash.held, "parameters loaded from flash"),
+        Some(StoreFault::Empty) => {
             defmt::warn!("parameter store empty: defaults in use");
             (
                 Config::default(),
                 "store empty: DEFAULT parameters (fault store_empty)",
             )
         }
-        Err(StoreFault::Invalid) => {
+        Some(StoreFault::Invalid) => {
             defmt::warn!("stored parameters invalid: defaults in use");
             (
                 Config::default(),
@@ -102,7 +102,7 @@ async fn main(spawner: embassy_executor::Spawner) {
             )
         }
     };
-    let (ctl, cfg) = match Controller::new(&cfg) {
+    let (mut ctl, cfg) = match Controller::new(&cfg) {
         Ok(c) => (c, cfg),
         Err(e) => {
             defmt::error!(
@@ -120,6 +120,11 @@ async fn main(spawner: embassy_executor::Spawner) {
             }
         }
     };
+
+    // Power-up: the rotor sits at an unknown angle and the amplifiers' zero codes are not
+    // known: Idle, the offsets calibrated over the first periods (gates off; the loop then
+    // programs them into the converters), Run refused until `mode align` has succeeded.
+    ctl.require_alignment();
 
     let Some(arr) = board::arr_for(cfg.pwm_hz) else {
         defmt::error!(
@@ -154,6 +159,7 @@ async fn main(spawner: embassy_executor::Spawner) {
                 pwm,
                 chop: thr.chop,
                 brake: false,
+                offsets: [0; 3],
             },
         });
     });

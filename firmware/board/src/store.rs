@@ -83,13 +83,23 @@ impl NorFlash for BoardFlash {
 }
 
 /// The store as the console task holds it.
+///
+/// The two configurations (what the flash holds, what a `save` asked for) are plain fields,
+/// exchanged by `swap` after a successful write: moving a `Config` out of an `Option` and into
+/// a `Result` across the save's await made the compiler copy it through the task's state with
+/// `memmove` (1.6 KB of flash for that routine alone).
 pub struct BoardStore {
     pub store: Store<BoardFlash>,
     /// What the flash holds (read at boot, replaced by each successful save): `load` returns
-    /// it without reading the flash again; the store is the flash's only writer.
-    pub held: Result<Config, StoreFault>,
-    /// A `save` taken by [`ParamStore::save`], written by the task ([`BoardStore::finish`]).
-    pub request: Option<Config>,
+    /// it without reading the flash again; the store is the flash's only writer. Meaningful
+    /// when `fault` is `None`.
+    pub held: Config,
+    /// Why the flash holds no configuration (`None`: `held` is it).
+    pub fault: Option<StoreFault>,
+    /// A `save` taken by [`ParamStore::save`] (when `requested`), written by the task
+    /// ([`BoardStore::finish`]).
+    request: Config,
+    requested: bool,
 }
 
 impl BoardStore {
@@ -97,27 +107,30 @@ impl BoardStore {
     /// torn double word, if the last reset came from one).
     pub async fn open(mut region: Bank2Region<'static, Async>) -> (BoardStore, bool) {
         let recovered = recover_ecc(&mut region).await;
-        let mut s = BoardStore {
-            store: Store {
-                flash: BoardFlash(region),
-                base: STORE_RANGE.start,
-            },
-            held: Err(StoreFault::Empty),
-            request: None,
+        let store = Store {
+            flash: BoardFlash(region),
+            base: STORE_RANGE.start,
         };
-        s.held = match s.store.load() {
-            (c, None) => Ok(c),
-            (_, Some(f)) => Err(f),
+        let (held, fault) = store.load();
+        let s = BoardStore {
+            store,
+            held,
+            fault,
+            request: held,
+            requested: false,
         };
         (s, recovered)
     }
 
     /// Write the pending `save`, if any; its result.
     pub async fn finish(&mut self) -> Option<Result<(), &'static str>> {
-        let cfg = self.request.take()?;
-        let r = self.store.save(&cfg).await;
+        if !core::mem::take(&mut self.requested) {
+            return None;
+        }
+        let r = self.store.save(&self.request).await;
         if r.is_ok() {
-            self.held = Ok(cfg);
+            core::mem::swap(&mut self.held, &mut self.request);
+            self.fault = None;
         }
         Some(r)
     }
@@ -125,11 +138,15 @@ impl BoardStore {
 
 impl ParamStore for BoardStore {
     fn save(&mut self, cfg: &Config) -> Result<Saved, &'static str> {
-        self.request = Some(*cfg);
+        self.request = *cfg;
+        self.requested = true;
         Ok(Saved::Deferred)
     }
     fn load(&mut self) -> Result<Config, &'static str> {
-        self.held.map_err(StoreFault::message)
+        match self.fault {
+            None => Ok(self.held),
+            Some(f) => Err(f.message()),
+        }
     }
 }
 

@@ -30,6 +30,7 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
     let mut last_refused = 0;
     let mut last_dropped = 0;
     let mut dead = false;
+    let mut retry = regen_fw::align::AlignRetry::NEW;
     wdg.unleash();
     loop {
         ticker.next().await;
@@ -65,6 +66,19 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
             }
             win_t = now;
             win_n = n;
+        }
+
+        // An alignment that found the rotor moving: retried after its wait in the safe state
+        // (`regen_fw::align`, the simulator's boot runs the same), through the mailbox.
+        if retry.poll(&ctl, n) == regen_fw::align::Retry::Post {
+            critical_section::with(|cs| {
+                regen_fw::align::post(&mut drive::PENDING.borrow_ref_mut(cs))
+            });
+            defmt::warn!(
+                "alignment found the rotor moving: try {} of {}",
+                retry.retries() + 1,
+                regen_fw::align::ALIGN_TRIES
+            );
         }
 
         let f = ctl.fault();
