@@ -198,6 +198,19 @@ pub struct Compiled {
 }
 
 impl Compiled {
+    /// Compile `cfg` for a controller whose configuration in force is `old` (all that
+    /// [`Controller::compile`] reads of it: whether a law parameter changed), so that a
+    /// caller can keep the old configuration alone instead of a whole controller.
+    pub fn new(old: &Config, cfg: &Config) -> Result<Compiled, ConfigError> {
+        let g = Gains::new(cfg)?;
+        let law = if Law::params_changed(old, cfg) {
+            Slot::Full(Law::from_config(cfg))
+        } else {
+            Slot::Empty
+        };
+        Ok(Compiled { cfg: *cfg, g, law })
+    }
+
     /// The configuration it was compiled from.
     pub fn config(&self) -> &Config {
         &self.cfg
@@ -279,13 +292,7 @@ impl Controller {
     /// law. On the board this runs in the console's task on its copy of the controller; the
     /// current loop then only [`Controller::install`]s the result between two steps.
     pub fn compile(&self, cfg: &Config) -> Result<Compiled, ConfigError> {
-        let g = Gains::new(cfg)?;
-        let law = if Law::params_changed(&self.cfg, cfg) {
-            Slot::Full(Law::from_config(cfg))
-        } else {
-            Slot::Empty
-        };
-        Ok(Compiled { cfg: *cfg, g, law })
+        Compiled::new(&self.cfg, cfg)
     }
 
     /// Put a compiled configuration in force: copies of fixed size and the slow terms'

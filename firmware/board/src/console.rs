@@ -99,22 +99,30 @@ async fn wait_applied() {
     defmt::warn!("console change not taken by the loop within 5 ms");
 }
 
+/// What `post` needs of the controller before a command: its configuration (all that
+/// compiling a change reads), fault and mode. Kept instead of a second whole controller.
+struct Before {
+    cfg: regen_fw::Config,
+    fault: Option<regen_fw::control::Fault>,
+    mode: regen_fw::control::Mode,
+}
+
 /// Post the differences between the copy before and after a command; `true` if any.
-fn post(before: &regen_fw::Controller, after: &regen_fw::Controller) -> bool {
+fn post(before: &Before, after: &regen_fw::Controller) -> bool {
     let mut p = Pending::default();
-    if before.fault().is_some() && after.fault().is_none() {
-        p.clear = before.fault().into();
+    if before.fault.is_some() && after.fault().is_none() {
+        p.clear = before.fault.into();
     }
-    if after.config().differs(before.config()) {
-        // Validated and compiled here, in the task (≈ 8,700 instructions: more than a
+    if after.config().differs(&before.cfg) {
+        // Validated and compiled here, in the task (≈ 11,500 instructions: more than a
         // period); the loop only installs it. `execute` accepted it on the copy, so this
         // cannot fail; if it did, nothing would be posted.
-        match before.compile(after.config()) {
+        match regen_fw::Compiled::new(&before.cfg, after.config()) {
             Ok(c) => p.cfg = Slot::Full(c),
             Err(_) => return false,
         }
     }
-    if after.mode() != before.mode() {
+    if after.mode() != before.mode {
         p.mode = Slot::Full(after.mode());
     }
     if p.is_empty() {
@@ -175,17 +183,25 @@ pub async fn console_task(
                         continue;
                     };
                     if !text.is_empty() {
-                        match drive::snapshot() {
-                            Some((before, _)) => {
-                                let mut ctl = before.clone();
+                        // One copy of the controller, in a block that ends before the
+                        // wait (the task's state keeps no controller across it).
+                        let posted = match drive::snapshot() {
+                            Some((mut ctl, _)) => {
+                                let before = Before {
+                                    cfg: *ctl.config(),
+                                    fault: ctl.fault(),
+                                    mode: ctl.mode(),
+                                };
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
-                                if post(&before, &ctl) {
-                                    wait_applied().await;
-                                }
+                                post(&before, &ctl)
                             }
                             None => {
                                 let _ = reply.write_str("error: current loop not started\r\n");
+                                false
                             }
+                        };
+                        if posted {
+                            wait_applied().await;
                         }
                     }
                     // A `save`: written here, awaited (the executor runs on), with no copy of
