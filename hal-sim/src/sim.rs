@@ -819,8 +819,9 @@ impl Sim {
         }
     }
 
-    /// The phase currents through the shunts at the converters' instants (`crate::sampling`).
-    #[inline(never)]
+    /// The phase currents through the shunts at the converters' instants (`crate::sampling`:
+    /// the common case inline, the general model out of line).
+    #[inline(always)]
     fn shunt_read(&self, i: [f64; 3]) -> [f64; 3] {
         let [ea, eb] = self.s.e_ab;
         let e = [ea, -0.5 * ea + SQRT3_2 * eb, -0.5 * ea - SQRT3_2 * eb];
