@@ -185,7 +185,8 @@ fn main() {
     // (a) The board's realism against the ideal sensors, timed alternately in the same run
     // so that all see the same machine load: the shunt sampling alone (`sensors.shunt`), and
     // everything the board faces together: the power-up draws (rotor angle, encoder start,
-    // per-phase offsets and gains, then the boot: calibration and alignment), the shunt
+    // per-phase offsets and gains, then the boot: calibration and alignment), the encoder's
+    // index pulse, the shunt
     // sampling, and the stage's hardware paths between the firmware and the plant
     // (`FaultSim::with_stage`, no fault injected).
     let mut sc_shunt = sc.clone();
@@ -195,6 +196,7 @@ fn main() {
         random_angle: true,
         offset_a: 0.15,
         gain_rel: 0.02,
+        index: true,
         seed: 1,
     };
     let mut off = sc.build().expect("scenario");
@@ -236,7 +238,7 @@ fn main() {
         100.0 * (t_shunt / t_off - 1.0)
     );
     println!(
-        "  board realism      {:7.1} ns per period (power-up draws and boot, shunt sampling, stage model), {:.1} ns off: (a) slowdown {:+.1} % (target ≤ 20 %)",
+        "  board realism      {:7.1} ns per period (power-up draws and boot, index pulse, shunt sampling, stage model), {:.1} ns off: (a) slowdown {:+.1} % (target ≤ 20 %)",
         ns(t_real),
         ns(t_off),
         100.0 * (t_real / t_off - 1.0)
