@@ -126,6 +126,9 @@ pub(crate) struct IndexPulse {
     phase: f64,
     /// ⌊phase + x·rev_per_m⌋ at the last sample.
     rev: f64,
+    /// Screw positions well inside that revolution (1 µm within its ends, far beyond the
+    /// rounding of `rev`'s expression): between them no mark can have been passed.
+    inside: [f64; 2],
 }
 
 impl IndexPulse {
@@ -134,12 +137,27 @@ impl IndexPulse {
     pub fn new(theta_m0: f64, index_m: f64, lead_m_per_rad: f64, x: f64) -> IndexPulse {
         let rev_per_m = 1.0 / (std::f64::consts::TAU * lead_m_per_rad);
         let phase = (theta_m0 - index_m) / std::f64::consts::TAU;
-        IndexPulse {
+        let mut p = IndexPulse {
             on: true,
             rev_per_m,
             phase,
             rev: (phase + x * rev_per_m).floor(),
-        }
+            inside: [0.0; 2],
+        };
+        p.set_inside();
+        p
+    }
+
+    fn set_inside(&mut self) {
+        let at = |r: f64| (r - self.phase) / self.rev_per_m;
+        self.inside = [at(self.rev) + 1e-6, at(self.rev + 1.0) - 1e-6];
+    }
+
+    /// Whether the screw at `x` is certainly still in the revolution of the last sample
+    /// (then [`IndexPulse::pass`] returns `None`; two compares, no `floor`).
+    #[inline(always)]
+    pub fn still_inside(&self, x: f64) -> bool {
+        x > self.inside[0] && x < self.inside[1]
     }
 
     /// The screw position at which the mark passed since the last call (the last passage if
@@ -153,6 +171,7 @@ impl IndexPulse {
         // Upwards the last integer passed is r, downwards r + 1.
         let k = if r > self.rev { r } else { r + 1.0 };
         self.rev = r;
+        self.set_inside();
         Some((k - self.phase) / self.rev_per_m)
     }
 }
@@ -160,6 +179,35 @@ impl IndexPulse {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn index_precheck_never_hides_a_pass() {
+        // A random walk over ±20 revolutions, steps up to 1/100 of one and some exactly onto
+        // the marks: wherever `still_inside` holds, `pass` (its floor) finds no mark either.
+        let l = 0.016 / std::f64::consts::TAU;
+        let mut p = IndexPulse::new(1.3, 4.1, l, 0.0);
+        let mut st = 0x2545_f491_4f6c_dd1du64;
+        let mut x = 0.0f64;
+        let (mut skipped, mut passes) = (0, 0);
+        for n in 0..200_000 {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            let u = (st >> 11) as f64 / (1u64 << 53) as f64;
+            x = (x + (u - 0.5) * 2.0 * 0.016 / 100.0).clamp(-0.32, 0.32);
+            if n % 97 == 0 {
+                // Onto the nearest mark (k − phase)/rev_per_m.
+                let k = (p.phase + x * p.rev_per_m).round();
+                x = (k - p.phase) / p.rev_per_m;
+            }
+            let inside = p.still_inside(x);
+            let r = p.pass(x);
+            assert!(!(inside && r.is_some()), "pre-check hid a pass at {x}");
+            skipped += inside as u32;
+            passes += r.is_some() as u32;
+        }
+        assert!(skipped > 150_000 && passes > 500, "{skipped} {passes}");
+    }
 
     #[test]
     fn draws_cover_their_ranges_and_depend_on_the_seed() {

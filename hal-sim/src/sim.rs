@@ -833,7 +833,11 @@ impl Sim {
             self.add_noise(&mut c, &mut vc);
         }
         if self.index.on {
-            self.sample_index();
+            if self.index.still_inside(self.s.x) {
+                self.index_capture = None;
+            } else {
+                self.sample_index();
+            }
         }
         // Code = (i + offset)/(A per count) + zero code, rounded to nearest in the positive
         // code domain (the cast truncates; below 0 it clamps anyway).
