@@ -26,6 +26,9 @@ fn best_of(reps: usize, mut f: impl FnMut() -> f64) -> f64 {
     (0..reps).map(|_| f()).fold(f64::MAX, f64::min)
 }
 
+/// Interleaved slices per repetition of the realism comparison (a).
+const CHUNKS: u64 = 10;
+
 fn env_or(name: &str, default: f64) -> f64 {
     std::env::var(name)
         .ok()
@@ -182,8 +185,9 @@ fn main() {
         sim_s / noisy
     );
 
-    // (a) The board's realism against the ideal sensors, timed alternately in the same run
-    // so that all see the same machine load: the shunt sampling alone (`sensors.shunt`), and
+    // (a) The board's realism against the ideal sensors, timed alternately in the same run,
+    // in CHUNKS interleaved slices of each repetition, so that all see the same machine load
+    // (which changes over seconds on the shared machine): the shunt sampling alone (`sensors.shunt`), and
     // everything the board faces together: the power-up draws (rotor angle, encoder start,
     // per-phase offsets and gains, then the boot: calibration and alignment), the encoder's
     // index pulse, the shunt
@@ -218,17 +222,23 @@ fn main() {
     let n_run = (sim_s / off.period()).round() as u64;
     let (mut t_off, mut t_shunt, mut t_real) = (f64::MAX, f64::MAX, f64::MAX);
     for _ in 0..reps {
-        let t = Instant::now();
-        off.run_for(sim_s);
-        t_off = t_off.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        shunt.run_for(sim_s);
-        t_shunt = t_shunt.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        for _ in 0..n_run {
-            real.step().expect("stage");
+        let mut t_rep = [0.0; 3];
+        for _ in 0..CHUNKS {
+            let t = Instant::now();
+            off.run_for(sim_s / CHUNKS as f64);
+            t_rep[0] += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            shunt.run_for(sim_s / CHUNKS as f64);
+            t_rep[1] += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for _ in 0..n_run / CHUNKS {
+                real.step().expect("stage");
+            }
+            t_rep[2] += t.elapsed().as_secs_f64();
         }
-        t_real = t_real.min(t.elapsed().as_secs_f64());
+        t_off = t_off.min(t_rep[0]);
+        t_shunt = t_shunt.min(t_rep[1]);
+        t_real = t_real.min(t_rep[2]);
     }
     assert!(real.sim.controller().fault().is_none());
     println!(
@@ -264,14 +274,19 @@ fn main() {
     }
     let (mut t_off72, mut t_real72) = (f64::MAX, f64::MAX);
     for _ in 0..reps {
-        let t = Instant::now();
-        off72.run_for(sim_s);
-        t_off72 = t_off72.min(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        for _ in 0..n_run {
-            real72.step().expect("stage");
+        let mut t_rep = [0.0; 2];
+        for _ in 0..CHUNKS {
+            let t = Instant::now();
+            off72.run_for(sim_s / CHUNKS as f64);
+            t_rep[0] += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for _ in 0..n_run / CHUNKS {
+                real72.step().expect("stage");
+            }
+            t_rep[1] += t.elapsed().as_secs_f64();
         }
-        t_real72 = t_real72.min(t.elapsed().as_secs_f64());
+        t_off72 = t_off72.min(t_rep[0]);
+        t_real72 = t_real72.min(t_rep[1]);
     }
     println!(
         "  board realism 72 V {:7.1} ns per period, {:.1} ns off: {:+.1} % (the board's 72 V TMD at 306 Ω, voltage-limited; fault {:?})",
