@@ -73,7 +73,7 @@ impl Default for ShuntSampling {
 }
 
 /// The model's constants for a run.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct ShuntPre {
     pub on: bool,
     /// Instants of I_a/I_b and of I_c after `t_k`, s.
@@ -91,7 +91,15 @@ pub(crate) struct ShuntPre {
     fast: bool,
     now_max: u16,
     before_max: u16,
+    /// The late window's settling factor for each duty above `before_max` (its bits, up to
+    /// 1), each sign of the current and each instant: `settled((δ − t_open)/τ)` as the
+    /// general model evaluates it, or −1 where the window has not opened by δ (reading 0).
+    /// Layout `[(instant·2 + pos)·n + bits − before_max − 1]`, n = `ONE − before_max`.
+    late: Vec<f64>,
 }
+
+/// The bits of duty 1 (U1F15).
+const ONE: u16 = 1 << 15;
 
 impl ShuntPre {
     /// Checks every value (the key, the value and the allowed range in the message).
@@ -135,6 +143,7 @@ impl ShuntPre {
             fast: false,
             now_max: 0,
             before_max: 0,
+            late: Vec::new(),
         };
         // The largest duty bits for which the general model's own expressions (rounding
         // included, monotone in the duty) put the instants inside the windows: no high side
@@ -154,6 +163,20 @@ impl ShuntPre {
         });
         if let (Some(n), Some(b)) = (now_max, before_max) {
             (p.fast, p.now_max, p.before_max) = (true, n, b);
+            let mut late = Vec::with_capacity(4 * (ONE - b) as usize);
+            for dl in [p.t_ab, p.t_c] {
+                for pos in [false, true] {
+                    for bits in b + 1..=ONE {
+                        let t0 = p.open_of(bits, true, pos);
+                        late.push(if dl <= t0 {
+                            -1.0
+                        } else {
+                            settled((dl - t0) * p.inv_tau)
+                        });
+                    }
+                }
+            }
+            p.late = late;
         }
         Ok(p)
     }
@@ -200,21 +223,29 @@ impl ShuntPre {
     /// instant and closes after it (`r` the readings without it), out of line.
     #[inline(never)]
     fn settle(&self, r: &mut [f64; 3], i: [f64; 3], before: &Actuation) {
-        for (x, dl) in [(0, self.t_ab), (1, self.t_ab), (2, self.t_c)] {
-            let t0 = self.open(x, i[x] > 0.0, before);
-            r[x] = if dl <= t0 {
-                0.0
-            } else {
-                r[x] * settled((dl - t0) * self.inv_tau)
-            };
+        let n = (ONE - self.before_max) as usize;
+        for (x, instant) in [(0, 0), (1, 0), (2, 1)] {
+            let bits = before.duties[x].to_bits().min(ONE);
+            if bits > self.before_max {
+                let k = (instant * 2 + (i[x] > 0.0) as usize) * n
+                    + (bits - self.before_max - 1) as usize;
+                let f = self.late[k];
+                r[x] = if f < 0.0 { 0.0 } else { r[x] * f };
+            }
         }
     }
 
     /// Where phase `x`'s shunt window opened (its current positive: `pos`), s after `t_k`.
     #[inline(always)]
     fn open(&self, x: usize, pos: bool, before: &Actuation) -> f64 {
-        let low_on = if before.enable {
-            -(1.0 - duty_of(before.duties[x])) * self.half_ts
+        self.open_of(before.duties[x].to_bits(), before.enable, pos)
+    }
+
+    /// [`ShuntPre::open`] from the duty's bits and whether the gates were enabled.
+    #[inline(always)]
+    fn open_of(&self, bits: u16, enabled: bool, pos: bool) -> f64 {
+        let low_on = if enabled {
+            -(1.0 - duty_of(Duty::from_bits(bits))) * self.half_ts
         } else {
             -self.half_ts
         };
