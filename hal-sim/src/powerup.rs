@@ -12,6 +12,12 @@
 //!
 //! The firmware calibrates the offsets at boot (gates off); gain errors are not calibrated
 //! (no reference current at boot) and remain as a per-phase scale error.
+//!
+//! The encoder's index channel (`index`, off by default): one pulse per mechanical revolution,
+//! where a mark at the seeded angle `index_m` on the rotor passes (rotor angle `θ_m0 + x/l`,
+//! θ_m0 the power-up angle, 0 without `random_angle`). The simulator reports the counter's
+//! value at the pulse as the encoder timer's index capture would
+//! ([`crate::sim::Sim::index_capture`]); the firmware does not use it.
 
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +32,8 @@ pub struct PowerUp {
     pub offset_a: f64,
     /// Per-phase current gain errors drawn within ±this, relative (0 = none).
     pub gain_rel: f64,
+    /// The encoder's index pulse, once per mechanical revolution at a seeded angle.
+    pub index: bool,
     /// Seed of the draws.
     pub seed: u64,
 }
@@ -36,6 +44,7 @@ impl Default for PowerUp {
             random_angle: false,
             offset_a: 0.0,
             gain_rel: 0.0,
+            index: false,
             seed: 1,
         }
     }
@@ -51,10 +60,14 @@ pub struct Draw {
     /// Per-phase current offsets, A, and relative gain errors.
     pub offset_a: [f64; 3],
     pub gain_rel: [f64; 3],
+    /// The index mark's mechanical angle on the rotor, rad, in [0, 2π) (drawn last, so that
+    /// the other draws do not depend on whether the index is modelled).
+    pub index_m: f64,
 }
 
 impl PowerUp {
-    /// Any model on.
+    /// Any model on that the firmware must boot against (the index pulse alone is a sensor
+    /// more, not an error to calibrate or align).
     pub fn any(&self) -> bool {
         self.random_angle || self.offset_a != 0.0 || self.gain_rel != 0.0
     }
@@ -91,12 +104,75 @@ impl PowerUp {
         let encoder_start = (u() * 65_536.0) as u16;
         let offset_a = [0; 3].map(|_| (2.0 * u() - 1.0) * self.offset_a);
         let gain_rel = [0; 3].map(|_| (2.0 * u() - 1.0) * self.gain_rel);
+        let index_m = u() * std::f64::consts::TAU;
         Draw {
             theta_m0,
             encoder_start,
             offset_a,
             gain_rel,
+            index_m,
         }
+    }
+}
+
+/// The index channel's state: where the mark is in rotor revolutions, and the revolution the
+/// rotor was in at the last sample.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct IndexPulse {
+    pub on: bool,
+    /// Rotor revolutions per metre of screw travel, 1/(2π·l).
+    rev_per_m: f64,
+    /// (θ_m0 − index_m)/2π: the mark passes where `phase + x·rev_per_m` is an integer.
+    phase: f64,
+    /// ⌊phase + x·rev_per_m⌋ at the last sample.
+    rev: f64,
+    /// Screw positions well inside that revolution (1 µm within its ends, far beyond the
+    /// rounding of `rev`'s expression): between them no mark can have been passed.
+    inside: [f64; 2],
+}
+
+impl IndexPulse {
+    /// The mark at `index_m` on a rotor at `theta_m0` when the screw is at 0, lead
+    /// `lead_m_per_rad`; the screw now at `x`.
+    pub fn new(theta_m0: f64, index_m: f64, lead_m_per_rad: f64, x: f64) -> IndexPulse {
+        let rev_per_m = 1.0 / (std::f64::consts::TAU * lead_m_per_rad);
+        let phase = (theta_m0 - index_m) / std::f64::consts::TAU;
+        let mut p = IndexPulse {
+            on: true,
+            rev_per_m,
+            phase,
+            rev: (phase + x * rev_per_m).floor(),
+            inside: [0.0; 2],
+        };
+        p.set_inside();
+        p
+    }
+
+    fn set_inside(&mut self) {
+        let at = |r: f64| (r - self.phase) / self.rev_per_m;
+        self.inside = [at(self.rev) + 1e-6, at(self.rev + 1.0) - 1e-6];
+    }
+
+    /// Whether the screw at `x` is certainly still in the revolution of the last sample
+    /// (then [`IndexPulse::pass`] returns `None`; two compares, no `floor`).
+    #[inline(always)]
+    pub fn still_inside(&self, x: f64) -> bool {
+        x > self.inside[0] && x < self.inside[1]
+    }
+
+    /// The screw position at which the mark passed since the last call (the last passage if
+    /// several), the screw now at `x`.
+    #[inline(never)]
+    pub fn pass(&mut self, x: f64) -> Option<f64> {
+        let r = (self.phase + x * self.rev_per_m).floor();
+        if r == self.rev {
+            return None;
+        }
+        // Upwards the last integer passed is r, downwards r + 1.
+        let k = if r > self.rev { r } else { r + 1.0 };
+        self.rev = r;
+        self.set_inside();
+        Some((k - self.phase) / self.rev_per_m)
     }
 }
 
@@ -105,11 +181,41 @@ mod tests {
     use super::*;
 
     #[test]
+    fn index_precheck_never_hides_a_pass() {
+        // A random walk over ±20 revolutions, steps up to 1/100 of one and some exactly onto
+        // the marks: wherever `still_inside` holds, `pass` (its floor) finds no mark either.
+        let l = 0.016 / std::f64::consts::TAU;
+        let mut p = IndexPulse::new(1.3, 4.1, l, 0.0);
+        let mut st = 0x2545_f491_4f6c_dd1du64;
+        let mut x = 0.0f64;
+        let (mut skipped, mut passes) = (0, 0);
+        for n in 0..200_000 {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            let u = (st >> 11) as f64 / (1u64 << 53) as f64;
+            x = (x + (u - 0.5) * 2.0 * 0.016 / 100.0).clamp(-0.32, 0.32);
+            if n % 97 == 0 {
+                // Onto the nearest mark (k − phase)/rev_per_m.
+                let k = (p.phase + x * p.rev_per_m).round();
+                x = (k - p.phase) / p.rev_per_m;
+            }
+            let inside = p.still_inside(x);
+            let r = p.pass(x);
+            assert!(!(inside && r.is_some()), "pre-check hid a pass at {x}");
+            skipped += inside as u32;
+            passes += r.is_some() as u32;
+        }
+        assert!(skipped > 150_000 && passes > 500, "{skipped} {passes}");
+    }
+
+    #[test]
     fn draws_cover_their_ranges_and_depend_on_the_seed() {
         let p = PowerUp {
             random_angle: true,
             offset_a: 0.15,
             gain_rel: 0.02,
+            index: true,
             seed: 7,
         };
         let ds: Vec<Draw> = (0..2000).map(|s| PowerUp { seed: s, ..p }.draw()).collect();
@@ -122,6 +228,8 @@ mod tests {
         assert!(max(&|d| d.offset_a[2]) > 0.149 && max(&|d| d.offset_a[2]) <= 0.15);
         assert!(min(&|d| d.gain_rel[0]) < -0.0199 && min(&|d| d.gain_rel[0]) >= -0.02);
         assert!(max(&|d| d.encoder_start as f64) > 65_000.0);
+        assert!(max(&|d| d.index_m) > 0.995 * std::f64::consts::TAU);
+        assert!(min(&|d| d.index_m) < 0.005 * std::f64::consts::TAU);
         assert_ne!(ds[0], ds[1]);
         assert_eq!(
             PowerUp { seed: 3, ..p }.draw(),

@@ -73,7 +73,7 @@ impl Default for ShuntSampling {
 }
 
 /// The model's constants for a run.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct ShuntPre {
     pub on: bool,
     /// Instants of I_a/I_b and of I_c after `t_k`, s.
@@ -84,7 +84,22 @@ pub(crate) struct ShuntPre {
     inv_tau: f64,
     inv_l: f64,
     r: f64,
+    /// The fast path's bounds on the duties' bits ([`ShuntPre::read`]): with every duty in
+    /// force after `t_k` at most `now_max` and every duty before it at most `before_max`, all
+    /// three instants lie inside every window, more than 30 amplifier time constants after it
+    /// opened and before any high side takes over.
+    fast: bool,
+    now_max: u16,
+    before_max: u16,
+    /// The late window's settling factor for each duty above `before_max` (its bits, up to
+    /// 1), each sign of the current and each instant: `settled((δ − t_open)/τ)` as the
+    /// general model evaluates it, or −1 where the window has not opened by δ (reading 0).
+    /// Layout `[(instant·2 + pos)·n + bits − before_max − 1]`, n = `ONE − before_max`.
+    late: Vec<f64>,
 }
+
+/// The bits of duty 1 (U1F15).
+const ONE: u16 = 1 << 15;
 
 impl ShuntPre {
     /// Checks every value (the key, the value and the allowed range in the message).
@@ -116,7 +131,7 @@ impl ShuntPre {
                 ts / 2.0 * 1e6
             ));
         }
-        Ok(ShuntPre {
+        let mut p = ShuntPre {
             on: s.enabled,
             t_ab: sc / f,
             t_c,
@@ -125,13 +140,122 @@ impl ShuntPre {
             inv_tau: 1.0 / settle,
             inv_l: 1.0 / l_h,
             r: r_ohm,
-        })
+            fast: false,
+            now_max: 0,
+            before_max: 0,
+            late: Vec::new(),
+        };
+        // The largest duty bits for which the general model's own expressions (rounding
+        // included, monotone in the duty) put the instants inside the windows: no high side
+        // has taken over at the last instant (`h` without the dead time, the earlier case),
+        // and the window opened (with the dead time, the later case) more than 30 time
+        // constants before the first instant (so `settled` is exactly 1). None: no duty
+        // qualifies (an ADC sequence too slow for any window), no fast path.
+        let last = |cond: &dyn Fn(f64) -> bool| {
+            (0..=Duty::from_num(1).to_bits())
+                .take_while(|&b| cond(duty_of(Duty::from_bits(b))))
+                .last()
+        };
+        let now_max = last(&|d| (1.0 - d) * p.half_ts >= p.t_c);
+        let before_max = last(&|d| {
+            let open = -(1.0 - d) * p.half_ts + p.dead;
+            (p.t_ab - open) * p.inv_tau > 30.0
+        });
+        // (Only for a run that samples through the shunts: the table is ≈ 0.24 MB.)
+        if let (true, Some(n), Some(b)) = (s.enabled, now_max, before_max) {
+            (p.fast, p.now_max, p.before_max) = (true, n, b);
+            let mut late = Vec::with_capacity(4 * (ONE - b) as usize);
+            for dl in [p.t_ab, p.t_c] {
+                for pos in [false, true] {
+                    for bits in b + 1..=ONE {
+                        let t0 = p.open_of(bits, true, pos);
+                        late.push(if dl <= t0 {
+                            -1.0
+                        } else {
+                            settled((dl - t0) * p.inv_tau)
+                        });
+                    }
+                }
+            }
+            p.late = late;
+        }
+        Ok(p)
     }
 
     /// The three current channels' readings, A: `i` and `e` the phase currents and emfs at
     /// `t_k`, `before` and `now` the actuations in force before and after `t_k`.
-    #[inline(never)]
+    ///
+    /// The common period (every duty within the bounds computed in [`ShuntPre::new`]) is
+    /// the general model with its window terms at their values there (no high time, the
+    /// amplifier settled: factors exactly 0 and 1), inline and without branches per phase;
+    /// with the duties after `t_k` within their bound but one before it above its own (a
+    /// window that opened late), the settling factors are applied out of line
+    /// ([`ShuntPre::settle`]). `fast_path_is_the_general_model` pins both to
+    /// [`ShuntPre::read_general`] bit for bit.
+    #[inline(always)]
     pub fn read(
+        &self,
+        i: [f64; 3],
+        e: [f64; 3],
+        v_bus: f64,
+        before: &Actuation,
+        now: &Actuation,
+    ) -> [f64; 3] {
+        let max3 = |a: &Actuation| {
+            let [x, y, z] = a.duties.map(|d| d.to_bits());
+            x.max(y).max(z)
+        };
+        if self.fast && now.enable && max3(now) <= self.now_max {
+            // No high side has taken over at either instant: no high time, every window
+            // still open.
+            let at = |x: usize, dl: f64| i[x] - dl * (e[x] + self.r * i[x]) * self.inv_l;
+            let mut r = [at(0, self.t_ab), at(1, self.t_ab), at(2, self.t_c)];
+            let b = if before.enable { max3(before) } else { 0 };
+            if b > self.before_max {
+                // A window that opened late (a high duty before t_k): its amplifier settles.
+                self.settle(&mut r, i, before);
+            }
+            return r;
+        }
+        self.read_general(i, e, v_bus, before, now)
+    }
+
+    /// [`ShuntPre::read_general`]'s factor on each channel whose window is open at its
+    /// instant and closes after it (`r` the readings without it), out of line.
+    #[inline(never)]
+    fn settle(&self, r: &mut [f64; 3], i: [f64; 3], before: &Actuation) {
+        let n = (ONE - self.before_max) as usize;
+        for (x, instant) in [(0, 0), (1, 0), (2, 1)] {
+            let bits = before.duties[x].to_bits().min(ONE);
+            if bits > self.before_max {
+                let k = (instant * 2 + (i[x] > 0.0) as usize) * n
+                    + (bits - self.before_max - 1) as usize;
+                let f = self.late[k];
+                r[x] = if f < 0.0 { 0.0 } else { r[x] * f };
+            }
+        }
+    }
+
+    /// Where phase `x`'s shunt window opened (its current positive: `pos`), s after `t_k`.
+    #[inline(always)]
+    fn open(&self, x: usize, pos: bool, before: &Actuation) -> f64 {
+        self.open_of(before.duties[x].to_bits(), before.enable, pos)
+    }
+
+    /// [`ShuntPre::open`] from the duty's bits and whether the gates were enabled.
+    #[inline(always)]
+    fn open_of(&self, bits: u16, enabled: bool, pos: bool) -> f64 {
+        let low_on = if enabled {
+            -(1.0 - duty_of(Duty::from_bits(bits))) * self.half_ts
+        } else {
+            -self.half_ts
+        };
+        low_on + if pos { 0.0 } else { self.dead }
+    }
+
+    /// The model in full (any duties, the gates off).
+    #[inline(never)]
+    pub fn read_general(
         &self,
         i: [f64; 3],
         e: [f64; 3],
@@ -142,20 +266,13 @@ impl ShuntPre {
         if !now.enable {
             return i;
         }
-        let duty = |d: Duty| (d.to_bits() as f64 * (1.0 / 32768.0)).min(1.0);
+        let duty = duty_of;
         let pos: [bool; 3] = core::array::from_fn(|x| i[x] > 0.0);
         // High side takes over (shunt window closes) at h, the window opened at `open`.
         let h: [f64; 3] = core::array::from_fn(|x| {
             (1.0 - duty(now.duties[x])) * self.half_ts + if pos[x] { self.dead } else { 0.0 }
         });
-        let open: [f64; 3] = core::array::from_fn(|x| {
-            let low_on = if before.enable {
-                -(1.0 - duty(before.duties[x])) * self.half_ts
-            } else {
-                -self.half_ts
-            };
-            low_on + if pos[x] { 0.0 } else { self.dead }
-        });
+        let open: [f64; 3] = core::array::from_fn(|x| self.open(x, pos[x], before));
         // The terminals' high time up to each instant (all zero while no high side has
         // taken over, the common case) and its mean.
         let high = |dl: f64| {
@@ -167,8 +284,6 @@ impl ShuntPre {
         let at = |x: usize, dl: f64, ax: f64| {
             i[x] + (v_bus * ax - dl * (e[x] + self.r * i[x])) * self.inv_l
         };
-        // 1 − e^(−k), exactly 1 past k = 30 (below 1e-13), without the exponential.
-        let settled = |k: f64| if k > 30.0 { 1.0 } else { 1.0 - (-k).exp() };
         let read = |x: usize, dl: f64, ax: f64| {
             let (t0, t1) = (open[x], h[x]);
             if dl <= t0 {
@@ -191,6 +306,23 @@ impl ShuntPre {
     }
 }
 
+/// The amplifier's settled fraction after `k` time constants, 1 − e^(−k): exactly 1 past
+/// k = 30 (below 1e-13), without the exponential.
+#[inline(always)]
+fn settled(k: f64) -> f64 {
+    if k > 30.0 {
+        1.0
+    } else {
+        1.0 - (-k).exp()
+    }
+}
+
+/// A duty's value, clamped to 1 (U1F15 reaches 2).
+#[inline(always)]
+fn duty_of(d: Duty) -> f64 {
+    (d.to_bits() as f64 * (1.0 / 32768.0)).min(1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -208,7 +340,11 @@ mod tests {
             switched: false,
             dead_time_s: 0.5e-6,
         };
-        ShuntPre::new(&ShuntSampling::default(), &inv, 2.41, 6e-3, 50e-6).unwrap()
+        let on = ShuntSampling {
+            enabled: true,
+            ..Default::default()
+        };
+        ShuntPre::new(&on, &inv, 2.41, 6e-3, 50e-6).unwrap()
     }
 
     #[test]
@@ -254,6 +390,94 @@ mod tests {
             (1.0 - (-(h + 0.8 * 25e-6 - 0.5e-6) / 0.2e-6).exp()) * (-(p.t_c - h) / 0.2e-6).exp();
         assert!((r[2] / (i[2] * keep) - 1.0).abs() < 1e-3, "{r:?} {keep}");
         assert!(r[2].abs() < 0.1 * i[2].abs());
+    }
+
+    #[test]
+    fn fast_path_is_the_general_model() {
+        // Random currents, emfs, buses and duties (before and after t_k, each enabled or not),
+        // half of them drawn near the fast path's duty bounds: `read` equals `read_general`
+        // bit for bit, and each of its three cases (all within the bounds, a late window,
+        // the general model) is exercised.
+        let p = pre();
+        assert!(
+            p.fast && p.now_max > 20_000 && p.before_max > 20_000,
+            "{p:?}"
+        );
+        let mut st = 0x1234_5678_9abc_def1u64;
+        let mut u = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut fast, mut late, mut slow) = (0, 0, 0);
+        for n in 0..200_000 {
+            let (nm, bm) = (p.now_max, p.before_max);
+            let duty = |near: u16, u: &mut dyn FnMut() -> f64| {
+                let b = if n % 2 == 0 {
+                    near as f64 + (u() - 0.5) * 64.0
+                } else {
+                    u() * 33_000.0
+                };
+                Duty::from_bits(b.max(0.0) as u16)
+            };
+            let before = Actuation {
+                duties: [0; 3].map(|_| duty(bm, &mut u)),
+                enable: u() < 0.9,
+                brake: false,
+            };
+            let now = Actuation {
+                duties: [0; 3].map(|_| duty(nm, &mut u)),
+                enable: u() < 0.9,
+                brake: false,
+            };
+            let i = [0; 3].map(|_| (u() - 0.5) * 40.0);
+            let e = [0; 3].map(|_| (u() - 0.5) * 600.0);
+            let vb = u() * 500.0;
+            let (a, b) = (
+                p.read(i, e, vb, &before, &now),
+                p.read_general(i, e, vb, &before, &now),
+            );
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "{i:?} {e:?} {vb} {before:?} {now:?}"
+            );
+            let m = |x: &Actuation| x.duties.iter().map(|d| d.to_bits()).max().unwrap();
+            let bmax = if before.enable { m(&before) } else { 0 };
+            match (now.enable && m(&now) <= nm, bmax <= bm) {
+                (true, true) => fast += 1,
+                (true, false) => late += 1,
+                _ => slow += 1,
+            }
+        }
+        assert!(
+            fast > 20_000 && late > 20_000 && slow > 20_000,
+            "fast {fast}, late window {late}, general {slow}"
+        );
+        // The bounds are the tight ones: one bit above either, the general model's window
+        // terms change the readings (a high side takes over before I_c's instant; the
+        // amplifier has not settled to the last bit at I_a's).
+        let (i, e) = ([3.0, -1.0, -2.0], [10.0, -4.0, -6.0]);
+        let mid = Duty::from_bits(16_384);
+        let act = |x: usize, dx: u16| {
+            let mut duties = [mid; 3];
+            duties[x] = Duty::from_bits(dx);
+            Actuation {
+                duties,
+                enable: true,
+                brake: false,
+            }
+        };
+        let plain = |x: usize, dl: f64| i[x] - dl * (e[x] + p.r * i[x]) * p.inv_l;
+        // (phase b, i_b < 0: no dead time added to its high side's take-over)
+        let g = p.read_general(i, e, 72.0, &act(1, 16_384), &act(1, p.now_max + 1));
+        assert_ne!(g[2], plain(2, p.t_c), "now_max + 1 still inside");
+        // i_a < 0 at a duty one bit above `before_max`: its window opened with the dead time.
+        let i_neg = [-3.0, 1.0, 2.0];
+        let g = p.read_general(i_neg, e, 72.0, &act(0, p.before_max + 1), &act(0, 16_384));
+        let plain_a = i_neg[0] - p.t_ab * (e[0] + p.r * i_neg[0]) * p.inv_l;
+        assert_ne!(g[0], plain_a, "before_max + 1 still settled");
     }
 
     #[test]

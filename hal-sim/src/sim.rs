@@ -18,6 +18,7 @@ use crate::fastmath::{floor_wrap_u16, Gauss, SinCos};
 use crate::plant::{
     Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
 };
+use crate::powerup::IndexPulse;
 use crate::sampling::ShuntPre;
 use regen_fw::fx::Duty;
 use regen_fw::io::{Actuation, DriveIo, RawSample};
@@ -328,6 +329,9 @@ pub struct Sim {
     /// A break the stage model latched, not yet read by the period (the timer's break flag,
     /// [`Sim::report_break`]).
     break_flag: Option<regen_fw::protect::Fault>,
+    /// The encoder's index channel ([`crate::powerup`]) and its capture at the last sample.
+    index: IndexPulse,
+    index_capture: Option<u16>,
 }
 
 impl Sim {
@@ -397,6 +401,8 @@ impl Sim {
             mail: Pending::EMPTY,
             powered_up: false,
             break_flag: None,
+            index: IndexPulse::default(),
+            index_capture: None,
         };
         sim.stored_start = sim.stored();
         Ok(sim)
@@ -567,17 +573,27 @@ impl Sim {
     /// Apply the power-up models ([`crate::powerup`]) of `p` (nothing when none is on): the
     /// rotor's angle and the encoder's start value, the current sensors' offsets and gains
     /// drawn from `p.seed`; the controller is told it powered up
-    /// ([`Controller::require_alignment`]: Idle, offsets to calibrate, alignment needed).
-    /// Returns the draw. Refused (nothing changed) for values out of range.
+    /// ([`Controller::require_alignment`]: Idle, offsets to calibrate, alignment needed);
+    /// with `p.index` the encoder's index channel is modelled from now on (alone it needs no
+    /// boot). Returns the draw when the firmware must boot ([`PowerUp::any`]), else `None`.
+    /// Refused (nothing changed) for values out of range.
+    ///
+    /// [`PowerUp::any`]: crate::powerup::PowerUp::any
     pub fn power_up(
         &mut self,
         p: &crate::powerup::PowerUp,
     ) -> Result<Option<crate::powerup::Draw>, String> {
         p.check()?;
+        let d = p.draw();
+        if p.index {
+            let th0 = if p.random_angle { d.theta_m0 } else { 0.0 };
+            let lead = self.rig.screw.lead_m_per_rad;
+            self.index = IndexPulse::new(th0, d.index_m, lead, self.s.x);
+            self.index_capture = None;
+        }
         if !p.any() {
             return Ok(None);
         }
-        let d = p.draw();
         if p.random_angle {
             let m = &mut self.rig.machine;
             // The rotor's electrical angle at the plant's zero position (the encoder's
@@ -680,6 +696,14 @@ impl Sim {
             self.pre.code_base[k] -= (ok - self.pre.adc_offsets[k]) as f64;
         }
         self.pre.adc_offsets = o;
+    }
+
+    /// The encoder counter's value at the index pulse the rotor passed between the previous
+    /// sample and the last one ([`Sim::take_sample`], [`Sim::step`]), as the encoder timer's
+    /// index capture holds it; `None` without a pulse in that period or without the index
+    /// model (`[powerup] index`). The last passage if several.
+    pub fn index_capture(&self) -> Option<u16> {
+        self.index_capture
     }
 
     /// The d/q currents the controller measured in its last step, A (its telemetry).
@@ -831,6 +855,13 @@ impl Sim {
         if p.noisy {
             self.add_noise(&mut c, &mut vc);
         }
+        if self.index.on {
+            if self.index.still_inside(self.s.x) {
+                self.index_capture = None;
+            } else {
+                self.sample_index();
+            }
+        }
         // Code = (i + offset)/(A per count) + zero code, rounded to nearest in the positive
         // code domain (the cast truncates; below 0 it clamps anyway).
         RawSample {
@@ -842,13 +873,23 @@ impl Sim {
         }
     }
 
-    /// The phase currents through the shunts at the converters' instants (`crate::sampling`).
-    #[inline(never)]
+    /// The phase currents through the shunts at the converters' instants (`crate::sampling`:
+    /// the common case inline, the general model out of line).
+    #[inline(always)]
     fn shunt_read(&self, i: [f64; 3]) -> [f64; 3] {
         let [ea, eb] = self.s.e_ab;
         let e = [ea, -0.5 * ea + SQRT3_2 * eb, -0.5 * ea - SQRT3_2 * eb];
         self.shunt
             .read(i, e, self.s.v_bus, &self.before, &self.active)
+    }
+
+    /// The index channel at this sample: the counter's value where the mark passed.
+    #[inline(never)]
+    fn sample_index(&mut self) {
+        self.index_capture = self
+            .index
+            .pass(self.s.x)
+            .map(|x| floor_wrap_u16(x * self.pre.counts_per_m).wrapping_add(self.pre.enc_start));
     }
 
     /// The sensors' noise (in counts) on the three current codes, then on the bus code.
@@ -1596,6 +1637,84 @@ impl DriveIo for PlantIo<'_> {
 mod tests {
     use super::Channel;
     use crate::scenario::Scenario;
+
+    #[test]
+    fn index_pulse_once_per_revolution_at_the_seeded_angle() {
+        use crate::plant::Motion;
+        use crate::powerup::PowerUp;
+        use std::f64::consts::TAU;
+        // A triangle of ±50 mm at 0.5 Hz (0.1 m/s) on the reference screw's 16 mm lead: 12.5
+        // revolutions per cycle, the marks at x_k = (k + index_m/2π − θ_m0/2π)·2π·l.
+        let (amp, f) = (0.05, 0.5);
+        let sc = Scenario::imposed(
+            Motion::Triangle {
+                amplitude_m: amp,
+                freq_hz: f,
+            },
+            306.0,
+            2.0,
+        );
+        // Off by default: no capture ever.
+        let mut sim = sc.build().unwrap();
+        for _ in 0..20_000 {
+            sim.step();
+            assert_eq!(sim.index_capture(), None);
+        }
+        let pu = PowerUp {
+            random_angle: true,
+            index: true,
+            seed: 5,
+            ..PowerUp::default()
+        };
+        let d = pu.draw();
+        let mut sim = sc.build().unwrap();
+        sim.power_up(&pu).unwrap().unwrap();
+        let l = sim.rig().screw.lead_m_per_rad;
+        let cpr = sc.config().unwrap().encoder_cpr as f64;
+        let counts_per_m = cpr / (TAU * l);
+        let ts = sim.period();
+        let v_max = 4.0 * amp * f;
+        let mut caps = Vec::new();
+        let mut x_prev = sim.motion().0;
+        for _ in 0..(2.0 / ts) as usize {
+            let s = sim.take_sample();
+            let x = sim.motion().0;
+            if let Some(c) = sim.index_capture() {
+                // The rotor is at the mark within one period's travel of the sample.
+                let rot = (d.theta_m0 + x / l - d.index_m).rem_euclid(TAU);
+                let off = rot.min(TAU - rot);
+                assert!(off <= v_max * ts / l * 1.0001, "{off} rad from the mark");
+                // The captured count is the counter's within that travel (±1 count).
+                let dc = s.encoder.wrapping_sub(c) as i16 as f64;
+                assert!(dc.abs() <= v_max * ts * counts_per_m + 1.0, "{dc} counts");
+                caps.push((x_prev, x, c));
+            }
+            x_prev = x;
+            sim.apply_and_advance(&regen_fw::io::Actuation::OFF);
+        }
+        // One pulse per mark passed (closed form: the integers k between the revolutions at
+        // the ends of each monotone stretch), over one period of the triangle: up 0 → A,
+        // down A → −A, up −A → 0.
+        let rev = |x: f64| (d.theta_m0 - d.index_m) / TAU + x / (TAU * l);
+        let passed =
+            |a: f64, b: f64| (rev(a).max(rev(b)).floor() - rev(a).min(rev(b)).floor()) as usize;
+        let want = passed(0.0, amp) + passed(amp, -amp) + passed(-amp, 0.0);
+        assert_eq!(caps.len(), want, "{caps:?}");
+        assert!(want >= 12, "{want}");
+        // Every capture is the same mark: counts apart by whole revolutions (mod 2^16), ±1.
+        let c0 = caps[0].2;
+        for &(_, _, c) in &caps {
+            let dc = c.wrapping_sub(c0) as f64;
+            let k = (-40..=40)
+                .map(|k| ((k as f64 * cpr).rem_euclid(65_536.0) - dc).abs())
+                .map(|e| e.min(65_536.0 - e))
+                .fold(f64::MAX, f64::min);
+            assert!(
+                k <= 1.0,
+                "capture {c} not a whole number of revolutions from {c0}"
+            );
+        }
+    }
 
     #[test]
     fn split_step_is_exactly_one_step() {

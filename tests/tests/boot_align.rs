@@ -18,6 +18,7 @@ fn board_powerup(seed: u64) -> PowerUp {
         offset_a: 0.15,
         gain_rel: 0.02,
         seed,
+        ..PowerUp::default()
     }
 }
 
@@ -306,6 +307,7 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
                 offset_a: 0.15,
                 gain_rel: 0.0,
                 seed,
+                ..PowerUp::default()
             })
             .unwrap()
             .unwrap();
@@ -349,6 +351,7 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
         offset_a: 0.0,
         gain_rel: 0.0,
         seed: 1,
+        ..PowerUp::default()
     };
     pu.offset_a = 1e-9;
     sim.power_up(&pu).unwrap();
