@@ -435,8 +435,21 @@ impl Sim {
         }
         self.rig.bus = bus;
         // The per-run constants hold the bus's decay factors and source current.
-        self.pre = Pre::new(&self.rig, &self.cfg, self.ts);
+        self.rebuild_pre();
         Ok(())
+    }
+
+    /// The per-run constants again after a plant change, keeping the sensors' power-up state
+    /// ([`Sim::power_up`], [`Sim::set_adc_offsets`]: the encoder's start, the per-phase
+    /// offsets and gains, the converter's offset registers), which no plant change resets.
+    fn rebuild_pre(&mut self) {
+        let old = &self.pre;
+        let mut pre = Pre::new(&self.rig, &self.cfg, self.ts);
+        pre.enc_start = old.enc_start;
+        pre.counts_per_amp_k = old.counts_per_amp_k;
+        pre.code_base = old.code_base;
+        pre.adc_offsets = old.adc_offsets;
+        self.pre = pre;
     }
 
     /// Replace what drives the screw (fault injection: excitation beyond the rating). A
@@ -458,7 +471,7 @@ impl Sim {
             _ => return Err("drive: only the excitation of a structure can change".into()),
         }
         self.rig.drive = drive;
-        self.pre = Pre::new(&self.rig, &self.cfg, self.ts);
+        self.rebuild_pre();
         Ok(())
     }
 

@@ -141,10 +141,12 @@ fn flux_braking_holds_the_bus() {
     // 86.97 V, under the derating and the trip.
     assert!(on.bus_peak < cfg.derate_start_v as f64, "{}", on.bus_peak);
     assert!(on.id_min < -0.1, "flux braking acted");
-    // Measured +0.029 W (the TMD's amplitude and the current ripple about the balance's
-    // sinusoid); bounded at 3×, 0.09 W (3 % of the load power).
+    // Measured +0.075 W: +0.029 W with ideal sensors (the TMD's amplitude and the current
+    // ripple about the balance's sinusoid), the rest from the scenario's drawn per-phase
+    // gain errors (±2 %, the board's sensing), which bias the firmware's i_d and so its
+    // i_d² by up to 4 % (0.043 W); bounded at 2×, 0.15 W (5 % of the load power).
     assert!(
-        (on.burn_w - want).abs() < 0.09,
+        (on.burn_w - want).abs() < 0.15,
         "{} W against {want} W",
         on.burn_w
     );
