@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod effects;
+pub mod model;
 pub mod record;
 pub mod report;
 pub mod synth;
@@ -761,6 +762,11 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     // Final model refitted on the whole record.
     let tf = full.0.plus(&full.1);
     let th_full = tf.solve();
+    // Each finding's parameters are those of the final model (the coefficients `--model`
+    // writes), not of the stage at which it was selected.
+    for (k, f) in findings.iter_mut().enumerate().take(chosen.len()) {
+        f.parameters = effects::parameters(&ctx, &chosen, &cols, &th_full, k);
+    }
     let pred = effects::predict(&cols, &th_full);
     // samples at rest are in no fit (static friction is anywhere within its breakaway
     // level): they carry no residual, so they cannot show as a spectral peak either

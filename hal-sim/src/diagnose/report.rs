@@ -823,23 +823,7 @@ pub fn json(d: &Diagnosis) -> String {
     s
 }
 
-/// Extended model as TOML (format documented in docs/diagnose.md).
-pub fn model_toml(d: &Diagnosis) -> String {
-    let mut s = String::from("# device force model from `regen diagnose` (docs/diagnose.md)\n# f = sum(coefficient * column), columns defined in hal_sim::diagnose::effects\n[baseline]\n");
-    for (name, v) in d.model.iter().filter(|(n, _)| !n.contains('.')) {
-        let _ = writeln!(s, "{name} = {}", jnum(*v));
-    }
-    for e in &d.effects {
-        let _ = writeln!(
-            s,
-            "\n[[effect]]\nname = {}\nparam = {}",
-            jstr(e.kind.name()),
-            jnum(e.param)
-        );
-        let prefix = format!("{}.", e.kind.name());
-        for (name, v) in d.model.iter().filter(|(n, _)| n.starts_with(&prefix)) {
-            let _ = writeln!(s, "{} = {}", &name[prefix.len()..], jnum(*v));
-        }
-    }
-    s
+/// Extended model as a scenario fragment (TOML, `[model]`; docs/diagnose.md, "The loop").
+pub fn model_toml(rec: &Record, d: &Diagnosis) -> String {
+    super::model::fragment_toml(rec, d)
 }
