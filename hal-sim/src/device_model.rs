@@ -149,7 +149,7 @@ impl ModelEffect {
                     ("coulomb_pos_N", cp, fc + off),
                     ("coulomb_neg_N", cn, fc - off),
                 ] {
-                    if !((v - want).abs() <= tol) {
+                    if (v - want).abs().is_nan() || (v - want).abs() > tol {
                         return Err(format!(
                             "model.{} = {v}: must restate the baseline, coulomb_friction_N {} offset force_offset_N = {want}",
                             k(key),
@@ -409,18 +409,10 @@ impl ModelState {
             match *e {
                 ModelEffect::ScrewEfficiency {
                     driven_over_driving_force_ratio: r,
-                } => {
-                    if f * v > 0.0 {
-                        f *= r;
-                    }
-                }
+                } if f * v > 0.0 => f *= r,
                 ModelEffect::ReflectedInertia {
                     extra_driven_inertia_kg: j,
-                } => {
-                    if f * v > 0.0 {
-                        f += j * a;
-                    }
-                }
+                } if f * v > 0.0 => f += j * a,
                 ModelEffect::Backlash { width_m, gain } => {
                     let h = 0.5 * width_m;
                     let xm = &mut self.play[i];
