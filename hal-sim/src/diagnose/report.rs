@@ -600,6 +600,20 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         100.0 * d.final_full_rel_error,
         100.0 * d.baseline_full_rel_error
     );
+    let base: Vec<String> = d
+        .model
+        .iter()
+        .filter(|(n, _)| !n.contains('.'))
+        .map(|(n, v)| {
+            let (name, unit) = super::effects::baseline_term(n);
+            format!("{name} {v:.6} {unit}")
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "Extended model fitted on the whole record (what --model writes; the findings' parameters above are of this fit): {}",
+        base.join(", ")
+    );
     let _ = writeln!(
         s,
         "Residual by direction / power quadrant (rms N, samples):"
@@ -674,139 +688,70 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
     s
 }
 
-fn jnum(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:e}")
-    } else {
-        "null".into()
-    }
-}
-
-fn jstr(s: &str) -> String {
-    let mut o = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
-
-/// Machine-readable report.
+/// Machine-readable report (serde_json; a non-finite number is written as `null`). Keys:
+/// docs/diagnose.md, "Output".
 pub fn json(d: &Diagnosis) -> String {
-    let mut s = String::from("{\n");
-    let _ = writeln!(s, "  \"samples\": {},", d.n);
-    let _ = writeln!(
-        s,
-        "  \"verdicts\": [{}],",
-        d.verdicts
-            .iter()
-            .map(|v| jstr(v))
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-    let _ = writeln!(
-        s,
-        "  \"baseline_holdout_rel_error\": {},",
-        jnum(d.baseline_holdout_rel_error)
-    );
-    let _ = writeln!(
-        s,
-        "  \"final_holdout_rel_error\": {},",
-        jnum(d.final_holdout_rel_error)
-    );
-    let _ = writeln!(
-        s,
-        "  \"baseline_full_rel_error\": {},",
-        jnum(d.baseline_full_rel_error)
-    );
-    let _ = writeln!(
-        s,
-        "  \"final_full_rel_error\": {},",
-        jnum(d.final_full_rel_error)
-    );
-    s.push_str("  \"baseline_terms\": [");
-    for (i, b) in d.baseline_terms.iter().enumerate() {
-        let _ = write!(s, "{}\n    {{\"effect\": {}, \"value\": {}, \"unit\": {}, \"holdout_rel_error_without\": {}, \"significant\": {}}}", if i > 0 { "," } else { "" }, jstr(&b.effect), jnum(b.value), jstr(&b.unit), jnum(b.holdout_rel_error_without), b.significant);
-    }
-    s.push_str("\n  ],\n  \"findings\": [");
-    for (i, f) in d.findings.iter().enumerate() {
-        let params: Vec<String> = f
-            .parameters
-            .iter()
-            .map(|(k, v)| format!("{}: {}", jstr(k), jnum(*v)))
-            .collect();
-        let _ = write!(
-            s,
-            "{}\n    {{\"effect\": {}, \"parameters\": {{{}}}, \"evidence\": {{\"holdout_rss_drop\": {}, \"delta_bic\": {}, \"consistency\": {}, \"note\": {}}}, \"holdout_rel_error_after\": {}}}",
-            if i > 0 { "," } else { "" },
-            jstr(&f.effect),
-            params.join(", "),
-            jnum(f.holdout_rss_drop),
-            jnum(f.delta_bic),
-            jnum(f.consistency),
-            jstr(&f.note),
-            jnum(f.holdout_rel_error_after)
-        );
-    }
-    s.push_str("\n  ],\n");
+    use serde_json::{json, Map, Value};
+    let num = |v: f64| Value::from(v); // NaN and ±inf become null
     let w = &d.whiteness;
-    let _ = writeln!(
-        s,
-        "  \"whiteness\": {{\"ljung_box_q\": {}, \"q_crit_99\": {}, \"lags\": {}, \"white\": {}}},",
-        jnum(w.q),
-        jnum(w.q_crit),
-        w.lags,
-        w.white
-    );
     let ps = &d.position_spectrum;
-    let _ = writeln!(
-        s,
-        "  \"position_spectrum\": {{\"bins\": {}, \"bin_m\": {}, \"span_m\": {}, \"v_min_m_s\": {}, \"directions\": {}, \"peaks\": [{}]}},",
-        ps.bins,
-        jnum(ps.bin_m),
-        jnum(ps.span_m),
-        jnum(ps.v_min),
-        ps.directions,
-        ps.peaks
-            .iter()
-            .map(|p| format!(
-                "{{\"wavelength_m\": {}, \"amplitude_N\": {}, \"ratio\": {}, \"matches\": {}, \"unexplained\": {}}}",
-                jnum(p.wavelength_m),
-                jnum(p.amplitude),
-                jnum(p.ratio),
-                jstr(&p.matches),
-                p.unexplained
-            ))
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-    match &d.cross {
-        Some(c) => {
-            let _ = writeln!(
-                s,
-                "  \"cross_check\": {{\"baseline_rel_error\": {}, \"final_rel_error\": {}, \"after_each\": [{}]}}",
-                jnum(c.baseline_rel_error),
-                jnum(c.final_rel_error),
-                c.after_each
-                    .iter()
-                    .zip(&c.worsens)
-                    .map(|((e, v), w)| format!(
-                        "{{\"effect\": {}, \"rel_error\": {}, \"worsens\": {w}}}",
-                        jstr(e),
-                        jnum(*v)
-                    ))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-        }
-        None => s.push_str("  \"cross_check\": null\n"),
-    }
-    s.push_str("}\n");
+    let report = json!({
+        "samples": d.n,
+        "verdicts": d.verdicts,
+        "baseline_holdout_rel_error": num(d.baseline_holdout_rel_error),
+        "final_holdout_rel_error": num(d.final_holdout_rel_error),
+        "baseline_full_rel_error": num(d.baseline_full_rel_error),
+        "final_full_rel_error": num(d.final_full_rel_error),
+        "baseline_terms": d.baseline_terms.iter().map(|b| json!({
+            "effect": b.effect,
+            "value": num(b.value),
+            "unit": b.unit,
+            "holdout_rel_error_without": num(b.holdout_rel_error_without),
+            "significant": b.significant,
+        })).collect::<Vec<_>>(),
+        "findings": d.findings.iter().map(|f| json!({
+            "effect": f.effect,
+            "parameters": f.parameters.iter().map(|(k, v)| (k.clone(), num(*v))).collect::<Map<_, _>>(),
+            "evidence": {
+                "holdout_rss_drop": num(f.holdout_rss_drop),
+                "delta_bic": num(f.delta_bic),
+                "consistency": num(f.consistency),
+                "note": f.note,
+            },
+            "holdout_rel_error_after": num(f.holdout_rel_error_after),
+        })).collect::<Vec<_>>(),
+        "whiteness": {
+            "ljung_box_q": num(w.q),
+            "q_crit_99": num(w.q_crit),
+            "lags": w.lags,
+            "white": w.white,
+        },
+        "position_spectrum": {
+            "bins": ps.bins,
+            "bin_m": num(ps.bin_m),
+            "span_m": num(ps.span_m),
+            "v_min_m_s": num(ps.v_min),
+            "directions": ps.directions,
+            "peaks": ps.peaks.iter().map(|p| json!({
+                "wavelength_m": num(p.wavelength_m),
+                "amplitude_N": num(p.amplitude),
+                "ratio": num(p.ratio),
+                "matches": p.matches,
+                "unexplained": p.unexplained,
+            })).collect::<Vec<_>>(),
+        },
+        "cross_check": d.cross.as_ref().map(|c| json!({
+            "baseline_rel_error": num(c.baseline_rel_error),
+            "final_rel_error": num(c.final_rel_error),
+            "after_each": c.after_each.iter().zip(&c.worsens).map(|((e, v), w)| json!({
+                "effect": e,
+                "rel_error": num(*v),
+                "worsens": w,
+            })).collect::<Vec<_>>(),
+        })),
+    });
+    let mut s = serde_json::to_string_pretty(&report).unwrap_or_default();
+    s.push('\n');
     s
 }
 
