@@ -533,6 +533,58 @@ mod tests {
         assert!((peak / want - 1.0).abs() < 0.02, "{peak} vs {want}");
     }
 
+    /// Clip, play and Dahl state on a ramp out and back (closed forms): the clip holds the
+    /// force at ±L; across the play the force is the offset for `width` of travel after the
+    /// reversal; the Dahl state after a travel d from a reversal is 1 − 2·e^(−d/x_c).
+    #[test]
+    fn clip_play_and_dahl_on_a_reversal() {
+        let dt = 1e-3;
+        let n = 2000;
+        let v0 = 0.01;
+        // out for 1 s at +v0, back for 1 s at −v0
+        let x: Vec<f64> = (0..n)
+            .map(|i| {
+                let t = i as f64 * dt;
+                if t < 1.0 {
+                    v0 * t
+                } else {
+                    v0 * (2.0 - t)
+                }
+            })
+            .collect();
+        let v: Vec<f64> = (0..n).map(|i| if i < 1000 { v0 } else { -v0 }).collect();
+        let a = vec![0.0; n];
+        let mut m = base();
+        m.effects = vec![ModelEffect::CurrentLimit {
+            limit_N: 5.0,
+            gain: 1.0,
+        }];
+        let f = m.force_series(dt, &x, &v, &a);
+        // 400·0.01 + 30 + 2 = 36 N clipped at 5 N; −36 + 4 → −30 + 2 = −32 → −5
+        assert!((f[500] - 5.0).abs() < 1e-12 && (f[1500] + 5.0).abs() < 1e-12);
+        m.effects = vec![ModelEffect::Backlash {
+            width_m: 0.002,
+            gain: 1.0,
+        }];
+        let f = m.force_series(dt, &x, &v, &a);
+        // the play is centred at the start: in contact after 1 mm (100 samples)
+        assert!((f[50] - 2.0).abs() < 1e-12, "{}", f[50]);
+        assert!((f[500] - 36.0).abs() < 1e-12);
+        // after the reversal at sample 1000: 2 mm of travel (200 samples) at the offset
+        assert!((f[1100] - 2.0).abs() < 1e-12 && (f[1190] - 2.0).abs() < 1e-12);
+        assert!((f[1300] + 32.0).abs() < 1e-12, "{}", f[1300]);
+        m.effects = vec![ModelEffect::PreslidingHysteresis {
+            characteristic_displacement_m: 0.001,
+            friction_N: 10.0,
+        }];
+        let f = m.force_series(dt, &x, &v, &a);
+        // at 1.5 s: 5 mm back from the reversal, z = −1 + (z_r + 1)·e^(−5), z_r ≈ 1
+        let z_r = 1.0 - (-10.0f64).exp(); // 10 mm out from z = 0: 1 − e^(−10)
+        let z = -1.0 + (z_r + 1.0) * (-5.0f64).exp();
+        let want = -4.0 - 30.0 + 2.0 + 10.0 * (z + 1.0);
+        assert!((f[1500] - want).abs() < 1e-9, "{} vs {want}", f[1500]);
+    }
+
     #[test]
     fn bad_fragment_names_key_value_range() {
         let t = "[model]\ninertia_kg = -3\nviscous_friction_Ns_per_m = 1\ncoulomb_friction_N = 1\nsign_band_m_s = 1e-4\n";
