@@ -573,6 +573,8 @@ mod tests {
         // after the reversal at sample 1000: 2 mm of travel (200 samples) at the offset
         assert!((f[1100] - 2.0).abs() < 1e-12 && (f[1190] - 2.0).abs() < 1e-12);
         assert!((f[1300] + 32.0).abs() < 1e-12, "{}", f[1300]);
+        // the gap's end: 1.99 mm back still across it, 2.01 mm in contact
+        assert!((f[1199] - 2.0).abs() < 1e-12 && (f[1201] + 32.0).abs() < 1e-12);
         m.effects = vec![ModelEffect::PreslidingHysteresis {
             characteristic_displacement_m: 0.001,
             friction_N: 10.0,
