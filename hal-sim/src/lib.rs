@@ -17,6 +17,7 @@
 pub mod analytic;
 pub mod bench_rig;
 pub mod cli;
+pub mod device_model;
 pub mod diagnose;
 pub mod drive;
 pub mod fastmath;

@@ -125,8 +125,28 @@ pub enum Motion {
     Sine { amplitude_m: f64, freq_hz: f64 },
     /// Symmetric triangle of amplitude A (constant speed 4·A·f), starting at 0 going up.
     Triangle { amplitude_m: f64, freq_hz: f64 },
-    /// Recorded trajectory: times (s) and positions (m), linearly interpolated.
-    Recorded { t_s: Vec<f64>, x_m: Vec<f64> },
+    /// Recorded trajectory: times (s) and positions (m), linearly interpolated; with
+    /// `v_m_s` given, the position is the cubic Hermite curve through the samples with those
+    /// velocities, and velocity and acceleration are linearly interpolated from `v_m_s`,
+    /// `a_m_s2` (else the slope of the position segments and 0).
+    Recorded {
+        t_s: Vec<f64>,
+        x_m: Vec<f64>,
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        v_m_s: Vec<f64>,
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        a_m_s2: Vec<f64>,
+    },
+    /// The motion of a record in the `diagnose` schema (CSV `t_s, x_m, f_N`, docs/diagnose.md),
+    /// replayed: read when the scenario is built, velocity and acceleration derived by the
+    /// diagnosis's reader (zero-phase Butterworth-2 at `cutoff_hz`, default fs/20, then central
+    /// differences) or taken from its `v_m_s`, `a_m_s2` columns, so the replay moves as the
+    /// diagnosis saw the record move.
+    Record {
+        path: String,
+        #[serde(default)]
+        cutoff_hz: Option<f64>,
+    },
 }
 
 impl Motion {
@@ -170,7 +190,12 @@ impl Motion {
                     (a * (3.0 - 4.0 * ph), -v, 0.0)
                 }
             }
-            Motion::Recorded { t_s, x_m } => {
+            Motion::Recorded {
+                t_s,
+                x_m,
+                v_m_s,
+                a_m_s2,
+            } => {
                 let n = t_s.len().min(x_m.len());
                 if n < 2 {
                     return (x_m.first().copied().unwrap_or(0.0), 0.0, 0.0);
@@ -182,8 +207,29 @@ impl Motion {
                 let dt = t_s[k + 1] - t_s[k];
                 let v = (x_m[k + 1] - x_m[k]) / dt;
                 let tt = (t - t_s[k]).clamp(0.0, dt);
-                (x_m[k] + v * tt, if t > t_s[n - 1] { 0.0 } else { v }, 0.0)
+                let after = t > t_s[n - 1];
+                let lerp = |c: &[f64]| {
+                    if after || c.len() < n {
+                        0.0
+                    } else {
+                        c[k] + (c[k + 1] - c[k]) * tt / dt
+                    }
+                };
+                if v_m_s.len() >= n && !after {
+                    // cubic Hermite position through the samples with the given velocities
+                    // (a smooth path: a drive's encoder and emf see no velocity steps)
+                    let s = tt / dt;
+                    let (s2, s3) = (s * s, s * s * s);
+                    let x = (2.0 * s3 - 3.0 * s2 + 1.0) * x_m[k]
+                        + (s3 - 2.0 * s2 + s) * dt * v_m_s[k]
+                        + (3.0 * s2 - 2.0 * s3) * x_m[k + 1]
+                        + (s3 - s2) * dt * v_m_s[k + 1];
+                    return (x, lerp(v_m_s), lerp(a_m_s2));
+                }
+                (x_m[k] + v * tt, if after { 0.0 } else { v }, lerp(a_m_s2))
             }
+            // Replaced by `Recorded` when the scenario is built.
+            Motion::Record { .. } => (0.0, 0.0, 0.0),
         }
     }
 }

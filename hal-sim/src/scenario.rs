@@ -230,6 +230,11 @@ pub struct Scenario {
     pub law: LawSpec,
     #[serde(default)]
     pub record: RecordSpec,
+    /// A diagnosed device model (`regen diagnose --model`, [`crate::device_model`]): with an
+    /// imposed motion, the device's mechanical force is this model's instead of the screw's
+    /// (the machine's electromagnetic force still adds to it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<crate::device_model::DeviceModel>,
 }
 
 fn default_name() -> String {
@@ -245,6 +250,18 @@ impl Scenario {
         let s: Scenario = toml::from_str(text).map_err(|e| toml_error(text, &e))?;
         s.check()?;
         Ok(s)
+    }
+
+    /// This scenario with the model of a fragment file (`regen run --model`, the TOML that
+    /// `regen diagnose --model` writes: one `[model]` table), checked as the scenario is.
+    pub fn with_model_file(mut self, path: &std::path::Path) -> Result<Scenario, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let f = crate::device_model::Fragment::from_toml(&text)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        self.model = Some(f.model);
+        self.check()
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(self)
     }
 
     /// Read and parse a file.
@@ -281,6 +298,7 @@ impl Scenario {
                 ..LawSpec::default()
             },
             record: RecordSpec::default(),
+            model: None,
         }
     }
 
@@ -318,6 +336,15 @@ impl Scenario {
             ));
         }
         self.physics()?;
+        if let Some(m) = &self.model {
+            if !matches!(self.drive, Drive::Imposed { .. }) {
+                return Err("model: a diagnosed device model needs drive.kind = \"imposed\" (it is the force of the device on a given motion)".into());
+            }
+            if self.screw.efficiency != 1.0 {
+                return Err(format!("screw.efficiency = {}: must be 1 with a [model] (the model replaces the screw's mechanical force; its own `screw_efficiency` effect carries the efficiency)", self.screw.efficiency));
+            }
+            m.check()?;
+        }
         for c in &self.record.channels {
             if Channel::from_name(c).is_none() {
                 let all: Vec<&str> = Channel::ALL.iter().map(|c| c.name()).collect();
@@ -471,28 +498,48 @@ impl Scenario {
             "m/s",
         )?;
         match &self.drive {
-            Drive::Imposed { motion } => match motion {
-                Motion::Sine {
-                    amplitude_m,
-                    freq_hz,
+            Drive::Imposed { motion } => {
+                match motion {
+                    Motion::Sine {
+                        amplitude_m,
+                        freq_hz,
+                    }
+                    | Motion::Triangle {
+                        amplitude_m,
+                        freq_hz,
+                    } => {
+                        in_range(
+                            "drive.motion.amplitude_m",
+                            *amplitude_m,
+                            Closed(0.0),
+                            10.0,
+                            "m",
+                        )?;
+                        in_range("drive.motion.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
+                    }
+                    Motion::Recorded {
+                        t_s,
+                        x_m,
+                        v_m_s,
+                        a_m_s2,
+                    } => {
+                        series("drive.motion", t_s, "x_m", x_m, 10.0)?;
+                        for (key, c, bound) in [("v_m_s", v_m_s, 20.0), ("a_m_s2", a_m_s2, 1e4)] {
+                            if !c.is_empty() {
+                                series("drive.motion", t_s, key, c, bound)?;
+                            }
+                        }
+                    }
+                    Motion::Record { path, cutoff_hz } => {
+                        if path.trim().is_empty() {
+                            return Err("drive.motion.path = \"\": a record file (CSV t_s,x_m,f_N) is needed".into());
+                        }
+                        if let Some(fc) = cutoff_hz {
+                            in_range("drive.motion.cutoff_hz", *fc, Open(0.0), 1e6, "Hz")?;
+                        }
+                    }
                 }
-                | Motion::Triangle {
-                    amplitude_m,
-                    freq_hz,
-                } => {
-                    in_range(
-                        "drive.motion.amplitude_m",
-                        *amplitude_m,
-                        Closed(0.0),
-                        10.0,
-                        "m",
-                    )?;
-                    in_range("drive.motion.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
-                }
-                Motion::Recorded { t_s, x_m } => {
-                    series("drive.motion", t_s, "x_m", x_m, 10.0)?;
-                }
-            },
+            }
             Drive::Structure {
                 structure,
                 excitation,
@@ -637,6 +684,18 @@ impl Scenario {
     /// The drive with recorded files loaded.
     fn loaded_drive(&self) -> Result<Drive, String> {
         let mut d = self.drive.clone();
+        if let Drive::Imposed { motion } = &mut d {
+            if let Motion::Record { path, cutoff_hz } = motion {
+                let r = crate::diagnose::read_csv(std::path::Path::new(path.as_str()), *cutoff_hz)
+                    .map_err(|e| format!("drive.motion.path: {e}"))?;
+                *motion = Motion::Recorded {
+                    t_s: r.t,
+                    x_m: r.x,
+                    v_m_s: r.v,
+                    a_m_s2: r.a,
+                };
+            }
+        }
         if let Drive::Structure { excitation, .. } = &mut d {
             if let Excitation::RecordedCsv { path } = excitation {
                 let (t_s, a_m_s2) =
@@ -660,6 +719,9 @@ impl Scenario {
             sensors: self.sensors,
         };
         let mut sim = Sim::new(rig, &self.config()?)?;
+        if let Some(m) = &self.model {
+            sim.set_model(m);
+        }
         if sim.power_up(&self.powerup)?.is_some() {
             // A boot that fails leaves its fault latched (and the drive in its safe mode)
             // for the run to show.

@@ -332,6 +332,9 @@ pub struct Sim {
     /// The encoder's index channel ([`crate::powerup`]) and its capture at the last sample.
     index: IndexPulse,
     index_capture: Option<u16>,
+    /// A diagnosed device model replacing the screw's mechanical force on an imposed motion
+    /// ([`Sim::set_model`]).
+    model: Option<Box<crate::device_model::ModelState>>,
 }
 
 impl Sim {
@@ -403,9 +406,31 @@ impl Sim {
             break_flag: None,
             index: IndexPulse::default(),
             index_capture: None,
+            model: None,
         };
+        // The encoder is incremental: the firmware's angle is referenced to the first count
+        // (`Boot::Stored`), so the rotor's electrical angle is zero there: an imposed motion
+        // starting away from x = 0 puts the rotor's angle origin at its first count.
+        let x_c = (x0 * sim.pre.counts_per_m).floor() / sim.pre.counts_per_m;
+        if x_c != 0.0 {
+            sim.pre.theta_offset -= x_c * sim.pre.theta_per_m;
+        }
         sim.stored_start = sim.stored();
         Ok(sim)
+    }
+
+    /// Replace the screw's mechanical force (inertia, friction, efficiency) by a diagnosed
+    /// device model, stepped at the mid-period motion ([`crate::device_model`]); the
+    /// machine's electromagnetic force adds to it. Imposed motion only (a structure's
+    /// dynamics would need the model's inertia in its implicit step): ignored otherwise. The
+    /// model's mechanical work is booked in the ledger as the friction's.
+    pub fn set_model(&mut self, m: &crate::device_model::DeviceModel) {
+        if let Drive::Imposed { motion } = &self.rig.drive {
+            let (x, v, _) = motion.at(self.s.t + self.ts / 2.0);
+            self.model = Some(Box::new(crate::device_model::ModelState::new(
+                m, self.ts, x, v,
+            )));
+        }
     }
 
     /// The MCU boots again (after a watchdog reset, `crate::stage`): a fresh controller,
@@ -1034,7 +1059,10 @@ impl Sim {
             Drive::Imposed { motion } => {
                 let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
                 let vm = vm_est;
-                let inner = f_e + jr * am_imposed + br * vm;
+                let (inner, fd) = match self.model.as_deref_mut() {
+                    None => (f_e + jr * am_imposed + br * vm, fd),
+                    Some(m) => (f_e, m.step(xm, vm, am_imposed)),
+                };
                 let out = ((inner + fd) * vm < 0.0) as usize;
                 let h = if out == 0 { p.h_in } else { p.h_out };
                 let f = h * inner + fd;

@@ -130,7 +130,7 @@ fn reader_and_pipeline_never_panic() {
             let d = diagnose(&rec, &opt);
             let _ = report::text(&rec, &d);
             let _ = report::json(&d);
-            let _ = report::model_toml(&d);
+            let _ = report::model_toml(&rec, &d);
             (
                 true,
                 !d.verdicts.is_empty() && d.findings.is_empty(),

@@ -104,8 +104,15 @@ fn hidden_position_periodic_force_shows_at_its_wavelength() {
             .unwrap()
             .1;
         assert_eq!(wl, top.wavelength_m);
-        let js = report::json(&d);
-        assert!(js.contains("\"effect\": \"unexplained\", \"parameters\": {\"wavelength_m\""));
+        let js: serde_json::Value = serde_json::from_str(&report::json(&d)).unwrap();
+        assert!(js["findings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|f| f["effect"] == "unexplained"
+                && f["parameters"]["wavelength_m"]
+                    .as_f64()
+                    .is_some_and(|w| (w / top.wavelength_m - 1.0).abs() < 1e-15)));
         found += 1;
     }
     println!("hidden position-periodic forces found at their wavelength: {found}/{seeds}");

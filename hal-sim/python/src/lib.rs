@@ -531,7 +531,7 @@ fn diagnose_csv(
         }
         Ok::<_, String>((
             report::json(&d),
-            report::model_toml(&d),
+            report::model_toml(&rec, &d),
             report::text(&rec, &d),
         ))
     })

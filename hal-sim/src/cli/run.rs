@@ -23,6 +23,42 @@ pub struct RunArgs {
     /// No progress bar (it is also hidden when stderr is not a terminal).
     #[arg(long, short)]
     pub quiet: bool,
+    /// A diagnosed device model (the fragment `regen diagnose --model` writes: one `[model]`
+    /// table) replacing the scenario's `[model]`; needs an imposed motion.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Also write the run as a record in the `diagnose` schema (`t_s, x_m, f_N`, and `i_q_A`
+    /// when recorded) at the recorder's rate; the channels t, x and force are recorded.
+    #[arg(long)]
+    pub record_diagnose: Option<PathBuf>,
+}
+
+/// A run's recorded channels as a record in the `diagnose` schema (docs/diagnose.md): CSV
+/// `t_s, x_m, f_N` (force on the device in +x), `i_q_A` when recorded, the screw's lead as
+/// `# lead_m_per_rev` metadata; every value written exactly (shortest text reading back to
+/// the same `f64`).
+pub fn diagnose_record_csv(rec: &Recorder, lead_m_per_rev: f64) -> Result<String, String> {
+    let col = |c| rec.column(c);
+    let (Some(t), Some(x), Some(f)) = (col(Channel::T), col(Channel::X), col(Channel::Force))
+    else {
+        return Err(
+            "--record-diagnose: the channels t, x and force must be recorded (record.channels)"
+                .into(),
+        );
+    };
+    let iq = col(Channel::Iq);
+    let mut s = format!(
+        "# regen run record in the diagnose schema\n# lead_m_per_rev = {lead_m_per_rev}\nt_s,x_m,f_N{}\n",
+        if iq.is_some() { ",i_q_A" } else { "" }
+    );
+    for i in 0..t.len() {
+        s.push_str(&format!("{},{},{}", t[i], x[i], f[i]));
+        if let Some(q) = &iq {
+            s.push_str(&format!(",{}", q[i]));
+        }
+        s.push('\n');
+    }
+    Ok(s)
 }
 
 /// `--window T0,T1` checked against the run: finite, T0 < T1, inside [0, duration].
@@ -97,13 +133,34 @@ pub fn exact_ledger_line(e: &Energy) -> String {
 }
 
 pub fn run(a: &RunArgs) -> Result<(), String> {
-    let sc = Scenario::from_file(&a.scenario)?;
+    let mut sc = Scenario::from_file(&a.scenario)?;
+    if let Some(m) = &a.model {
+        sc = sc.with_model_file(m).map_err(|e| format!("--model {e}"))?;
+    }
+    if let Some(p) = &a.record_diagnose {
+        if p.is_dir() {
+            return Err(format!(
+                "--record-diagnose {}: is a directory, a file path expected",
+                p.display()
+            ));
+        }
+        for c in ["t", "x", "force"] {
+            if !sc.record.channels.iter().any(|k| k == c) {
+                sc.record.channels.push(c.into());
+            }
+        }
+    }
     let window = check_window(&a.window, sc.duration_s)?;
     check_out_dir(&a.out)?;
     let bar = Progress::new(&sc.name, sc.duration_s, a.quiet);
     let o = simulate(&sc, &mut bar.callback())?;
     bar.finish();
     let (s, wall) = (&o.summary, o.wall_s);
+    if let (Some(p), Some(rec)) = (&a.record_diagnose, &o.recorder) {
+        let lead = sc.screw.lead_m_per_rad * std::f64::consts::TAU;
+        write(p, &diagnose_record_csv(rec, lead)?)?;
+        println!("diagnose record: {}", p.display());
+    }
     if let Some(rec) = &o.recorder {
         let csv = a.out.join(format!("{}.csv", sc.name));
         write(&csv, &rec.to_csv())?;

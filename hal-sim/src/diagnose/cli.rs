@@ -153,7 +153,8 @@ pub fn cli_main(args: DiagnoseArgs) -> Result<(), Box<dyn std::error::Error>> {
         println!("wrote {}", p.display());
     }
     if let Some(p) = &args.model {
-        std::fs::write(p, report::model_toml(&d)).map_err(|e| format!("{}: {e}", p.display()))?;
+        std::fs::write(p, report::model_toml(&rec, &d))
+            .map_err(|e| format!("{}: {e}", p.display()))?;
         println!("wrote {}", p.display());
     }
     if let Some(dir) = &args.plots {

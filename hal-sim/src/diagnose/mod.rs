@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod effects;
+pub mod model;
 pub mod record;
 pub mod report;
 pub mod synth;
@@ -824,6 +825,11 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     let sol = tf.solve_full();
     let (fit_rank, fit_condition) = (sol.rank, sol.condition);
     let th_full = sol.th;
+    // Each finding's parameters are those of the final model (the coefficients `--model`
+    // writes), not of the stage at which it was selected.
+    for (k, f) in findings.iter_mut().enumerate().take(chosen.len()) {
+        f.parameters = effects::parameters(&ctx, &chosen, &cols, &th_full, k);
+    }
     let pred = effects::predict(&cols, &th_full);
     // samples at rest are in no fit (static friction is anywhere within its breakaway
     // level): they carry no residual, so they cannot show as a spectral peak either
