@@ -133,8 +133,11 @@ fn shipped_scenarios_parse_and_run() {
         let sc = Scenario::from_file(&p).unwrap_or_else(|e| panic!("{e}"));
         let mut sim = sc.build().unwrap();
         sim.run_for(sc.duration_s.min(0.5));
-        // Measured 3.7e-9 (tmd-306) and 1.4e-12 (the two bench scenarios): 1.1e-8 for all.
-        check_balance(&sim.energy(), &sc.name, 1.1e-8);
+        // Measured 3.7e-9 (tmd-306) and ≤ 6.4e-12 (the bench scenarios): 1.1e-8; a
+        // scenario that boots first (board-72v-tmd-306: calibration, the alignment's d-axis
+        // field and its short while the structure moves, then 0.5 s of run) 2.6e-8: 8e-8.
+        let bound = if sc.powerup.any() { 8e-8 } else { 1.1e-8 };
+        check_balance(&sim.energy(), &sc.name, bound);
         assert!(sim.controller().fault().is_none(), "{}", sc.name);
         assert!(!sim.recorder().unwrap().rows.is_empty());
         n += 1;
