@@ -476,6 +476,10 @@ pub struct Losses {
     pub r_on_ohm: f64,
     /// Logic supply, W (taken from the bus while the gates are enabled or not).
     pub logic_w: f64,
+    /// The logic supply's under-voltage lockout, V: with the bus below it the supply draws
+    /// nothing (a converter does not hold its power into a collapsing input; a constant
+    /// power drawn from a bus near zero would drive it negative).
+    pub logic_min_v: f64,
 }
 
 impl Default for Losses {
@@ -484,6 +488,7 @@ impl Default for Losses {
             k_sw_s: 50e-9,
             r_on_ohm: 0.02,
             logic_w: 2.0,
+            logic_min_v: 10.0,
         }
     }
 }

@@ -634,6 +634,7 @@ impl Scenario {
         in_range("losses.k_sw_s", l.k_sw_s, Closed(0.0), 1e-5, "s")?;
         in_range("losses.r_on_ohm", l.r_on_ohm, Closed(0.0), 10.0, "Ω")?;
         in_range("losses.logic_w", l.logic_w, Closed(0.0), 1e3, "W")?;
+        in_range("losses.logic_min_v", l.logic_min_v, Closed(0.0), 1e4, "V")?;
         let n = &self.sensors;
         for (k, o) in n.current_offset_a.iter().enumerate() {
             in_range(

@@ -103,7 +103,8 @@ impl Energy {
 /// The ledger's flows as the period accumulates them: sums over periods of each flow's
 /// mean power over its period, W, scaled by the period `T` only when the ledger is read
 /// ([`Sim::energy`]). Copper and conduction losses share one sum (of the mean of
-/// i_α² + i_β²), and the logic supply is its constant power times the number of periods.
+/// i_α² + i_β²), and the logic supply is its power summed over the periods (nothing
+/// below its lockout).
 /// The mechanical flows are kept as the few products they are made of: with the device force
 /// f = h·inner + f_d (`inner` = electromagnetic + viscous + inertial force, h ∈ {h_in, h_out}),
 /// f·v̄ = h·inner·v̄ + f_d·v̄ and the screw's loss is (h − 1)·inner·v̄, so one sum of inner·v̄
@@ -130,6 +131,8 @@ struct Flows {
     brake: f64,
     source_r_loss: f64,
     sink: f64,
+    /// Σ the logic supply's power over the periods, W (nothing below its lockout).
+    logic: f64,
 }
 
 /// A channel the recorder can keep.
@@ -546,7 +549,7 @@ impl Sim {
             to_inverter: f.to_inverter * ts,
             switching_loss: f.switching_loss * ts,
             conduction_loss: p.r_on_15 * ts * (f.i2 - f.i2_off),
-            logic_loss: p.logic_w * ts * self.steps as f64,
+            logic_loss: f.logic * ts,
             brake: f.brake * ts,
             source_r_loss: f.source_r_loss * ts,
             sink: f.sink * ts,
@@ -1005,7 +1008,9 @@ impl Sim {
             (0.0, 0.0)
         };
         fl.switching_loss += p_sw;
-        let p_draw = p_inv + p_sw + p_cond + p.logic_w;
+        let p_logic = if vb0 >= p.logic_min_v { p.logic_w } else { 0.0 };
+        fl.logic += p_logic;
+        let p_draw = p_inv + p_sw + p_cond + p_logic;
         let bk = &p.bus[act.brake as usize];
         // Injection current such that ∫V·i_inj dt equals the energy the inverter drew, by one
         // fixed-point step from the guess i₀ = −p/max(V, 1) (the rest, second order, shows in
@@ -1491,6 +1496,7 @@ struct Pre {
     k_sw_f: f64,
     r_on_15: f64,
     logic_w: f64,
+    logic_min_v: f64,
     // Bus.
     bus: [BusK; 2],
     i_source: f64,
@@ -1611,6 +1617,7 @@ impl Pre {
             k_sw_f: rig.losses.k_sw_s * cfg.pwm_hz as f64,
             r_on_15: rig.losses.r_on_ohm * 1.5,
             logic_w: rig.losses.logic_w,
+            logic_min_v: rig.losses.logic_min_v,
             bus: [bus_k(0.0), bus_k(1.0 / b.brake_r_ohm)],
             i_source,
             g_source: gs,
