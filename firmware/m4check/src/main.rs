@@ -9,13 +9,13 @@
 use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
+use regen_fw::control::{Boot, Fault};
 use regen_fw::encoder::{Encoder, EncoderGains};
 use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq, Rotation};
 use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
 use regen_fw::svpwm::{inv_bus, modulate_limited};
-use regen_fw::control::{Boot, Fault};
 use regen_fw::{Actuation, Compiled, Config, Controller, Mode, RawSample};
 
 static VECTORS: &[u8] = include_bytes!("../vectors.bin");
