@@ -405,19 +405,6 @@ pub fn sine_best_fixed_fc(model: LinModel, f_c: f64, amp: f64, f_hz: f64) -> (f6
     (r, f(r.ln()).max(p[kb]))
 }
 
-/// Mean powers of one law on broadband excitation: `(terminal W, drive-loss W, back-flow W)`.
-pub fn broadband_run(
-    model: LinModel,
-    cfg: &Config,
-    loss: LossModel,
-    seed: u64,
-    settle_s: f64,
-    secs: f64,
-) -> (f64, f64, f64) {
-    let r = broadband_run_with(model, cfg, loss, seed, settle_s, secs, &mut |_| {}).unwrap();
-    (r.p_terminal, r.p_drive, r.p_back)
-}
-
 /// What [`broadband_run_with`] measured over the averaging time.
 #[derive(Clone, Copy, Debug)]
 pub struct Broadband {
@@ -432,8 +419,9 @@ pub struct Broadband {
     pub limited: f64,
 }
 
-/// As [`broadband_run`], calling `tick` with the simulated seconds done (settling included)
-/// after every simulated second, and reporting how often the current limit clipped.
+/// Mean powers of one law on broadband excitation (Kanai–Tajimi, `seed`) over `secs` after
+/// `settle_s`, calling `tick` with the simulated seconds done (settling included) after every
+/// simulated second, and how often the current limit clipped.
 pub fn broadband_run_with(
     model: LinModel,
     cfg: &Config,

@@ -3,7 +3,7 @@
 //! the resistor. Compact model (`hal_sim::study`), firmware laws in fixed point.
 
 use hal_sim::lqg::{self, LqgSpec};
-use hal_sim::study::{broadband_run, study_config, LossModel};
+use hal_sim::study::{broadband_run_with, study_config, LossModel};
 use regen_fw::laws::LawKind;
 use regen_fw::Config;
 
@@ -34,7 +34,13 @@ fn two_way_beats_best_fixed_resistor_on_broadband() {
     let p: Vec<f64> = std::thread::scope(|s| {
         let h: Vec<_> = runs
             .iter()
-            .map(|c| s.spawn(move || broadband_run(model, c, LossModel::NONE, 42, 30.0, secs).0))
+            .map(|c| {
+                s.spawn(move || {
+                    broadband_run_with(model, c, LossModel::NONE, 42, 30.0, secs, &mut |_| {})
+                        .expect("broadband run")
+                        .p_terminal
+                })
+            })
             .collect();
         h.into_iter().map(|h| h.join().unwrap()).collect()
     });
