@@ -9,8 +9,8 @@
 //! no current flows: the amplitude of the undamped-by-the-drive TMD), and the energy ledger
 //! closes over the whole minute.
 
+use hal_sim::cli::sweep::set_param;
 use hal_sim::faults::{FaultSim, Inject};
-use hal_sim::plant::{Drive, Excitation};
 use hal_sim::scenario::Scenario;
 use hal_sim::stage::StageSpec;
 use regen_fw::protect::Fault;
@@ -22,13 +22,7 @@ fn drained_bus_stays_physical() {
         let mut sc = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
         sc.record.channels.clear();
         sc.law.r_load_ohm = r_load;
-        if let Drive::Structure {
-            excitation: Excitation::Sine { a0_m_s2, .. },
-            ..
-        } = &mut sc.drive
-        {
-            *a0_m_s2 = a0;
-        }
+        set_param(&mut sc, "a0_m_s2", a0).expect("a0_m_s2");
         let sim = sc.build().expect("build");
         let cfg = *sim.controller().config();
         let spec = StageSpec::from_config(&cfg, 100.0);

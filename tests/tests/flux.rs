@@ -17,8 +17,9 @@
 //!   trips (`bus_over_voltage`).
 
 use hal_sim::analytic::{tmd_power, DampingFormula};
+use hal_sim::cli::sweep::set_param;
 use hal_sim::faults::{FaultSim, Inject};
-use hal_sim::plant::{Drive, Excitation};
+use hal_sim::plant::Drive;
 use hal_sim::scenario::Scenario;
 use hal_sim::stage::StageSpec;
 use regen_fw::protect::Fault;
@@ -33,13 +34,7 @@ fn scenario(flux_a: f32) -> Scenario {
     let mut sc = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
     sc.record.channels.clear();
     sc.law.r_load_ohm = R_LOAD;
-    if let Drive::Structure {
-        excitation: Excitation::Sine { a0_m_s2, .. },
-        ..
-    } = &mut sc.drive
-    {
-        *a0_m_s2 = A0;
-    }
+    set_param(&mut sc, "a0_m_s2", A0).expect("a0_m_s2");
     sc.firmware.flux_brake_a = flux_a;
     sc
 }

@@ -922,7 +922,8 @@ fn clip_speed(c: &Class, sc: &Scenario, r_load: f64) -> f64 {
 #[test]
 fn board_72v_tmd_sweep() {
     use hal_sim::analytic::{tmd_power, DampingFormula};
-    use hal_sim::plant::{Drive, Excitation};
+    use hal_sim::cli::sweep::set_param;
+    use hal_sim::plant::Drive;
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
     let base = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
     let onset = C72.onset(&base);
@@ -991,13 +992,7 @@ fn board_72v_tmd_sweep() {
             let mut sc = base.clone();
             sc.record.channels.clear();
             sc.law.r_load_ohm = r;
-            if let Drive::Structure {
-                excitation: Excitation::Sine { a0_m_s2, .. },
-                ..
-            } = &mut sc.drive
-            {
-                *a0_m_s2 = a0;
-            }
+            set_param(&mut sc, "a0_m_s2", a0).expect("a0_m_s2");
             let mut sim = sc.build().expect("build");
             let n = (sc.duration_s / sim.period()).round() as u64;
             let n_settle = (sc.settle_s / sim.period()).round() as u64;
