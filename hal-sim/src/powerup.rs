@@ -92,14 +92,7 @@ impl PowerUp {
     /// The draw for this seed (splitmix64; shares nothing with the sensor-noise generator).
     pub fn draw(&self) -> Draw {
         let mut st = self.seed;
-        let mut u = move || {
-            st = st.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = st;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            (z >> 11) as f64 / (1u64 << 53) as f64 // [0, 1)
-        };
+        let mut u = move || (crate::study::splitmix(&mut st) >> 11) as f64 / (1u64 << 53) as f64; // [0, 1)
         let theta_m0 = u() * std::f64::consts::TAU;
         let encoder_start = (u() * 65_536.0) as u16;
         let offset_a = [0; 3].map(|_| (2.0 * u() - 1.0) * self.offset_a);

@@ -129,7 +129,9 @@ pub struct Sim {
     rng: u64,
 }
 
-fn splitmix(x: &mut u64) -> u64 {
+/// splitmix64: the next value of the stream whose state is `x` (the seeded draws of the
+/// studies and of the power-up, [`crate::powerup`]).
+pub(crate) fn splitmix(x: &mut u64) -> u64 {
     *x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
     let mut z = *x;
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
