@@ -578,12 +578,12 @@ impl Console {
                     .s("set  description\r\n");
                 for p in PARAMS.iter().filter(hit) {
                     out.col(p.name, 19)
-                        .col(Num((p.get)(c)).text().as_str(), 12)
+                        .col(Num(p.get(c)).text().as_str(), 12)
                         .col(p.unit, 7)
                         .num(p.min)
                         .s(" .. ")
                         .col(Num(p.max).text().as_str(), 10)
-                        .col(Num((p.get)(&f)).text().as_str(), 11)
+                        .col(Num(p.get(&f)).text().as_str(), 11)
                         .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc())
                         .s("\r\n");
@@ -594,7 +594,7 @@ impl Console {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
                     Some(p) => {
-                        ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                        ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit))
                     }
                     None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
                 }
@@ -630,9 +630,9 @@ impl Console {
                         .s(" ")
                         .s(p.unit)
                         .s(", now ")
-                        .num((p.get)(ctl.config())))
+                        .num(p.get(ctl.config())))
                 }
-                ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit))
             }
             "save" if want(0) => {
                 if running {

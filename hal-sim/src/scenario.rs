@@ -411,7 +411,7 @@ impl Scenario {
             match regen_fw::params::find(e.field) {
                 Some(p) => format!(
                     "{key} = {}: {} (allowed [{}, {}] {})",
-                    (p.get)(&c),
+                    p.get(&c),
                     e.reason,
                     p.min,
                     p.max,
