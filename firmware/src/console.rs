@@ -579,7 +579,7 @@ impl Console {
                 for p in PARAMS.iter().filter(hit) {
                     out.col(p.name, 19)
                         .col(Num(p.get(c)).text().as_str(), 12)
-                        .col(p.unit, 7)
+                        .col(p.unit(), 7)
                         .num(p.min)
                         .s(" .. ")
                         .col(Num(p.max).text().as_str(), 10)
@@ -594,7 +594,7 @@ impl Console {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
                     Some(p) => {
-                        ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit))
+                        ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
                     }
                     None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
                 }
@@ -628,11 +628,11 @@ impl Console {
                         .s(" .. ")
                         .num(p.max)
                         .s(" ")
-                        .s(p.unit)
+                        .s(p.unit())
                         .s(", now ")
                         .num(p.get(ctl.config())))
                 }
-                ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit))
+                ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
             }
             "save" if want(0) => {
                 if running {

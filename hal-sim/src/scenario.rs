@@ -415,7 +415,7 @@ impl Scenario {
                     e.reason,
                     p.min,
                     p.max,
-                    p.unit
+                    p.unit()
                 ),
                 None => format!("{key}: {}", e.reason),
             }
@@ -430,7 +430,9 @@ impl Scenario {
             p.apply(&mut c, *v as f32, false).map_err(|e| {
                 format!(
                     "law.set.{name} = {v}: {e} (allowed [{}, {}] {})",
-                    p.min, p.max, p.unit
+                    p.min,
+                    p.max,
+                    p.unit()
                 )
             })?;
         }
