@@ -37,7 +37,7 @@ fn ADC1_2() {
 /// addresses of the panic's first frames go to the defmt log and the image stops in a
 /// HardFault; the watchdog resets it. Neither the message nor the `Location` is read: reading
 /// either keeps, for every panic site of the image, its arguments, its message and file path
-/// strings and the `core::fmt` code that formats them (6.8 KB of flash, measured; with both
+/// strings and the `core::fmt` code that formats them (6.7 KB of flash, measured; with both
 /// unread the compiler folds every panic path into this handler). The site is found from the
 /// logged addresses: `addr2line -e target/thumbv7em-none-eabihf/release/regen-board ADDR`
 /// (the image keeps its debug information, `debug = 2`).
