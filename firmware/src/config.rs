@@ -248,7 +248,7 @@ impl Config {
         // place ranges are written; one loop instead of a check per field keeps the board
         // image small), then the relations between fields.
         for p in PARAMS {
-            let reason = match (p.name, p.check((p.get)(self))) {
+            let reason = match (p.name, p.check(p.get(self))) {
                 (_, Ok(())) => continue,
                 ("r_load_ohm", _) => "must be ≥ 0 (inf = open)",
                 ("f_trip_n", _) => "must be ≥ 1 N (inf = off)",
@@ -381,7 +381,7 @@ impl Config {
     /// within their validated ranges.)
     #[inline(never)]
     pub fn differs(&self, other: &Config) -> bool {
-        self.opt != other.opt || PARAMS.iter().any(|p| (p.get)(self) != (p.get)(other))
+        self.opt != other.opt || PARAMS.iter().any(|p| p.get(self) != p.get(other))
     }
 
     /// Sampling period, s.
@@ -625,14 +625,14 @@ mod tests {
                     continue; // an infinite maximum admits everything above the minimum
                 }
                 let mut c = Config::default();
-                (p.set)(&mut c, v);
+                p.set(&mut c, v);
                 let e = c.validate().unwrap_err();
                 assert_eq!(e.field, p.name, "{} = {v}: {e:?}", p.name);
             }
         }
         for p in PARAMS.iter().filter(|p| p.kind == Kind::Int) {
             let mut c = Config::default();
-            (p.set)(&mut c, p.max + 1.0);
+            p.set(&mut c, p.max + 1.0);
             assert_eq!(c.validate().unwrap_err().field, p.name);
         }
     }
@@ -671,7 +671,7 @@ mod tests {
         assert!(!d.differs(&d));
         // Each entry changed to another valid value, and `opt`: a difference, as `!=` says.
         for p in PARAMS {
-            for v in [p.min, p.max, (p.get)(&d) + 1.0] {
+            for v in [p.min, p.max, p.get(&d) + 1.0] {
                 let mut c = d;
                 if p.apply(&mut c, v, false).is_ok() && c != d {
                     assert!(c.differs(&d) && d.differs(&c), "{}", p.name);

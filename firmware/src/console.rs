@@ -83,6 +83,9 @@ pub struct LineEditor {
     cr: bool,
     /// Escape sequence state: 1 after ESC, 2 inside `ESC [`.
     esc: u8,
+    /// The last line ended, as checked text (a `&str` without `core::str::from_utf8`, which
+    /// with its 256-byte table is 0.6 KB of the board's flash).
+    text: heapless::String<LINE_MAX>,
 }
 
 impl Default for LineEditor {
@@ -93,6 +96,7 @@ impl Default for LineEditor {
             overlong: false,
             cr: false,
             esc: 0,
+            text: heapless::String::new(),
         }
     }
 }
@@ -127,13 +131,17 @@ impl LineEditor {
                         .s(" characters\r\n");
                     return Some("");
                 }
-                match core::str::from_utf8(&self.buf[..n]) {
-                    Ok(t) => Some(t),
-                    Err(_) => {
+                self.text.clear();
+                let mut rest = self.buf.get(..n).unwrap_or(&[]);
+                while !rest.is_empty() {
+                    let Some((ch, k)) = utf8_first(rest) else {
                         out.s("error: line is not UTF-8\r\n");
-                        Some("")
-                    }
+                        return Some("");
+                    };
+                    let _ = self.text.push(ch);
+                    rest = rest.get(k..).unwrap_or(&[]);
                 }
+                Some(self.text.as_str())
             }
             0x08 | 0x7f => {
                 self.erase(out);
@@ -159,9 +167,11 @@ impl LineEditor {
                 self.buf[self.len] = b;
                 self.len += 1;
                 // Echo whole characters: an ASCII byte at once, a multi-byte one when complete.
-                let start = self.char_start();
-                if let Ok(ch) = core::str::from_utf8(&self.buf[start..self.len]) {
-                    out.s(ch);
+                let last = self.buf.get(self.char_start()..self.len).unwrap_or(&[]);
+                if let Some((ch, k)) = utf8_first(last) {
+                    if k == last.len() {
+                        out.s(ch.encode_utf8(&mut [0; 4]));
+                    }
                 }
                 None
             }
@@ -184,6 +194,31 @@ impl LineEditor {
             out.s("\x08 \x08");
         }
     }
+}
+
+/// The first character of `b` and its length in bytes, if `b` starts with a complete UTF-8
+/// encoded character by the rules of `core::str::from_utf8` (shortest form, no surrogate,
+/// nothing above U+10FFFF; `char::from_u32` checks the last two). The line editor's check,
+/// tested against `from_utf8` over every sequence of up to three bytes and a sample of four.
+fn utf8_first(b: &[u8]) -> Option<(char, usize)> {
+    let &b0 = b.first()?;
+    let (n, min, mut c) = match b0 {
+        0x00..=0x7f => return Some((char::from(b0), 1)),
+        0xc0..=0xdf => (2, 0x80, (b0 & 0x1f) as u32),
+        0xe0..=0xef => (3, 0x800, (b0 & 0x0f) as u32),
+        0xf0..=0xf7 => (4, 0x1_0000, (b0 & 0x07) as u32),
+        _ => return None,
+    };
+    for &x in b.get(1..n)? {
+        if x & 0xc0 != 0x80 {
+            return None;
+        }
+        c = c << 6 | (x & 0x3f) as u32;
+    }
+    if c < min {
+        return None;
+    }
+    char::from_u32(c).map(|ch| (ch, n))
 }
 
 /// What a store did with a `save`.
@@ -543,12 +578,12 @@ impl Console {
                     .s("set  description\r\n");
                 for p in PARAMS.iter().filter(hit) {
                     out.col(p.name, 19)
-                        .col(Num((p.get)(c)).text().as_str(), 12)
-                        .col(p.unit, 7)
+                        .col(Num(p.get(c)).text().as_str(), 12)
+                        .col(p.unit(), 7)
                         .num(p.min)
                         .s(" .. ")
                         .col(Num(p.max).text().as_str(), 10)
-                        .col(Num((p.get)(&f)).text().as_str(), 11)
+                        .col(Num(p.get(&f)).text().as_str(), 11)
                         .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc())
                         .s("\r\n");
@@ -559,7 +594,7 @@ impl Console {
                 let n = a1.unwrap_or("");
                 match params::find(n) {
                     Some(p) => {
-                        ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                        ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
                     }
                     None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
                 }
@@ -593,11 +628,11 @@ impl Console {
                         .s(" .. ")
                         .num(p.max)
                         .s(" ")
-                        .s(p.unit)
+                        .s(p.unit())
                         .s(", now ")
-                        .num((p.get)(ctl.config())))
+                        .num(p.get(ctl.config())))
                 }
-                ok!(.s(" ").s(p.name).s(" = ").num((p.get)(ctl.config())).s(" ").s(p.unit))
+                ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
             }
             "save" if want(0) => {
                 if running {
@@ -944,6 +979,44 @@ mod tests {
     use std::format;
     use std::string::{String, ToString};
     use std::vec::Vec;
+
+    /// The line editor's UTF-8 check against core's: every sequence of one to three bytes,
+    /// and four-byte sequences over every lead byte from 0xF0, every second byte and a
+    /// sample of the last two. Agreement is exact: one character and its length, or none.
+    #[test]
+    fn utf8_first_agrees_with_core() {
+        let check = |b: &[u8]| {
+            let core = core::str::from_utf8(b).ok().and_then(|s| {
+                let mut it = s.chars();
+                let c = it.next()?;
+                it.next().is_none().then_some((c, b.len()))
+            });
+            let ours = utf8_first(b).filter(|&(_, k)| k == b.len());
+            assert_eq!(ours, core, "{b:02x?}");
+            // A complete character at the start, whatever follows it.
+            if let Some((c, k)) = utf8_first(b) {
+                assert_eq!(
+                    core::str::from_utf8(&b[..k]).ok(),
+                    Some(c.encode_utf8(&mut [0; 4]) as &str)
+                );
+            }
+        };
+        for x in 0..=0xff_ffffu32 {
+            let [a, b, c, _] = x.to_le_bytes();
+            check(&[a]);
+            check(&[a, b]);
+            check(&[a, b, c]);
+        }
+        for a in 0xf0..=0xffu8 {
+            for b in 0..=0xffu8 {
+                for c in [0x00, 0x7f, 0x80, 0x8f, 0x90, 0xbf, 0xc0, 0xff] {
+                    for d in [0x00, 0x7f, 0x80, 0x9a, 0xbf, 0xc0, 0xff] {
+                        check(&[a, b, c, d]);
+                    }
+                }
+            }
+        }
+    }
 
     fn run(con: &mut Console, ctl: &mut Controller, line: &str) -> (CmdResult, String) {
         let mut s = String::new();

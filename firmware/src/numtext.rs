@@ -349,20 +349,17 @@ pub fn parse_f32(s: &str) -> Result<f32, NumError> {
 }
 
 /// A small stack buffer implementing the text building (never more than 32 bytes used).
-struct Buf {
-    b: [u8; 40],
-    n: usize,
-}
+/// A `heapless::String`, not bytes: its text is a `&str` without `core::str::from_utf8`
+/// (which, with its 256-byte table, is 0.6 KB of the board's flash).
+struct Buf(heapless::String<40>);
 
 impl Buf {
     fn new() -> Buf {
-        Buf { b: [0; 40], n: 0 }
+        Buf(heapless::String::new())
     }
+    /// One ASCII byte (the only kind pushed); dropped when the buffer is full.
     fn push(&mut self, c: u8) {
-        if let Some(slot) = self.b.get_mut(self.n) {
-            *slot = c;
-            self.n += 1;
-        }
+        let _ = self.0.push(char::from(c));
     }
     /// The decimal digits of `v`, `width` of them at least (zero padded).
     #[inline(never)]
@@ -385,8 +382,7 @@ impl Buf {
         }
     }
     fn as_str(&self) -> &str {
-        // Only ASCII is ever pushed.
-        core::str::from_utf8(self.b.get(..self.n).unwrap_or(&[])).unwrap_or("?")
+        self.0.as_str()
     }
 }
 

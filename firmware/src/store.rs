@@ -193,7 +193,7 @@ impl<S: ReadNow> Store<S> {
             let v = f32::from_bits(bits);
             if let Some(p) = PARAMS.iter().find(|p| u32::from(param_id(p.name)) == id) {
                 in_range &= p.check(v).is_ok();
-                (p.set)(&mut cfg, v);
+                p.set(&mut cfg, v);
             }
         }
         if in_range && cfg.validate().is_ok() {
@@ -229,7 +229,7 @@ impl<S: ReadNow + NorFlash> Store<S> {
         rec[..DW].copy_from_slice(&dw(HEADER, seq));
         rec[DW..2 * DW].copy_from_slice(&dw(n as u32, !(n as u32)));
         for (p, d) in PARAMS.iter().zip(rec[2 * DW..].chunks_exact_mut(DW)) {
-            d.copy_from_slice(&dw(param_id(p.name).into(), (p.get)(cfg).to_bits()));
+            d.copy_from_slice(&dw(param_id(p.name).into(), p.get(cfg).to_bits()));
         }
         let crc = !crc32(!0, &rec);
         let off = self.base + page as u32 * PAGE + (at * DW) as u32;
@@ -433,7 +433,7 @@ mod tests {
                 b[2..4].copy_from_slice(&(PARAMS.len() as u16).to_le_bytes());
                 for (p, e) in PARAMS.iter().zip(b[4..].chunks_exact_mut(6)) {
                     e[..2].copy_from_slice(&param_id(p.name).to_le_bytes());
-                    e[2..].copy_from_slice(&(p.get)(&self.0).to_bits().to_le_bytes());
+                    e[2..].copy_from_slice(&p.get(&self.0).to_bits().to_le_bytes());
                 }
                 Ok(ITEM_BYTES)
             }
@@ -447,7 +447,7 @@ mod tests {
                     let v = f32::from_bits(u32::from_le_bytes([e[2], e[3], e[4], e[5]]));
                     if let Some(p) = PARAMS.iter().find(|p| param_id(p.name) == id) {
                         ok &= p.check(v).is_ok();
-                        (p.set)(&mut cfg, v);
+                        p.set(&mut cfg, v);
                     }
                 }
                 Ok((Item(cfg, ok), len))
@@ -569,7 +569,7 @@ mod tests {
         let r_load = PARAMS.iter().position(|p| p.name == "r_load_ohm").unwrap();
         let mut entries: std::vec::Vec<(u32, f32)> = PARAMS
             .iter()
-            .map(|p| (param_id(p.name) as u32, (p.get)(&cfg(55.0))))
+            .map(|p| (param_id(p.name) as u32, p.get(&cfg(55.0))))
             .collect();
         entries[r_load].0 = 0xFFFF; // an entry this registry does not have
         entries.pop(); // and one missing (the last)

@@ -411,11 +411,11 @@ impl Scenario {
             match regen_fw::params::find(e.field) {
                 Some(p) => format!(
                     "{key} = {}: {} (allowed [{}, {}] {})",
-                    (p.get)(&c),
+                    p.get(&c),
                     e.reason,
                     p.min,
                     p.max,
-                    p.unit
+                    p.unit()
                 ),
                 None => format!("{key}: {}", e.reason),
             }
@@ -430,7 +430,9 @@ impl Scenario {
             p.apply(&mut c, *v as f32, false).map_err(|e| {
                 format!(
                     "law.set.{name} = {v}: {e} (allowed [{}, {}] {})",
-                    p.min, p.max, p.unit
+                    p.min,
+                    p.max,
+                    p.unit()
                 )
             })?;
         }

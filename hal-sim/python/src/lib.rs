@@ -195,7 +195,7 @@ impl PyScenario {
         }
         if let Some(p) = regen_fw::params::find(key) {
             let c = self.inner.config().map_err(err)?;
-            return ((p.get)(&c) as f64).into_py_any(py);
+            return (p.get(&c) as f64).into_py_any(py);
         }
         if let Some(x) = lookup(&v, key) {
             return toml_to_py(py, x);
