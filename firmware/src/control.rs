@@ -767,11 +767,7 @@ impl Controller {
         let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
             f == Fault::BusOverVoltage
         } else {
-            // The Q16.16 speed as f32: one conversion of its bits (rounded to nearest, as
-            // `to_num` rounds) and an exact scaling by 2^-16; `to_num` builds the float
-            // from 64-bit shifts, which the board's build makes library calls (+50
-            // instructions on the latching step).
-            crate::protect::above_onset(&self.cfg, omega_m.to_bits() as f32 * (1.0 / 65_536.0))
+            crate::protect::above_onset(&self.cfg, f32_of(omega_m))
         };
         self.mode = crate::protect::next_mode(self.fault.is_some(), before, f, onset);
         if self.fault.is_none() {
@@ -1190,6 +1186,15 @@ struct HeldTerms {
     tick_or: u8,
 }
 
+/// A Q16.16 value as `f32`, the value `to_num::<f32>` gives (a property test pins the two):
+/// one conversion of the bits (rounded to nearest, as `to_num` rounds) and an exact scaling
+/// by 2^-16. `to_num` builds the float from 64-bit shifts, which the board's build makes
+/// library calls: +50 instructions on the step that latches a fault.
+#[inline(always)]
+fn f32_of(q: Q) -> f32 {
+    q.to_bits() as f32 * (1.0 / 65_536.0)
+}
+
 /// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
 fn amps_of_code(g: &Gains, code: u16) -> Q {
     g.amps_per_count
@@ -1356,11 +1361,10 @@ mod tests {
             }
         }
 
-        /// The latch's speed conversion (`latch_mode`: the bits converted, then scaled by
-        /// 2^-16) is `to_num::<f32>` bit for bit over every Q16.16 value.
+        /// The latch's speed conversion (`f32_of`) is `to_num::<f32>` bit for bit.
         #[test]
-        fn speed_as_f32_is_to_num(b in any::<i32>()) {
-            prop_assert_eq!((b as f32 * (1.0 / 65_536.0)).to_bits(), Q::from_bits(b).to_num::<f32>().to_bits());
+        fn f32_of_is_to_num(b in any::<i32>()) {
+            prop_assert_eq!(f32_of(Q::from_bits(b)).to_bits(), Q::from_bits(b).to_num::<f32>().to_bits());
         }
 
         /// Codes beyond 12 bits (a wiring or driver fault) give the same currents as the

@@ -90,6 +90,15 @@ pub fn regen_install(per: &mut Period, ctl: &mut Controller, mail: &mut Pending)
     per.apply(ctl, mail, &mut NoHw)
 }
 
+/// The first step after that swap (counted on a copy of the controller): the interrupt
+/// serves no change, so this is a step like any other.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_swapped(ctl: &mut Controller, s: &RawSample, _k: usize) -> Actuation {
+    // (A third argument: a body of its own, not folded with `regen_step`.)
+    ctl.step_outputs(black_box(s))
+}
+
 /// The period's hardware besides `DriveIo`, with nothing to do.
 struct NoHw;
 impl PeriodHw for NoHw {}
@@ -277,6 +286,7 @@ fn main() -> ! {
                     mail.cfg = Slot::Full(compiled);
                     let mut per = Period::NEW;
                     regen_install(&mut per, c, &mut mail);
+                    black_box(regen_step_swapped(&mut c.clone(), s, k));
                 }
                 None => bad_cfg = true,
             }
