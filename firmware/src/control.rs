@@ -751,23 +751,24 @@ impl Controller {
     /// of a latch at once.
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
-        let before = self.latch_mode(f, t.omega_m);
+        let above = t.omega_m.to_bits().unsigned_abs() >= self.g.onset_w;
+        let before = self.latch_mode(f, self.latched_bits(), above);
         self.latch_record(f, before, t);
     }
 
     /// The first half of a latch, what the outputs depend on: the fault and the safe mode in
-    /// force. Returns the mode it found the drive in. (With the record not yet written by
-    /// [`Controller::latch_record`], `latched_bits` lacks only faults latched in this same
-    /// call sequence, an over-current before an over-voltage: not a speed-doubt fault, so the
-    /// onset decision is the one a written record gives.)
-    fn latch_mode(&mut self, f: Fault, omega_m: Q) -> Mode {
+    /// force, given the faults latched before it (`latched`, bits as [`Controller::latched_bits`]
+    /// gives them once their records are written) and whether the speed estimate is above the
+    /// diode onset (`above`, `protect::above_onset` as `Gains::onset_w` decides it). Returns
+    /// the mode it found the drive in.
+    fn latch_mode(&mut self, f: Fault, latched: u32, above: bool) -> Mode {
         let before = self.mode;
         // With the encoder or the speed in doubt the bus decides: over-voltage while open
         // is the rectification itself (above the onset); nothing else is taken as above it.
-        let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
+        let onset = if (latched | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
             f == Fault::BusOverVoltage
         } else {
-            crate::protect::above_onset(&self.cfg, f32_of(omega_m))
+            above
         };
         self.mode = crate::protect::next_mode(self.fault.is_some(), before, f, onset);
         if self.fault.is_none() {
@@ -793,16 +794,18 @@ impl Controller {
         self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
-    /// Which fault, in order of precedence, once the step has seen that one occurred.
+    /// Which fault, in order of precedence, once the step has seen that one occurred; the
+    /// first half of its latch.
     #[cold]
     #[inline(never)]
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
         if self.latching.first.is_some() {
             self.finish_latch(); // a latch left unfinished by a caller: finished first
         }
+        let latched = self.latched_bits();
         let bus = if !over_voltage {
             None
-        } else if s.v_bus >= 4095 && self.latched_bits() & 1 << Fault::BusOverVoltage.code() == 0 {
+        } else if s.v_bus >= 4095 && latched & 1 << Fault::BusOverVoltage.code() == 0 {
             // At the rail without having passed the trip below it: a false reading.
             Some(Fault::BusSensor)
         } else {
@@ -821,12 +824,15 @@ impl Controller {
         };
         // The outputs are safe from this period on (the step continues in the new mode); the
         // record and the slow terms follow after the actuation (`complete_latch`).
+        // The speed as the snapshot has it (the encoder as just updated), one onset test for
+        // both latches.
         let w = self.enc.omega_m(&self.g.enc);
-        let first = Some((f, self.latch_mode(f, w)));
+        let above = w.to_bits().unsigned_abs() >= self.g.onset_w;
+        let first = Some((f, self.latch_mode(f, latched, above)));
         // An over-current must not hide an over-voltage in the same period (open above the
         // onset, the diode currents pass the trip while they charge the bus).
         let second = match (over_current, bus) {
-            (true, Some(b)) => Some((b, self.latch_mode(b, w))),
+            (true, Some(b)) => Some((b, self.latch_mode(b, latched | 1 << f.code(), above))),
             _ => None,
         };
         self.latching = Latching {
@@ -1186,15 +1192,6 @@ struct HeldTerms {
     tick_or: u8,
 }
 
-/// A Q16.16 value as `f32`, the value `to_num::<f32>` gives (a property test pins the two):
-/// one conversion of the bits (rounded to nearest, as `to_num` rounds) and an exact scaling
-/// by 2^-16. `to_num` builds the float from 64-bit shifts, which the board's build makes
-/// library calls: +50 instructions on the step that latches a fault.
-#[inline(always)]
-fn f32_of(q: Q) -> f32 {
-    q.to_bits() as f32 * (1.0 / 65_536.0)
-}
-
 /// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
 fn amps_of_code(g: &Gains, code: u16) -> Q {
     g.amps_per_count
@@ -1361,10 +1358,21 @@ mod tests {
             }
         }
 
-        /// The latch's speed conversion (`f32_of`) is `to_num::<f32>` bit for bit.
+        /// The latch's onset decision (`Gains::onset_w`, an integer threshold) is
+        /// `protect::above_onset` on the speed as `f32` (`to_num`), for any validated
+        /// configuration, at random speeds and at the threshold's neighbours of either sign.
         #[test]
-        fn f32_of_is_to_num(b in any::<i32>()) {
-            prop_assert_eq!(f32_of(Q::from_bits(b)).to_bits(), Q::from_bits(b).to_num::<f32>().to_bits());
+        fn onset_threshold_is_above_onset(cfg in extreme_config(), b in any::<i32>(), d in -2i64..=2) {
+            let g = Gains::new(&cfg).unwrap();
+            let near = (g.onset_w as i64 + d).clamp(0, i32::MAX as i64) as i32;
+            for x in [b, near, near.wrapping_neg()] {
+                let w = Q::from_bits(x);
+                prop_assert_eq!(
+                    x.unsigned_abs() >= g.onset_w,
+                    crate::protect::above_onset(&cfg, w.to_num::<f32>()),
+                    "bits {} against {}", x, g.onset_w
+                );
+            }
         }
 
         /// Codes beyond 12 bits (a wiring or driver fault) give the same currents as the

@@ -42,15 +42,17 @@ pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
     ctl.step_outputs(black_box(s))
 }
 
-/// A step that finds an instantaneous fault (an over-current code): the fault and its safe
-/// mode in force, the period's outputs the safe state's. Counted on copies of the controller
-/// every 1,000 steps of the replay, not in the digest.
+/// A step that finds an instantaneous fault (phase b's code `code`, the bus code `bus`: an
+/// over-current, an over-voltage, or both in one period): the fault and its safe mode in
+/// force, the period's outputs the safe state's. Counted on copies of the controller every
+/// 1,000 steps of the replay, not in the digest.
 #[no_mangle]
 #[inline(never)]
-pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16) -> Actuation {
-    // (By value, and a third argument: a body of its own, not folded with the other steps.)
+pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16, bus: u16) -> Actuation {
+    // (By value, and more arguments: a body of its own, not folded with the other steps.)
     let mut s = s;
     s.i_abc[1] = black_box(code);
+    s.v_bus = black_box(bus);
     ctl.step_outputs(&s)
 }
 
@@ -295,16 +297,21 @@ fn main() -> ! {
             let mut copy = c.clone();
             let _ = copy.law_mut();
             black_box(regen_step_refresh(&mut copy, s));
-            // Full-scale phase current: over-current, latched in the step.
-            let mut copy = c.clone();
-            let a = black_box(regen_step_trip(&mut copy, *s, 4095));
-            // Safe in the period found: the bridge open (the over-current's safe state).
-            if copy.fault().is_none() || a.enable {
-                bad_cfg = true;
-            }
-            regen_trip_finish(&mut copy);
-            if copy.protection().record().is_none() {
-                bad_cfg = true;
+            // Full-scale phase current (over-current), a bus code above the 95 V trip (3,243)
+            // and both, each latched by the step on a copy.
+            for (code, bus) in [(4095, s.v_bus), (s.i_abc[1], 3300), (4095, 3300)] {
+                let mut copy = c.clone();
+                let a = black_box(regen_step_trip(&mut copy, *s, code, bus));
+                // Safe in the period found: the bridge open, or the phases shorted (all
+                // low-side switches on).
+                let safe = !a.enable || a.duties.iter().all(|d| *d == Duty::ZERO);
+                if copy.fault().is_none() || !safe {
+                    bad_cfg = true;
+                }
+                regen_trip_finish(&mut copy);
+                if copy.protection().record().is_none() {
+                    bad_cfg = true;
+                }
             }
         }
         k += 1;
