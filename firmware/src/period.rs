@@ -190,7 +190,7 @@ impl Period {
     /// task, right after a period's interrupt (`firmware/board/src/drive.rs`, `apply`); in
     /// the simulator after [`Period::finish`]. A configuration is installed with fixed-size
     /// copies and the slow terms' refresh ([`Controller::install`], the same work whatever
-    /// changed: 1,210 instructions as the board builds it, ≈ 9 µs, `docs/m4check.md`).
+    /// changed: 1,217 instructions as the board builds it, ≈ 9 µs, `docs/m4check.md`).
     #[inline(never)]
     pub fn apply<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
         if mail.is_empty() {

@@ -118,7 +118,7 @@ fn periods() -> Option<u32> {
 /// Apply a task's changes to the loop (`regen_fw::period::Period::apply`: clear, compiled
 /// configuration, mode) between two periods: as soon as a period's interrupt is seen to have
 /// run, with the loop locked for the application only. Its longest part, a configuration's
-/// install, is 1,210 instructions as the board builds it (≈ 9 µs at 170 MHz, `run.sh`);
+/// install, is 1,217 instructions as the board builds it (≈ 9 µs at 170 MHz, `run.sh`);
 /// started right after a period it ends ≈ 30 µs before the next sample. Should another
 /// interrupt or a late start make the current-loop interrupt wait for it, that interrupt is
 /// delayed by at most the application and does the same: the ADC's injected results stay in
