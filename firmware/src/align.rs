@@ -5,9 +5,9 @@
 //! latched for the user.
 //!
 //! One implementation for both callers: the board's supervision task polls it every 10 ms
-//! against a copy of the controller, the simulator's boot sequence every period; each posts
-//! the returned changes to the period's mailbox ([`Pending`]), which applies them between two
-//! steps (the fault cleared, then `mode align`).
+//! against a copy of the controller, the simulator's boot sequence every period; each puts
+//! the returned changes in a [`Pending`] that [`crate::period::Period::apply`] applies between
+//! two periods (the fault cleared, then `mode align`).
 
 use crate::control::{Boot, Controller, Fault, Mode};
 use crate::period::{Pending, Slot};
@@ -82,8 +82,8 @@ impl AlignRetry {
     }
 }
 
-/// What [`Retry::Post`] asks for, put into the period's mailbox (which applies it between two
-/// steps, the clear first): clear `align_moving` (if it is still the latched fault), then
+/// What [`Retry::Post`] asks for, put into the changes `Period::apply` applies between two
+/// periods (the clear first): clear `align_moving` (if it is still the latched fault), then
 /// `mode align`. A configuration already waiting there stays.
 pub fn post(mail: &mut Pending) {
     mail.clear = Slot::Full(Fault::AlignMoving);

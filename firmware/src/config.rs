@@ -415,6 +415,9 @@ pub struct Gains {
     pub brake_off: Q,
     pub ff_emf: bool,
     pub ff_decouple: bool,
+    /// The diode onset as a speed (`protect::onset_bits`): a latch is above it when the
+    /// speed estimate's Q16.16 bits have at least this magnitude.
+    pub onset_w: u32,
     /// Constants of the step in the forms its fast paths use.
     pub k: StepConsts,
 }
@@ -571,6 +574,7 @@ impl Gains {
             brake_off: q_of(c.brake_off_v),
             ff_emf: c.ff_emf,
             ff_decouple: c.ff_decouple,
+            onset_w: crate::protect::onset_bits(c),
             k,
         })
     }

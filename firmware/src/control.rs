@@ -238,8 +238,26 @@ pub struct Controller {
     bs: BootState,
     /// Protection state (protect.rs): derate factor, supervision, fault record.
     prot: Protection,
+    /// A latch the step began and [`Controller::complete_latch`] finishes.
+    latching: Latching,
     law: Law,
     cfg: Config,
+}
+
+/// A latch begun by the step ([`Controller::step_outputs`]: the fault and its safe mode in
+/// force, the period's outputs already safe), finished by [`Controller::complete_latch`]
+/// after the actuation: the record with its snapshot, the PI reset and the slow terms for
+/// the new mode (≈ 650 instructions that the step's budget has no room for).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Latching {
+    /// The fault found, and an over-voltage found with an over-current in the same period,
+    /// each with the mode it found the drive in (the snapshot's).
+    first: Option<(Fault, Mode)>,
+    second: Option<(Fault, Mode)>,
+    /// The last period's d/q currents, the snapshot's: the step records its own after the
+    /// protection checks (the rest of the snapshot, this period's codes and the encoder as
+    /// updated, stays in place until the next step).
+    i_dq: Dq,
 }
 
 impl Controller {
@@ -271,6 +289,7 @@ impl Controller {
             held: HeldTerms::default(),
             slow_tick: REFRESH_ALL,
             prot: Protection::default(),
+            latching: Latching::default(),
             bs: BootState {
                 zero: [cfg.adc_zero_code as i32; 3],
                 ..BootState::default()
@@ -728,25 +747,44 @@ impl Controller {
     }
 
     /// Latch `f` (with a snapshot of `t`) and go to the safe state `protect::next_mode`
-    /// decides (open dominates, with its stated exceptions above the diode onset).
+    /// decides (open dominates, with its stated exceptions above the diode onset): both halves
+    /// of a latch at once.
     #[cold]
     fn trip(&mut self, f: Fault, t: &Telemetry) {
-        self.prot.latch(f, self.mode, t);
-        if self.mode == Mode::Align {
-            self.end_align(None);
-        }
+        let above = t.omega_m.to_bits().unsigned_abs() >= self.g.onset_w;
+        let before = self.latch_mode(f, self.latched_bits(), above);
+        self.latch_record(f, before, t);
+    }
+
+    /// The first half of a latch, what the outputs depend on: the fault and the safe mode in
+    /// force, given the faults latched before it (`latched`, bits as [`Controller::latched_bits`]
+    /// gives them once their records are written) and whether the speed estimate is above the
+    /// diode onset (`above`, `protect::above_onset` as `Gains::onset_w` decides it). Returns
+    /// the mode it found the drive in.
+    fn latch_mode(&mut self, f: Fault, latched: u32, above: bool) -> Mode {
+        let before = self.mode;
         // With the encoder or the speed in doubt the bus decides: over-voltage while open
         // is the rectification itself (above the onset); nothing else is taken as above it.
-        let onset = if (self.latched_bits() | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
+        let onset = if (latched | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
             f == Fault::BusOverVoltage
         } else {
-            crate::protect::above_onset(&self.cfg, t.omega_m.to_num::<f32>())
+            above
         };
-        let mode = crate::protect::next_mode(self.fault.is_some(), self.mode, f, onset);
+        self.mode = crate::protect::next_mode(self.fault.is_some(), before, f, onset);
         if self.fault.is_none() {
             self.fault = Some(f);
         }
-        self.mode = mode;
+        before
+    }
+
+    /// The second half: the record with the snapshot `t` (taken in mode `before`), an
+    /// alignment ended, the PI reset and the slow terms for the new mode.
+    #[cold]
+    fn latch_record(&mut self, f: Fault, before: Mode, t: &Telemetry) {
+        self.prot.latch(f, before, t);
+        if before == Mode::Align {
+            self.end_align(None);
+        }
         self.pi.reset();
         self.refresh_now();
     }
@@ -756,13 +794,18 @@ impl Controller {
         self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
-    /// Which fault, in order of precedence, once the step has seen that one occurred.
+    /// Which fault, in order of precedence, once the step has seen that one occurred; the
+    /// first half of its latch.
     #[cold]
     #[inline(never)]
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
+        if self.latching.first.is_some() {
+            self.finish_latch(); // a latch left unfinished by a caller: finished first
+        }
+        let latched = self.latched_bits();
         let bus = if !over_voltage {
             None
-        } else if s.v_bus >= 4095 && self.latched_bits() & 1 << Fault::BusOverVoltage.code() == 0 {
+        } else if s.v_bus >= 4095 && latched & 1 << Fault::BusOverVoltage.code() == 0 {
             // At the rail without having passed the trip below it: a false reading.
             Some(Fault::BusSensor)
         } else {
@@ -779,23 +822,65 @@ impl Controller {
         } else {
             return; // a low bus matters only while running
         };
-        // Snapshot (protect.rs): this period's currents and bus, the encoder as just updated,
-        // the rest as of the last period.
-        let g = &self.g;
-        let t = Telemetry {
-            i_abc: s.i_abc.map(|c| amps_of_code(g, c)),
-            v_bus: volts_of_code(g, s.v_bus),
-            ..self.telemetry()
-        };
-        self.trip(f, &t);
+        // The outputs are safe from this period on (the step continues in the new mode); the
+        // record and the slow terms follow after the actuation (`complete_latch`).
+        // The speed as the snapshot has it (the encoder as just updated), one onset test for
+        // both latches.
+        let w = self.enc.omega_m(&self.g.enc);
+        let above = w.to_bits().unsigned_abs() >= self.g.onset_w;
+        let first = Some((f, self.latch_mode(f, latched, above)));
         // An over-current must not hide an over-voltage in the same period (open above the
         // onset, the diode currents pass the trip while they charge the bus).
-        if let (true, Some(b)) = (over_current, bus) {
-            self.trip(b, &t);
+        let second = match (over_current, bus) {
+            (true, Some(b)) => Some((b, self.latch_mode(b, latched | 1 << f.code(), above))),
+            _ => None,
+        };
+        self.latching = Latching {
+            first,
+            second,
+            i_dq: self.rec.i_dq,
+        };
+    }
+
+    /// Finish a latch the last step began, nothing otherwise (see [`Latching`]): the fault
+    /// record with its snapshot (this period's phase codes and bus, the encoder as that step
+    /// updated it, the last period's d/q currents, as the step found them), the PI reset and
+    /// the slow terms for the safe mode. The period routine calls it right after the
+    /// actuation ([`crate::period::Period::finish`]); [`Controller::step`] calls it itself.
+    #[inline(always)]
+    pub fn complete_latch(&mut self) {
+        if self.latching.first.is_some() {
+            self.finish_latch();
         }
     }
 
-    /// One current-loop period.
+    #[cold]
+    #[inline(never)]
+    fn finish_latch(&mut self) {
+        let l = core::mem::take(&mut self.latching);
+        // The telemetry's codes are this period's sample (the step records it first).
+        let t = Telemetry {
+            i_dq: l.i_dq,
+            ..self.telemetry()
+        };
+        for (f, before) in [l.first, l.second].into_iter().flatten() {
+            self.latch_record(f, before, &t);
+        }
+    }
+
+    /// One current-loop period, complete: [`Controller::step_outputs`] then
+    /// [`Controller::complete_latch`]. The period routine calls the two halves with the
+    /// actuation between them.
+    #[inline]
+    pub fn step(&mut self, s: &RawSample) -> Actuation {
+        let a = self.step_outputs(s);
+        self.complete_latch();
+        a
+    }
+
+    /// One current-loop period up to its outputs (what the board's interrupt runs before it
+    /// writes them). A fault found here is in force at once (its safe mode gives this
+    /// period's outputs); its record and slow terms wait for [`Controller::complete_latch`].
     ///
     /// Ranges (the reason most arithmetic below needs no saturation): ADC codes are 12-bit
     /// (larger codes are clamped where they enter arithmetic); `amps_per_count ≤ 1`,
@@ -807,7 +892,7 @@ impl Controller {
     /// opt-level (`s`), while the rest of the image is built for size (`z`), see
     /// `firmware/board/Cargo.toml`. The call costs a few cycles of the 8,500 of a period.
     #[inline(never)]
-    pub fn step(&mut self, s: &RawSample) -> Actuation {
+    pub fn step_outputs(&mut self, s: &RawSample) -> Actuation {
         let k = &self.g.k;
 
         // ---- Measurements (scalings folded into constants; the zero code cancels) ----
@@ -1270,6 +1355,23 @@ mod tests {
                 let v = (t.v_dq.d.to_num::<f64>().powi(2) + t.v_dq.q.to_num::<f64>().powi(2)).sqrt();
                 prop_assert!(v <= vb * cfg.m_max as f64 / 3f64.sqrt() * (1.0 + 3e-4) + 1e-3,
                              "|v| = {} on {} V", v, vb);
+            }
+        }
+
+        /// The latch's onset decision (`Gains::onset_w`, an integer threshold) is
+        /// `protect::above_onset` on the speed as `f32` (`to_num`), for any validated
+        /// configuration, at random speeds and at the threshold's neighbours of either sign.
+        #[test]
+        fn onset_threshold_is_above_onset(cfg in extreme_config(), b in any::<i32>(), d in -2i64..=2) {
+            let g = Gains::new(&cfg).unwrap();
+            let near = (g.onset_w as i64 + d).clamp(0, i32::MAX as i64) as i32;
+            for x in [b, near, near.wrapping_neg()] {
+                let w = Q::from_bits(x);
+                prop_assert_eq!(
+                    x.unsigned_abs() >= g.onset_w,
+                    crate::protect::above_onset(&cfg, w.to_num::<f32>()),
+                    "bits {} against {}", x, g.onset_w
+                );
             }
         }
 

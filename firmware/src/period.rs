@@ -2,20 +2,22 @@
 //! [`Controller::step`], written once for the board's ADC interrupt and the simulator.
 //!
 //! One period ([`Period::run`]):
-//! 1. sample ([`DriveIo::sample`]), step, add the period's electrical power to the exact energy
-//!    sum ([`Period::step`]);
+//! 1. sample ([`DriveIo::sample`]), step up to the outputs ([`Controller::step_outputs`]), add
+//!    the period's electrical power to the exact energy sum ([`Period::step`]);
 //! 2. actuate ([`DriveIo::apply`]): the duties are written before any slower work;
-//! 3. [`Period::finish`]: a hardware trip latched as a fault ([`PeriodHw::tripped`]),
-//!    protection supervision on every `supervise_every()`-th period (the
-//!    first period included), the console's changes posted in the mailbox ([`Pending`]), the
-//!    period count, and the overrun check last ([`PeriodHw::overran`]: the next sample was
-//!    ready before this period's work was done), which the controller counts against
-//!    `overrun_max` and trips on at its next supervision.
+//! 3. [`Period::finish`]: a fault latch the step began finished ([`Controller::complete_latch`]:
+//!    its record and slow terms; the outputs just written are already the safe state's), a
+//!    hardware trip latched as a fault ([`PeriodHw::tripped`]), protection supervision on
+//!    every `supervise_every()`-th period (the first period included), the period count, and
+//!    the overrun check last ([`PeriodHw::overran`]: the next sample was ready before this
+//!    period's work was done), which the controller counts against `overrun_max` and trips on
+//!    at its next supervision.
 //!
-//! The mailbox is applied between two steps only, so a step never sees half a change, and
-//! its configuration arrives compiled ([`Controller::compile`], in the console's task), so the
-//! period only installs it ([`Controller::install`]: fixed-size copies and the slow terms'
-//! refresh, the same work whatever changed).
+//! The console's changes ([`Pending`]: a fault to clear, a configuration compiled in the
+//! console's task by [`Controller::compile`], a mode) are not the period's work: they are
+//! applied between two periods by [`Period::apply`], with the loop locked (the board's
+//! console task, right after a period; the simulator, after [`Period::finish`]), so no step
+//! serves them and a step never sees half a change.
 //!
 //! The simulator calls [`Period::step`] and [`Period::finish`] itself, with its fault-injection
 //! hooks on the sample and the actuation in between; a test in `hal-sim` (`sim.rs`,
@@ -95,7 +97,8 @@ impl<T> From<Option<T>> for Slot<T> {
     }
 }
 
-/// Changes posted by the console for the period to apply between two steps.
+/// Changes the console (or the supervision's alignment retry) makes, applied between two
+/// periods by [`Period::apply`].
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Pending {
     /// Clear this fault (only if it is still the latched one).
@@ -143,32 +146,29 @@ impl Period {
 
     /// One whole period against the hardware (the board's interrupt body).
     #[inline(always)]
-    pub fn run<IO: DriveIo + PeriodHw>(
-        &mut self,
-        ctl: &mut Controller,
-        mail: &mut Pending,
-        io: &mut IO,
-    ) -> Actuation {
+    pub fn run<IO: DriveIo + PeriodHw>(&mut self, ctl: &mut Controller, io: &mut IO) -> Actuation {
         let s = io.sample();
         let a = self.step(ctl, &s);
         io.apply(&a);
-        self.finish(ctl, mail, io);
+        self.finish(ctl, io);
         a
     }
 
-    /// The step and the energy sum.
+    /// The step up to its outputs and the energy sum.
     #[inline(always)]
     pub fn step(&mut self, ctl: &mut Controller, s: &RawSample) -> Actuation {
-        let a = ctl.step(s);
+        let a = ctl.step_outputs(s);
         self.energy = self
             .energy
             .saturating_add(ctl.telemetry().p_elec.to_bits() as i64);
         a
     }
 
-    /// After the actuation: supervision, mailbox, counters, overrun.
+    /// After the actuation: the step's latch finished, hardware trip, supervision, counters,
+    /// overrun.
     #[inline(always)]
-    pub fn finish<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
+    pub fn finish<H: PeriodHw>(&mut self, ctl: &mut Controller, hw: &mut H) {
+        ctl.complete_latch();
         if let Some(f) = hw.tripped() {
             ctl.hardware_trip(f);
         }
@@ -178,9 +178,6 @@ impl Period {
         } else {
             self.countdown -= 1;
         }
-        if !mail.is_empty() {
-            self.apply_mail(ctl, mail, hw);
-        }
         self.periods = self.periods.wrapping_add(1);
         if hw.overran() {
             self.overruns = self.overruns.wrapping_add(1);
@@ -189,9 +186,16 @@ impl Period {
     }
 
     /// The console's changes, in the order clear, configuration, mode; the mailbox is left
-    /// empty.
+    /// empty. Call it between two periods with the loop locked: on the board the console's
+    /// task, right after a period's interrupt (`firmware/board/src/drive.rs`, `apply`); in
+    /// the simulator after [`Period::finish`]. A configuration is installed with fixed-size
+    /// copies and the slow terms' refresh ([`Controller::install`], the same work whatever
+    /// changed: 1,217 instructions as the board builds it, ≈ 9 µs, `docs/m4check.md`).
     #[inline(never)]
-    fn apply_mail<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
+    pub fn apply<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
+        if mail.is_empty() {
+            return;
+        }
         if let Slot::Full(f) = mail.clear {
             // The console's copy checked the cause is gone; if it came back since, the
             // controller refuses and the fault stays latched (the console shows it).
@@ -301,6 +305,13 @@ mod tests {
         }
     }
 
+    /// One period, then the mailbox applied between it and the next, as the board's console
+    /// task and the simulator do.
+    fn run(per: &mut Period, ctl: &mut Controller, mail: &mut Pending, io: &mut Mock) {
+        per.run(ctl, io);
+        per.apply(ctl, mail, io);
+    }
+
     /// A running controller against the mock, whose currents follow no machine: the angle
     /// plausibility check (which would rightly find its emf off the q axis) is set beyond any
     /// emf the mock's speed gives, so these tests see the period's mechanics only.
@@ -332,7 +343,7 @@ mod tests {
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(3, 1));
         for p in 0..=trip_period {
             assert_eq!(ctl.fault(), None, "tripped early, before period {p}");
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
         }
         assert_eq!(ctl.fault(), Some(Fault::LoopOverrun));
         assert_eq!(per.overruns, trip_period + 1);
@@ -347,7 +358,7 @@ mod tests {
         let n = ctl.supervise_every();
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(3, n));
         for _ in 0..100 * n {
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
         }
         assert_eq!(ctl.fault(), None);
         assert_eq!(per.overruns, 100);
@@ -362,7 +373,7 @@ mod tests {
         let mut sum = 0.0f64;
         let mut nonzero = 0;
         for _ in 0..20_000 {
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
             let p = ctl.telemetry().p_elec.to_num::<f64>();
             nonzero += (p != 0.0) as u32;
             sum += p * 65_536.0;
@@ -388,7 +399,7 @@ mod tests {
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(7, 0));
         let mut refio = Mock::new(7, 0);
         for _ in 0..400 {
-            per.run(&mut a, &mut mail, &mut io);
+            run(&mut per, &mut a, &mut mail, &mut io);
             let s = refio.sample();
             let o = b.step(&s);
             refio.apply(&o);
@@ -401,7 +412,7 @@ mod tests {
         mail.mode = Slot::Full(Mode::Run);
         assert_eq!(a.config().r_load_ohm, b.config().r_load_ohm);
         // The period it was posted in steps with the old configuration …
-        per.run(&mut a, &mut mail, &mut io);
+        run(&mut per, &mut a, &mut mail, &mut io);
         let s = refio.sample();
         let o = b.step(&s);
         refio.apply(&o);
@@ -412,7 +423,7 @@ mod tests {
         b.set_config(&cfg).unwrap();
         b.set_mode(Mode::Run).unwrap();
         for _ in 0..400 {
-            per.run(&mut a, &mut mail, &mut io);
+            run(&mut per, &mut a, &mut mail, &mut io);
             let s = refio.sample();
             let o = b.step(&s);
             refio.apply(&o);
@@ -433,7 +444,7 @@ mod tests {
         cfg.pwm_hz = 16_000.0;
         mail.cfg = Slot::Full(ctl.compile(&cfg).unwrap());
         for _ in 0..3 {
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
         }
         assert_eq!(io.pwm, [16_000.0]);
         assert_eq!(ctl.supervise_every(), 16);
@@ -446,13 +457,59 @@ mod tests {
         let mut ctl = running();
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(3, 1));
         while ctl.fault().is_none() {
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
         }
         let f = ctl.fault();
         mail.mode = Slot::Full(Mode::Run);
-        per.run(&mut ctl, &mut mail, &mut io);
+        run(&mut per, &mut ctl, &mut mail, &mut io);
         assert_eq!(per.mode_refused, 1);
         assert_eq!(ctl.fault(), f);
+    }
+
+    /// An over-current the step finds: the period it is found in already writes the safe
+    /// state (bridge open: the over-current's), and by the end of that period (after the
+    /// actuation) the fault is recorded with the snapshot as the step saw it: this period's
+    /// phase codes, the last period's d/q currents, the mode it found (Run).
+    #[test]
+    fn step_fault_is_safe_in_its_period_and_recorded_by_its_end() {
+        let mut ctl = running();
+        let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(7, 0));
+        for _ in 0..300 {
+            run(&mut per, &mut ctl, &mut mail, &mut io);
+        }
+        let last = ctl.telemetry();
+        let mut s = io.sample();
+        // Full scale on every phase (whichever two the shunt rule reads): 2,047 codes above
+        // the zero code, 24.99 A at 50/4096 A per code, against the 20 A trip.
+        s.i_abc = [4095; 3];
+        let a = per.step(&mut ctl, &s);
+        assert_eq!(ctl.fault(), Some(Fault::OverCurrent));
+        assert_eq!(ctl.mode(), Mode::Idle);
+        assert!(
+            !a.enable,
+            "the bridge opens in the period the fault is found"
+        );
+        assert!(
+            ctl.protection().record().is_none(),
+            "the record is written after the actuation"
+        );
+        io.apply(&a);
+        per.finish(&mut ctl, &mut io);
+        let r = ctl
+            .protection()
+            .record()
+            .expect("recorded by the period's end");
+        assert_eq!(
+            (r.fault, r.later, r.snap.mode),
+            (Fault::OverCurrent, 0, Mode::Run)
+        );
+        let cfg = Config::default();
+        let amps = (4095.0 - cfg.adc_zero_code as f64) * cfg.amps_per_count as f64;
+        for i in r.snap.i_abc {
+            // The gain's rounding: relative 2^-24 of 25 A, plus one LSB.
+            assert!((i.to_num::<f64>() - amps).abs() < 1e-4, "{i} A vs {amps} A");
+        }
+        assert_eq!(r.snap.i_dq, last.i_dq);
     }
 
     /// A hardware trip reported at the end of period k latches its fault there: period k
@@ -463,7 +520,7 @@ mod tests {
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(7, 0));
         io.trip_at = Some((50, Fault::OverCurrent));
         for _ in 0..52 {
-            per.run(&mut ctl, &mut mail, &mut io);
+            run(&mut per, &mut ctl, &mut mail, &mut io);
         }
         assert!(io.applied[50].enable);
         assert!(!io.applied[51].enable);

@@ -750,6 +750,32 @@ pub fn above_onset(cfg: &Config, omega_m: f32) -> bool {
     1.732_050_8 * cfg.ke_v_s_per_rad * abs(omega_m) >= 0.9 * cfg.v_bus_ov
 }
 
+/// [`above_onset`] as a threshold on the magnitude of a Q16.16 speed's bits: the least `u`
+/// with `above_onset(cfg, u·2^-16)` (2^31 + 1 if none), found by bisection. `above_onset` of a
+/// speed `q` is `|bits(q)| ≥ onset_bits(cfg)`: its value depends on |ω| only, and grows
+/// with it (the conversion to `f32` and the product rounded to nearest are non-decreasing),
+/// so one threshold decides it; a property test pins the two. The step's latch compares
+/// integers instead of converting and multiplying floats.
+pub fn onset_bits(cfg: &Config) -> u32 {
+    let above = |u: u32| above_onset(cfg, u as f32 * (1.0 / 65_536.0));
+    let (mut lo, mut hi) = (0u32, 1u32 << 31); // the answer is in (lo, hi] or none
+    if above(0) {
+        return 0;
+    }
+    if !above(hi) {
+        return hi + 1;
+    }
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if above(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi
+}
+
 /// Faults after which the measured speed is not trusted (bits `1 << code`): encoder
 /// implausible, encoder loss, speed implausible.
 pub const SPEED_DOUBT: u32 = 1 << 4 | 1 << 7 | 1 << 8;

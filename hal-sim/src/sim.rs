@@ -324,7 +324,8 @@ pub struct Sim {
     rec_countdown: u64,
     ts: f64,
     /// The firmware's period around the step (`regen_fw::period`: supervision countdown,
-    /// exact energy sum, overrun count) and its console mailbox, as on the board.
+    /// exact energy sum, overrun count) and the console's changes it applies between two
+    /// periods, as the board's console task does.
     per: Period,
     mail: Pending,
     /// The power-up models were applied ([`Sim::power_up`]): a reboot calibrates and aligns.
@@ -790,7 +791,10 @@ impl Sim {
         on_actuation(&mut out);
         PlantIo(self).apply(&out);
         let mut hw = SimTimer(self.break_flag.take());
-        self.per.finish(&mut self.ctl, &mut self.mail, &mut hw);
+        self.per.finish(&mut self.ctl, &mut hw);
+        // The console's changes between this period and the next, as the board's console
+        // task applies them right after a period (`Period::apply`).
+        self.per.apply(&mut self.ctl, &mut self.mail, &mut hw);
         self.finish_period();
     }
 
@@ -810,8 +814,8 @@ impl Sim {
         &self.per
     }
 
-    /// The console mailbox the period applies between two steps (as the board's console
-    /// posts to it). A `pwm_hz` change through it does not change the plant's period.
+    /// The console's changes, applied between this period and the next ([`Period::apply`],
+    /// as the board's console task applies them). A `pwm_hz` change through it does not change the plant's period.
     pub fn mailbox(&mut self) -> &mut Pending {
         &mut self.mail
     }
@@ -1764,6 +1768,49 @@ mod tests {
         }
     }
 
+    /// A configuration the console posts (`set r_load_ohm 100`, compiled outside the loop)
+    /// while period k is under way is installed between period k and k + 1: period k runs
+    /// with the old one, every later period as if `set_config` had been called at that
+    /// boundary, and the change shows (the run differs from an unchanged one).
+    #[test]
+    fn console_change_is_in_force_from_the_next_period() {
+        let sc = Scenario::tmd(306.0);
+        let (mut a, mut b, mut c) = (
+            sc.build().unwrap(),
+            sc.build().unwrap(),
+            sc.build().unwrap(),
+        );
+        for _ in 0..4_000 {
+            a.step();
+            b.step();
+            c.step();
+        }
+        let cfg = regen_fw::Config {
+            r_load_ohm: 100.0,
+            ..*a.ctl.config()
+        };
+        a.mailbox().cfg = regen_fw::Slot::Full(a.ctl.compile(&cfg).unwrap());
+        a.step();
+        b.step();
+        c.step();
+        assert_eq!(
+            a.ctl.telemetry(),
+            c.ctl.telemetry(),
+            "period k: the old configuration"
+        );
+        assert_eq!(a.ctl.config().r_load_ohm, 100.0, "installed after period k");
+        b.ctl.set_config(&cfg).unwrap();
+        for _ in 0..4_000 {
+            a.step();
+            b.step();
+            c.step();
+        }
+        assert_eq!(a.ctl.telemetry(), b.ctl.telemetry());
+        assert_eq!(a.motion(), b.motion());
+        assert_eq!(a.energy(), b.energy());
+        assert_ne!(a.motion(), c.motion(), "the change shows");
+    }
+
     #[test]
     fn split_step_is_exactly_one_step() {
         // `take_sample` + the controller held outside + `apply_and_advance` must reproduce
@@ -1798,10 +1845,10 @@ mod tests {
             }
         }
         impl regen_fw::PeriodHw for Split<'_> {}
-        let (mut per, mut mail) = (regen_fw::Period::NEW, regen_fw::Pending::EMPTY);
+        let mut per = regen_fw::Period::NEW;
         for _ in 0..20_000 {
             a.step();
-            per.run(&mut ctl, &mut mail, &mut Split(&mut b));
+            per.run(&mut ctl, &mut Split(&mut b));
         }
         assert_eq!(a.loop_period(), &per);
         assert_eq!(a.ctl.fault(), ctl.fault());

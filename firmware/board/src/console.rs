@@ -1,9 +1,10 @@
 //! The serial console task: `regen_fw::console` over USART2 (ST-LINK virtual COM port).
 //!
 //! Lines in → `Console::execute` on a *copy* of the controller → reply out; what the command
-//! changed is posted to the current loop (`drive::PENDING`) and applied between two steps.
-//! The reply says what the copy accepted; a mode change can still be refused by the loop if a
-//! fault latched in the meantime (counted, logged by supervision, visible in `status`).
+//! changed is applied to the current loop between two periods (`drive::apply`) before the
+//! next line is read. The reply says what the copy accepted; a mode change can still be
+//! refused by the loop if a fault latched in the meantime (counted, logged by supervision,
+//! visible in `status`).
 //!
 //! Telemetry. `Console::tick` must see the controller once per period; the task instead wakes
 //! every 0.5 ms (the fastest `tel` rate is 2 kHz), copies the controller, and calls `tick` once
@@ -23,7 +24,7 @@ use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
 use regen_fw::console::{save_reply, Console, LineEditor, PROMPT};
 
-use crate::drive::{self, PENDING};
+use crate::drive;
 use crate::store::BoardStore;
 use regen_fw::period::{Pending, Slot};
 
@@ -85,20 +86,6 @@ impl core::fmt::Write for LastLine {
     }
 }
 
-/// Wait (≤ 5 ms) until the loop has taken the posted changes, so that the next command's
-/// copy includes them (two `set` lines arriving together must not undo each other, and `save`
-/// must store what was set before it).
-async fn wait_applied() {
-    for _ in 0..100 {
-        let empty = critical_section::with(|cs| PENDING.borrow_ref(cs).is_empty());
-        if empty {
-            return;
-        }
-        embassy_time::Timer::after_micros(50).await;
-    }
-    defmt::warn!("console change not taken by the loop within 5 ms");
-}
-
 /// What `post` needs of the controller before a command: its configuration (all that
 /// compiling a change reads), fault and mode. Kept instead of a second whole controller.
 struct Before {
@@ -107,35 +94,29 @@ struct Before {
     mode: regen_fw::control::Mode,
 }
 
-/// Post the differences between the copy before and after a command; `true` if any.
-fn post(before: &Before, after: &regen_fw::Controller) -> bool {
+/// Apply the differences between the copy before and after a command to the loop, at once
+/// (`drive::apply`), so that the next command's copy includes them (two `set` lines arriving
+/// together must not undo each other, and `save` must store what was set before it).
+fn post(before: &Before, after: &regen_fw::Controller) {
     let mut p = Pending::default();
     if before.fault.is_some() && after.fault().is_none() {
         p.clear = before.fault.into();
     }
     if after.config().differs(&before.cfg) {
         // Validated and compiled here, in the task (≈ 11,500 instructions: more than a
-        // period); the loop only installs it. `execute` accepted it on the copy, so this
-        // cannot fail; if it did, nothing would be posted.
+        // period); `drive::apply` only installs it. `execute` accepted it on the copy, so
+        // this cannot fail; if it did, nothing would be applied.
         match regen_fw::Compiled::new(&before.cfg, after.config()) {
             Ok(c) => p.cfg = Slot::Full(c),
-            Err(_) => return false,
+            Err(_) => return,
         }
     }
     if after.mode() != before.mode {
         p.mode = Slot::Full(after.mode());
     }
-    if p.is_empty() {
-        return false;
+    if !p.is_empty() {
+        drive::apply(&mut p);
     }
-    critical_section::with(|cs| {
-        let mut q = PENDING.borrow_ref_mut(cs);
-        // Later changes win field by field; a pending change not yet applied is kept.
-        q.clear = p.clear.or(q.clear);
-        q.cfg = p.cfg.or(q.cfg);
-        q.mode = p.mode.or(q.mode);
-    });
-    true
 }
 
 #[embassy_executor::task]
@@ -185,7 +166,7 @@ pub async fn console_task(
                     if !text.is_empty() {
                         // One copy of the controller, in a block that ends before the
                         // wait (the task's state keeps no controller across it).
-                        let posted = match drive::snapshot() {
+                        match drive::snapshot() {
                             Some((mut ctl, _)) => {
                                 let before = Before {
                                     cfg: *ctl.config(),
@@ -193,15 +174,11 @@ pub async fn console_task(
                                     mode: ctl.mode(),
                                 };
                                 let _ = con.execute(text, &mut ctl, &mut store, reply);
-                                post(&before, &ctl)
+                                post(&before, &ctl);
                             }
                             None => {
                                 let _ = reply.write_str("error: current loop not started\r\n");
-                                false
                             }
-                        };
-                        if posted {
-                            wait_applied().await;
                         }
                     }
                     // A `save`: written here, awaited (the executor runs on), with no copy of

@@ -9,9 +9,9 @@
 //!   holds the lock only to copy the controller (880 bytes, ≈ 2 µs) — it never runs console
 //!   commands inside it.
 //! * Console commands run on a copy of the controller; what they changed (configuration
-//!   compiled in the task, mode, cleared fault) is posted to [`PENDING`] and applied by the
-//!   period routine right after its next step, so parameters change between steps only and a
-//!   step never sees half a change.
+//!   compiled in the task, mode, cleared fault) is applied to the loop's controller by the
+//!   task itself ([`apply`]), between two periods, right after one: no step serves a change
+//!   and a step never sees half of one.
 //! * The period's counters and energy sum live in [`LoopState`]; tasks copy them under the
 //!   same lock ([`counters`]).
 
@@ -23,6 +23,7 @@ use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM2;
 use embassy_stm32::peripherals::{ADC1, ADC2};
 use embassy_stm32::timer::qei::Qei;
+use embassy_time::{Duration, Instant};
 use regen_fw::config::Config;
 use regen_fw::control::{Controller, Fault};
 use regen_fw::io::{Actuation, DriveIo, HwThresholds, RawSample};
@@ -109,8 +110,35 @@ pub struct LoopState {
 
 pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot::Empty));
 
-/// Changes posted by the console for the period routine to apply between two steps.
-pub static PENDING: Mutex<RefCell<Pending>> = Mutex::new(RefCell::new(Pending::EMPTY));
+/// Periods the loop has run; `None` before it starts.
+fn periods() -> Option<u32> {
+    critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| s.per.periods))
+}
+
+/// Apply a task's changes to the loop (`regen_fw::period::Period::apply`: clear, compiled
+/// configuration, mode) between two periods: as soon as a period's interrupt is seen to have
+/// run, with the loop locked for the application only. Its longest part, a configuration's
+/// install, is 1,217 instructions as the board builds it (≈ 9 µs at 170 MHz, `run.sh`);
+/// started right after a period it ends ≈ 30 µs before the next sample. Should another
+/// interrupt or a late start make the current-loop interrupt wait for it, that interrupt is
+/// delayed by at most the application and does the same: the ADC's injected results stay in
+/// their registers until the next trigger, a period later, and the duties it writes are
+/// preloaded and taken at the next update event, which is that next trigger (`pwm.rs`), so a
+/// delay of 9 µs plus its own work (≈ 3 µs, ≈ 7 µs with supervision) changes no output and
+/// no sampling instant. Does nothing before the loop starts. The mailbox is left empty.
+pub fn apply(mail: &mut Pending) {
+    let Some(p0) = periods() else {
+        return;
+    };
+    // At most two periods at the slowest PWM (5 kHz): a stopped loop is no reason to wait.
+    let t0 = Instant::now();
+    while periods() == Some(p0) && t0.elapsed() < Duration::from_micros(400) {}
+    critical_section::with(|cs| {
+        if let Some(st) = LOOP.borrow_ref_mut(cs).get_mut() {
+            st.per.apply(&mut st.ctl, mail, &mut st.io);
+        }
+    });
+}
 
 /// Copy of the controller and of the period's counters and energy sum for a task (briefly
 /// locks out the interrupt: ≈ 2 µs); `None` before the loop starts.
@@ -128,8 +156,7 @@ pub fn on_sample() {
         let Some(st) = guard.get_mut() else {
             return;
         };
-        let mut mail = PENDING.borrow_ref_mut(cs);
-        st.per.run(&mut st.ctl, &mut mail, &mut st.io);
+        st.per.run(&mut st.ctl, &mut st.io);
         // Calibrated offsets are removed by the converters, as the simulator's sample does
         // (`Sim::set_adc_offsets`): written here, right after a sample, the period the
         // calibration ends (the next trigger is a period away).

@@ -69,11 +69,11 @@ pub async fn supervisor_task(mut wdg: IndependentWatchdog<'static, IWDG>) {
         }
 
         // An alignment that found the rotor moving: retried after its wait in the safe state
-        // (`regen_fw::align`, the simulator's boot runs the same), through the mailbox.
+        // (`regen_fw::align`, the simulator's boot runs the same), applied between two periods.
         if retry.poll(&ctl, n) == regen_fw::align::Retry::Post {
-            critical_section::with(|cs| {
-                regen_fw::align::post(&mut drive::PENDING.borrow_ref_mut(cs))
-            });
+            let mut mail = regen_fw::period::Pending::EMPTY;
+            regen_fw::align::post(&mut mail);
+            drive::apply(&mut mail);
             defmt::warn!(
                 "alignment found the rotor moving: try {} of {}",
                 retry.retries() + 1,

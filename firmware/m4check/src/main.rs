@@ -16,16 +16,19 @@ use regen_fw::fx::{Angle, Duty, Gain, Q};
 use regen_fw::pi::{CurrentPi, PiGains, PiOutput};
 use regen_fw::selftest::{replay, STEP_BYTES};
 use regen_fw::svpwm::{inv_bus, modulate_limited};
-use regen_fw::{Actuation, Compiled, Config, Controller, Mode, RawSample};
+use regen_fw::{
+    Actuation, Compiled, Config, Controller, Mode, Pending, Period, PeriodHw, RawSample, Slot,
+};
 
 static VECTORS: &[u8] = include_bytes!("../vectors.bin");
 
-/// One current-loop period: read currents → Clarke → Park → law → limits → two PI →
-/// inverse Park → modulation (exactly `Controller::step`).
+/// One current-loop period up to its outputs: read currents → Clarke → Park → law → limits
+/// → two PI → inverse Park → modulation (exactly `Controller::step_outputs`, what the
+/// board's interrupt runs before it writes the outputs).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_step(ctl: &mut Controller, s: &RawSample) -> Actuation {
-    ctl.step(s)
+    ctl.step_outputs(s)
 }
 
 /// A step right after a refresh request the step serves itself (`law_mut`), counted on
@@ -36,18 +39,29 @@ pub fn regen_step(ctl: &mut Controller, s: &RawSample) -> Actuation {
 pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
     // (`black_box`: keeps this function distinct from `regen_step`, which the linker would
     // otherwise fold into one.)
-    ctl.step(black_box(s))
+    ctl.step_outputs(black_box(s))
 }
 
-/// A step that finds an instantaneous fault (an over-current code) and latches it there:
-/// counted on copies of the controller every 1,000 steps of the replay, not in the digest.
+/// A step that finds an instantaneous fault (phase b's code `code`, the bus code `bus`: an
+/// over-current, an over-voltage, or both in one period): the fault and its safe mode in
+/// force, the period's outputs the safe state's. Counted on copies of the controller every
+/// 1,000 steps of the replay, not in the digest.
 #[no_mangle]
 #[inline(never)]
-pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16) -> Actuation {
-    // (By value, and a third argument: a body of its own, not folded with the other steps.)
+pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16, bus: u16) -> Actuation {
+    // (By value, and more arguments: a body of its own, not folded with the other steps.)
     let mut s = s;
     s.i_abc[1] = black_box(code);
-    ctl.step(&s)
+    s.v_bus = black_box(bus);
+    ctl.step_outputs(&s)
+}
+
+/// The rest of that latch after the outputs are written (`Period::finish` →
+/// `Controller::complete_latch`): the record with its snapshot, the PI reset, the slow terms.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_trip_finish(ctl: &mut Controller) {
+    ctl.complete_latch()
 }
 
 /// The configuration change of the recorded run (R_L 306 → 2 Ω halfway) done at once, as
@@ -68,14 +82,28 @@ pub fn regen_compile(ctl: &Controller, cfg: &Config) -> Option<Compiled> {
     ctl.compile(cfg).ok()
 }
 
-/// The swap the period routine does between two steps when the mailbox holds a compiled
-/// configuration (`Period::finish` → `Controller::install`): fixed-size copies and the slow
-/// terms' refresh.
+/// The swap between two periods, as the board's console task makes it with the loop locked
+/// (`drive::apply` → `Period::apply` → `Controller::install`): fixed-size copies and the
+/// slow terms' refresh (the board's comparator thresholds, `PeriodHw::installed`, not
+/// included).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_install(ctl: &mut Controller, c: &Compiled) {
-    ctl.install(c)
+pub fn regen_install(per: &mut Period, ctl: &mut Controller, mail: &mut Pending) {
+    per.apply(ctl, mail, &mut NoHw)
 }
+
+/// The first step after that swap (counted on a copy of the controller): the interrupt
+/// serves no change, so this is a step like any other.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_swapped(ctl: &mut Controller, s: &RawSample, _k: usize) -> Actuation {
+    // (A third argument: a body of its own, not folded with `regen_step`.)
+    ctl.step_outputs(black_box(s))
+}
+
+/// The period's hardware besides `DriveIo`, with nothing to do.
+struct NoHw;
+impl PeriodHw for NoHw {}
 
 /// A step of the power-up sequence (offset calibration in Idle, alignment), counted on a
 /// controller of its own before the replay (`boot_paths`): not in the digest.
@@ -84,7 +112,7 @@ pub fn regen_install(ctl: &mut Controller, c: &Compiled) {
 pub fn regen_step_boot(ctl: &mut Controller, s: RawSample) -> Actuation {
     // (The sample by value: a body of its own, so the linker does not fold this function
     // with `regen_step_refresh` and count their calls together.)
-    ctl.step(black_box(&s))
+    ctl.step_outputs(black_box(&s))
 }
 
 /// The boot paths: calibration (2,048 Idle periods), then two alignments with 20 ms steps,
@@ -255,7 +283,13 @@ fn main() -> ! {
             };
             black_box(regen_set_config(&mut c.clone(), &new));
             match regen_compile(c, &new) {
-                Some(compiled) => regen_install(c, &compiled),
+                Some(compiled) => {
+                    let mut mail = Pending::EMPTY;
+                    mail.cfg = Slot::Full(compiled);
+                    let mut per = Period::NEW;
+                    regen_install(&mut per, c, &mut mail);
+                    black_box(regen_step_swapped(&mut c.clone(), s, k));
+                }
                 None => bad_cfg = true,
             }
         }
@@ -263,15 +297,26 @@ fn main() -> ! {
             let mut copy = c.clone();
             let _ = copy.law_mut();
             black_box(regen_step_refresh(&mut copy, s));
-            // Full-scale phase current: over-current, latched in the step.
-            let mut copy = c.clone();
-            black_box(regen_step_trip(&mut copy, *s, 4095));
-            if copy.fault().is_none() {
-                bad_cfg = true;
+            // Full-scale phase current (over-current), a bus code above the 95 V trip (3,243)
+            // and both, each latched by the step on a copy.
+            for (code, bus) in [(4095, s.v_bus), (s.i_abc[1], 3300), (4095, 3300)] {
+                let mut copy = c.clone();
+                let a = black_box(regen_step_trip(&mut copy, *s, code, bus));
+                // Safe in the period found: the bridge open, or the phases shorted (all
+                // low-side switches on).
+                let safe = !a.enable || a.duties.iter().all(|d| *d == Duty::ZERO);
+                if copy.fault().is_none() || !safe {
+                    bad_cfg = true;
+                }
+                regen_trip_finish(&mut copy);
+                if copy.protection().record().is_none() {
+                    bad_cfg = true;
+                }
             }
         }
         k += 1;
         let a = regen_step(c, s);
+        c.complete_latch();
         // On a copy: the recorded sequence starts at speed with the observer at rest, a
         // start-up current transient (−10 A for a few ms) that the force check rightly trips
         // on; the step's digest stays that of the loop alone.
