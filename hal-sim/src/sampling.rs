@@ -96,6 +96,12 @@ pub(crate) struct ShuntPre {
     /// general model evaluates it, or −1 where the window has not opened by δ (reading 0).
     /// Layout `[(instant·2 + pos)·n + bits − before_max − 1]`, n = `ONE − before_max`.
     late: Vec<f64>,
+    /// The held reading's decay after a window that closed before its instant (a duty above
+    /// `now_max`): `exp(−(δ − h)/τ)` as the general model evaluates it, h the high side's
+    /// take-over for the duty's bits (up to 1) and the current's sign, at each instant (NaN
+    /// where the window is still open at δ). Layout `[(instant·2 + pos)·m + bits − now_max
+    /// − 1]`, m = `ONE − now_max`.
+    hold: Vec<f64>,
 }
 
 /// The bits of duty 1 (U1F15).
@@ -144,6 +150,7 @@ impl ShuntPre {
             now_max: 0,
             before_max: 0,
             late: Vec::new(),
+            hold: Vec::new(),
         };
         // The largest duty bits for which the general model's own expressions (rounding
         // included, monotone in the duty) put the instants inside the windows: no high side
@@ -178,6 +185,20 @@ impl ShuntPre {
                 }
             }
             p.late = late;
+            let mut hold = Vec::with_capacity(4 * (ONE - n) as usize);
+            for dl in [p.t_ab, p.t_c] {
+                for pos in [false, true] {
+                    for bits in n + 1..=ONE {
+                        let t1 = p.close_of(bits, pos);
+                        hold.push(if dl > t1 {
+                            (-(dl - t1) * p.inv_tau).exp()
+                        } else {
+                            f64::NAN
+                        });
+                    }
+                }
+            }
+            p.hold = hold;
         }
         Ok(p)
     }
@@ -221,8 +242,9 @@ impl ShuntPre {
     }
 
     /// [`ShuntPre::read_general`]'s factor on each channel whose window is open at its
-    /// instant and closes after it (`r` the readings without it), out of line.
-    #[inline(never)]
+    /// instant and closes after it (`r` the readings without it): a table load and a
+    /// product per phase, inline (in a voltage-limited run most periods take it).
+    #[inline(always)]
     fn settle(&self, r: &mut [f64; 3], i: [f64; 3], before: &Actuation) {
         let n = (ONE - self.before_max) as usize;
         for (x, instant) in [(0, 0), (1, 0), (2, 1)] {
@@ -233,6 +255,49 @@ impl ShuntPre {
                 let f = self.late[k];
                 r[x] = if f < 0.0 { 0.0 } else { r[x] * f };
             }
+        }
+    }
+
+    /// Where a phase's shunt window closes (its high side takes over) for the duty's `bits`
+    /// in force after `t_k` (its current positive: `pos`), s after `t_k`.
+    #[inline(always)]
+    fn close_of(&self, bits: u16, pos: bool) -> f64 {
+        (1.0 - duty_of(Duty::from_bits(bits))) * self.half_ts + if pos { self.dead } else { 0.0 }
+    }
+
+    /// The amplifier's settled fraction at instant `inst` (0: I_a/I_b, 1: I_c, at `dl`) on
+    /// phase `x`, whose window opened at `t0` < `dl` from the duty before `t_k`: from the
+    /// `late` table where it holds the value (a late window), else [`settled`].
+    #[inline(always)]
+    fn settled_at(
+        &self,
+        x: usize,
+        inst: usize,
+        pos: bool,
+        before: &Actuation,
+        dl: f64,
+        t0: f64,
+    ) -> f64 {
+        let bits = before.duties[x].to_bits().min(ONE);
+        if self.fast && before.enable && bits > self.before_max {
+            let n = (ONE - self.before_max) as usize;
+            self.late[(inst * 2 + pos as usize) * n + (bits - self.before_max - 1) as usize]
+        } else {
+            settled((dl - t0) * self.inv_tau)
+        }
+    }
+
+    /// The held reading's decay `exp(−(dl − t1)/τ)` at instant `inst` on phase `x`, whose
+    /// window closed at `t1` < `dl`: from the `hold` table (a duty above `now_max`, the only
+    /// duties whose window closes before an instant, when the tables exist).
+    #[inline(always)]
+    fn decay_at(&self, x: usize, inst: usize, pos: bool, now: &Actuation, dl: f64, t1: f64) -> f64 {
+        let bits = now.duties[x].to_bits().min(ONE);
+        if self.fast && bits > self.now_max {
+            let m = (ONE - self.now_max) as usize;
+            self.hold[(inst * 2 + pos as usize) * m + (bits - self.now_max - 1) as usize]
+        } else {
+            (-(dl - t1) * self.inv_tau).exp()
         }
     }
 
@@ -266,12 +331,9 @@ impl ShuntPre {
         if !now.enable {
             return i;
         }
-        let duty = duty_of;
         let pos: [bool; 3] = core::array::from_fn(|x| i[x] > 0.0);
         // High side takes over (shunt window closes) at h, the window opened at `open`.
-        let h: [f64; 3] = core::array::from_fn(|x| {
-            (1.0 - duty(now.duties[x])) * self.half_ts + if pos[x] { self.dead } else { 0.0 }
-        });
+        let h: [f64; 3] = core::array::from_fn(|x| self.close_of(now.duties[x].to_bits(), pos[x]));
         let open: [f64; 3] = core::array::from_fn(|x| self.open(x, pos[x], before));
         // The terminals' high time up to each instant (all zero while no high side has
         // taken over, the common case) and its mean.
@@ -284,24 +346,28 @@ impl ShuntPre {
         let at = |x: usize, dl: f64, ax: f64| {
             i[x] + (v_bus * ax - dl * (e[x] + self.r * i[x])) * self.inv_l
         };
-        let read = |x: usize, dl: f64, ax: f64| {
+        // The amplifier's settling and the held reading's decay come from the tables where
+        // they hold them (`settled_at`, `decay_at`: the same expressions, evaluated in
+        // `ShuntPre::new`), so that a period at the modulation limit calls no exponential
+        // but for a window both opened late and closed early.
+        let read = |x: usize, inst: usize, dl: f64, ax: f64| {
             let (t0, t1) = (open[x], h[x]);
             if dl <= t0 {
                 0.0
             } else if dl <= t1 {
-                at(x, dl, ax) * settled((dl - t0) * self.inv_tau)
+                at(x, dl, ax) * self.settled_at(x, inst, pos[x], before, dl, t0)
             } else {
                 // Held at the window's end (no high time of its own yet then).
                 let a1 = high(t1)[x];
                 at(x, t1, a1)
                     * settled((t1 - t0) * self.inv_tau)
-                    * (-(dl - t1) * self.inv_tau).exp()
+                    * self.decay_at(x, inst, pos[x], now, dl, t1)
             }
         };
         [
-            read(0, self.t_ab, a_ab[0]),
-            read(1, self.t_ab, a_ab[1]),
-            read(2, self.t_c, a_c[2]),
+            read(0, 0, self.t_ab, a_ab[0]),
+            read(1, 0, self.t_ab, a_ab[1]),
+            read(2, 1, self.t_c, a_c[2]),
         ]
     }
 }
@@ -390,6 +456,102 @@ mod tests {
             (1.0 - (-(h + 0.8 * 25e-6 - 0.5e-6) / 0.2e-6).exp()) * (-(p.t_c - h) / 0.2e-6).exp();
         assert!((r[2] / (i[2] * keep) - 1.0).abs() < 1e-3, "{r:?} {keep}");
         assert!(r[2].abs() < 0.1 * i[2].abs());
+    }
+
+    /// The general model with every exponential evaluated in place (no table): what
+    /// `read_general` computes.
+    fn reference(
+        p: &ShuntPre,
+        i: [f64; 3],
+        e: [f64; 3],
+        v_bus: f64,
+        before: &Actuation,
+        now: &Actuation,
+    ) -> [f64; 3] {
+        if !now.enable {
+            return i;
+        }
+        let pos: [bool; 3] = core::array::from_fn(|x| i[x] > 0.0);
+        let h: [f64; 3] = core::array::from_fn(|x| {
+            (1.0 - duty_of(now.duties[x])) * p.half_ts + if pos[x] { p.dead } else { 0.0 }
+        });
+        let open: [f64; 3] = core::array::from_fn(|x| p.open(x, pos[x], before));
+        let high = |dl: f64| {
+            let a = h.map(|hy| (dl - hy).max(0.0));
+            let m = (a[0] + a[1] + a[2]) * (1.0 / 3.0);
+            [a[0] - m, a[1] - m, a[2] - m]
+        };
+        let (a_ab, a_c) = (high(p.t_ab), high(p.t_c));
+        let at =
+            |x: usize, dl: f64, ax: f64| i[x] + (v_bus * ax - dl * (e[x] + p.r * i[x])) * p.inv_l;
+        let read = |x: usize, dl: f64, ax: f64| {
+            let (t0, t1) = (open[x], h[x]);
+            if dl <= t0 {
+                0.0
+            } else if dl <= t1 {
+                at(x, dl, ax) * settled((dl - t0) * p.inv_tau)
+            } else {
+                let a1 = high(t1)[x];
+                at(x, t1, a1) * settled((t1 - t0) * p.inv_tau) * (-(dl - t1) * p.inv_tau).exp()
+            }
+        };
+        [
+            read(0, p.t_ab, a_ab[0]),
+            read(1, p.t_ab, a_ab[1]),
+            read(2, p.t_c, a_c[2]),
+        ]
+    }
+
+    #[test]
+    fn general_model_tables_are_the_exponentials() {
+        // `read_general` with its settling and decay tables against the model evaluating
+        // every exponential in place, bit for bit, over duties drawn around both bounds and
+        // up to the U1F15 range's top (held windows on every phase, late windows, both),
+        // both current signs and the gates either way; the held case must occur.
+        let p = pre();
+        let mut st = 0x0bad_cafe_1234_5678u64;
+        let mut u = move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut held = 0;
+        for n in 0..200_000 {
+            let duty = |lo: u16, u: &mut dyn FnMut() -> f64| {
+                let b = if n % 3 == 0 {
+                    u() * 40_000.0
+                } else {
+                    lo as f64 + u() * (40_000.0 - lo as f64)
+                };
+                Duty::from_bits(b as u16)
+            };
+            let before = Actuation {
+                duties: [0; 3].map(|_| duty(p.before_max - 50, &mut u)),
+                enable: u() < 0.9,
+                brake: false,
+            };
+            let now = Actuation {
+                duties: [0; 3].map(|_| duty(p.now_max - 50, &mut u)),
+                enable: u() < 0.95,
+                brake: false,
+            };
+            let i = [0; 3].map(|_| (u() - 0.5) * 40.0);
+            let e = [0; 3].map(|_| (u() - 0.5) * 600.0);
+            let vb = u() * 100.0;
+            let (a, b) = (
+                p.read_general(i, e, vb, &before, &now),
+                reference(&p, i, e, vb, &before, &now),
+            );
+            assert_eq!(
+                a.map(f64::to_bits),
+                b.map(f64::to_bits),
+                "{i:?} {e:?} {vb} {before:?} {now:?}"
+            );
+            let c = now.duties[2].to_bits().min(ONE);
+            held += (now.enable && c > p.now_max && p.close_of(c, i[2] > 0.0) < p.t_c) as u32;
+        }
+        assert!(held > 50_000, "held {held}");
     }
 
     #[test]
