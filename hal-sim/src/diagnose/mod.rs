@@ -624,9 +624,15 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                     - bic(rss_t0, nn.0.n, base_refs.len());
                 (nn.1.rss(&t), dbic)
             };
-            // fill the cache for a list of compliance values in one pass over the record
+            // fill the cache for a list of values in one pass over the record (the effects
+            // whose columns walk the record's history: resonators, Dahl states, play)
             let prefill = |effs: &[Effect], cache: &mut Cache| {
-                if cand.kind != EffectKind::Compliance {
+                if !matches!(
+                    cand.kind,
+                    EffectKind::Compliance
+                        | EffectKind::PreslidingHysteresis
+                        | EffectKind::Backlash
+                ) {
                     return;
                 }
                 let missing: Vec<Effect> = effs
