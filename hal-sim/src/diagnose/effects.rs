@@ -536,25 +536,32 @@ pub fn resonator_batch(
         let a1 = 1.0 / (1.0 + g * (g + k));
         [a1, g * a1, g * g * a1]
     };
-    // structure of arrays: the m recurrences side by side, one lane each (vectorised)
-    let split =
-        |c: Vec<[f64; 3]>| -> [Vec<f64>; 3] { [0, 1, 2].map(|j| c.iter().map(|v| v[j]).collect()) };
-    let [a1, a2, a3] = split(
-        freqs
-            .iter()
-            .map(|&f| coef(f, 2.0 * COMPLIANCE_ZETA))
-            .collect(),
-    );
-    let [b1, b2, b3] = split(
-        freqs
-            .iter()
-            .map(|&f| coef(2.0 * f, std::f64::consts::SQRT_2))
-            .collect(),
-    );
+    // the recurrences side by side in groups of LANES (one lane per frequency, the last group
+    // padded with copies of the last frequency), so that each step is vectorised
+    const LANES: usize = 4;
+    #[derive(Clone, Copy)]
+    struct Group {
+        c: [[f64; LANES]; 6],
+        st: [[f64; LANES]; 4],
+        out: [[f64; LANES]; 3],
+    }
     let u0 = u.first().copied().unwrap_or(0.0);
-    let (mut ic1, mut ic2, mut jc1, mut jc2) =
-        (vec![0.0; m], vec![u0; m], vec![0.0; m], vec![u0; m]);
-    let (mut lp, mut bp, mut ub) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
+    let mut groups: Vec<Group> = (0..m.div_ceil(LANES))
+        .map(|g| {
+            let f = |l: usize| freqs[(g * LANES + l).min(m - 1)];
+            let ca: [[f64; 3]; LANES] = std::array::from_fn(|l| coef(f(l), 2.0 * COMPLIANCE_ZETA));
+            let cb: [[f64; 3]; LANES] =
+                std::array::from_fn(|l| coef(2.0 * f(l), std::f64::consts::SQRT_2));
+            Group {
+                c: std::array::from_fn(|j| {
+                    std::array::from_fn(|l| if j < 3 { ca[l][j] } else { cb[l][j - 3] })
+                }),
+                // ic1, ic2, jc1, jc2
+                st: [[0.0; LANES], [u0; LANES], [0.0; LANES], [u0; LANES]],
+                out: [[0.0; LANES]; 3],
+            }
+        })
+        .collect();
     let cap = rows.map_or(u.len(), |r| r.len());
     let mut out: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..m)
         .map(|_| {
@@ -568,31 +575,36 @@ pub fn resonator_batch(
     let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
     let mut next = 0usize;
     for (i, &xin) in u[..last].iter().enumerate() {
-        for k in 0..m {
-            let w3 = xin - jc2[k];
-            let w1 = b1[k] * jc1[k] + b2[k] * w3;
-            let w2 = jc2[k] + b2[k] * jc1[k] + b3[k] * w3;
-            let x = w2;
-            let v3 = x - ic2[k];
-            let v1 = a1[k] * ic1[k] + a2[k] * v3;
-            let v2 = ic2[k] + a2[k] * ic1[k] + a3[k] * v3;
-            ic1[k] = 2.0 * v1 - ic1[k];
-            ic2[k] = 2.0 * v2 - ic2[k];
-            jc1[k] = 2.0 * w1 - jc1[k];
-            jc2[k] = 2.0 * w2 - jc2[k];
-            lp[k] = v2;
-            bp[k] = v1;
-            ub[k] = x;
+        for g in groups.iter_mut() {
+            let [a1, a2, a3, b1, b2, b3] = g.c;
+            let [ic1, ic2, jc1, jc2] = &mut g.st;
+            for l in 0..LANES {
+                let w3 = xin - jc2[l];
+                let w1 = b1[l] * jc1[l] + b2[l] * w3;
+                let w2 = jc2[l] + b2[l] * jc1[l] + b3[l] * w3;
+                let x = w2;
+                let v3 = x - ic2[l];
+                let v1 = a1[l] * ic1[l] + a2[l] * v3;
+                let v2 = ic2[l] + a2[l] * ic1[l] + a3[l] * v3;
+                ic1[l] = 2.0 * v1 - ic1[l];
+                ic2[l] = 2.0 * v2 - ic2[l];
+                jc1[l] = 2.0 * w1 - jc1[l];
+                jc2[l] = 2.0 * w2 - jc2[l];
+                g.out[0][l] = v2;
+                g.out[1][l] = v1;
+                g.out[2][l] = x;
+            }
         }
         let keep = match rows {
             None => true,
             Some(r) => r[next] == i,
         };
         if keep {
-            for k in 0..m {
-                out[k].0.push(lp[k]);
-                out[k].1.push(bp[k]);
-                out[k].2.push(ub[k]);
+            for (k, o) in out.iter_mut().enumerate() {
+                let (g, l) = (&groups[k / LANES], k % LANES);
+                o.0.push(g.out[0][l]);
+                o.1.push(g.out[1][l]);
+                o.2.push(g.out[2][l]);
             }
             if let Some(r) = rows {
                 next += 1;
@@ -910,6 +922,9 @@ pub fn dahl_batch_at(x: &[f64], xcs: &[f64], rows: &[usize]) -> Vec<Vec<f64>> {
     out
 }
 
+/// Step sizes whose decay factor `dahl_walk` keeps per characteristic displacement.
+const DAHL_SLOTS: usize = 16;
+
 /// Walk the Dahl states of the characteristic displacements `xcs` over the first `end`
 /// samples of `x`, calling `emit(i, z)` per sample with each one's state.
 /// Once a state has converged to the direction of motion it equals ±1 exactly (the remaining
@@ -920,9 +935,10 @@ fn dahl_walk(x: &[f64], xcs: &[f64], end: usize, mut emit: impl FnMut(usize, &[f
     let mut z = vec![0.0f64; m];
     let mut prev = x.first().copied().unwrap_or(0.0);
     let ixc: Vec<f64> = xcs.iter().map(|xc| 1.0 / xc.max(1e-300)).collect();
-    // a quantised position repeats its step sizes: the last step's decay factor is reused
-    // when the step repeats (the same value, so the result is identical)
-    let (mut last_adx, mut last_e) = (vec![f64::NAN; m], vec![0.0; m]);
+    // a quantised position repeats its step sizes: the decay factors of the step sizes seen
+    // are kept (direct-mapped on the step's leading bits, DAHL_SLOTS per value) and reused
+    // when a step repeats (the same value, so the result is identical)
+    let mut memo = vec![(f64::NAN, 0.0); m * DAHL_SLOTS];
     // states equal to the direction of the last step, all of them: nothing to update while
     // the direction holds
     let mut settled = false;
@@ -934,14 +950,16 @@ fn dahl_walk(x: &[f64], xcs: &[f64], end: usize, mut emit: impl FnMut(usize, &[f
             let s = dx.signum();
             if !(settled && s == dir) {
                 let adx = dx.abs();
+                let b = adx.to_bits();
+                let slot = ((b >> 48) ^ (b >> 52)) as usize % DAHL_SLOTS;
                 settled = true;
                 for k in 0..m {
                     if z[k] != s {
-                        if adx != last_adx[k] {
-                            last_adx[k] = adx;
-                            last_e[k] = (-adx * ixc[k]).exp();
+                        let e = &mut memo[k * DAHL_SLOTS + slot];
+                        if adx != e.0 {
+                            *e = (adx, (-adx * ixc[k]).exp());
                         }
-                        z[k] = s + (z[k] - s) * last_e[k];
+                        z[k] = s + (z[k] - s) * e.1;
                         settled &= z[k] == s;
                     }
                 }
@@ -1252,6 +1270,24 @@ mod tests {
         assert_eq!(za.len(), rows.len());
         for (k, &r) in rows.iter().enumerate() {
             assert_eq!(za[k], z[r]);
+        }
+    }
+
+    /// The resonators run side by side (groups of lanes, the last one padded) give, frequency
+    /// by frequency, exactly the resonator run alone, on every sample and at chosen rows.
+    #[test]
+    fn batched_resonators_match_single_ones() {
+        let u: Vec<f64> = (0..5000)
+            .map(|i| (0.013 * i as f64).sin() + 0.3 * (0.21 * i as f64).cos())
+            .collect();
+        let freqs = [0.5, 1.1, 2.3, 4.7, 9.1, 17.0];
+        let rows: Vec<usize> = (3..u.len()).step_by(29).collect();
+        for r in [None, Some(rows.as_slice())] {
+            let b = resonator_batch(&u, &freqs, 1e-3, r);
+            for (k, &f) in freqs.iter().enumerate() {
+                let one = resonator(&u, f, 1e-3, r);
+                assert_eq!(b[k], one, "f {f}");
+            }
         }
     }
 
