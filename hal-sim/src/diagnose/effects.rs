@@ -1273,6 +1273,24 @@ mod tests {
         }
     }
 
+    /// Monotone motion by steps of many different sizes (more than the decay factors kept per
+    /// value, so that step sizes share a memo slot): still the closed form 1 − exp(−x/x_c).
+    #[test]
+    fn dahl_closed_form_with_irregular_steps() {
+        let mut x = vec![0.0];
+        for i in 0..4000u64 {
+            let step = 1e-7 * (1 + (i * 7919) % 97) as f64;
+            x.push(x[x.len() - 1] + step);
+        }
+        for xc in [3e-6, 4e-5] {
+            let z = dahl(&x, xc);
+            for (i, &xi) in x.iter().enumerate() {
+                let want = 1.0 - (-xi / xc).exp();
+                assert!((z[i] - want).abs() < 1e-12, "{i}: {} vs {want}", z[i]);
+            }
+        }
+    }
+
     /// The resonators run side by side (groups of lanes, the last one padded) give, frequency
     /// by frequency, exactly the resonator run alone, on every sample and at chosen rows.
     #[test]
