@@ -516,54 +516,9 @@ pub fn resonator(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let coef = |f: f64, k: f64| {
-        let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
-        let a1 = 1.0 / (1.0 + g * (g + k));
-        (a1, g * a1, g * g * a1)
-    };
-    let (a1, a2, a3) = coef(f_hz, 2.0 * COMPLIANCE_ZETA);
-    // input band limit: Butterworth-2 low-pass at 2·f_r (same filter structure, k = √2)
-    let (b1, b2, b3) = coef(2.0 * f_hz, std::f64::consts::SQRT_2);
-    let u0 = u.first().copied().unwrap_or(0.0);
-    let (mut ic1, mut ic2) = (0.0, u0);
-    let (mut jc1, mut jc2) = (0.0, u0);
-    let cap = rows.map_or(u.len(), |r| r.len());
-    let (mut lp, mut bp) = (Vec::with_capacity(cap), Vec::with_capacity(cap));
-    let mut ub = Vec::with_capacity(cap);
-    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
-    let mut next = 0usize;
-    for (i, &xin) in u[..last].iter().enumerate() {
-        let w3 = xin - jc2;
-        let w1 = b1 * jc1 + b2 * w3;
-        let w2 = jc2 + b2 * jc1 + b3 * w3;
-        jc1 = 2.0 * w1 - jc1;
-        jc2 = 2.0 * w2 - jc2;
-        let x = w2;
-        let v3 = x - ic2;
-        let v1 = a1 * ic1 + a2 * v3;
-        let v2 = ic2 + a2 * ic1 + a3 * v3;
-        ic1 = 2.0 * v1 - ic1;
-        ic2 = 2.0 * v2 - ic2;
-        match rows {
-            None => {
-                lp.push(v2);
-                bp.push(v1);
-                ub.push(x);
-            }
-            Some(r) => {
-                if r[next] == i {
-                    lp.push(v2);
-                    bp.push(v1);
-                    ub.push(x);
-                    next += 1;
-                    if next == r.len() {
-                        break;
-                    }
-                }
-            }
-        }
-    }
-    (lp, bp, ub)
+    resonator_batch(u, &[f_hz], dt, rows)
+        .pop()
+        .unwrap_or_default()
 }
 
 /// `resonator` for several resonance frequencies in one pass over the record (independent
@@ -581,16 +536,32 @@ pub fn resonator_batch(
         let a1 = 1.0 / (1.0 + g * (g + k));
         [a1, g * a1, g * g * a1]
     };
-    let ca: Vec<[f64; 3]> = freqs
-        .iter()
-        .map(|&f| coef(f, 2.0 * COMPLIANCE_ZETA))
-        .collect();
-    let cb: Vec<[f64; 3]> = freqs
-        .iter()
-        .map(|&f| coef(2.0 * f, std::f64::consts::SQRT_2))
-        .collect();
+    // the recurrences side by side in groups of LANES (one lane per frequency, the last group
+    // padded with copies of the last frequency), so that each step is vectorised
+    const LANES: usize = 4;
+    #[derive(Clone, Copy)]
+    struct Group {
+        c: [[f64; LANES]; 6],
+        st: [[f64; LANES]; 4],
+        out: [[f64; LANES]; 3],
+    }
     let u0 = u.first().copied().unwrap_or(0.0);
-    let mut st = vec![[0.0, u0, 0.0, u0]; m]; // ic1, ic2, jc1, jc2
+    let mut groups: Vec<Group> = (0..m.div_ceil(LANES))
+        .map(|g| {
+            let f = |l: usize| freqs[(g * LANES + l).min(m - 1)];
+            let ca: [[f64; 3]; LANES] = std::array::from_fn(|l| coef(f(l), 2.0 * COMPLIANCE_ZETA));
+            let cb: [[f64; 3]; LANES] =
+                std::array::from_fn(|l| coef(2.0 * f(l), std::f64::consts::SQRT_2));
+            Group {
+                c: std::array::from_fn(|j| {
+                    std::array::from_fn(|l| if j < 3 { ca[l][j] } else { cb[l][j - 3] })
+                }),
+                // ic1, ic2, jc1, jc2
+                st: [[0.0; LANES], [u0; LANES], [0.0; LANES], [u0; LANES]],
+                out: [[0.0; LANES]; 3],
+            }
+        })
+        .collect();
     let cap = rows.map_or(u.len(), |r| r.len());
     let mut out: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..m)
         .map(|_| {
@@ -603,36 +574,37 @@ pub fn resonator_batch(
         .collect();
     let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
     let mut next = 0usize;
-    let mut tmp = vec![[0.0f64; 3]; m];
     for (i, &xin) in u[..last].iter().enumerate() {
-        for k in 0..m {
-            let [ic1, ic2, jc1, jc2] = st[k];
-            let [b1, b2, b3] = cb[k];
-            let [a1, a2, a3] = ca[k];
-            let w3 = xin - jc2;
-            let w1 = b1 * jc1 + b2 * w3;
-            let w2 = jc2 + b2 * jc1 + b3 * w3;
-            let x = w2;
-            let v3 = x - ic2;
-            let v1 = a1 * ic1 + a2 * v3;
-            let v2 = ic2 + a2 * ic1 + a3 * v3;
-            st[k] = [
-                2.0 * v1 - ic1,
-                2.0 * v2 - ic2,
-                2.0 * w1 - jc1,
-                2.0 * w2 - jc2,
-            ];
-            tmp[k] = [v2, v1, x];
+        for g in groups.iter_mut() {
+            let [a1, a2, a3, b1, b2, b3] = g.c;
+            let [ic1, ic2, jc1, jc2] = &mut g.st;
+            for l in 0..LANES {
+                let w3 = xin - jc2[l];
+                let w1 = b1[l] * jc1[l] + b2[l] * w3;
+                let w2 = jc2[l] + b2[l] * jc1[l] + b3[l] * w3;
+                let x = w2;
+                let v3 = x - ic2[l];
+                let v1 = a1[l] * ic1[l] + a2[l] * v3;
+                let v2 = ic2[l] + a2[l] * ic1[l] + a3[l] * v3;
+                ic1[l] = 2.0 * v1 - ic1[l];
+                ic2[l] = 2.0 * v2 - ic2[l];
+                jc1[l] = 2.0 * w1 - jc1[l];
+                jc2[l] = 2.0 * w2 - jc2[l];
+                g.out[0][l] = v2;
+                g.out[1][l] = v1;
+                g.out[2][l] = x;
+            }
         }
         let keep = match rows {
             None => true,
             Some(r) => r[next] == i,
         };
         if keep {
-            for k in 0..m {
-                out[k].0.push(tmp[k][0]);
-                out[k].1.push(tmp[k][1]);
-                out[k].2.push(tmp[k][2]);
+            for (k, o) in out.iter_mut().enumerate() {
+                let (g, l) = (&groups[k / LANES], k % LANES);
+                o.0.push(g.out[0][l]);
+                o.1.push(g.out[1][l]);
+                o.2.push(g.out[2][l]);
             }
             if let Some(r) = rows {
                 next += 1;
@@ -645,17 +617,54 @@ pub fn resonator_batch(
     out
 }
 
-/// Columns of several effects of one kind on the rows of `s` (the compliance filters of all
-/// the values in one pass).
+/// The walks along the whole record (compliance resonators, Dahl states, play operators) run
+/// for all the values in one pass; the columns are those of `columns_on` value by value.
 pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
-    if effs.is_empty() || effs.iter().any(|e| e.kind != EffectKind::Compliance) {
+    let Some(kind) = effs.first().map(|e| e.kind) else {
+        return Vec::new();
+    };
+    let params: Vec<f64> = effs.iter().map(|e| e.param).collect();
+    if effs.iter().any(|e| e.kind != kind) {
         return effs.iter().map(|e| columns_on(ctx, s, e)).collect();
     }
-    let freqs: Vec<f64> = effs.iter().map(|e| e.param).collect();
-    resonator_batch(&ctx.rec.a, &freqs, ctx.dt, s.rows)
-        .into_iter()
-        .map(|(lp, bp, ub)| compliance_columns(lp, bp, ub))
-        .collect()
+    match (kind, s.rows) {
+        (EffectKind::Compliance, _) => resonator_batch(&ctx.rec.a, &params, ctx.dt, s.rows)
+            .into_iter()
+            .map(|(lp, bp, ub)| compliance_columns(lp, bp, ub))
+            .collect(),
+        (EffectKind::PreslidingHysteresis, Some(r)) => dahl_batch_at(&ctx.rec.x, &params, r)
+            .into_iter()
+            .map(|z| dahl_columns(&z, s.sgn))
+            .collect(),
+        (EffectKind::Backlash, Some(r)) => play_batch_at(&ctx.rec.x, &params, r)
+            .into_iter()
+            .map(|c| backlash_columns(ctx, s, |j| c[j]))
+            .collect(),
+        _ => effs.iter().map(|e| columns_on(ctx, s, e)).collect(),
+    }
+}
+
+/// `presliding_hysteresis` column `z − sgn v` (coefficient: the Coulomb force Fc·z carries).
+fn dahl_columns(z: &[f64], sg: &[f64]) -> Vec<(String, Vec<f64>)> {
+    let name = EffectKind::PreslidingHysteresis.name();
+    vec![(
+        format!("{name}.dahl_minus_sgn"),
+        z.iter().zip(sg).map(|(z, s)| z - s).collect(),
+    )]
+}
+
+/// `backlash` column `−(1 − contact)·(f̂₀ − offset)` on the rows of `s`, `contact(j)` at row j.
+fn backlash_columns(
+    ctx: &Context,
+    s: &Sig,
+    contact: impl Fn(usize) -> bool,
+) -> Vec<(String, Vec<f64>)> {
+    let off = ctx.base_th.get(3).copied().unwrap_or(0.0);
+    let name = EffectKind::Backlash.name();
+    let z = (0..s.len())
+        .map(|j| if contact(j) { 0.0 } else { off - s.bp[j] })
+        .collect();
+    vec![(format!("{name}.gap_minus_free"), z)]
 }
 
 fn compliance_columns(lp: Vec<f64>, bp: Vec<f64>, ub: Vec<f64>) -> Vec<(String, Vec<f64>)> {
@@ -733,28 +742,25 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             // play operator of width b on the position: the device side follows only while
             // the motion pushes on one flank; across the gap it carries no force (only the
             // offset, a sensor property, stays): column −(1 − contact)·(f̂₀ − offset)
-            let contact = play_contact(&ctx.rec.x, e.param);
-            let off = ctx.base_th.get(3).copied().unwrap_or(0.0);
-            let z = match s.rows {
-                None => map(&|i| if contact[i] { 0.0 } else { off - bp[i] }),
-                Some(r) => map(&|j| if contact[r[j]] { 0.0 } else { off - bp[j] }),
-            };
-            vec![col("gap_minus_free", z)]
+            match s.rows {
+                None => {
+                    let contact = play_contact(&ctx.rec.x, e.param);
+                    backlash_columns(ctx, s, |i| contact[i])
+                }
+                Some(r) => {
+                    let contact = play_batch_at(&ctx.rec.x, &[e.param], r).swap_remove(0);
+                    backlash_columns(ctx, s, |j| contact[j])
+                }
+            }
         }
         EffectKind::PreslidingHysteresis => {
             // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
             // force becomes Fc·z: column z − sgn v (coefficient Fc)
-            let y = match s.rows {
-                None => {
-                    let z = dahl(&ctx.rec.x, e.param);
-                    map(&|i| z[i] - sg[i])
-                }
-                Some(r) => {
-                    let z = dahl_at(&ctx.rec.x, e.param, r);
-                    map(&|j| z[j] - sg[j])
-                }
+            let z = match s.rows {
+                None => dahl(&ctx.rec.x, e.param),
+                Some(r) => dahl_at(&ctx.rec.x, e.param, r),
             };
-            vec![col("dahl_minus_sgn", y)]
+            dahl_columns(&z, sg)
         }
         EffectKind::Compliance => {
             // A mass m2 hung on the device through a spring-damper (resonance f_r, damping
@@ -840,74 +846,127 @@ pub fn clip_consistent(l: f64, bp: &[f64], f: &[f64], resid_rms: f64) -> bool {
 /// Contact of a play operator of total width `b` driven by `x`: true where the device side
 /// moves with x (x pushes on a flank), false while x crosses the gap.
 pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
-    let h = 0.5 * b;
-    let mut xm = x.first().copied().unwrap_or(0.0);
-    x.iter()
-        .map(|&xi| {
-            let lo = xi - h;
-            let hi = xi + h;
-            if xm < lo {
-                xm = lo;
-                true
-            } else if xm > hi {
-                xm = hi;
-                true
-            } else {
-                false
-            }
-        })
-        .collect()
-}
-
-/// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
-/// z → sgn(dx) + (z − sgn(dx))·exp(−|dx|/xc) over each step (exact for the model).
-pub fn dahl(x: &[f64], xc: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(x.len());
-    dahl_walk(x, xc, x.len(), |_, z| out.push(z));
+    play_walk(x, &[b], x.len(), |_, c| out.push(c[0]));
     out
 }
 
-/// The Dahl state of `dahl` at the given ascending sample indices only (the path is walked up
-/// to the last of them; no full-length array).
-pub fn dahl_at(x: &[f64], xc: f64, rows: &[usize]) -> Vec<f64> {
-    let mut out = Vec::with_capacity(rows.len());
+/// `play_contact` for several widths at the given ascending sample indices, in one pass (the
+/// path is walked up to the last of them; no full-length array).
+pub fn play_batch_at(x: &[f64], widths: &[f64], rows: &[usize]) -> Vec<Vec<bool>> {
+    let mut out = vec![Vec::with_capacity(rows.len()); widths.len()];
     let mut k = 0;
     let end = rows.last().map_or(0, |r| r + 1).min(x.len());
-    dahl_walk(x, xc, end, |i, z| {
+    play_walk(x, widths, end, |i, c| {
         while k < rows.len() && rows[k] == i {
-            out.push(z);
+            for (o, &ci) in out.iter_mut().zip(c) {
+                o.push(ci);
+            }
             k += 1;
         }
     });
     out
 }
 
-/// Walk the Dahl state over the first `end` samples of `x`, calling `emit(i, z)` per sample.
-/// Once the state has converged to the direction of motion it equals ±1 exactly (the remaining
+/// Walk play operators of the given widths over the first `end` samples of `x`, calling
+/// `emit(i, contact)` per sample with each width's contact.
+fn play_walk(x: &[f64], widths: &[f64], end: usize, mut emit: impl FnMut(usize, &[bool])) {
+    let h: Vec<f64> = widths.iter().map(|b| 0.5 * b).collect();
+    let mut xm = vec![x.first().copied().unwrap_or(0.0); widths.len()];
+    let mut contact = vec![false; widths.len()];
+    for (i, &xi) in x[..end].iter().enumerate() {
+        for ((xm, c), &h) in xm.iter_mut().zip(contact.iter_mut()).zip(&h) {
+            let lo = xi - h;
+            let hi = xi + h;
+            *c = if *xm < lo {
+                *xm = lo;
+                true
+            } else if *xm > hi {
+                *xm = hi;
+                true
+            } else {
+                false
+            };
+        }
+        emit(i, &contact);
+    }
+}
+
+/// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
+/// z → sgn(dx) + (z − sgn(dx))·exp(−|dx|/xc) over each step (exact for the model).
+pub fn dahl(x: &[f64], xc: f64) -> Vec<f64> {
+    let mut out = Vec::with_capacity(x.len());
+    dahl_walk(x, &[xc], x.len(), |_, z| out.push(z[0]));
+    out
+}
+
+/// The Dahl state of `dahl` at the given ascending sample indices only (the path is walked up
+/// to the last of them; no full-length array).
+pub fn dahl_at(x: &[f64], xc: f64, rows: &[usize]) -> Vec<f64> {
+    dahl_batch_at(x, &[xc], rows).swap_remove(0)
+}
+
+/// `dahl_at` for several characteristic displacements in one pass over the path.
+pub fn dahl_batch_at(x: &[f64], xcs: &[f64], rows: &[usize]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::with_capacity(rows.len()); xcs.len()];
+    let mut k = 0;
+    let end = rows.last().map_or(0, |r| r + 1).min(x.len());
+    dahl_walk(x, xcs, end, |i, z| {
+        while k < rows.len() && rows[k] == i {
+            for (o, &zi) in out.iter_mut().zip(z) {
+                o.push(zi);
+            }
+            k += 1;
+        }
+    });
+    out
+}
+
+/// Step sizes whose decay factor `dahl_walk` keeps per characteristic displacement.
+const DAHL_SLOTS: usize = 16;
+
+/// Walk the Dahl states of the characteristic displacements `xcs` over the first `end`
+/// samples of `x`, calling `emit(i, z)` per sample with each one's state.
+/// Once a state has converged to the direction of motion it equals ±1 exactly (the remaining
 /// deviation rounds away below half an ulp of 1) and stays there while the direction holds, so
 /// the exponential is evaluated only in the transitions after reversals.
-fn dahl_walk(x: &[f64], xc: f64, end: usize, mut emit: impl FnMut(usize, f64)) {
-    let mut z = 0.0f64;
+fn dahl_walk(x: &[f64], xcs: &[f64], end: usize, mut emit: impl FnMut(usize, &[f64])) {
+    let m = xcs.len();
+    let mut z = vec![0.0f64; m];
     let mut prev = x.first().copied().unwrap_or(0.0);
-    let ixc = 1.0 / xc.max(1e-300);
-    // a quantised position repeats its step sizes: the last step's decay factor is reused
-    // when the step repeats (the same value, so the result is identical)
-    let (mut last_adx, mut last_e) = (f64::NAN, 0.0);
+    let ixc: Vec<f64> = xcs.iter().map(|xc| 1.0 / xc.max(1e-300)).collect();
+    // a quantised position repeats its step sizes: the decay factors of the step sizes seen
+    // are kept (direct-mapped on the step's leading bits, DAHL_SLOTS per value) and reused
+    // when a step repeats (the same value, so the result is identical)
+    let mut memo = vec![(f64::NAN, 0.0); m * DAHL_SLOTS];
+    // states equal to the direction of the last step, all of them: nothing to update while
+    // the direction holds
+    let mut settled = false;
+    let mut dir = 0.0;
     for (i, &xi) in x[..end].iter().enumerate() {
         let dx = xi - prev;
         prev = xi;
         if dx != 0.0 {
             let s = dx.signum();
-            if z != s {
+            if !(settled && s == dir) {
                 let adx = dx.abs();
-                if adx != last_adx {
-                    last_adx = adx;
-                    last_e = (-adx * ixc).exp();
+                let b = adx.to_bits();
+                let slot = ((b >> 48) ^ (b >> 52)) as usize % DAHL_SLOTS;
+                settled = true;
+                for k in 0..m {
+                    if z[k] != s {
+                        let e = &mut memo[k * DAHL_SLOTS + slot];
+                        if adx != e.0 {
+                            *e = (adx, (-adx * ixc[k]).exp());
+                        }
+                        z[k] = s + (z[k] - s) * e.1;
+                        settled &= z[k] == s;
+                    }
                 }
-                z = s + (z - s) * last_e;
+                dir = s;
             }
         }
-        emit(i, z);
+        emit(i, &z);
     }
 }
 
@@ -1211,6 +1270,69 @@ mod tests {
         assert_eq!(za.len(), rows.len());
         for (k, &r) in rows.iter().enumerate() {
             assert_eq!(za[k], z[r]);
+        }
+    }
+
+    /// Monotone motion by steps of many different sizes (more than the decay factors kept per
+    /// value, so that step sizes share a memo slot): still the closed form 1 − exp(−x/x_c).
+    #[test]
+    fn dahl_closed_form_with_irregular_steps() {
+        let mut x = vec![0.0];
+        for i in 0..4000u64 {
+            let step = 1e-7 * (1 + (i * 7919) % 97) as f64;
+            x.push(x[x.len() - 1] + step);
+        }
+        for xc in [3e-6, 4e-5] {
+            let z = dahl(&x, xc);
+            for (i, &xi) in x.iter().enumerate() {
+                let want = 1.0 - (-xi / xc).exp();
+                assert!((z[i] - want).abs() < 1e-12, "{i}: {} vs {want}", z[i]);
+            }
+        }
+    }
+
+    /// The resonators run side by side (groups of lanes, the last one padded) give, frequency
+    /// by frequency, exactly the resonator run alone, on every sample and at chosen rows.
+    #[test]
+    fn batched_resonators_match_single_ones() {
+        let u: Vec<f64> = (0..5000)
+            .map(|i| (0.013 * i as f64).sin() + 0.3 * (0.21 * i as f64).cos())
+            .collect();
+        let freqs = [0.5, 1.1, 2.3, 4.7, 9.1, 17.0];
+        let rows: Vec<usize> = (3..u.len()).step_by(29).collect();
+        for r in [None, Some(rows.as_slice())] {
+            let b = resonator_batch(&u, &freqs, 1e-3, r);
+            for (k, &f) in freqs.iter().enumerate() {
+                let one = resonator(&u, f, 1e-3, r);
+                assert_eq!(b[k], one, "f {f}");
+            }
+        }
+    }
+
+    /// The one-pass walks over several parameter values give, value by value, exactly the
+    /// single-value walks (Dahl states and play contacts on a quantised path with reversals and
+    /// standstills: a state settled for one value and not for another).
+    #[test]
+    fn batched_walks_match_single_ones() {
+        let q = 1.6e-6;
+        let x: Vec<f64> = (0..20_000)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                let p = 2e-3 * (2.1 * t).sin() + 3e-4 * (13.0 * t).sin();
+                (p / q).round() * q
+            })
+            .collect();
+        let rows: Vec<usize> = (5..x.len()).step_by(37).collect();
+        let xcs = [2.0 * q, 1e-5, 1e-4, 1e-3, 1e-2];
+        let zb = dahl_batch_at(&x, &xcs, &rows);
+        let cb = play_batch_at(&x, &xcs, &rows);
+        for (k, &xc) in xcs.iter().enumerate() {
+            let z = dahl(&x, xc);
+            let c = play_contact(&x, xc);
+            for (j, &r) in rows.iter().enumerate() {
+                assert_eq!(zb[k][j].to_bits(), z[r].to_bits(), "xc {xc}, row {r}");
+                assert_eq!(cb[k][j], c[r], "b {xc}, row {r}");
+            }
         }
     }
 }

@@ -339,6 +339,78 @@ pub fn extend_normals_dense(
     out
 }
 
+/// The Gram entries of a candidate's columns already computed against base columns (each
+/// base column's address and length with its training and held-out products), against each
+/// other and against the force. During forward selection the base only grows by appended
+/// columns, so a candidate screened again in a later round needs only the products with the
+/// new base columns (the others are the same sums over the same rows).
+#[derive(Debug, Default, Clone)]
+pub struct GramCache {
+    /// Per candidate column: per base column (its (address, length)), the products.
+    cross: Vec<Vec<(ColumnId, TrainHold)>>,
+    /// Per candidate column c: products with candidate columns 0..=c, then with the force.
+    own: Vec<(Vec<TrainHold>, TrainHold)>,
+}
+
+/// A column's address and length.
+type ColumnId = (usize, usize);
+/// A sum over the training and over the held-out samples.
+type TrainHold = (f64, f64);
+
+/// `extend_normals_dense` keeping the products already computed in `gc` (see `GramCache`): the
+/// result is the same, entry by entry (`tests::cached_gram_matches_dense`). Products with a base
+/// column not at the same address and length as the cached one are recomputed from there on.
+pub fn extend_normals_cached(
+    base: &(Normal, Normal),
+    bcols: &[&[f64]],
+    z: &[&[f64]],
+    f: &[f64],
+    w: &HoldWeights,
+    gc: &mut GramCache,
+) -> (Normal, Normal) {
+    let p = bcols.len();
+    let k = z.len();
+    let m = p + k;
+    if gc.own.len() != k {
+        gc.own = (0..k)
+            .map(|c| {
+                let zz = (0..=c)
+                    .map(|j| dot2(z[c], z[j], &w.train, &w.hold))
+                    .collect();
+                (zz, dot2(z[c], f, &w.train, &w.hold))
+            })
+            .collect();
+        gc.cross = vec![Vec::new(); k];
+    }
+    let mut out = (embed(&base.0, p, m), embed(&base.1, p, m));
+    for c in 0..k {
+        let row = p + c;
+        let cr = &mut gc.cross[c];
+        let same = cr
+            .iter()
+            .zip(bcols)
+            .take_while(|(e, b)| e.0 == (b.as_ptr() as usize, b.len()))
+            .count();
+        cr.truncate(same);
+        for bc in &bcols[same..] {
+            cr.push((
+                (bc.as_ptr() as usize, bc.len()),
+                dot2(z[c], bc, &w.train, &w.hold),
+            ));
+        }
+        let (zz, zf) = &gc.own[c];
+        for (j, &(t, h)) in cr.iter().map(|e| &e.1).chain(zz.iter()).enumerate() {
+            out.0.g[row * m + j] = t;
+            out.0.g[j * m + row] = t;
+            out.1.g[row * m + j] = h;
+            out.1.g[j * m + row] = h;
+        }
+        out.0.b[row] = zf.0;
+        out.1.b[row] = zf.1;
+    }
+    out
+}
+
 /// Relative error ‖f − f̂‖₂/‖f‖₂ from rss and ‖f‖².
 pub fn rel(rss: f64, ff: f64) -> f64 {
     if ff > 0.0 {
@@ -575,6 +647,9 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     // once (on the subsample, at most `screen_samples` rows each) and kept.
     type Cache = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
     let mut cache = Cache::new();
+    // and their Gram entries against the base columns, extended as the base grows
+    let grams =
+        std::cell::RefCell::new(std::collections::HashMap::<(usize, u64), GramCache>::new());
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
     let whole_fit = |full: &(Normal, Normal), cols: &[(String, Vec<f64>)]| {
@@ -604,7 +679,11 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                     .entry((eff.kind as usize, eff.param.to_bits()))
                     .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-                let nn = extend_normals_dense(&base, &base_refs, &zr, &sub_f, &sub_w);
+                let mut grams = grams.borrow_mut();
+                let gc = grams
+                    .entry((eff.kind as usize, eff.param.to_bits()))
+                    .or_default();
+                let nn = extend_normals_cached(&base, &base_refs, &zr, &sub_f, &sub_w, gc);
                 let t = nn.0.solve();
                 let nb = base_refs.len();
                 if !effects::plausible(eff.kind, &t[nb..], &t[..nb.min(4)])
@@ -624,9 +703,15 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                     - bic(rss_t0, nn.0.n, base_refs.len());
                 (nn.1.rss(&t), dbic)
             };
-            // fill the cache for a list of compliance values in one pass over the record
+            // fill the cache for a list of values in one pass over the record (the effects
+            // whose columns walk the record's history: resonators, Dahl states, play)
             let prefill = |effs: &[Effect], cache: &mut Cache| {
-                if cand.kind != EffectKind::Compliance {
+                if !matches!(
+                    cand.kind,
+                    EffectKind::Compliance
+                        | EffectKind::PreslidingHysteresis
+                        | EffectKind::Backlash
+                ) {
                     return;
                 }
                 let missing: Vec<Effect> = effs
@@ -698,11 +783,13 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
         }
         chosen.push(eff.clone());
         let z = effects::effect_columns(&ctx, &eff);
-        sub_cols.extend(
-            effects::columns_on(&ctx, &sig, &eff)
-                .into_iter()
-                .map(|(_, v)| v),
-        );
+        // the screening columns of the chosen value are in the cache (it was evaluated)
+        let key = (eff.kind as usize, eff.param.to_bits());
+        let zs = match cache.get(&key) {
+            Some(zs) => zs.clone(),
+            None => effects::columns_on(&ctx, &sig, &eff),
+        };
+        sub_cols.extend(zs.into_iter().map(|(_, v)| v));
         {
             let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
             full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
@@ -732,7 +819,10 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     let mut spans = Vec::new();
     let mut at = n_base;
     for e in &chosen {
-        let k = effects::columns_on(&ctx, &sig, e).len();
+        let k = match cache.get(&(e.kind as usize, e.param.to_bits())) {
+            Some(zs) => zs.len(),
+            None => effects::columns_on(&ctx, &sig, e).len(),
+        };
         spans.push((at, at + k));
         at += k;
     }
@@ -1123,5 +1213,38 @@ mod tests {
         assert_eq!(s.th[2], 0.0);
         let s = solve_sym(&[f64::NAN], &[1.0], 1);
         assert_eq!((s.th[0], s.rank), (0.0, 0));
+    }
+
+    /// The Gram entries kept across a growing base (`extend_normals_cached`) are those
+    /// `extend_normals_dense` computes from scratch, bit for bit, round after round; a base
+    /// column replaced by another is recomputed.
+    #[test]
+    fn cached_gram_matches_dense() {
+        let n = 1000;
+        let col = |s: f64| -> Vec<f64> { (0..n).map(|i| (s * i as f64).sin() + 0.1 * s).collect() };
+        let f = col(0.37);
+        let part: Vec<u8> = (0..n)
+            .map(|i| [TRAIN, HELD_OUT, AT_REST][i % 7 % 3])
+            .collect();
+        let w = HoldWeights::new(&part);
+        let mut base_cols: Vec<Vec<f64>> = vec![col(0.011), col(0.023)];
+        let z = [col(0.05), col(0.071)];
+        let zr: Vec<&[f64]> = z.iter().map(|v| v.as_slice()).collect();
+        let mut gc = GramCache::default();
+        for round in 0..4 {
+            if round == 3 {
+                base_cols[1] = col(0.029);
+            }
+            let br: Vec<&[f64]> = base_cols.iter().map(|v| v.as_slice()).collect();
+            let base = normals(&br, &f, &part, 1);
+            let dense = extend_normals_dense(&base, &br, &zr, &f, &w);
+            let cached = extend_normals_cached(&base, &br, &zr, &f, &w, &mut gc);
+            for (a, b) in [(&dense.0, &cached.0), (&dense.1, &cached.1)] {
+                assert_eq!(a.g, b.g, "round {round}");
+                assert_eq!(a.b, b.b, "round {round}");
+                assert_eq!((a.ff, a.n), (b.ff, b.n));
+            }
+            base_cols.push(col(0.1 + round as f64));
+        }
     }
 }
