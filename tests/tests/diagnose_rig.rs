@@ -25,7 +25,15 @@ struct Tally {
 fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Tally> {
     let emps = emps_x();
     let mut out: BTreeMap<&'static str, Tally> = BTreeMap::new();
+    // RIG_KINDS=none,delay runs only those kinds (same seeds as in the full run)
+    let only = std::env::var("RIG_KINDS").ok();
     for (ki, kind) in Hidden::KINDS.iter().enumerate() {
+        if only
+            .as_ref()
+            .is_some_and(|o| !o.split(',').any(|k| k == *kind))
+        {
+            continue;
+        }
         for j in 0..per_kind {
             let seed = seed0 + (ki * 100_000 + j) as u64;
             let traj = match j % 5 {
@@ -74,6 +82,23 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
                 100.0 * d.final_holdout_rel_error,
                 if exact { "" } else { "  <-- not exact" }
             );
+            if std::env::var("RIG_EVIDENCE").is_ok() {
+                // the evidence of each finding: held-out gain, BIC change, consistency
+                for f in &d.findings {
+                    println!(
+                        "    {} {:?}: held-out rss -{:.2} %, ΔBIC {:.1}, held on {:.0} % of segments; {}",
+                        f.effect,
+                        f.parameters,
+                        100.0 * f.holdout_rss_drop,
+                        f.delta_bic,
+                        100.0 * f.consistency,
+                        f.note
+                    );
+                }
+                for v in &d.verdicts {
+                    println!("    verdict: {v}");
+                }
+            }
         }
     }
     println!(
