@@ -137,9 +137,22 @@ fn rig_sample() {
     let exact: usize = t.values().map(|t| t.exact).sum();
     let detected: usize = t.values().map(|t| t.detected).sum();
     println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured 2026-11-24: 13/27 exactly right, 18/27 detected (the targets, 95 % exactly
-    // right, are not reached); the bounds guard what is reached, about 3 records of margin
-    // (a seeded sample: the figures move only with the code)
-    assert!(exact >= 10, "{exact}/{all} exactly right (measured 13)");
-    assert!(detected >= 15, "{detected}/{all} detected (measured 18)");
+    // measured 2026-11-24: 16/27 exactly right, 19/27 detected (the targets, 95 % exactly
+    // right, are not reached: the clipped current loop, the play and the delay are rarely
+    // named right); the bounds guard what is reached, 3 records of margin (a seeded sample:
+    // the figures move only with the code)
+    assert!(exact >= 13, "{exact}/{all} exactly right (measured 16)");
+    assert!(detected >= 16, "{detected}/{all} detected (measured 19)");
+    // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
+    // drift records, and no effect-free record gets a catalogue name (0/3); one record of
+    // margin on the first (the check runs on the baseline residual of any motion)
+    assert!(
+        t["drift"].detected >= 2,
+        "drift detected {}/3 (measured 3)",
+        t["drift"].detected
+    );
+    assert_eq!(
+        t["none"].false_name, 0,
+        "effect-free records given a catalogue name"
+    );
 }

@@ -439,6 +439,43 @@ pub const SWAP_ROUNDS: usize = 4;
 /// Nuisance columns of a slow change of the force offset over the record (not a catalogue
 /// effect: reported as `unexplained`).
 pub const DRIFT_COLUMNS: [&str; 2] = ["drift.t_legendre1", "drift.t_legendre2"];
+/// Agreement of a finding's coefficients across the stability segments: its jackknife t
+/// (the segment fits' mean coefficient vector over the jackknife standard error of their
+/// projections on it) must reach this. With 5 leave-one-segment-out fits, t ≥ 3 means the
+/// coefficient is determined to within a third of its value by every part of the record (a
+/// two-sided 4 % level for a t variable with 4 degrees of freedom); a fit that the segments
+/// scatter around zero or across a wide range is not the same effect throughout the record.
+pub const AGREEMENT_T: f64 = 3.0;
+
+/// Jackknife t of coefficient vectors fitted with one segment left out each: |θ̄| over the
+/// jackknife standard error √((S−1)/S·Σ(p_i − p̄)²) of the projections p_i = θ_i·θ̄/|θ̄|
+/// (0 when there are fewer than 3 fits or θ̄ = 0; ∞ when they agree exactly).
+pub fn jackknife_t(fits: &[Vec<f64>]) -> f64 {
+    let s = fits.len();
+    if s < 3 {
+        return 0.0;
+    }
+    let m = fits[0].len();
+    let mean: Vec<f64> = (0..m)
+        .map(|j| fits.iter().map(|f| f[j]).sum::<f64>() / s as f64)
+        .collect();
+    let norm = mean.iter().map(|v| v * v).sum::<f64>().sqrt();
+    if !(norm > 0.0 && norm.is_finite()) {
+        return 0.0;
+    }
+    let p: Vec<f64> = fits
+        .iter()
+        .map(|f| f.iter().zip(&mean).map(|(a, b)| a * b).sum::<f64>() / norm)
+        .collect();
+    let pm = p.iter().sum::<f64>() / s as f64;
+    let se = ((s - 1) as f64 / s as f64 * p.iter().map(|v| (v - pm).powi(2)).sum::<f64>()).sqrt();
+    if se > 0.0 {
+        norm / se
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Samples in motion the diagnosis needs at least (training and held-out together).
 pub const MIN_MOVING: usize = 200;
 
@@ -877,6 +914,7 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
     let sub_refs: Vec<&[f64]> = sub_all.iter().map(|v| v.as_slice()).collect();
     let mut holds = vec![0usize; chosen.len()];
     let mut signs = vec![(0usize, 0usize); chosen.len()];
+    let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
     for sgi in 0..STABILITY_SEGMENTS {
         let part: Vec<u8> = (0..n_sub)
             .map(|j| {
@@ -903,6 +941,7 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             if phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain) {
                 holds[k] += 1;
             }
+            seg_coefs[k].push(th[a..b].to_vec());
             if th[a] > 0.0 {
                 signs[k].0 += 1;
             } else {
@@ -910,19 +949,78 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             }
         }
     }
+    let agreement: Vec<f64> = seg_coefs.iter().map(|c| jackknife_t(c)).collect();
+    // A periodic finding names a ripple: the residual it explains (the whole-record residual
+    // with its own contribution added back) must show that ripple as a peak of the spectrum
+    // over position (30× the median level, the `unexplained` criterion) within the 3 % of
+    // `same_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
+    // peaks there (fewer than 3 periods) and are not checked.
+    let ripple_shows: Vec<bool> = {
+        let periodic = |k: EffectKind| {
+            matches!(
+                k,
+                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+            )
+        };
+        let th_now = full.0.plus(&full.1).solve();
+        let resid_now = if chosen.iter().any(|e| periodic(e.kind)) {
+            resid_of(&cols, &th_now)
+        } else {
+            Vec::new()
+        };
+        chosen
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                if !periodic(e.kind) || e.param > 2.0 * ctx.x_half / 3.0 {
+                    return true;
+                }
+                let (a, b) = spans[k];
+                let mut r = resid_now.clone();
+                for j in a..b {
+                    for ((ri, c), &rest) in r.iter_mut().zip(&cols[j].1).zip(&ctx.rest) {
+                        if !rest {
+                            *ri += th_now[j] * c;
+                        }
+                    }
+                }
+                report::position_spectrum(rec, &r).peaks.iter().any(|p| {
+                    let probe = Effect {
+                        kind: e.kind,
+                        param: p.wavelength_m,
+                    };
+                    effects::same_wavelength(&probe, std::slice::from_ref(e))
+                })
+            })
+            .collect()
+    };
     let kept: Vec<usize> = (0..chosen.len())
-        .filter(|&k| holds[k] >= STABILITY_MIN && (signs[k].0 == 0 || signs[k].1 == 0))
+        .filter(|&k| {
+            holds[k] >= STABILITY_MIN
+                && (signs[k].0 == 0 || signs[k].1 == 0)
+                && agreement[k] >= AGREEMENT_T
+                && ripple_shows[k]
+        })
         .collect();
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
+            if !ripple_shows[k] {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but the residual it explains shows no peak at its wavelength in the spectrum over position (no ripple stands 30× above the spectrum's median within 3 %): not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(&ctx, &chosen[k]),
+                ));
+                continue;
+            }
             dropped_notes.push(format!(
-                "{} ({}) selected on the whole record but held on only {}/{} independent segments{}: not kept",
+                "{} ({}) selected on the whole record, held on {}/{} independent segments (at least {STABILITY_MIN} needed){}, its coefficients agreeing across them to t = {:.1} (at least {AGREEMENT_T} needed): not kept",
                 chosen[k].kind.name(),
                 effects::describe(&ctx, &chosen[k]),
                 holds[k],
                 STABILITY_SEGMENTS,
-                if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" }
+                if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" },
+                agreement[k]
             ));
         }
         // rebuild the model from the kept findings (sub-blocks of the accumulated normals)
