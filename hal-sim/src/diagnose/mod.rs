@@ -1329,6 +1329,35 @@ mod tests {
         (g, b)
     }
 
+    /// The jackknife t of leave-one-segment-out fits against its closed form: scalar fits
+    /// 1.0, 1.1, 0.9, 1.0, 1.0 have mean 1 and Σ(θ_i − θ̄)² = 0.02, so se = √(4/5·0.02) and
+    /// t = 1/se = 7.906; two-column fits are projected on their mean (fits along one
+    /// direction give the scalar result times its norm over the same spread); fits scattered
+    /// around zero give t below `AGREEMENT_T`.
+    #[test]
+    fn jackknife_t_matches_closed_form() {
+        let f: Vec<Vec<f64>> = [1.0, 1.1, 0.9, 1.0, 1.0].iter().map(|v| vec![*v]).collect();
+        let want = 1.0 / (0.8f64 * 0.02).sqrt();
+        assert!(
+            (jackknife_t(&f) / want - 1.0).abs() < 1e-12,
+            "{}",
+            jackknife_t(&f)
+        );
+        // the same along (3, 4)/5 · 5: norm 5 × mean 1, projections 5 × the scalars
+        let g: Vec<Vec<f64>> = f.iter().map(|v| vec![3.0 * v[0], 4.0 * v[0]]).collect();
+        assert!(
+            (jackknife_t(&g) / want - 1.0).abs() < 1e-12,
+            "{}",
+            jackknife_t(&g)
+        );
+        let z: Vec<Vec<f64>> = [0.5, -0.4, 0.3, -0.2, 0.1]
+            .iter()
+            .map(|v| vec![*v])
+            .collect();
+        assert!(jackknife_t(&z) < AGREEMENT_T, "{}", jackknife_t(&z));
+        assert_eq!(jackknife_t(&f[..2]), 0.0);
+    }
+
     /// Straight line through noisy points: the closed-form slope Sxy/Sxx and intercept
     /// ȳ − slope·x̄, with columns of very different scale (x in µm-sized units, offset 1).
     #[test]
