@@ -1057,7 +1057,17 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         EffectKind::Compliance => {
             // from 10 periods over the record to 0.4·fs
             let t = ctx.dt * ctx.rec.len() as f64;
-            let hi = ctx.f_motion.min(0.4 / ctx.dt);
+            // and to a quarter of the derivative filter's cutoff: the resonator's input band
+            // (up to 2·f_r) then lies where the zero-phase Butterworth-2 passes the derived
+            // acceleration within 6 % (gain 1/(1 + (f/fc)^4) = 0.94 at fc/2); above it the
+            // columns fit the filter's own attenuation of M·a as a "resonance" (38–42 Hz on
+            // effect-free records following EMPS's motion, 50 Hz cutoff)
+            let cap = ctx
+                .rec
+                .meta
+                .get(super::record::DERIVATIVE_CUTOFF_KEY)
+                .map_or(f64::INFINITY, |fc| 0.25 * fc);
+            let hi = ctx.f_motion.min(0.4 / ctx.dt).min(cap);
             let lo = 10.0 / t;
             if hi > 1.5 * lo {
                 logspace(lo, hi, 24).into_iter().map(mk).collect()

@@ -62,6 +62,10 @@ impl Record {
     }
 }
 
+/// Metadata key under which the reader records the cutoff (Hz) of the low-pass the
+/// acceleration was derived through (absent when `a_m_s2` is measured).
+pub const DERIVATIVE_CUTOFF_KEY: &str = "derivative_cutoff_hz";
+
 /// Parse a record from CSV text. `cutoff_hz`: low-pass cutoff for derived v and a
 /// (None = fs/20).
 pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
@@ -217,6 +221,11 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
             (v, a, format!("zero-phase Butterworth-2 low-pass of x_m at {fc:.3} Hz (forward-backward), then central differences"))
         }
     };
+    if idx("a_m_s2").is_none() {
+        // the acceleration is derived through the low-pass: its cutoff bounds the band in
+        // which it follows the motion (effects::grid keeps a resonance well below it)
+        meta.insert(DERIVATIVE_CUTOFF_KEY.to_string(), fc);
+    }
     let mut extra = BTreeMap::new();
     for (j, name) in h.iter().enumerate() {
         if !["t_s", "x_m", "f_N", "v_m_s", "a_m_s2"].contains(&name.as_str()) {
