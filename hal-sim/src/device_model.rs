@@ -82,8 +82,17 @@ pub enum ModelEffect {
     ReflectedInertia { extra_driven_inertia_kg: f64 },
     /// The force is seen `lag_s` late (gain: the fraction of the force delayed).
     Lag { lag_s: f64, gain: f64 },
-    /// The force is clipped at ±`limit_N` (gain: the fraction clipped).
-    CurrentLimit { limit_N: f64, gain: f64 },
+    /// The drive's force is clipped at ±`limit_N`. With `drive_damping_Ns_per_m` = 0 the drive
+    /// produces the whole force (a motor-driven axis; gain: the fraction clipped); with
+    /// `drive_damping_Ns_per_m` = c_d > 0 the drive acts as a damper on an imposed motion and
+    /// its force c_d·v (part of the viscous term) is what saturates.
+    CurrentLimit {
+        limit_N: f64,
+        #[serde(default = "one")]
+        gain: f64,
+        #[serde(default)]
+        drive_damping_Ns_per_m: f64,
+    },
     /// A mass hung on the device through a spring-damper (resonance, damping ratio); its
     /// rigid-body part is in the baseline inertia.
     Compliance {
@@ -92,7 +101,8 @@ pub enum ModelEffect {
         damping_ratio: f64,
     },
     /// Play of total width between the motion and the device: across the gap the device
-    /// carries no force (the offset, a sensor property, stays).
+    /// stands still and carries no force (the offset, a sensor property, stays); where the
+    /// motion takes up the play the device is struck into its velocity (an impulse M·v).
     Backlash { width_m: f64, gain: f64 },
     /// Dahl friction: the Coulomb force builds up over the characteristic displacement after
     /// each reversal instead of switching with the sign of v.
@@ -100,6 +110,10 @@ pub enum ModelEffect {
         characteristic_displacement_m: f64,
         friction_N: f64,
     },
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// `key = value` in [lo, hi], or the message naming the key, the value and the range.
@@ -198,9 +212,20 @@ impl ModelEffect {
                 range(&k("lag_s"), lag_s, 0.0, 10.0, "s")?;
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
             }
-            ModelEffect::CurrentLimit { limit_N, gain } => {
+            ModelEffect::CurrentLimit {
+                limit_N,
+                gain,
+                drive_damping_Ns_per_m: cd,
+            } => {
                 range(&k("limit_N"), limit_N, 0.0, F, "N")?;
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
+                range(
+                    &k("drive_damping_Ns_per_m"),
+                    cd,
+                    0.0,
+                    m.viscous_friction_Ns_per_m,
+                    "N·s/m (at most the viscous_friction_Ns_per_m that carries it)",
+                )?;
             }
             ModelEffect::Compliance {
                 resonance_Hz: f,
@@ -303,6 +328,8 @@ pub struct ModelState {
     /// Per effect: resonator (y, ẏ), play position, Dahl state, lag buffer.
     y: Vec<(f64, f64)>,
     play: Vec<f64>,
+    /// Per effect: the play's gap was open at the previous step.
+    gap_was_open: Vec<bool>,
     dahl: Vec<(f64, f64)>,
     lag: Vec<(usize, VecDeque<f64>)>,
 }
@@ -317,6 +344,7 @@ impl ModelState {
             dt,
             y: vec![(x0, v0); ne],
             play: vec![x0; ne],
+            gap_was_open: vec![false; ne],
             dahl: vec![(0.0, x0); ne],
             lag: m
                 .effects
@@ -384,6 +412,15 @@ impl ModelState {
                     // the friction it carries follows z instead of sgn v
                     coulomb += friction_N * (*z - sg);
                 }
+                ModelEffect::CurrentLimit {
+                    limit_N,
+                    gain,
+                    drive_damping_Ns_per_m: cd,
+                } if cd > 0.0 => {
+                    // the drive acts as a damper: its force c_d·v, carried by the viscous term,
+                    // saturates at ±limit_N
+                    other += gain * ((cd * v).clamp(-limit_N, limit_N) - cd * v);
+                }
                 ModelEffect::Compliance {
                     resonance_Hz,
                     modal_mass_kg: m2,
@@ -425,11 +462,21 @@ impl ModelState {
                     } else {
                         false
                     };
+                    let struck = contact && self.gap_was_open[i];
+                    self.gap_was_open[i] = !contact;
                     if !contact {
                         f += gain * (m.force_offset_N - f);
+                    } else if struck {
+                        // the device side, at rest across the gap, is struck into the
+                        // motion's velocity: the impulse M·v within this step
+                        f += gain * m.inertia_kg * v / self.dt;
                     }
                 }
-                ModelEffect::CurrentLimit { limit_N, gain } => {
+                ModelEffect::CurrentLimit {
+                    limit_N,
+                    gain,
+                    drive_damping_Ns_per_m,
+                } if drive_damping_Ns_per_m <= 0.0 => {
                     f += gain * (f.clamp(-limit_N, limit_N) - f);
                 }
                 ModelEffect::Lag { gain, .. } => {
@@ -534,8 +581,9 @@ mod tests {
     }
 
     /// Clip, play and Dahl state on a ramp out and back (closed forms): the clip holds the
-    /// force at ±L; across the play the force is the offset for `width` of travel after the
-    /// reversal; the Dahl state after a travel d from a reversal is 1 − 2·e^(−d/x_c).
+    /// force at ±L (the whole force, or the drive's damping force only); across the play the
+    /// force is the offset for `width` of travel after the reversal, then the impact M·v/dt in
+    /// the first step of contact; the Dahl state after a travel d from a reversal is 1 − 2·e^(−d/x_c).
     #[test]
     fn clip_play_and_dahl_on_a_reversal() {
         let dt = 1e-3;
@@ -558,6 +606,7 @@ mod tests {
         m.effects = vec![ModelEffect::CurrentLimit {
             limit_N: 5.0,
             gain: 1.0,
+            drive_damping_Ns_per_m: 0.0,
         }];
         let f = m.force_series(dt, &x, &v, &a);
         // 400·0.01 + 30 + 2 = 36 N clipped at 5 N; −36 + 4 → −30 + 2 = −32 → −5
@@ -569,12 +618,34 @@ mod tests {
         let f = m.force_series(dt, &x, &v, &a);
         // the play is centred at the start: in contact after 1 mm (100 samples)
         assert!((f[50] - 2.0).abs() < 1e-12, "{}", f[50]);
-        assert!((f[500] - 36.0).abs() < 1e-12);
+        assert!(
+            (f[500] - 36.0).abs() < 1e-12,
+            "{} {:?}",
+            f[500],
+            &f[95..106]
+        );
         // after the reversal at sample 1000: 2 mm of travel (200 samples) at the offset
         assert!((f[1100] - 2.0).abs() < 1e-12 && (f[1190] - 2.0).abs() < 1e-12);
         assert!((f[1300] + 32.0).abs() < 1e-12, "{}", f[1300]);
-        // the gap's end: 1.99 mm back still across it, 2.01 mm in contact
-        assert!((f[1199] - 2.0).abs() < 1e-12 && (f[1201] + 32.0).abs() < 1e-12);
+        // the gap's end: 1.99 mm back still across it, 2.01 mm in contact; the first step in
+        // contact (2.00 mm, either side by rounding) carries the impact M·v/dt = 50·(−0.01)/1e-3
+        let k = (1199..1202).find(|&i| (f[i] - 2.0).abs() > 1e-9).unwrap();
+        assert!(k == 1200 || k == 1201, "{k}");
+        assert!(
+            (f[1199] - 2.0).abs() < 1e-12 && (f[k] + 32.0 + 500.0).abs() < 1e-9,
+            "{}",
+            f[k]
+        );
+        assert!((f[k + 1] + 32.0).abs() < 1e-12);
+        // the drive acting as a damper: 300 of the 400 N·s/m clipped at 2 N:
+        // 100·0.01 + clip(300·0.01, ±2) + 30 + 2 = 35 N; back: −1 − 2 − 30 + 2 = −31 N
+        m.effects = vec![ModelEffect::CurrentLimit {
+            limit_N: 2.0,
+            gain: 1.0,
+            drive_damping_Ns_per_m: 300.0,
+        }];
+        let f = m.force_series(dt, &x, &v, &a);
+        assert!((f[500] - 35.0).abs() < 1e-12 && (f[1500] + 31.0).abs() < 1e-12);
         m.effects = vec![ModelEffect::PreslidingHysteresis {
             characteristic_displacement_m: 0.001,
             friction_N: 10.0,

@@ -137,12 +137,10 @@ fn rig_sample() {
     let exact: usize = t.values().map(|t| t.exact).sum();
     let detected: usize = t.values().map(|t| t.detected).sum();
     println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured 2026-11-24: 16/27 exactly right, 19/27 detected (the targets, 95 % exactly
-    // right, are not reached: the clipped current loop, the play and the delay are rarely
-    // named right); the bounds guard what is reached, 3 records of margin (a seeded sample:
-    // the figures move only with the code)
-    assert!(exact >= 13, "{exact}/{all} exactly right (measured 16)");
-    assert!(detected >= 16, "{detected}/{all} detected (measured 19)");
+    // measured 2026-11-24: 19/27 exactly right, 22/27 detected; the bounds guard what is reached,
+    // about 3 records of margin (a seeded sample: the figures move only with the code)
+    assert!(exact >= 16, "{exact}/{all} exactly right (measured 19)");
+    assert!(detected >= 19, "{detected}/{all} detected (measured 22)");
     // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
     // drift records, and no effect-free record gets a catalogue name (0/3); one record of
     // margin on the first (the check runs on the baseline residual of any motion)
@@ -197,9 +195,53 @@ fn drift_is_reported_as_a_slow_change() {
         let c = change.unwrap_or_else(|| panic!("seed {seed}: no slow change reported"));
         let ratio = c / total_n;
         assert!(
-            (0.7..1.3).contains(&ratio),
+            (0.8..1.2).contains(&ratio),
             "seed {seed}: {c} N against {total_n} N"
         );
         assert!(names.is_empty(), "seed {seed}: {names:?}");
     }
+}
+
+/// A drive acting as a damper whose force saturates (the rig clips c·v at ±L): `current_limit`
+/// is named under the drive's hypothesis, with the level and the drive's damping of the rig.
+#[test]
+fn clipped_drive_is_named_with_its_level() {
+    let mut worst: (f64, f64) = (0.0, 0.0);
+    for (seed, traj) in [
+        (100_001, Trajectory::Multisine),
+        (100_003, Trajectory::PointToPoint),
+        (100_004, Trajectory::Narrowband),
+        (100_006, Trajectory::Multisine),
+    ] {
+        let spec = RigSpec::random(seed, "clipped_current_loop", traj, 12_000);
+        let Hidden::ClippedCurrentLoop { limit_n } = spec.hidden else {
+            unreachable!()
+        };
+        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+        let d = diagnose(&rec, &Options::default());
+        let f = d
+            .findings
+            .iter()
+            .find(|f| f.effect == "current_limit")
+            .unwrap_or_else(|| panic!("seed {seed}: current_limit not named"));
+        let p = |k: &str| f.parameters.iter().find(|(n, _)| n == k).map(|p| p.1);
+        let (l, cd) = (p("limit_N").unwrap(), p("drive_damping_Ns_per_m").unwrap());
+        let (el, ec) = (l / limit_n - 1.0, cd / spec.drive_damping - 1.0);
+        println!(
+            "seed {seed}: limit {l:.2} N (rig {limit_n:.2}, {:+.1} %), drive damping {cd:.1} N·s/m (rig {:.1}, {:+.1} %)",
+            100.0 * el,
+            spec.drive_damping,
+            100.0 * ec
+        );
+        worst = (worst.0.max(el.abs()), worst.1.max(ec.abs()));
+    }
+    println!(
+        "worst: limit {:.1} %, drive damping {:.1} %",
+        100.0 * worst.0,
+        100.0 * worst.1
+    );
+    // Measured 2026-11-24: worst 0.5 % on the level and 0.5 % on the drive's damping (the
+    // rig's c·v clipped at L, 20 substeps per sample, noise and quantisation). Bound 3×: 1.5 %.
+    // With the column's sign flipped `current_limit` is named on none of these records.
+    assert!(worst.0 < 0.015 && worst.1 < 0.015, "{worst:?}");
 }

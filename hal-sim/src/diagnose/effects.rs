@@ -112,8 +112,12 @@ pub struct Context<'a> {
     pub base_pred: Vec<f64>,
     /// Shortest wavelength scanned: the stroke / 400, but at least 8 median position steps.
     pub lambda_min: f64,
-    /// Quantiles 80 … 99 % of |baseline prediction| (the current-limit grid).
+    /// Quantiles 80 … 99 % of |baseline prediction| (the current-limit grid of the whole
+    /// force, a motor-driven axis).
     pub clip_levels: Vec<f64>,
+    /// Quantiles 80 … 99 % of |v| on the samples in motion (the current-limit grid of a drive
+    /// acting as a damper on an imposed motion: its force ∝ v saturates above a speed).
+    pub speed_levels: Vec<f64>,
     /// Motion bandwidth: the highest frequency where the spectrum of the position increments
     /// stands 100× above its noise floor (median of the upper half band). The compliance scan
     /// stops there: a resonance is seen only where the motion has content.
@@ -130,6 +134,8 @@ pub struct Context<'a> {
     pub x_quantum: f64,
     /// rms of the baseline residual on the fitted samples.
     pub base_resid_rms: f64,
+    /// `compliance_zeta` per resonance frequency (bits of f).
+    pub zeta_cache: std::sync::Mutex<std::collections::HashMap<u64, f64>>,
 }
 
 /// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
@@ -225,6 +231,7 @@ impl<'a> Context<'a> {
             base_pred: Vec::new(),
             lambda_min: 0.0,
             clip_levels: Vec::new(),
+            speed_levels: Vec::new(),
             f_motion: 0.0,
             spatial_wavelengths: Vec::new(),
             rest: at_rest(&rec.x, &rec.v, rec.dt()),
@@ -236,6 +243,7 @@ impl<'a> Context<'a> {
                 .filter(|d| *d > 0.0)
                 .fold(f64::MAX, f64::min),
             base_resid_rms: 0.0,
+            zeta_cache: Default::default(),
         };
         if c.x_quantum == f64::MAX {
             c.x_quantum = 0.0;
@@ -285,6 +293,22 @@ impl<'a> Context<'a> {
                 v
             })
             .collect();
+        let mut av: Vec<f64> = rec
+            .v
+            .iter()
+            .zip(&c.rest)
+            .filter(|(_, &r)| !r)
+            .map(|(v, _)| v.abs())
+            .collect();
+        if !av.is_empty() {
+            av.sort_unstable_by(|a, b| a.total_cmp(b));
+            let last = av.len() - 1;
+            c.speed_levels = SPEED_QUANTILES
+                .iter()
+                .map(|q| av[(last as f64 * q) as usize])
+                .filter(|v| *v > 0.0)
+                .collect();
+        }
         c
     }
 }
@@ -499,112 +523,63 @@ impl SubSignals {
     }
 }
 
-/// Damping ratio of the resonance filter of the `compliance` candidate (a lightly damped
-/// structural mode; the numerator damping is fitted linearly, see `effect_columns`).
-pub const COMPLIANCE_ZETA: f64 = 0.1;
+/// Damping ratios over which `compliance_zeta` profiles a mode (log-spaced, 0.01 … 0.4).
+/// A mode damped by 0.4 or more amplifies its resonance by at most 1/(2ζ) ≈ 1.25: over such a
+/// broad band the column is a frequency-dependent inertia that also fits the remainder of
+/// other effects (a lag's, on 7/40 synthetic records), so a profile whose optimum lies at the
+/// last value does not identify a resonance (`compliance_zeta` gives None).
+pub const COMPLIANCE_ZETAS: [f64; 9] = [
+    0.01, 0.0159, 0.0252, 0.04, 0.0635, 0.1007, 0.1597, 0.2533, 0.4,
+];
 
-/// Second-order resonator driven by `u` band-limited to twice the resonance (causal
-/// Butterworth-2 low-pass at 2·f_r, so that derivative noise far above the resonance, where
-/// the motion has no content, cannot be fitted as a resonance), each stage a zero-delay-
-/// feedback state-variable filter (bilinear transform prewarped at its corner,
-/// unconditionally stable). Returns the low-pass `ω²/(s²+2ζωs+ω²)·u_b` and band-pass
-/// `ωs/(s²+2ζωs+ω²)·u_b` outputs at `rows` (all samples when None), and the band-limited input
-/// u_b is what the compliance columns subtract. Starts at rest on the first input.
-pub fn resonator(
-    u: &[f64],
-    f_hz: f64,
-    dt: f64,
-    rows: Option<&[usize]>,
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    resonator_batch(u, &[f_hz], dt, rows)
-        .pop()
-        .unwrap_or_default()
-}
-
-/// `resonator` for several resonance frequencies in one pass over the record (independent
-/// recurrences interleaved, so the pass is bound by arithmetic throughput rather than by the
-/// latency of one filter's feedback chain). Same outputs as `resonator` per frequency.
+/// Second-order resonators (ω = 2π·f, damping ratio ζ per pair) driven by `u`, interleaved in
+/// one pass over the record (independent recurrences, so the pass is bound by arithmetic
+/// throughput rather than by one filter's feedback chain). Each is a zero-delay-feedback
+/// state-variable filter (bilinear transform prewarped at f, unconditionally stable) started
+/// at rest on the first input. Returns per pair the low-pass `ω²/(s²+2ζωs+ω²)·u` and band-pass
+/// `ωs/(s²+2ζωs+ω²)·u` outputs at `rows` (all samples when None).
 pub fn resonator_batch(
     u: &[f64],
-    freqs: &[f64],
+    modes: &[(f64, f64)],
     dt: f64,
     rows: Option<&[usize]>,
-) -> Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-    let m = freqs.len();
-    let coef = |f: f64, k: f64| {
-        let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
-        let a1 = 1.0 / (1.0 + g * (g + k));
-        [a1, g * a1, g * g * a1]
-    };
-    // the recurrences side by side in groups of LANES (one lane per frequency, the last group
-    // padded with copies of the last frequency), so that each step is vectorised
-    const LANES: usize = 4;
-    #[derive(Clone, Copy)]
-    struct Group {
-        c: [[f64; LANES]; 6],
-        st: [[f64; LANES]; 4],
-        out: [[f64; LANES]; 3],
-    }
-    let u0 = u.first().copied().unwrap_or(0.0);
-    let mut groups: Vec<Group> = (0..m.div_ceil(LANES))
-        .map(|g| {
-            let f = |l: usize| freqs[(g * LANES + l).min(m - 1)];
-            let ca: [[f64; 3]; LANES] = std::array::from_fn(|l| coef(f(l), 2.0 * COMPLIANCE_ZETA));
-            let cb: [[f64; 3]; LANES] =
-                std::array::from_fn(|l| coef(2.0 * f(l), std::f64::consts::SQRT_2));
-            Group {
-                c: std::array::from_fn(|j| {
-                    std::array::from_fn(|l| if j < 3 { ca[l][j] } else { cb[l][j - 3] })
-                }),
-                // ic1, ic2, jc1, jc2
-                st: [[0.0; LANES], [u0; LANES], [0.0; LANES], [u0; LANES]],
-                out: [[0.0; LANES]; 3],
-            }
+) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let m = modes.len();
+    let ca: Vec<[f64; 3]> = modes
+        .iter()
+        .map(|&(f, z)| {
+            let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+            let a1 = 1.0 / (1.0 + g * (g + 2.0 * z));
+            [a1, g * a1, g * g * a1]
         })
         .collect();
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let mut st = vec![[0.0, u0]; m]; // ic1, ic2
     let cap = rows.map_or(u.len(), |r| r.len());
-    let mut out: Vec<(Vec<f64>, Vec<f64>, Vec<f64>)> = (0..m)
-        .map(|_| {
-            (
-                Vec::with_capacity(cap),
-                Vec::with_capacity(cap),
-                Vec::with_capacity(cap),
-            )
-        })
+    let mut out: Vec<(Vec<f64>, Vec<f64>)> = (0..m)
+        .map(|_| (Vec::with_capacity(cap), Vec::with_capacity(cap)))
         .collect();
     let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
     let mut next = 0usize;
+    let mut tmp = vec![[0.0f64; 2]; m];
     for (i, &xin) in u[..last].iter().enumerate() {
-        for g in groups.iter_mut() {
-            let [a1, a2, a3, b1, b2, b3] = g.c;
-            let [ic1, ic2, jc1, jc2] = &mut g.st;
-            for l in 0..LANES {
-                let w3 = xin - jc2[l];
-                let w1 = b1[l] * jc1[l] + b2[l] * w3;
-                let w2 = jc2[l] + b2[l] * jc1[l] + b3[l] * w3;
-                let x = w2;
-                let v3 = x - ic2[l];
-                let v1 = a1[l] * ic1[l] + a2[l] * v3;
-                let v2 = ic2[l] + a2[l] * ic1[l] + a3[l] * v3;
-                ic1[l] = 2.0 * v1 - ic1[l];
-                ic2[l] = 2.0 * v2 - ic2[l];
-                jc1[l] = 2.0 * w1 - jc1[l];
-                jc2[l] = 2.0 * w2 - jc2[l];
-                g.out[0][l] = v2;
-                g.out[1][l] = v1;
-                g.out[2][l] = x;
-            }
+        for k in 0..m {
+            let [ic1, ic2] = st[k];
+            let [a1, a2, a3] = ca[k];
+            let v3 = xin - ic2;
+            let v1 = a1 * ic1 + a2 * v3;
+            let v2 = ic2 + a2 * ic1 + a3 * v3;
+            st[k] = [2.0 * v1 - ic1, 2.0 * v2 - ic2];
+            tmp[k] = [v2, v1];
         }
         let keep = match rows {
             None => true,
             Some(r) => r[next] == i,
         };
         if keep {
-            for (k, o) in out.iter_mut().enumerate() {
-                let (g, l) = (&groups[k / LANES], k % LANES);
-                o.0.push(g.out[0][l]);
-                o.1.push(g.out[1][l]);
-                o.2.push(g.out[2][l]);
+            for k in 0..m {
+                out[k].0.push(tmp[k][0]);
+                out[k].1.push(tmp[k][1]);
             }
             if let Some(r) = rows {
                 next += 1;
@@ -617,8 +592,127 @@ pub fn resonator_batch(
     out
 }
 
-/// The walks along the whole record (compliance resonators, Dahl states, play operators) run
-/// for all the values in one pass; the columns are those of `columns_on` value by value.
+/// The force a modal mass of 1 kg hung on the device through a spring-damper (resonance
+/// `f_hz`, damping ratio `zeta`) adds beyond its rigid-body inertia (which the baseline carries):
+/// the mass follows y = H·x with H = (2ζωs + ω²)/(s² + 2ζωs + ω²), the spring-damper carries
+/// m2·ÿ = m2·H·a, so the column is (H − 1)·a = LP + 2ζ·BP − a. `a` is the acceleration at
+/// every sample; the column is returned at `rows` (all when None).
+pub fn compliance_columns_at(
+    a: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<Vec<f64>> {
+    resonator_batch(a, modes, dt, rows)
+        .into_iter()
+        .zip(modes)
+        .map(|((lp, bp), &(_, z))| {
+            (0..lp.len())
+                .map(|j| {
+                    let aj = match rows {
+                        None => a[j],
+                        Some(r) => a[r[j]],
+                    };
+                    lp[j] + 2.0 * z * bp[j] - aj
+                })
+                .collect()
+        })
+        .collect()
+}
+
+impl Context<'_> {
+    /// The damping ratio of a mode at `f_hz` that the record shows: the profile of the
+    /// least-squares fit of the force by the baseline columns and m2·(H − 1)·a over
+    /// `COMPLIANCE_ZETAS`, on at most 4,000 training samples in motion (strided), refined by a
+    /// parabola in ln ζ through the best value and its neighbours (clamped to the grid's range).
+    /// Cached per frequency: the columns, the report and the stability check use one value.
+    /// None when the optimum is at the grid's upper end (no resonance peak: not a mode the
+    /// record identifies; the candidate then has a zero column and is not named).
+    pub fn compliance_zeta(&self, f_hz: f64) -> Option<f64> {
+        let z = self.compliance_zeta_profile(f_hz);
+        (z < COMPLIANCE_ZETAS[COMPLIANCE_ZETAS.len() - 1]).then_some(z)
+    }
+
+    fn compliance_zeta_profile(&self, f_hz: f64) -> f64 {
+        if let Ok(c) = self.zeta_cache.lock() {
+            if let Some(z) = c.get(&f_hz.to_bits()) {
+                return *z;
+            }
+        }
+        let n = self.rec.len();
+        let hold = super::holdout_mask(n);
+        let cand: Vec<usize> = (0..n)
+            .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
+            .collect();
+        let step = cand.len().div_ceil(4000).max(1);
+        let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
+        let z = if rows.len() < 10 || self.base_pred.len() != n {
+            COMPLIANCE_ZETAS[4]
+        } else {
+            let modes: Vec<(f64, f64)> = COMPLIANCE_ZETAS.iter().map(|&z| (f_hz, z)).collect();
+            let cols = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(&rows));
+            // the joint fit of the baseline columns and the mode's column (what the selection
+            // fits), per damping ratio
+            let base: Vec<Vec<f64>> = base_columns(self)
+                .into_iter()
+                .map(|(_, c)| rows.iter().map(|&i| c[i]).collect())
+                .collect();
+            let f: Vec<f64> = rows.iter().map(|&i| self.rec.f[i]).collect();
+            let ff: f64 = f.iter().map(|v| v * v).sum();
+            let rss: Vec<f64> = cols
+                .iter()
+                .map(|c| {
+                    let mut all: Vec<&[f64]> = base.iter().map(|v| v.as_slice()).collect();
+                    all.push(c.as_slice());
+                    let m = all.len();
+                    let mut g = vec![0.0; m * m];
+                    let mut bb = vec![0.0; m];
+                    for p in 0..m {
+                        for q in p..m {
+                            let d: f64 = all[p].iter().zip(all[q]).map(|(x, y)| x * y).sum();
+                            g[p * m + q] = d;
+                            g[q * m + p] = d;
+                        }
+                        bb[p] = all[p].iter().zip(&f).map(|(x, y)| x * y).sum();
+                    }
+                    let th = super::solve_sym(&g, &bb, m).th;
+                    let mut r = ff;
+                    for p in 0..m {
+                        r -= 2.0 * th[p] * bb[p];
+                        for q in 0..m {
+                            r += th[p] * g[p * m + q] * th[q];
+                        }
+                    }
+                    r
+                })
+                .collect();
+            let k = (0..rss.len())
+                .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
+                .unwrap_or(4);
+            if k == 0 || k + 1 == rss.len() {
+                COMPLIANCE_ZETAS[k]
+            } else {
+                // vertex of the parabola through (ln ζ, rss) at k−1, k, k+1 (equal spacing h)
+                let (y0, y1, y2) = (rss[k - 1], rss[k], rss[k + 1]);
+                let den = y0 - 2.0 * y1 + y2;
+                let h = (COMPLIANCE_ZETAS[k + 1] / COMPLIANCE_ZETAS[k]).ln();
+                let d = if den > 0.0 {
+                    0.5 * (y0 - y2) / den
+                } else {
+                    0.0
+                };
+                (COMPLIANCE_ZETAS[k].ln() + d.clamp(-1.0, 1.0) * h).exp()
+            }
+        };
+        if let Ok(mut c) = self.zeta_cache.lock() {
+            c.insert(f_hz.to_bits(), z);
+        }
+        z
+    }
+}
+
+/// Columns of several effects of one kind on the rows of `s` (the compliance filters of all
+/// the values in one pass).
 pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
     let Some(kind) = effs.first().map(|e| e.kind) else {
         return Vec::new();
@@ -628,17 +722,10 @@ pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String
         return effs.iter().map(|e| columns_on(ctx, s, e)).collect();
     }
     match (kind, s.rows) {
-        (EffectKind::Compliance, _) => resonator_batch(&ctx.rec.a, &params, ctx.dt, s.rows)
-            .into_iter()
-            .map(|(lp, bp, ub)| compliance_columns(lp, bp, ub))
-            .collect(),
+        (EffectKind::Compliance, _) => compliance_batch(ctx, s, effs),
         (EffectKind::PreslidingHysteresis, Some(r)) => dahl_batch_at(&ctx.rec.x, &params, r)
             .into_iter()
             .map(|z| dahl_columns(&z, s.sgn))
-            .collect(),
-        (EffectKind::Backlash, Some(r)) => play_batch_at(&ctx.rec.x, &params, r)
-            .into_iter()
-            .map(|c| backlash_columns(ctx, s, |j| c[j]))
             .collect(),
         _ => effs.iter().map(|e| columns_on(ctx, s, e)).collect(),
     }
@@ -653,26 +740,26 @@ fn dahl_columns(z: &[f64], sg: &[f64]) -> Vec<(String, Vec<f64>)> {
     )]
 }
 
-/// `backlash` column `−(1 − contact)·(f̂₀ − offset)` on the rows of `s`, `contact(j)` at row j.
-fn backlash_columns(
-    ctx: &Context,
-    s: &Sig,
-    contact: impl Fn(usize) -> bool,
-) -> Vec<(String, Vec<f64>)> {
-    let off = ctx.base_th.get(3).copied().unwrap_or(0.0);
-    let name = EffectKind::Backlash.name();
-    let z = (0..s.len())
-        .map(|j| if contact(j) { 0.0 } else { off - s.bp[j] })
+/// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
+/// pass (a frequency whose profile identifies no mode has a zero column).
+fn compliance_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
+    let zetas: Vec<Option<f64>> = effs.iter().map(|e| ctx.compliance_zeta(e.param)).collect();
+    let modes: Vec<(f64, f64)> = effs
+        .iter()
+        .zip(&zetas)
+        .filter_map(|(e, z)| z.map(|z| (e.param, z)))
         .collect();
-    vec![(format!("{name}.gap_minus_free"), z)]
-}
-
-fn compliance_columns(lp: Vec<f64>, bp: Vec<f64>, ub: Vec<f64>) -> Vec<(String, Vec<f64>)> {
-    let c1 = lp.iter().zip(&ub).map(|(l, u)| l - u).collect();
-    vec![
-        ("compliance.lp_minus_a".into(), c1),
-        ("compliance.bp".into(), bp),
-    ]
+    let mut cols = compliance_columns_at(&ctx.rec.a, &modes, ctx.dt, s.rows).into_iter();
+    zetas
+        .iter()
+        .map(|z| {
+            let c = match z {
+                Some(_) => cols.next().unwrap_or_default(),
+                None => vec![0.0; s.len()],
+            };
+            vec![("compliance.mode_minus_rigid".to_string(), c)]
+        })
+        .collect()
 }
 
 /// Unit-coefficient shape of an effect for synthesis and fitting: the regressor columns at
@@ -734,24 +821,26 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             };
             vec![col("delayed_minus_now", z)]
         }
+        EffectKind::CurrentLimit if e.param < 0.0 => {
+            // the drive's damping force c_d·v clipped at ±c_d·v_L: c_d·(clip(v, ±v_L) − v),
+            // coefficient c_d (N·s/m, part of the viscous term)
+            let vl = -e.param;
+            vec![col(
+                "drive_clip_minus_free",
+                map(&|i| v[i].clamp(-vl, vl) - v[i]),
+            )]
+        }
         EffectKind::CurrentLimit => {
             let l = e.param;
             vec![col("clip_minus_free", map(&|i| bp[i].clamp(-l, l) - bp[i]))]
         }
         EffectKind::Backlash => {
-            // play operator of width b on the position: the device side follows only while
-            // the motion pushes on one flank; across the gap it carries no force (only the
-            // offset, a sensor property, stays): column −(1 − contact)·(f̂₀ − offset)
-            match s.rows {
-                None => {
-                    let contact = play_contact(&ctx.rec.x, e.param);
-                    backlash_columns(ctx, s, |i| contact[i])
-                }
-                Some(r) => {
-                    let contact = play_batch_at(&ctx.rec.x, &[e.param], r).swap_remove(0);
-                    backlash_columns(ctx, s, |j| contact[j])
-                }
-            }
+            let z = play_column(ctx, e.param);
+            let y = match s.rows {
+                None => z,
+                Some(r) => r.iter().map(|&i| z[i]).collect(),
+            };
+            vec![col("play_minus_free", y)]
         }
         EffectKind::PreslidingHysteresis => {
             // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
@@ -763,12 +852,11 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             dahl_columns(&z, sg)
         }
         EffectKind::Compliance => {
-            // A mass m2 hung on the device through a spring-damper (resonance f_r, damping
-            // ratio ζ) adds m2·(H(s) − 1)·a, H = (2ζωs + ω²)/(s² + 2ζ₀ωs + ω²) = LP + 2ζ·BP:
-            // columns LP(a_b) − a_b (coefficient m2) and BP(a_b) (coefficient 2ζ·m2), the
-            // denominator damping ζ₀ = COMPLIANCE_ZETA, a_b = a band-limited to 2·f_r.
-            let (lp, bpf, ub) = resonator(&ctx.rec.a, e.param, ctx.dt, s.rows);
-            compliance_columns(lp, bpf, ub)
+            // A modal mass m2 hung on the device through a spring-damper (resonance f_r,
+            // damping ratio ζ from `compliance_zeta`): column (H − 1)·a, coefficient m2
+            columns_batch(ctx, s, std::slice::from_ref(e))
+                .pop()
+                .unwrap_or_default()
         }
     }
 }
@@ -784,17 +872,28 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
 ///   … 1, whichever way the power flows);
 /// * `reflected_inertia`: the extra inertia is positive and at most the baseline inertia;
 /// * `lag`: a delay of the force of unit gain (0.8 … 1.25: the whole force delayed);
-/// * `current_limit`: the clip has unit gain (0.8 … 1.25) — the level itself is checked
-///   against the measured force by the selection (`clip_consistent`);
-/// * `compliance`: a positive modal mass and a damping ratio in [0, 1];
+/// * `current_limit` of the whole force: the clip has unit gain (0.8 … 1.25); of the drive's
+///   damping force: the drive's damping c_d lies between half the fitted viscous coefficient
+///   (a drive emulating a damper carries most of the damping) and all of it — the level
+///   itself is checked against the measured force by the selection (`clip_consistent`);
+/// * `compliance`: a positive modal mass (its damping ratio lies in [0.01, 1] by
+///   construction, `compliance_zeta`);
 /// * `presliding_hysteresis`: the friction force it carries is positive and at most 1.5× the
 ///   Coulomb level;
 /// * `backlash`: unit gain (0.8 … 1.25: the device's own force, carried through the play).
 ///
 /// Every parameter must also be finite.
-pub fn plausible(kind: EffectKind, coef: &[f64], base: &[f64]) -> bool {
+pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
+    let kind = e.kind;
     if coef.iter().chain(base).any(|c| !c.is_finite()) {
         return false;
+    }
+    if drive_clip(e) {
+        // the drive's damping is part of the fitted viscous term (c_d ≤ Fv), and a drive that
+        // acts as a damper is the damper: it carries at least half of the viscous force (a
+        // viscous term that saturates in a smaller part is friction, not a drive)
+        let fv = base.get(1).copied().unwrap_or(0.0);
+        return coef[0] >= 0.5 * fv && coef[0] <= fv && coef[0] > 0.0;
     }
     let unit = |g: f64| (0.8..=1.25).contains(&g);
     let fv = base.get(1).copied().unwrap_or(0.0);
@@ -820,7 +919,7 @@ pub fn plausible(kind: EffectKind, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::ScrewEfficiency => (-0.5..=1.0).contains(&coef[0]),
         EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
         EffectKind::Lag | EffectKind::CurrentLimit | EffectKind::Backlash => unit(coef[0]),
-        EffectKind::Compliance => coef[0] > 0.0 && coef[1] >= 0.0 && coef[1] <= 2.0 * coef[0],
+        EffectKind::Compliance => coef[0] > 0.0,
         EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
     }
 }
@@ -828,7 +927,38 @@ pub fn plausible(kind: EffectKind, coef: &[f64], base: &[f64]) -> bool {
 /// A clip level is consistent with the measured force when, on the samples it clips (baseline
 /// prediction beyond ±L), the measured force does not exceed L: its 90th percentile of |f|
 /// there stays below L plus 3× the baseline residual rms (noise and model error).
-pub fn clip_consistent(l: f64, bp: &[f64], f: &[f64], resid_rms: f64) -> bool {
+///
+/// For the drive's damping force (`drive_clip`, coefficient c_d, level L = c_d·v_L) the clipped
+/// component is measured as the force minus the rest of the model: f − (f̂₀ − Fv₀·v) −
+/// (Fv − c_d)·v (the baseline's inertia, Coulomb and offset, and the viscous part that is not
+/// the drive's, Fv₀ the baseline's viscous coefficient, Fv the one fitted with the clip), on the
+/// samples faster than v_L.
+#[allow(clippy::too_many_arguments)]
+pub fn clip_consistent(
+    ctx: &Context,
+    e: &Effect,
+    coef: &[f64],
+    base: &[f64],
+    bp: &[f64],
+    v: &[f64],
+    f: &[f64],
+    resid_rms: f64,
+) -> bool {
+    if !drive_clip(e) {
+        return clip_level_consistent(e.param, bp, f, resid_rms);
+    }
+    let (vl, cd) = (-e.param, coef.first().copied().unwrap_or(0.0));
+    let fv0 = ctx.base_th.get(1).copied().unwrap_or(0.0);
+    let fv = base.get(1).copied().unwrap_or(0.0);
+    let drive: Vec<f64> = v.iter().map(|v| cd * v).collect();
+    let meas: Vec<f64> = (0..f.len())
+        .map(|i| f[i] - (bp[i] - fv0 * v[i]) - (fv - cd) * v[i])
+        .collect();
+    clip_level_consistent(cd * vl, &drive, &meas, resid_rms)
+}
+
+/// `clip_consistent` for a level `l` of a component predicted as `bp` and measured as `f`.
+fn clip_level_consistent(l: f64, bp: &[f64], f: &[f64], resid_rms: f64) -> bool {
     let mut over: Vec<f64> = bp
         .iter()
         .zip(f)
@@ -849,6 +979,57 @@ pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
     let mut out = Vec::with_capacity(x.len());
     play_walk(x, &[b], x.len(), |_, c| out.push(c[0]));
     out
+}
+
+/// The force play of total width `b` changes, at every sample: the device (its inertia,
+/// viscous and Coulomb friction: the baseline's coefficients) sits behind the gap and moves
+/// with the play operator's output x_m instead of the imposed x. Across the gap it stands
+/// still and carries no force (the offset, a sensor property, stays); where x takes up the
+/// play it is struck into motion, an impact of momentum M·v. Its velocity and acceleration
+/// are derived from x_m as the record's are from x (the reader's default zero-phase
+/// Butterworth-2 at fs/20, then central differences, applied to the play's offset x − x_m), so
+/// the impact is the same low-passed pulse the derived acceleration would show. Column
+/// f̂₀(x_m) − f̂₀(x) (coefficient 1 when the device is the baseline's).
+///
+/// That is what tells play from presliding friction (`dahl`): presliding changes only the
+/// friction near reversals, over a displacement, while inertia and viscous friction stay; play
+/// removes every force over a dead band of position and then adds an impact.
+pub fn play_column(ctx: &Context, b: f64) -> Vec<f64> {
+    let x = &ctx.rec.x;
+    let n = x.len();
+    let contact = play_contact(x, b);
+    let h = 0.5 * b;
+    // the device side: held while x crosses the gap, on a flank otherwise
+    let mut xm = Vec::with_capacity(n);
+    let mut m = x.first().copied().unwrap_or(0.0);
+    for (i, &xi) in x.iter().enumerate() {
+        if contact[i] {
+            m = if m < xi - h { xi - h } else { xi + h };
+        }
+        xm.push(m);
+    }
+    let d: Vec<f64> = x.iter().zip(&xm).map(|(a, b)| a - b).collect();
+    let (mi, fv, fc) = (
+        ctx.base_th.first().copied().unwrap_or(0.0),
+        ctx.base_th.get(1).copied().unwrap_or(0.0),
+        ctx.base_th.get(2).copied().unwrap_or(0.0),
+    );
+    if n < 3 || ctx.dt <= 0.0 {
+        return vec![0.0; n];
+    }
+    let fs = 1.0 / ctx.dt;
+    let df = super::record::filtfilt(&d, fs / 20.0, fs);
+    let vd = super::record::central_diff(&df, ctx.dt);
+    let ad = super::record::central_diff(&vd, ctx.dt);
+    (0..n)
+        .map(|i| {
+            let vm = ctx.rec.v[i] - vd[i];
+            let am = ctx.rec.a[i] - ad[i];
+            mi * (am - ctx.rec.a[i])
+                + fv * (vm - ctx.rec.v[i])
+                + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
+        })
+        .collect()
 }
 
 /// `play_contact` for several widths at the given ascending sample indices, in one pass (the
@@ -996,6 +1177,12 @@ pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
         .map_or(0.0, |p| p.0)
 }
 
+/// Quantiles of |v| (samples in motion) scanned as the speed above which a drive acting as a
+/// damper saturates: from a drive clipped over most of the motion to one clipped at its peaks.
+const SPEED_QUANTILES: [f64; 12] = [
+    0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.93, 0.96, 0.99,
+];
+
 /// Quantiles of |f̂₀| scanned as current-limit levels.
 const CLIP_QUANTILES: [f64; 7] = [0.80, 0.85, 0.9, 0.93, 0.96, 0.98, 0.99];
 
@@ -1042,7 +1229,16 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             .iter()
             .map(|&k| mk(k as f64 * ctx.dt))
             .collect(),
-        EffectKind::CurrentLimit => ctx.clip_levels.iter().map(|&l| mk(l)).collect(),
+        // two hypotheses on which force the drive produces, both scanned, the data choosing:
+        // the whole force (a motor-driven axis; parameter the level L > 0, N) or the drive's
+        // damping force c_d·v on an imposed motion (parameter −v_L < 0, the speed above which
+        // it saturates, m/s; L = c_d·v_L)
+        EffectKind::CurrentLimit => ctx
+            .clip_levels
+            .iter()
+            .map(|&l| mk(l))
+            .chain(ctx.speed_levels.iter().map(|&v| mk(-v)))
+            .collect(),
         EffectKind::Backlash | EffectKind::PreslidingHysteresis => {
             let stroke = 2.0 * ctx.x_half;
             // from the position resolution (4 quanta) up: below it no transition is resolved
@@ -1055,19 +1251,20 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             }
         }
         EffectKind::Compliance => {
-            // from 10 periods over the record to 0.4·fs
+            // from 10 periods over the record to the motion bandwidth, and at most half the
+            // derivative filter's default cutoff (fs/20): above it the derived acceleration is
+            // attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so
+            // a mode's force cannot be told from the filter's loss
             let t = ctx.dt * ctx.rec.len() as f64;
-            // and to a quarter of the derivative filter's cutoff: the resonator's input band
-            // (up to 2·f_r) then lies where the zero-phase Butterworth-2 passes the derived
-            // acceleration within 6 % (gain 1/(1 + (f/fc)^4) = 0.94 at fc/2); above it the
-            // columns fit the filter's own attenuation of M·a as a "resonance" (38–42 Hz on
-            // effect-free records following EMPS's motion, 50 Hz cutoff)
+            // and to a quarter of the derivative filter's cutoff when the record states it
+            // (the resonator's band then lies where the zero-phase Butterworth-2 passes the
+            // derived acceleration within 6 %)
             let cap = ctx
                 .rec
                 .meta
                 .get(super::record::DERIVATIVE_CUTOFF_KEY)
                 .map_or(f64::INFINITY, |fc| 0.25 * fc);
-            let hi = ctx.f_motion.min(0.4 / ctx.dt).min(cap);
+            let hi = ctx.f_motion.min(0.025 / ctx.dt).min(cap);
             let lo = 10.0 / t;
             if hi > 1.5 * lo {
                 logspace(lo, hi, 24).into_iter().map(mk).collect()
@@ -1094,11 +1291,28 @@ pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
             .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
 }
 
+/// The scanned range [lo, hi] of a coarse grid that `best` belongs to: the values of the same
+/// sign (the two hypotheses of `current_limit` are two grids, told apart by the sign).
+pub fn scan_range(coarse: &[Effect], best: &Effect) -> (f64, f64) {
+    coarse
+        .iter()
+        .filter(|e| (e.param < 0.0) == (best.param < 0.0))
+        .fold((f64::MAX, f64::MIN), |(a, b), e| {
+            (a.min(e.param), b.max(e.param))
+        })
+}
+
+/// True when `e` is the `current_limit` of a drive acting as a damper (its force c_d·v
+/// clipped) rather than of the whole force.
+pub fn drive_clip(e: &Effect) -> bool {
+    e.kind == EffectKind::CurrentLimit && e.param < 0.0
+}
+
 /// True when a scanned parameter's optimum `p` lies strictly inside the scanned range
 /// [`lo`, `hi`] (relative margin 1e-9 for rounding): only then is it bracketed by worse fits
 /// on both sides, i.e. identified by the record.
 pub fn interior(p: f64, lo: f64, hi: f64) -> bool {
-    p > lo * (1.0 + 1e-9) && p < hi * (1.0 - 1e-9)
+    p > lo + 1e-9 * lo.abs() && p < hi - 1e-9 * hi.abs()
 }
 
 /// Local refinement grid around a coarse best value.
@@ -1194,29 +1408,33 @@ pub fn parameters(
             ("lag_s".into(), e.param),
             ("gain".into(), get("delayed_minus_now")),
         ],
+        EffectKind::CurrentLimit if e.param < 0.0 => {
+            let cd = get("drive_clip_minus_free");
+            vec![
+                ("limit_N".into(), -e.param * cd),
+                ("drive_damping_Ns_per_m".into(), cd),
+            ]
+        }
         EffectKind::CurrentLimit => vec![
             ("limit_N".into(), e.param),
             ("gain".into(), get("clip_minus_free")),
         ],
         EffectKind::Backlash => vec![
             ("width_m".into(), e.param),
-            ("gain".into(), get("gap_minus_free")),
+            ("gain".into(), get("play_minus_free")),
         ],
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
             ("friction_N".into(), get("dahl_minus_sgn")),
         ],
-        EffectKind::Compliance => {
-            let m2 = get("lp_minus_a");
-            vec![
-                ("resonance_Hz".into(), e.param),
-                ("modal_mass_kg".into(), m2),
-                (
-                    "damping_ratio".into(),
-                    if m2 != 0.0 { 0.5 * get("bp") / m2 } else { 0.0 },
-                ),
-            ]
-        }
+        EffectKind::Compliance => vec![
+            ("resonance_Hz".into(), e.param),
+            ("modal_mass_kg".into(), get("mode_minus_rigid")),
+            (
+                "damping_ratio".into(),
+                ctx.compliance_zeta(e.param).unwrap_or(f64::NAN),
+            ),
+        ],
     }
 }
 
@@ -1241,6 +1459,10 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         }
         EffectKind::Stribeck => format!("Stribeck velocity {:.3e} m/s", e.param),
         EffectKind::Lag => format!("force lags motion by {:.4} s", e.param),
+        EffectKind::CurrentLimit if e.param < 0.0 => format!(
+            "the drive's damping force clipped above {:.3e} m/s (a drive acting as a load)",
+            -e.param
+        ),
         EffectKind::CurrentLimit => format!("force clipped near {:.1} N", e.param),
         EffectKind::Compliance => format!("resonance near {:.3} Hz", e.param),
         EffectKind::Backlash => format!("play of {:.3e} m after reversals", e.param),
@@ -1301,20 +1523,27 @@ mod tests {
         }
     }
 
-    /// The resonators run side by side (groups of lanes, the last one padded) give, frequency
-    /// by frequency, exactly the resonator run alone, on every sample and at chosen rows.
+    /// The resonators interleaved in one pass give, mode by mode, exactly the resonator run
+    /// alone, on every sample and at chosen rows.
     #[test]
     fn batched_resonators_match_single_ones() {
         let u: Vec<f64> = (0..5000)
             .map(|i| (0.013 * i as f64).sin() + 0.3 * (0.21 * i as f64).cos())
             .collect();
-        let freqs = [0.5, 1.1, 2.3, 4.7, 9.1, 17.0];
+        let modes = [
+            (0.5, 0.01),
+            (1.1, 0.1),
+            (2.3, 0.4),
+            (4.7, 0.05),
+            (9.1, 0.2),
+            (17.0, 0.02),
+        ];
         let rows: Vec<usize> = (3..u.len()).step_by(29).collect();
         for r in [None, Some(rows.as_slice())] {
-            let b = resonator_batch(&u, &freqs, 1e-3, r);
-            for (k, &f) in freqs.iter().enumerate() {
-                let one = resonator(&u, f, 1e-3, r);
-                assert_eq!(b[k], one, "f {f}");
+            let b = resonator_batch(&u, &modes, 1e-3, r);
+            for (k, &m) in modes.iter().enumerate() {
+                let one = resonator_batch(&u, &[m], 1e-3, r).pop();
+                assert_eq!(Some(&b[k]), one.as_ref(), "mode {m:?}");
             }
         }
     }

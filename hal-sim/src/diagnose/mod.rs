@@ -813,11 +813,15 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                     extend_normals_cached(&base, &base_refs, &base_ids, &zr, &sub_f, &sub_w, gc);
                 let t = nn.0.solve();
                 let nb = base_refs.len();
-                if !effects::plausible(eff.kind, &t[nb..], &t[..nb.min(4)])
+                if !effects::plausible(eff, &t[nb..], &t[..nb.min(4)])
                     || (eff.kind == EffectKind::CurrentLimit
                         && !effects::clip_consistent(
-                            eff.param,
+                            &ctx,
+                            eff,
+                            &t[nb..],
+                            &t[..nb.min(4)],
                             &sub.bp,
+                            &sub.v,
                             &sub_f,
                             ctx.base_resid_rms,
                         ))
@@ -856,12 +860,9 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             // the scanned range: an optimum on its edge is not bracketed (the profile of the
             // fit over the parameter still falls beyond the range the record resolves), so the
             // parameter is not identified and the effect is not named
-            let (p_lo, p_hi) = coarse.iter().fold((f64::MAX, f64::MIN), |(a, b), e| {
-                (a.min(e.param), b.max(e.param))
-            });
             prefill(&coarse, cache);
             let mut cb: Option<(f64, f64, Effect)> = None;
-            for eff in coarse {
+            for eff in coarse.iter().cloned() {
                 let (rh, db) = eval(&eff, cache);
                 if cb.as_ref().is_none_or(|b| rh < b.0) {
                     cb = Some((rh, db, eff));
@@ -889,10 +890,10 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
                 }
             }
             if cand.kind.scanned()
-                && coarse_len_gt1(p_lo, p_hi)
-                && cb
-                    .as_ref()
-                    .is_some_and(|c| !effects::interior(c.2.param, p_lo, p_hi))
+                && cb.as_ref().is_some_and(|c| {
+                    let (p_lo, p_hi) = effects::scan_range(&coarse, &c.2);
+                    coarse_len_gt1(p_lo, p_hi) && !effects::interior(c.2.param, p_lo, p_hi)
+                })
             {
                 cb = None;
             }
@@ -1042,7 +1043,7 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
             let (t2, h2) = (tr.select(&keep), ho.select(&keep));
             let rss_without = h2.rss(&t2.solve());
-            let phys = effects::plausible(chosen[k].kind, &th[a..b], &th[..4.min(n_base)]);
+            let phys = effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)]);
             if phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain) {
                 holds[k] += 1;
             }

@@ -157,7 +157,7 @@ impl SynthSpec {
                 kind: EffectKind::Compliance,
                 param: f_r,
             },
-            vec![m2, 2.0 * zeta * m2],
+            vec![m2, zeta],
         ));
         s
     }
@@ -205,6 +205,20 @@ pub fn generate_csv(s: &SynthSpec) -> String {
     let ctx = Context::new(&rec); // base_pred = the exact device baseline force
     let mut f = rec.f.clone();
     for (e, c) in &s.hidden {
+        if e.kind == EffectKind::Compliance {
+            // coefficients (modal mass, damping ratio): the mode's force at its own damping
+            // (the diagnosis's column takes the damping ratio from the record)
+            let col = &crate::diagnose::effects::compliance_columns_at(
+                &rec.a,
+                &[(e.param, c[1])],
+                dt,
+                None,
+            )[0];
+            for (fi, ci) in f.iter_mut().zip(col) {
+                *fi += c[0] * ci;
+            }
+            continue;
+        }
         for ((_, col), k) in effect_columns(&ctx, e).iter().zip(c) {
             for (fi, ci) in f.iter_mut().zip(col) {
                 *fi += k * ci;
