@@ -136,7 +136,28 @@ pub struct Context<'a> {
     pub base_resid_rms: f64,
     /// `compliance_zeta` per resonance frequency (bits of f).
     pub zeta_cache: std::sync::Mutex<std::collections::HashMap<u64, f64>>,
+    /// The damping-ratio profile's rows with the baseline columns and the force there (the
+    /// same for every frequency: built once).
+    pub profile_rows: std::sync::OnceLock<ProfileRows>,
 }
+
+/// Rows of the damping-ratio profile (`Context::compliance_zeta`): at most
+/// `PROFILE_ROWS` training samples in motion, strided over the first `PROFILE_WINDOW`
+/// samples, with the baseline columns and the force at them.
+#[derive(Debug, Clone, Default)]
+pub struct ProfileRows {
+    pub rows: Vec<usize>,
+    pub base: Vec<Vec<f64>>,
+    pub f: Vec<f64>,
+}
+
+/// Training samples the damping-ratio profile fits (strided).
+pub const PROFILE_ROWS: usize = 4000;
+/// Samples from the record's start over which the profile's rows are taken: the profile's
+/// resonators run up to its last row, so on a long record they walk this window instead of the
+/// whole record (200 s at 1 kHz, 40 periods of the lowest mode the 10-periods-per-record scan
+/// admits on a 20 s record; records up to this length are profiled over all their samples).
+pub const PROFILE_WINDOW: usize = 200_000;
 
 /// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
 /// of the default derivative filter (fs/20), the span over which the derived velocity averages.
@@ -244,6 +265,7 @@ impl<'a> Context<'a> {
                 .fold(f64::MAX, f64::min),
             base_resid_rms: 0.0,
             zeta_cache: Default::default(),
+            profile_rows: Default::default(),
         };
         if c.x_quantum == f64::MAX {
             c.x_quantum = 0.0;
@@ -640,24 +662,32 @@ impl Context<'_> {
             }
         }
         let n = self.rec.len();
-        let hold = super::holdout_mask(n);
-        let cand: Vec<usize> = (0..n)
-            .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
-            .collect();
-        let step = cand.len().div_ceil(4000).max(1);
-        let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
+        let pr = self.profile_rows.get_or_init(|| {
+            let hold = super::holdout_mask(n);
+            let cand: Vec<usize> = (0..n.min(PROFILE_WINDOW))
+                .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
+                .collect();
+            let step = cand.len().div_ceil(PROFILE_ROWS).max(1);
+            let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
+            let base: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
+                Vec::new()
+            } else {
+                base_columns(self)
+                    .into_iter()
+                    .map(|(_, c)| rows.iter().map(|&i| c[i]).collect())
+                    .collect()
+            };
+            let f = rows.iter().map(|&i| self.rec.f[i]).collect();
+            ProfileRows { rows, base, f }
+        });
+        let (rows, base, f) = (&pr.rows, &pr.base, &pr.f);
         let z = if rows.len() < 10 || self.base_pred.len() != n {
             COMPLIANCE_ZETAS[4]
         } else {
             let modes: Vec<(f64, f64)> = COMPLIANCE_ZETAS.iter().map(|&z| (f_hz, z)).collect();
-            let cols = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(&rows));
+            let cols = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(rows));
             // the joint fit of the baseline columns and the mode's column (what the selection
             // fits), per damping ratio
-            let base: Vec<Vec<f64>> = base_columns(self)
-                .into_iter()
-                .map(|(_, c)| rows.iter().map(|&i| c[i]).collect())
-                .collect();
-            let f: Vec<f64> = rows.iter().map(|&i| self.rec.f[i]).collect();
             let ff: f64 = f.iter().map(|v| v * v).sum();
             let rss: Vec<f64> = cols
                 .iter()
@@ -673,7 +703,7 @@ impl Context<'_> {
                             g[p * m + q] = d;
                             g[q * m + p] = d;
                         }
-                        bb[p] = all[p].iter().zip(&f).map(|(x, y)| x * y).sum();
+                        bb[p] = all[p].iter().zip(f).map(|(x, y)| x * y).sum();
                     }
                     let th = super::solve_sym(&g, &bb, m).th;
                     let mut r = ff;
