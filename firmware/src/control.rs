@@ -244,16 +244,17 @@ pub struct Controller {
     cfg: Config,
 }
 
-/// A latch begun by the step ([`Controller::step_outputs`]: the fault and its safe mode in
-/// force, the period's outputs already safe), finished by [`Controller::complete_latch`]
-/// after the actuation: the record with its snapshot, the PI reset and the slow terms for
-/// the new mode (≈ 650 instructions that the step's budget has no room for).
+/// A latch begun by the step ([`Controller::step_outputs`]: the faults found, their safe
+/// mode and the first fault in force, the period's outputs already safe), finished by
+/// [`Controller::complete_latch`] after the actuation: the records with the snapshot, the PI
+/// reset and the slow terms for the new mode (≈ 500 instructions that the step's budget has
+/// no room for).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Latching {
-    /// The fault found, and an over-voltage found with an over-current in the same period,
-    /// each with the mode it found the drive in (the snapshot's).
-    first: Option<(Fault, Mode)>,
-    second: Option<(Fault, Mode)>,
+    /// What the step found (`protect::FOUND_OC` …; 0: no latch pending).
+    found: u8,
+    /// The mode it found the drive in (the snapshot's).
+    before: Mode,
     /// The last period's d/q currents, the snapshot's: the step records its own after the
     /// protection checks (the rest of the snapshot, this period's codes and the encoder as
     /// updated, stays in place until the next step).
@@ -757,31 +758,31 @@ impl Controller {
     }
 
     /// The first half of a latch, what the outputs depend on: the fault and the safe mode in
-    /// force, given the faults latched before it (`latched`, bits as [`Controller::latched_bits`]
-    /// gives them once their records are written) and whether the speed estimate is above the
-    /// diode onset (`above`, `protect::above_onset` as `Gains::onset_w` decides it). Returns
-    /// the mode it found the drive in.
+    /// force (`protect::latch_next`), given the faults latched before it (`latched`, bits as
+    /// [`Controller::latched_bits`] gives them once their records are written) and whether the
+    /// speed estimate is above the diode onset (`above`, `protect::above_onset` as
+    /// `Gains::onset_w` decides it). Returns the mode it found the drive in.
     fn latch_mode(&mut self, f: Fault, latched: u32, above: bool) -> Mode {
         let before = self.mode;
-        // With the encoder or the speed in doubt the bus decides: over-voltage while open
-        // is the rectification itself (above the onset); nothing else is taken as above it.
-        let onset = if (latched | 1 << f.code()) & crate::protect::SPEED_DOUBT != 0 {
-            f == Fault::BusOverVoltage
-        } else {
-            above
-        };
-        self.mode = crate::protect::next_mode(self.fault.is_some(), before, f, onset);
+        self.mode = crate::protect::latch_next(self.fault.is_some(), latched, before, f, above);
         if self.fault.is_none() {
             self.fault = Some(f);
         }
         before
     }
 
-    /// The second half: the record with the snapshot `t` (taken in mode `before`), an
-    /// alignment ended, the PI reset and the slow terms for the new mode.
+    /// The second half: the record with the snapshot `t` (taken in mode `before`), then
+    /// [`Controller::settle_latch`].
     #[cold]
     fn latch_record(&mut self, f: Fault, before: Mode, t: &Telemetry) {
         self.prot.latch(f, before, t);
+        self.settle_latch(before);
+    }
+
+    /// After a latch's records: an alignment ended (`before`, the mode the latch found), the
+    /// PI reset and the slow terms for the new mode (all of it a function of the state the
+    /// records leave: once is as good as twice).
+    fn settle_latch(&mut self, before: Mode) {
         if before == Mode::Align {
             self.end_align(None);
         }
@@ -794,62 +795,65 @@ impl Controller {
         self.prot.record().map_or(0, |r| r.later) | self.fault.map_or(0, |g| 1 << g.code())
     }
 
-    /// Which fault, in order of precedence, once the step has seen that one occurred; the
-    /// first half of its latch.
+    /// Which faults, once the step has seen that one occurred; the first half of their
+    /// latch: the mode after all of them (`protect::latch_found`, read from its table,
+    /// `protect::step_safe_mode`) and the first fault in force.
     #[cold]
     #[inline(never)]
     fn trip_on(&mut self, s: &RawSample, over_current: bool, over_voltage: bool) {
-        if self.latching.first.is_some() {
+        use crate::protect::{
+            FOUND_ENCODER, FOUND_OC, FOUND_OV, FOUND_RAIL, FOUND_UNDER_V, SPEED_DOUBT,
+        };
+        if self.latching.found != 0 {
             self.finish_latch(); // a latch left unfinished by a caller: finished first
         }
         let latched = self.latched_bits();
-        let bus = if !over_voltage {
-            None
-        } else if s.v_bus >= 4095 && latched & 1 << Fault::BusOverVoltage.code() == 0 {
-            // At the rail without having passed the trip below it: a false reading.
-            Some(Fault::BusSensor)
-        } else {
-            Some(Fault::BusOverVoltage)
-        };
-        let f = if over_current {
-            Fault::OverCurrent
-        } else if let Some(b) = bus {
-            b
-        } else if self.enc.implausible {
-            Fault::EncoderImplausible
-        } else if self.mode == Mode::Run {
-            Fault::BusUnderVoltage
-        } else {
-            return; // a low bus matters only while running
-        };
+        // At the rail without having passed the trip below it: a false reading.
+        let rail = over_voltage & (s.v_bus >= 4095) & (latched & Fault::BusOverVoltage.bit() == 0);
+        let mut found = (over_current as u8 * FOUND_OC)
+            | (over_voltage as u8 * FOUND_OV)
+            | (rail as u8 * FOUND_RAIL);
+        if found == 0 {
+            found = if self.enc.implausible {
+                FOUND_ENCODER
+            } else if self.mode == Mode::Run {
+                FOUND_UNDER_V
+            } else {
+                return; // a low bus matters only while running
+            };
+        }
         // The outputs are safe from this period on (the step continues in the new mode); the
-        // record and the slow terms follow after the actuation (`complete_latch`).
-        // The speed as the snapshot has it (the encoder as just updated), one onset test for
-        // both latches.
+        // records and the slow terms follow after the actuation (`complete_latch`).
+        // The speed as the snapshot has it (the encoder as just updated).
         let w = self.enc.omega_m(&self.g.enc);
         let above = w.to_bits().unsigned_abs() >= self.g.onset_w;
-        let first = Some((f, self.latch_mode(f, latched, above)));
-        // An over-current must not hide an over-voltage in the same period (open above the
-        // onset, the diode currents pass the trip while they charge the bus).
-        let second = match (over_current, bus) {
-            (true, Some(b)) => Some((b, self.latch_mode(b, latched | 1 << f.code(), above))),
-            _ => None,
-        };
+        let before = self.mode;
+        let has_fault = self.fault.is_some();
+        self.mode = crate::protect::step_safe_mode(
+            found,
+            before,
+            has_fault,
+            latched & SPEED_DOUBT != 0,
+            above,
+        );
+        if !has_fault {
+            self.fault = crate::protect::found_faults(found).map(|(f, _)| f);
+        }
         self.latching = Latching {
-            first,
-            second,
+            found,
+            before,
             i_dq: self.rec.i_dq,
         };
     }
 
     /// Finish a latch the last step began, nothing otherwise (see [`Latching`]): the fault
-    /// record with its snapshot (this period's phase codes and bus, the encoder as that step
-    /// updated it, the last period's d/q currents, as the step found them), the PI reset and
+    /// records with the snapshot (this period's phase codes and bus, the encoder as that step
+    /// updated it, the last period's d/q currents, the mode the step found), the PI reset and
     /// the slow terms for the safe mode. The period routine calls it right after the
     /// actuation ([`crate::period::Period::finish`]); [`Controller::step`] calls it itself.
     #[inline(always)]
     pub fn complete_latch(&mut self) {
-        if self.latching.first.is_some() {
+        if self.latching.found != 0 {
             self.finish_latch();
         }
     }
@@ -863,8 +867,14 @@ impl Controller {
             i_dq: l.i_dq,
             ..self.telemetry()
         };
-        for (f, before) in [l.first, l.second].into_iter().flatten() {
-            self.latch_record(f, before, &t);
+        if let Some((f, second)) = crate::protect::found_faults(l.found) {
+            self.prot.latch(f, l.before, &t);
+            if let Some(g) = second {
+                // The record exists now: the second fault is added to it (`later`); the mode
+                // it found, the first's safe mode, is no snapshot's.
+                self.prot.latch(g, self.mode, &t);
+            }
+            self.settle_latch(l.before);
         }
     }
 
@@ -1571,5 +1581,139 @@ mod tests {
         assert!(brake(2800));
         assert!(brake(2799));
         assert!(!brake(2798));
+    }
+
+    /// The step's half of a latch (`trip_on`: the safe mode read from its table,
+    /// `protect::step_safe_mode`) followed by `complete_latch` leaves the controller exactly
+    /// (every field, compared through `Debug`) as the general latch does after the same step:
+    /// `trip`, the rule applied fault by fault, each with its record, PI reset and slow terms,
+    /// on the snapshot the step takes. Every fault the step finds, alone and the two pairs,
+    /// from every mode with nothing latched and from Idle and Short with a fault of each kind
+    /// latched (current, speed in doubt, over-voltage), below and above the diode onset. The
+    /// outputs of the period are the safe state's, the records written only after them.
+    #[test]
+    fn step_latch_is_the_general_latch() {
+        use std::format;
+        use Fault::*;
+        let cfg = Config::default();
+        let z = cfg.adc_zero_code;
+        let normal = RawSample {
+            i_abc: [z; 3],
+            v_bus: 2458, // 72 V
+            encoder: 0,
+        };
+        // Full scale on every phase (25 A against the 20 A trip, whichever two phases the
+        // shunt rule reads); 96.7 V against the 95 V trip; the rail; 17.6 V under the 20 V
+        // minimum; an encoder jump of 1,000 counts (the limit: 167).
+        let (oc, ov, rail, uv, jump) = ([4095u16; 3], 3300u16, 4095u16, 600u16, 1000u16);
+        // What the step is given, and the faults the general latch takes in order (the bus
+        // at the rail is an over-voltage once one is latched; a low bus trips only in Run).
+        type Expect = fn(bool, Mode) -> std::vec::Vec<Fault>;
+        type Kind = (&'static str, Option<[u16; 3]>, Option<u16>, u16, Expect);
+        let kinds: [Kind; 7] = [
+            ("oc", Some(oc), None, 0, |_, _| std::vec![OverCurrent]),
+            ("ov", None, Some(ov), 0, |_, _| std::vec![BusOverVoltage]),
+            ("rail", None, Some(rail), 0, |o, _| {
+                std::vec![if o { BusOverVoltage } else { BusSensor }]
+            }),
+            ("oc+ov", Some(oc), Some(ov), 0, |_, _| {
+                std::vec![OverCurrent, BusOverVoltage]
+            }),
+            ("oc+rail", Some(oc), Some(rail), 0, |o, _| {
+                std::vec![OverCurrent, if o { BusOverVoltage } else { BusSensor }]
+            }),
+            ("encoder", None, None, jump, |_, _| {
+                std::vec![EncoderImplausible]
+            }),
+            ("uv", None, Some(uv), 0, |_, m| {
+                if m == Mode::Run {
+                    std::vec![BusUnderVoltage]
+                } else {
+                    std::vec![]
+                }
+            }),
+        ];
+        let mut modes_after = [0usize; 2];
+        let mut pairs = 0;
+        // 3 and 5 counts per period: 37.7 and 62.8 rad/s, either side of the onset
+        // (√3·K_e·ω = 0.9·v_bus_ov: 52.3 rad/s).
+        for counts in [3u16, 5] {
+            let mut base = Controller::new(&cfg).unwrap();
+            base.set_mode(Mode::Run).unwrap();
+            let mut s = normal;
+            for _ in 0..400 {
+                s.encoder = s.encoder.wrapping_add(counts);
+                base.step(&s);
+            }
+            let above = base.enc.omega_m(&base.g.enc).to_bits().unsigned_abs() >= base.g.onset_w;
+            assert_eq!(above, counts == 5);
+            let mut starts = std::vec::Vec::new();
+            for m in [Mode::Run, Mode::Open, Mode::Idle, Mode::Short, Mode::Align] {
+                let mut c = base.clone();
+                if m == Mode::Align {
+                    c.set_mode(Mode::Idle).unwrap();
+                }
+                c.set_mode(m).unwrap();
+                starts.push(c);
+            }
+            for f in [OverForce, EncoderLoss, BusOverVoltage] {
+                for m in [Mode::Idle, Mode::Short] {
+                    let mut c = base.clone();
+                    let t = c.telemetry();
+                    c.trip(f, &t);
+                    c.mode = m;
+                    starts.push(c);
+                }
+            }
+            for pre in &starts {
+                let ov_latched = pre.latched_bits() & 1 << BusOverVoltage.code() != 0;
+                for (name, i, v, j, expect) in &kinds {
+                    let faults = expect(ov_latched, pre.mode);
+                    let x = RawSample {
+                        i_abc: i.unwrap_or(normal.i_abc),
+                        v_bus: v.unwrap_or(normal.v_bus),
+                        encoder: s.encoder.wrapping_add(counts).wrapping_add(*j),
+                    };
+                    let what = format!(
+                        "{name} from {:?}, {:?} latched, above {above}",
+                        pre.mode, pre.fault
+                    );
+                    let mut a = pre.clone();
+                    let out = a.step_outputs(&x);
+                    assert_eq!(
+                        a.prot.record(),
+                        pre.prot.record(),
+                        "{what}: recorded after the outputs"
+                    );
+                    if faults.is_empty() {
+                        assert_eq!((a.mode, a.fault), (pre.mode, pre.fault), "{what}");
+                    } else {
+                        let safe = match a.mode {
+                            Mode::Idle => !out.enable,
+                            Mode::Short => out.enable && out.duties == [Duty::ZERO; 3],
+                            _ => false,
+                        };
+                        assert!(safe, "{what}: {:?} with {out:?}", a.mode);
+                        modes_after[(a.mode == Mode::Short) as usize] += 1;
+                        pairs += (faults.len() == 2) as usize;
+                    }
+                    a.complete_latch();
+                    let mut r = pre.clone();
+                    r.step_outputs(&x);
+                    (r.mode, r.fault, r.latching) = (pre.mode, pre.fault, Latching::default());
+                    let t = Telemetry {
+                        i_dq: pre.rec.i_dq,
+                        ..r.telemetry()
+                    };
+                    for f in faults {
+                        r.trip(f, &t);
+                    }
+                    assert_eq!(format!("{a:?}"), format!("{r:?}"), "{what}");
+                }
+            }
+        }
+        // Both safe states reached, and the pairs from every start on both sides.
+        assert!(modes_after[0] > 0 && modes_after[1] > 0, "{modes_after:?}");
+        assert_eq!(pairs, 2 * 2 * 11);
     }
 }

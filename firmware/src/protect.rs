@@ -172,7 +172,7 @@ impl Fault {
     ///   encoder faults and implausible speed (the short needs no angle), stroke limit (brake
     ///   hardest before the end stop), a wrong angle and a failed alignment (the short damps
     ///   the structure without an angle, so a moving structure slows down for a retry).
-    pub fn safe_mode(self) -> Mode {
+    pub const fn safe_mode(self) -> Mode {
         match self {
             Fault::OverCurrent
             | Fault::BusUnderVoltage
@@ -193,8 +193,8 @@ impl Fault {
         }
     }
 
-    fn bit(self) -> u32 {
-        1 << self.code()
+    pub(crate) const fn bit(self) -> u32 {
+        1 << self as u8
     }
 }
 
@@ -791,13 +791,138 @@ pub const SPEED_DOUBT: u32 = 1 << 4 | 1 << 7 | 1 << 8;
 ///   ADC's range, nor the force or I²t the short costs; below the onset they open;
 /// * a bus reading at the rail opens, from any state: a false over-voltage must not hold a
 ///   short (a true one is caught by the stage's own comparator on its own divider).
-pub fn next_mode(latched: bool, mode: Mode, f: Fault, above_onset: bool) -> Mode {
+pub const fn next_mode(latched: bool, mode: Mode, f: Fault, above_onset: bool) -> Mode {
     match (f, mode) {
         (Fault::BusSensor, _) => Mode::Idle,
         (Fault::BusOverVoltage, Mode::Idle) if above_onset => Mode::Short,
         (_, Mode::Short) if above_onset => Mode::Short,
-        _ if latched && mode == Mode::Idle => Mode::Idle,
+        (_, Mode::Idle) if latched => Mode::Idle,
         _ => f.safe_mode(),
+    }
+}
+
+/// The rule as a latch applies it: fault `f` arriving in `mode`, a fault latched before it
+/// or not (`has_fault`), the faults latched before it as bits `1 << code` (`latched`), and
+/// the speed estimate above the diode onset or not (`above`). With the encoder or the speed
+/// in doubt (`f` or a latched fault in [`SPEED_DOUBT`]) the bus decides: over-voltage while
+/// open is the rectification itself (above the onset); nothing else is taken as above it.
+pub const fn latch_next(has_fault: bool, latched: u32, mode: Mode, f: Fault, above: bool) -> Mode {
+    let onset = if (latched | f.bit()) & SPEED_DOUBT != 0 {
+        matches!(f, Fault::BusOverVoltage)
+    } else {
+        above
+    };
+    next_mode(has_fault, mode, f, onset)
+}
+
+/// What the current-loop step found in one period, as one number (`found`, 1 … 7; 0:
+/// nothing): bit 0 a phase over-current ([`FOUND_OC`]), bit 1 the bus above its trip
+/// ([`FOUND_OV`]), bit 2 with it that reading taken for a sensor fault ([`FOUND_RAIL`]: at
+/// the rail without having passed the trip below it); with neither, the encoder's jump
+/// ([`FOUND_ENCODER`]) or, in Run, the bus below its minimum ([`FOUND_UNDER_V`]).
+pub const FOUND_OC: u8 = 1;
+/// See [`FOUND_OC`].
+pub const FOUND_OV: u8 = 2;
+/// See [`FOUND_OC`] (only with [`FOUND_OV`]).
+pub const FOUND_RAIL: u8 = 4;
+/// See [`FOUND_OC`] (alone).
+pub const FOUND_ENCODER: u8 = 4;
+/// See [`FOUND_OC`] (alone).
+pub const FOUND_UNDER_V: u8 = 5;
+
+/// The faults a step's `found` ([`FOUND_OC`]) latches, in the order of precedence: the first,
+/// and the bus fault an over-current must not hide (open above the onset, the diode
+/// currents pass the current trip while they charge the bus). None for 0.
+pub const fn found_faults(found: u8) -> Option<(Fault, Option<Fault>)> {
+    use Fault::*;
+    match found {
+        1 => Some((OverCurrent, None)),
+        2 => Some((BusOverVoltage, None)),
+        3 => Some((OverCurrent, Some(BusOverVoltage))),
+        4 => Some((EncoderImplausible, None)),
+        5 => Some((BusUnderVoltage, None)),
+        6 => Some((BusSensor, None)),
+        7 => Some((OverCurrent, Some(BusSensor))),
+        _ => None,
+    }
+}
+
+/// The mode after latching the faults a step found (`found`), one after the other by
+/// [`latch_next`], in `mode`, with `latched` (bits) latched before and a fault latched or not
+/// (`has_fault`). `mode` when nothing was found.
+pub const fn latch_found(
+    found: u8,
+    has_fault: bool,
+    latched: u32,
+    mode: Mode,
+    above: bool,
+) -> Mode {
+    match found_faults(found) {
+        None => mode,
+        Some((f, None)) => latch_next(has_fault, latched, mode, f, above),
+        Some((f, Some(g))) => {
+            let m = latch_next(has_fault, latched, mode, f, above);
+            latch_next(true, latched | f.bit(), m, g, above)
+        }
+    }
+}
+
+/// A mode from its discriminant (`Mode as u8`).
+const fn mode_of(d: usize) -> Option<Mode> {
+    match d {
+        0 => Some(Mode::Idle),
+        1 => Some(Mode::Run),
+        2 => Some(Mode::Short),
+        3 => Some(Mode::Open),
+        5 => Some(Mode::Align),
+        _ => None,
+    }
+}
+
+/// [`latch_found`] tabulated for the step (bit `i` of the 512: 1 = Short, 0 = Idle; the index
+/// as [`step_safe_mode`] forms it), evaluated when the firmware is compiled: the latched
+/// faults enter only through whether one is latched and whether one is in [`SPEED_DOUBT`],
+/// so one of that set stands for them. Every result is Idle or Short (checked here: a
+/// compile error otherwise).
+const STEP_SHORT: [u32; 16] = {
+    let mut t = [0u32; 16];
+    let mut i = 0;
+    while i < 512 {
+        if let Some(mode) = mode_of(i >> 3 & 7) {
+            let latched = if i & 2 != 0 {
+                Fault::EncoderImplausible.bit()
+            } else {
+                0
+            };
+            match latch_found((i >> 6) as u8, i & 4 != 0, latched, mode, i & 1 != 0) {
+                Mode::Short => t[i >> 5] |= 1 << (i & 31),
+                Mode::Idle => {}
+                // (Nothing found leaves the mode: those entries are never read.)
+                _ if i >> 6 == 0 => {}
+                _ => panic!("a step's latch leads to Idle or Short only"),
+            }
+        }
+        i += 1;
+    }
+    t
+};
+
+/// [`latch_found`] for the current-loop step, as one bit of a table ([`STEP_SHORT`]): the
+/// faults found (`found`, 1 … 7), the mode found, a fault latched or not (`has_fault`), one in
+/// [`SPEED_DOUBT`] latched or not (`doubt`), the speed estimate above the onset or not.
+/// A handful of instructions where the rule itself, applied once per fault, costs ≈ 40 per
+/// fault on the board's build (`docs/m4check.md`).
+#[inline(always)]
+pub fn step_safe_mode(found: u8, mode: Mode, has_fault: bool, doubt: bool, above: bool) -> Mode {
+    let i = ((found & 7) as usize) << 6
+        | (mode as usize) << 3
+        | (has_fault as usize) << 2
+        | (doubt as usize) << 1
+        | above as usize;
+    if STEP_SHORT[i >> 5] >> (i & 31) & 1 != 0 {
+        Mode::Short
+    } else {
+        Mode::Idle
     }
 }
 
@@ -870,6 +995,83 @@ mod tests {
         let w = 0.9 * c.v_bus_ov / (1.732_050_8 * c.ke_v_s_per_rad);
         assert!(above_onset(&c, 1.001 * w) && above_onset(&c, -1.001 * w));
         assert!(!above_onset(&c, 0.999 * w));
+    }
+
+    /// The step's table (`step_safe_mode`) is the rule applied fault by fault
+    /// (`latch_found`) for every `found`, every mode, the faults latched before (none, each
+    /// alone, every pair, with or without a fault in force) and either side of the onset.
+    #[test]
+    fn step_table_is_the_rule_fault_by_fault() {
+        let modes = [Mode::Idle, Mode::Run, Mode::Short, Mode::Open, Mode::Align];
+        let mut sets = std::vec![0u32];
+        for (i, f) in Fault::ALL.iter().enumerate() {
+            sets.push(f.bit());
+            for g in &Fault::ALL[i + 1..] {
+                sets.push(f.bit() | g.bit());
+            }
+        }
+        let mut n = 0;
+        for found in 1..=7u8 {
+            for m in modes {
+                for &latched in &sets {
+                    for has_fault in [false, true] {
+                        for above in [false, true] {
+                            let doubt = latched & SPEED_DOUBT != 0;
+                            assert_eq!(
+                                step_safe_mode(found, m, has_fault, doubt, above),
+                                latch_found(found, has_fault, latched, m, above),
+                                "found {found}, {m:?}, latched {latched:#x}, {has_fault} {above}"
+                            );
+                            n += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(n, 7 * 5 * 137 * 4);
+    }
+
+    /// The two faults a step can find in one period, against the safe-state table
+    /// (docs/protection.md, "The rule"), by hand: an over-current opens; the over-voltage with
+    /// it shorts above the onset (the open bridge is what charges the bus), stays open below
+    /// it; a rail reading with it opens from anywhere; a short above the onset stays.
+    #[test]
+    fn two_faults_in_one_period_by_the_table() {
+        use Fault::*;
+        let (oc_ov, oc_rail) = (FOUND_OC | FOUND_OV, FOUND_OC | FOUND_OV | FOUND_RAIL);
+        assert_eq!(
+            found_faults(oc_ov),
+            Some((OverCurrent, Some(BusOverVoltage)))
+        );
+        assert_eq!(found_faults(oc_rail), Some((OverCurrent, Some(BusSensor))));
+        for m in [Mode::Run, Mode::Open, Mode::Align, Mode::Idle] {
+            assert_eq!(step_safe_mode(oc_ov, m, false, false, false), Mode::Idle);
+            assert_eq!(step_safe_mode(oc_ov, m, false, false, true), Mode::Short);
+            assert_eq!(step_safe_mode(oc_rail, m, false, false, true), Mode::Idle);
+        }
+        // In a short (an earlier fault's) above the onset: kept; below it: opened.
+        assert_eq!(
+            step_safe_mode(oc_ov, Mode::Short, true, false, true),
+            Mode::Short
+        );
+        assert_eq!(
+            step_safe_mode(FOUND_OC, Mode::Short, true, false, true),
+            Mode::Short
+        );
+        assert_eq!(
+            step_safe_mode(oc_ov, Mode::Short, true, false, false),
+            Mode::Idle
+        );
+        // The speed in doubt (an encoder fault latched, its short in force): the bus decides,
+        // the over-voltage shorts at any speed.
+        assert_eq!(
+            step_safe_mode(oc_ov, Mode::Short, true, true, false),
+            Mode::Short
+        );
+        assert_eq!(
+            step_safe_mode(oc_ov, Mode::Idle, true, true, false),
+            Mode::Short
+        );
     }
 
     #[test]

@@ -43,9 +43,9 @@ pub fn regen_step_refresh(ctl: &mut Controller, s: &RawSample) -> Actuation {
 }
 
 /// A step that finds an instantaneous fault (phase b's code `code`, the bus code `bus`: an
-/// over-current, an over-voltage, or both in one period): the fault and its safe mode in
-/// force, the period's outputs the safe state's. Counted on copies of the controller every
-/// 1,000 steps of the replay, not in the digest.
+/// over-current or an over-voltage): the fault and its safe mode in force, the period's
+/// outputs the safe state's. Counted on copies of the controller every 1,000 steps of the
+/// replay, not in the digest.
 #[no_mangle]
 #[inline(never)]
 pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16, bus: u16) -> Actuation {
@@ -56,11 +56,31 @@ pub fn regen_step_trip(ctl: &mut Controller, s: RawSample, code: u16, bus: u16) 
     ctl.step_outputs(&s)
 }
 
-/// The rest of that latch after the outputs are written (`Period::finish` →
+/// The same with both in one period (an over-current and an over-voltage): both faults and
+/// the safe mode after them in force, the outputs the safe state's.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_trip2(ctl: &mut Controller, s: RawSample, code: u16, bus: u16) -> Actuation {
+    // (The arguments in another order: a body of its own.)
+    let mut s = s;
+    s.v_bus = black_box(bus);
+    s.i_abc[1] = black_box(code);
+    ctl.step_outputs(&s)
+}
+
+/// The rest of a one-fault latch after the outputs are written (`Period::finish` →
 /// `Controller::complete_latch`): the record with its snapshot, the PI reset, the slow terms.
 #[no_mangle]
 #[inline(never)]
 pub fn regen_trip_finish(ctl: &mut Controller) {
+    ctl.complete_latch()
+}
+
+/// The rest of the two-fault latch (both records, one PI reset and slow terms).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_trip_finish2(ctl: &mut Controller, _two: u32) {
+    // (A second argument: a body of its own.)
     ctl.complete_latch()
 }
 
@@ -301,15 +321,30 @@ fn main() -> ! {
             // and both, each latched by the step on a copy.
             for (code, bus) in [(4095, s.v_bus), (s.i_abc[1], 3300), (4095, 3300)] {
                 let mut copy = c.clone();
-                let a = black_box(regen_step_trip(&mut copy, *s, code, bus));
+                let both = code == 4095 && bus == 3300;
+                let a = if both {
+                    black_box(regen_step_trip2(&mut copy, *s, code, bus))
+                } else {
+                    black_box(regen_step_trip(&mut copy, *s, code, bus))
+                };
                 // Safe in the period found: the bridge open, or the phases shorted (all
                 // low-side switches on).
                 let safe = !a.enable || a.duties.iter().all(|d| *d == Duty::ZERO);
                 if copy.fault().is_none() || !safe {
                     bad_cfg = true;
                 }
-                regen_trip_finish(&mut copy);
-                if copy.protection().record().is_none() {
+                if both {
+                    regen_trip_finish2(&mut copy, 2);
+                } else {
+                    regen_trip_finish(&mut copy);
+                }
+                // Both faults recorded when both were found (the over-voltage as a later one
+                // when the over-current is the record's).
+                let ov = Fault::BusOverVoltage.code();
+                let recorded = copy.protection().record().is_some_and(|r| {
+                    !both || r.fault == Fault::BusOverVoltage || r.later & 1 << ov != 0
+                });
+                if !recorded {
                     bad_cfg = true;
                 }
             }
