@@ -1003,12 +1003,21 @@ fn clip_level_consistent(l: f64, bp: &[f64], f: &[f64], resid_rms: f64) -> bool 
     q <= l + 3.0 * resid_rms
 }
 
-/// Contact of a play operator of total width `b` driven by `x`: true where the device side
-/// moves with x (x pushes on a flank), false while x crosses the gap.
-pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
-    let mut out = Vec::with_capacity(x.len());
-    play_walk(x, &[b], x.len(), |_, c| out.push(c[0]));
-    out
+/// Output of a play operator of total width `b` driven by `x`, started centred at x[0]: the
+/// device side, held while x crosses the gap and carried on a flank (x ∓ b/2) while x pushes it.
+pub fn play_output(x: &[f64], b: f64) -> Vec<f64> {
+    let h = 0.5 * b;
+    let mut m = x.first().copied().unwrap_or(0.0);
+    x.iter()
+        .map(|&xi| {
+            if m < xi - h {
+                m = xi - h;
+            } else if m > xi + h {
+                m = xi + h;
+            }
+            m
+        })
+        .collect()
 }
 
 /// The force play of total width `b` changes, at every sample: the device (its inertia,
@@ -1027,17 +1036,7 @@ pub fn play_contact(x: &[f64], b: f64) -> Vec<bool> {
 pub fn play_column(ctx: &Context, b: f64) -> Vec<f64> {
     let x = &ctx.rec.x;
     let n = x.len();
-    let contact = play_contact(x, b);
-    let h = 0.5 * b;
-    // the device side: held while x crosses the gap, on a flank otherwise
-    let mut xm = Vec::with_capacity(n);
-    let mut m = x.first().copied().unwrap_or(0.0);
-    for (i, &xi) in x.iter().enumerate() {
-        if contact[i] {
-            m = if m < xi - h { xi - h } else { xi + h };
-        }
-        xm.push(m);
-    }
+    let xm = play_output(x, b);
     let d: Vec<f64> = x.iter().zip(&xm).map(|(a, b)| a - b).collect();
     let (mi, fv, fc) = (
         ctx.base_th.first().copied().unwrap_or(0.0),
@@ -1060,47 +1059,6 @@ pub fn play_column(ctx: &Context, b: f64) -> Vec<f64> {
                 + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
         })
         .collect()
-}
-
-/// `play_contact` for several widths at the given ascending sample indices, in one pass (the
-/// path is walked up to the last of them; no full-length array).
-pub fn play_batch_at(x: &[f64], widths: &[f64], rows: &[usize]) -> Vec<Vec<bool>> {
-    let mut out = vec![Vec::with_capacity(rows.len()); widths.len()];
-    let mut k = 0;
-    let end = rows.last().map_or(0, |r| r + 1).min(x.len());
-    play_walk(x, widths, end, |i, c| {
-        while k < rows.len() && rows[k] == i {
-            for (o, &ci) in out.iter_mut().zip(c) {
-                o.push(ci);
-            }
-            k += 1;
-        }
-    });
-    out
-}
-
-/// Walk play operators of the given widths over the first `end` samples of `x`, calling
-/// `emit(i, contact)` per sample with each width's contact.
-fn play_walk(x: &[f64], widths: &[f64], end: usize, mut emit: impl FnMut(usize, &[bool])) {
-    let h: Vec<f64> = widths.iter().map(|b| 0.5 * b).collect();
-    let mut xm = vec![x.first().copied().unwrap_or(0.0); widths.len()];
-    let mut contact = vec![false; widths.len()];
-    for (i, &xi) in x[..end].iter().enumerate() {
-        for ((xm, c), &h) in xm.iter_mut().zip(contact.iter_mut()).zip(&h) {
-            let lo = xi - h;
-            let hi = xi + h;
-            *c = if *xm < lo {
-                *xm = lo;
-                true
-            } else if *xm > hi {
-                *xm = hi;
-                true
-            } else {
-                false
-            };
-        }
-        emit(i, &contact);
-    }
 }
 
 /// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
@@ -1578,8 +1536,8 @@ mod tests {
         }
     }
 
-    /// The one-pass walks over several parameter values give, value by value, exactly the
-    /// single-value walks (Dahl states and play contacts on a quantised path with reversals and
+    /// The one-pass walk over several characteristic displacements gives, value by value,
+    /// exactly the single-value walk (Dahl states on a quantised path with reversals and
     /// standstills: a state settled for one value and not for another).
     #[test]
     fn batched_walks_match_single_ones() {
@@ -1594,13 +1552,10 @@ mod tests {
         let rows: Vec<usize> = (5..x.len()).step_by(37).collect();
         let xcs = [2.0 * q, 1e-5, 1e-4, 1e-3, 1e-2];
         let zb = dahl_batch_at(&x, &xcs, &rows);
-        let cb = play_batch_at(&x, &xcs, &rows);
         for (k, &xc) in xcs.iter().enumerate() {
             let z = dahl(&x, xc);
-            let c = play_contact(&x, xc);
             for (j, &r) in rows.iter().enumerate() {
                 assert_eq!(zb[k][j].to_bits(), z[r].to_bits(), "xc {xc}, row {r}");
-                assert_eq!(cb[k][j], c[r], "b {xc}, row {r}");
             }
         }
     }
