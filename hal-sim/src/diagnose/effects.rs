@@ -38,10 +38,16 @@ pub enum EffectKind {
     /// over a characteristic displacement instead of switching with the sign of v;
     /// parameter: that displacement, m).
     PreslidingHysteresis,
+    /// The force channel is the drive's command (a controller's output × gain), which the
+    /// force follows through the actuator's delay τ (the output's zero-order hold, half a
+    /// sample on average, and the current loop): the recorded force leads the force the motion
+    /// needs, f_cmd(t) = f(t + τ) ≈ f + τ·ḟ (coefficient: τ, as ω_c·τ, ω_c = 2π × the
+    /// derivative filter's cutoff).
+    ActuatorLag,
 }
 
 impl EffectKind {
-    pub const ALL: [EffectKind; 12] = [
+    pub const ALL: [EffectKind; 13] = [
         EffectKind::DirectionAsymmetricFriction,
         EffectKind::PositionDependentFriction,
         EffectKind::PositionPeriodicFriction,
@@ -54,6 +60,7 @@ impl EffectKind {
         EffectKind::Compliance,
         EffectKind::Backlash,
         EffectKind::PreslidingHysteresis,
+        EffectKind::ActuatorLag,
     ];
     pub fn name(self) -> &'static str {
         match self {
@@ -69,6 +76,7 @@ impl EffectKind {
             EffectKind::Compliance => "compliance",
             EffectKind::Backlash => "backlash",
             EffectKind::PreslidingHysteresis => "presliding_hysteresis",
+            EffectKind::ActuatorLag => "actuator_lag",
         }
     }
     pub fn from_name(s: &str) -> Option<Self> {
@@ -839,6 +847,26 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             "driven_accel",
             map(&|i| if bp[i] * v[i] > 0.0 { a[i] } else { 0.0 }),
         )],
+        EffectKind::ActuatorLag => {
+            // τ_c·df̂₀/dt (central differences of the full-record baseline prediction), so
+            // the coefficient is ω_c·τ
+            let full = &ctx.base_pred;
+            let last = full.len().saturating_sub(1);
+            let k = actuator_tc(ctx) / ctx.dt;
+            let d = |i: usize| {
+                let (lo, hi) = (i.saturating_sub(1), (i + 1).min(last));
+                if hi > lo {
+                    k * (full[hi] - full[lo]) / (hi - lo) as f64
+                } else {
+                    0.0
+                }
+            };
+            let z = match s.rows {
+                None => map(&|i| d(i)),
+                Some(r) => map(&|j| d(r[j])),
+            };
+            vec![col("rate_times_tc", z)]
+        }
         EffectKind::Lag => {
             let k = ((e.param / ctx.dt).round() as usize).max(1);
             let z = match s.rows {
@@ -910,7 +938,10 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
 ///   construction, `compliance_zeta`);
 /// * `presliding_hysteresis`: the friction force it carries is positive and at most 1.5× the
 ///   Coulomb level;
-/// * `backlash`: unit gain (0.8 … 1.25: the device's own force, carried through the play).
+/// * `backlash`: unit gain (0.8 … 1.25: the device's own force, carried through the play);
+/// * `actuator_lag`: 0 < ω_c·τ ≤ 1 (a delay of the force behind its command: the recorded
+///   force leads; a recorded force that lags the motion is `lag`'s, and beyond ω_c·τ = 1 the
+///   first-order column no longer is the delay, `actuator_tc`).
 ///
 /// Every parameter must also be finite.
 pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
@@ -951,7 +982,22 @@ pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::Lag | EffectKind::CurrentLimit | EffectKind::Backlash => unit(coef[0]),
         EffectKind::Compliance => coef[0] > 0.0,
         EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
+        EffectKind::ActuatorLag => coef[0] > 0.0 && coef[0] <= 1.0,
     }
+}
+
+/// The time constant τ_c = 1/ω_c of the derivative filter's cutoff (the record's
+/// `derivative_cutoff_hz`, else the default fs/20) that scales the `actuator_lag` column: its
+/// coefficient ω_c·τ is at most 1, where the first-order expansion f(t + τ) ≈ f + τ·ḟ holds
+/// over the band the derived signals carry (its error (ωτ)²/2 stays below half the term).
+pub fn actuator_tc(ctx: &Context) -> f64 {
+    let fc = ctx
+        .rec
+        .meta
+        .get(super::record::DERIVATIVE_CUTOFF_KEY)
+        .copied()
+        .unwrap_or(0.05 / ctx.dt);
+    1.0 / (2.0 * std::f64::consts::PI * fc)
 }
 
 /// A clip level is consistent with the measured force when, on the samples it clips (baseline
@@ -1415,6 +1461,9 @@ pub fn parameters(
             ("characteristic_displacement_m".into(), e.param),
             ("friction_N".into(), get("dahl_minus_sgn")),
         ],
+        EffectKind::ActuatorLag => {
+            vec![("delay_s".into(), get("rate_times_tc") * actuator_tc(ctx))]
+        }
         EffectKind::Compliance => vec![
             ("resonance_Hz".into(), e.param),
             ("modal_mass_kg".into(), get("mode_minus_rigid")),
@@ -1447,6 +1496,9 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         }
         EffectKind::Stribeck => format!("Stribeck velocity {:.3e} m/s", e.param),
         EffectKind::Lag => format!("force lags motion by {:.4} s", e.param),
+        EffectKind::ActuatorLag => {
+            "the force channel leads the force: a drive's command, followed through the actuator's delay".into()
+        }
         EffectKind::CurrentLimit if e.param < 0.0 => format!(
             "the drive's damping force clipped above {:.3e} m/s (a drive acting as a load)",
             -e.param

@@ -25,6 +25,11 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
     };
     let mut effects = Vec::new();
     for (e, f) in d.effects.iter().zip(&d.findings) {
+        if e.kind == super::EffectKind::ActuatorLag {
+            // the recording's force channel (a drive's command ahead of the force), not the
+            // device: the plant carries the force the motion needs
+            continue;
+        }
         // the report's parameters, by their report names, read as the plant's effect
         let mut t = toml::Table::new();
         t.insert("name".into(), toml::Value::String(e.kind.name().into()));
@@ -62,6 +67,17 @@ pub fn fragment_toml(rec: &Record, d: &Diagnosis) -> String {
                 "{n} = {v:e}: the electromagnetic force is the simulated machine's (machine.ke_v_s_per_rad and the law), not the model's"
             ));
         }
+    }
+    for f in d.findings.iter().filter(|f| f.effect == "actuator_lag") {
+        let p: Vec<String> = f
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k} = {v:e}"))
+            .collect();
+        outside.push(format!(
+            "actuator_lag ({}): the record's force channel leads the device's force, not simulated",
+            p.join(", ")
+        ));
     }
     for f in d.findings.iter().filter(|f| f.effect == "unexplained") {
         let p: Vec<String> = f
