@@ -1607,8 +1607,15 @@ mod actuator_lag_tests {
     #[test]
     fn command_ahead_of_the_force_is_named_with_its_delay() {
         let tau = 4e-4;
-        let d = diagnose(&record(tau), &Options::default());
+        let rec = record(tau);
+        let d = diagnose(&rec, &Options::default());
         let got = delay(&d).expect("actuator_lag named");
+        // the record's channel, not the device: stated in the fragment's header, not a plant
+        // effect (the fragment still loads)
+        let frag = model::fragment_toml(&rec, &d);
+        assert!(frag.contains("#   actuator_lag (delay_s = "), "{frag}");
+        let m = model::device_model(&rec, &d).expect("the fragment is a device model");
+        assert_eq!(m.effects.len(), d.effects.len() - 1, "{frag}");
         println!("delay {got:e} s for {tau:e} s");
         // measured 0.433 ms (8 % high: the derivative filter's smoothing and the baseline
         // fitted on the shifted force bias the first-order column); 10 % is the bound, a

@@ -68,27 +68,18 @@ pub fn fragment_toml(rec: &Record, d: &Diagnosis) -> String {
             ));
         }
     }
-    for f in d.findings.iter().filter(|f| f.effect == "actuator_lag") {
+    for f in &d.findings {
+        let why = match f.effect.as_str() {
+            "actuator_lag" => "the record's force channel leads the device's force, not simulated",
+            "unexplained" => "no catalogue effect, not simulated",
+            _ => continue,
+        };
         let p: Vec<String> = f
             .parameters
             .iter()
             .map(|(k, v)| format!("{k} = {v:e}"))
             .collect();
-        outside.push(format!(
-            "actuator_lag ({}): the record's force channel leads the device's force, not simulated",
-            p.join(", ")
-        ));
-    }
-    for f in d.findings.iter().filter(|f| f.effect == "unexplained") {
-        let p: Vec<String> = f
-            .parameters
-            .iter()
-            .map(|(k, v)| format!("{k} = {v:e}"))
-            .collect();
-        outside.push(format!(
-            "unexplained ({}): no catalogue effect, not simulated",
-            p.join(", ")
-        ));
+        outside.push(format!("{} ({}): {why}", f.effect, p.join(", ")));
     }
     if !outside.is_empty() {
         s.push_str("# not expressed by the simulator's plant:\n");
