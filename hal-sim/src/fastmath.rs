@@ -104,9 +104,9 @@ impl SinCos {
                 self.c * self.c_step - self.s * self.s_step,
             );
             let e2 = e * e;
-            let e6 = e * (1.0 / 6.0);
-            self.s = (sp + cp * e) - e2 * (0.5 * sp + cp * e6);
-            self.c = (cp - sp * e) - e2 * (0.5 * cp - sp * e6);
+            let (sp6, cp6) = (sp * (1.0 / 6.0), cp * (1.0 / 6.0));
+            self.s = (sp + cp * e) - e2 * (0.5 * sp + cp6 * e);
+            self.c = (cp - sp * e) - e2 * (0.5 * cp - sp6 * e);
             self.n += 1;
             let (sd, cd) = Self::short_series(d);
             self.step = d;

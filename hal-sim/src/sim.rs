@@ -1015,9 +1015,10 @@ impl Sim {
             },
             iq_avg,
         ) = if act.enable && p.plain_average {
-            let v = duty_clarke(act, vb0);
+            let dv = duty_clarke(act);
+            let v = [dv[0] * vb0, dv[1] * vb0];
             let iq = mean_iq(p, (sn, cs), kw, v, self.s.i_ab);
-            (averaged_period(&e, v, p, &mut self.s.i_ab), iq)
+            (averaged_period(&e, dv, vb0, p, &mut self.s.i_ab), iq)
         } else {
             let el = other_period(act, vb0, &e, p, ts, &mut self.s.i_ab);
             if !act.enable {
@@ -1047,7 +1048,9 @@ impl Sim {
         fl.switching_loss += p_sw;
         let p_logic = if vb0 >= p.logic_min_v { p.logic_w } else { 0.0 };
         fl.logic += p_logic;
-        let p_draw = p_inv + p_sw + p_cond + p_logic;
+        // Summed in the order the terms arrive (the bus voltage's path through the period:
+        // the conduction loss, from the mean of i², comes last).
+        let p_draw = ((p_logic + p_inv) + p_sw) + p_cond;
         let bk = &p.bus[act.brake as usize];
         // Injection current such that ∫V·i_inj dt equals the energy the inverter drew, by one
         // fixed-point step from the guess i₀ = −p/max(V, 1) (the rest, second order, shows in
@@ -1063,7 +1066,9 @@ impl Sim {
         let v1 = if bk.gt > 0.0 {
             let vinf = (i_inj + p.i_source) * bk.inv_gt;
             let d0 = vb0 - vinf;
-            let v1 = vinf + d0 * bk.k;
+            // V∞ + d0·k = (k·V0 + (1 − k)·i_s/g) + (1 − k)/g·i_inj: one product and sum
+            // after the division.
+            let v1 = (vb0 * bk.k + bk.v_src) + bk.v_per_inj * i_inj;
             let d0k = d0 * bk.ak;
             let d0k2 = d0 * d0 * bk.ak2;
             let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
@@ -1173,19 +1178,19 @@ fn adc_code(c: f64) -> u16 {
 /// Value of the duty's least significant bit (`Duty` = U1F15).
 const DUTY_LSB: f64 = 1.0 / (1u32 << Duty::FRAC_NBITS) as f64;
 
-/// The averaged inverter's αβ voltages from the duties' bits: `clarke` of the phase
-/// voltages `d_k·V_bus` (each duty at most 1), with the Clarke combinations taken exactly on
-/// the integer bits and one product each by `V_bus·LSB/3` and `V_bus·LSB/√3`: the same
-/// voltages to a rounding or two (`duty_clarke_is_clarke_of_the_duties` pins it against
+/// The averaged inverter's αβ voltages per volt of bus from the duties' bits: `clarke` of
+/// the duties (each at most 1), with the Clarke combinations taken exactly on the integer
+/// bits and one product each by `LSB/3` and `LSB/√3`; times V_bus, the phase voltages'
+/// transform to a rounding or two (`duty_clarke_is_clarke_of_the_duties` pins it against
 /// `clarke`, 4 ulp), in a third of the instructions (no three conversions, clamps and
 /// products before the transform).
 #[inline(always)]
-fn duty_clarke(act: &Actuation, vb: f64) -> [f64; 2] {
+fn duty_clarke(act: &Actuation) -> [f64; 2] {
     const ONE: u32 = 1 << Duty::FRAC_NBITS;
     let [a, b, c] = act.duties.map(|d| (d.to_bits() as u32).min(ONE) as i32);
     [
-        (2 * a - b - c) as f64 * (vb * (DUTY_LSB / 3.0)),
-        (b - c) as f64 * (vb * (DUTY_LSB / (2.0 * SQRT3_2))),
+        (2 * a - b - c) as f64 * (DUTY_LSB / 3.0),
+        (b - c) as f64 * (DUTY_LSB / (2.0 * SQRT3_2)),
     ]
 }
 
@@ -1250,21 +1255,32 @@ impl Elec {
     }
 }
 
-/// The averaged inverter's period (phase voltages `v`, αβ, held over the whole period): the
-/// exact solution of [`Elec::segment`] with f = 1 written out for the one segment, so that
-/// nothing is accumulated from zero.
+/// The averaged inverter's period (αβ phase voltages `dv·vb`, held over the whole period):
+/// the exact solution of [`Elec::segment`] with f = 1 written out for the one segment, so
+/// that nothing is accumulated from zero. Written affine in the bus voltage `vb`
+/// (u = (v − e)/R = vb·dv/R − e/R, the mean current (1 − g)·u + g·i(t_k)), so that the
+/// bus voltage's path through the period (voltage → current → drawn power → the bus's end
+/// voltage, the next period's input) is a few operations long.
 #[inline(always)]
-fn averaged_period(e: &[f64; 2], v: [f64; 2], p: &Pre, i_ab: &mut [f64; 2]) -> Elec {
-    let u = [(v[0] - e[0]) * p.inv_r, (v[1] - e[1]) * p.inv_r];
-    let dlt = [i_ab[0] - u[0], i_ab[1] - u[1]];
+fn averaged_period(e: &[f64; 2], dv: [f64; 2], vb: f64, p: &Pre, i_ab: &mut [f64; 2]) -> Elec {
+    let w = [dv[0] * p.inv_r, dv[1] * p.inv_r];
+    let u0 = [-e[0] * p.inv_r, -e[1] * p.inv_r];
+    let i0 = *i_ab;
+    let u = [vb * w[0] + u0[0], vb * w[1] + u0[1]];
+    let dlt = [i0[0] - u[0], i0[1] - u[1]];
     *i_ab = [u[0] + dlt[0] * p.decay, u[1] + dlt[1] * p.decay];
-    let i_avg = [u[0] + dlt[0] * p.g_avg, u[1] + dlt[1] * p.g_avg];
+    let g = p.g_avg;
+    let i_avg = [
+        vb * (w[0] * p.one_m_g) + (u0[0] * p.one_m_g + g * i0[0]),
+        vb * (w[1] * p.one_m_g) + (u0[1] * p.one_m_g + g * i0[1]),
+    ];
+    let v15 = [vb * (1.5 * dv[0]), vb * (1.5 * dv[1])];
     Elec {
         i_avg,
         i2_avg: (u[0] * u[0] + u[1] * u[1])
-            + 2.0 * p.g_avg * (u[0] * dlt[0] + u[1] * dlt[1])
+            + 2.0 * g * (u[0] * dlt[0] + u[1] * dlt[1])
             + p.g2_avg * (dlt[0] * dlt[0] + dlt[1] * dlt[1]),
-        p_inv: 1.5 * (v[0] * i_avg[0] + v[1] * i_avg[1]),
+        p_inv: v15[0] * i_avg[0] + v15[1] * i_avg[1],
     }
 }
 
@@ -1277,7 +1293,10 @@ fn averaged_period(e: &[f64; 2], v: [f64; 2], p: &Pre, i_ab: &mut [f64; 2]) -> E
 /// position. `mean_q_current_is_the_projection` pins it to the projection.
 #[inline(always)]
 fn mean_iq(p: &Pre, (sn, cs): (f64, f64), kw: f64, v: [f64; 2], i0: [f64; 2]) -> f64 {
-    p.g_u * ((cs * v[1] - sn * v[0]) - kw) + p.g_avg * (cs * i0[1] - sn * i0[0])
+    // Grouped by the angle's sine and cosine, which arrive last.
+    let a = p.g_u * v[1] + p.g_avg * i0[1];
+    let b = p.g_u * v[0] + p.g_avg * i0[0];
+    (cs * a - sn * b) - p.g_u * kw
 }
 
 /// Every electrical period but the plain averaged one: gates disabled, dead time, the
@@ -1301,8 +1320,7 @@ fn other_period(
         if p.switched {
             switched_period(&mut el, &d, vb0, e, p, ts, i_ab);
         } else {
-            let v = clarke([d[0] * vb0, d[1] * vb0, d[2] * vb0]);
-            el = averaged_period(e, v, p, i_ab);
+            el = averaged_period(e, clarke(d), vb0, p, i_ab);
         }
     } else {
         el = diode_period(vb0, e, p, ts, i_ab);
@@ -1522,6 +1540,9 @@ struct BusK {
     k: f64,
     ak: f64,
     ak2: f64,
+    /// (1 − k)·i_source/gt and (1 − k)/gt: the end voltage k·V0 + v_src + v_per_inj·i_inj.
+    v_src: f64,
+    v_per_inj: f64,
     g_brake: f64,
     /// Mean of V over the period = iv_c + iv_a·V(start) + iv_b·i_injected.
     iv_a: f64,
@@ -1563,7 +1584,8 @@ struct Pre {
     tau: f64,
     decay: f64,
     g_avg: f64,
-    /// (1 − g_avg)/R: the mean current's part from the held voltage.
+    /// 1 − g_avg, and (1 − g_avg)/R: the mean current's part from the held voltage.
+    one_m_g: f64,
     g_u: f64,
     g2_avg: f64,
     copper: f64,
@@ -1639,6 +1661,8 @@ impl Pre {
                     k,
                     ak,
                     ak2: (1.0 - k * k) * tc / 2.0 / ts,
+                    v_src: (1.0 - k) * i_source / gt,
+                    v_per_inj: (1.0 - k) / gt,
                     g_brake: gb,
                     iv_a: ak,
                     iv_b: (1.0 - ak) / gt,
@@ -1691,6 +1715,7 @@ impl Pre {
             tau,
             decay,
             g_avg: (1.0 - decay) * tau / ts,
+            one_m_g: 1.0 - (1.0 - decay) * tau / ts,
             g_u: (1.0 - (1.0 - decay) * tau / ts) / m.r_ohm,
             g2_avg: (1.0 - decay * decay) * tau / 2.0 / ts,
             copper: 1.5 * m.r_ohm * ts,
@@ -1958,7 +1983,7 @@ mod tests {
             let v = [u(200.0), u(200.0)];
             let i0 = [u(20.0), u(20.0)];
             let mut i = i0;
-            let el = super::averaged_period(&e, v, p, &mut i);
+            let el = super::averaged_period(&e, [v[0] / 100.0, v[1] / 100.0], 100.0, p, &mut i);
             let want = -sn * el.i_avg[0] + cs * el.i_avg[1];
             let got = super::mean_iq(p, (sn, cs), kw, v, i0);
             // relative to the operands' scale (voltages/R and currents): rounding only
@@ -2019,7 +2044,8 @@ mod tests {
                 .duties
                 .map(|d| (d.to_bits() as f64 * super::DUTY_LSB).min(1.0) * vb);
             let want = super::clarke(d);
-            let got = super::duty_clarke(&a, vb);
+            let dv = super::duty_clarke(&a);
+            let got = [dv[0] * vb, dv[1] * vb];
             let tol = 4.0 * f64::EPSILON * vb.max(1e-300);
             for k in 0..2 {
                 assert!((got[k] - want[k]).abs() <= tol, "{got:?} {want:?}");
