@@ -6,7 +6,12 @@
 //! * [`SinCos::at`] rotates the previous (sin, cos) by the angle step δ = θ − θ_prev, with
 //!   sin δ and cos δ from their Taylor series to δ¹¹ and δ¹² (truncation below 3e-18 for
 //!   |δ| ≤ 0.25 rad; to δ⁷ and δ⁸ for |δ| ≤ 1/16, below 4e-17), or, when δ is within 1e-8
-//!   of the last step so computed, from that step's values to first order (below 1e-16). δ itself is exact (Sterbenz: θ and θ_prev are within a factor 2 of each
+//!   of the last step so computed, from that step's values to first order (below 1e-16), or,
+//!   when δ is within 1e-4 of the last step (a speed that changed a little, the common case of
+//!   a structure's rotor), by that step's pair and then by the difference ε with sin ε, cos ε
+//!   to ε³ and ε² (below 5e-18), the new step's pair from the short series for the next call;
+//!   the first rotation needs only the previous pair, so the angle's path through the period
+//!   is the difference's few operations. δ itself is exact (Sterbenz: θ and θ_prev are within a factor 2 of each
 //!   other whenever |δ| ≤ 0.25 and |θ| > 0.5; for smaller |θ| the subtraction error is below
 //!   1e-17), so the only error is the rounding of the rotations, a few 1e-16 each; after
 //!   [`SinCos::REANCHOR`] rotations (or a step over 0.25 rad) the pair is recomputed with the
