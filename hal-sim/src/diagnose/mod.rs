@@ -1565,16 +1565,10 @@ mod tests {
         }
     }
 
-    /// A force channel delayed by τ = 12.5 samples (not a whole number) on a closed-form
-    /// record: a three-tone motion with its exact velocity and acceleration, the device's force
-    /// M·a + Fv·v + Fc·sign(v) evaluated in closed form at t − τ, white noise 0.3 N. The
-    /// delayed baseline (`lag_coefs` at the true τ) gives the device's M, Fv, Fc (the baseline
-    /// fitted on the delayed record does not: its inertia is M − Fv·τ to first order), and the
-    /// diagnosis names `lag` alone, its delay and its unit gain within the bounds below.
-    #[test]
-    fn lag_is_the_whole_force_delayed() {
+    /// A closed-form record: a three-tone motion with its exact velocity and acceleration, and
+    /// the force M·a + Fv·v + Fc·sign(v) of a device evaluated at t − τ, white noise 0.3 N.
+    fn delayed_record(m: f64, fv: f64, fc: f64, tau: f64) -> Record {
         let (fs, n) = (1000.0, 12_000);
-        let (m, fv, fc, tau) = (40.0, 300.0, 20.0, 0.0125);
         let tones = [(0.31, 0.012, 0.3), (0.73, 0.008, 1.9), (1.37, 0.004, 4.1)];
         let motion = |t: f64| {
             tones
@@ -1610,6 +1604,17 @@ mod tests {
             rec.f
                 .push(m * ad + fv * vd + fc * vd.signum() + 0.3 * noise());
         }
+        rec
+    }
+
+    /// A force channel delayed by τ = 12.5 samples (not a whole number) on a closed-form
+    /// record (`delayed_record`). The delayed baseline (`lag_coefs` at the true τ) gives the
+    /// device's M, Fv, Fc (the baseline fitted on the delayed record does not), and the
+    /// diagnosis names `lag` alone, its delay and its unit gain within the bounds below.
+    #[test]
+    fn lag_is_the_whole_force_delayed() {
+        let (m, fv, fc, tau) = (40.0, 300.0, 20.0, 0.0125);
+        let rec = delayed_record(m, fv, fc, tau);
         let ctx = effects::Context::new(&rec);
         let th = ctx.lag_coefs(tau).expect("a device's coefficients");
         let dev = [th[0] / m - 1.0, th[1] / fv - 1.0, th[2] / fc - 1.0];
@@ -1648,5 +1653,22 @@ mod tests {
         // 5 % and 3 % (3× the measured, rounded up)
         assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
         assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
+    }
+
+    /// The delayed baseline must be a device's: a force channel delayed on a device whose
+    /// viscous coefficient is negative (an active drive pushing with the motion, −300 N·s/m)
+    /// has no delayed device's coefficients at the true delay and is not named `lag` (with the
+    /// rule removed, `lag_coefs` gives Fv = −300 and the test fails).
+    #[test]
+    fn lag_needs_a_physical_delayed_device() {
+        let rec = delayed_record(40.0, -300.0, 20.0, 0.0125);
+        let ctx = effects::Context::new(&rec);
+        assert_eq!(ctx.lag_coefs(0.0125), None);
+        let d = diagnose(&rec, &Options::default());
+        assert!(
+            d.findings.iter().all(|f| f.effect != "lag"),
+            "{:?}",
+            d.verdicts
+        );
     }
 }
