@@ -1,6 +1,7 @@
 //! The catalogue of candidate physical effects. Each is a set of regressor columns added to the
 //! linear device model; some carry one nonlinear parameter scanned on a grid. The same
-//! functions generate the effects in `synth`, so what is hidden is what is fitted.
+//! functions generate the effects in `synth`, so what is hidden is what is fitted (a lag
+//! there is the device's force delayed, whose coefficients `lag` fits itself).
 
 use super::record::Record;
 
