@@ -137,10 +137,12 @@ fn rig_sample() {
     let exact: usize = t.values().map(|t| t.exact).sum();
     let detected: usize = t.values().map(|t| t.detected).sum();
     println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured 2026-11-24: 19/27 exactly right, 22/27 detected; the bounds guard what is reached,
-    // about 3 records of margin (a seeded sample: the figures move only with the code)
-    assert!(exact >= 16, "{exact}/{all} exactly right (measured 19)");
-    assert!(detected >= 19, "{detected}/{all} detected (measured 22)");
+    // measured 2026-11-24: 18/27 exactly right, 21/27 detected (the lag as the whole force
+    // delayed: the delay record 200500 stays right with a lower error, the backlash record
+    // 600501 is no longer named); the bounds guard what is reached, 3 records of margin (a
+    // seeded sample: the figures move only with the code)
+    assert!(exact >= 15, "{exact}/{all} exactly right (measured 18)");
+    assert!(detected >= 18, "{detected}/{all} detected (measured 21)");
     // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
     // drift records, and no effect-free record gets a catalogue name (0/3); one record of
     // margin on the first (the check runs on the baseline residual of any motion)

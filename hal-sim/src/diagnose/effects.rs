@@ -1,6 +1,7 @@
 //! The catalogue of candidate physical effects. Each is a set of regressor columns added to the
 //! linear device model; some carry one nonlinear parameter scanned on a grid. The same
-//! functions generate the effects in `synth`, so what is hidden is what is fitted.
+//! functions generate the effects in `synth`, so what is hidden is what is fitted (a lag
+//! there is the device's force delayed, whose coefficients `lag` fits itself).
 
 use super::record::Record;
 
@@ -147,7 +148,24 @@ pub struct Context<'a> {
     /// The damping-ratio profile's rows with the baseline columns and the force there (the
     /// same for every frequency: built once).
     pub profile_rows: std::sync::OnceLock<ProfileRows>,
+    /// The training rows the delayed baseline of `lag` is fitted on (built once).
+    pub lag_rows: std::sync::OnceLock<LagRows>,
+    /// `lag_coefs` per delay (bits of τ).
+    pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
 }
+
+/// Rows of the delayed baseline's fit (`Context::lag_coefs`): at most `LAG_ROWS` training
+/// samples in motion, strided over the record, with the baseline columns that are not the
+/// motion's (offset, electromagnetic force) and the force there.
+#[derive(Debug, Clone, Default)]
+pub struct LagRows {
+    pub rows: Vec<usize>,
+    pub fixed: Vec<Vec<f64>>,
+    pub f: Vec<f64>,
+}
+
+/// Training samples the delayed baseline of `lag` is fitted on (strided).
+pub const LAG_ROWS: usize = 20_000;
 
 /// Rows of the damping-ratio profile (`Context::compliance_zeta`): at most
 /// `PROFILE_ROWS` training samples in motion, strided over the first `PROFILE_WINDOW`
@@ -274,6 +292,8 @@ impl<'a> Context<'a> {
             base_resid_rms: 0.0,
             zeta_cache: Default::default(),
             profile_rows: Default::default(),
+            lag_rows: Default::default(),
+            lag_cache: Default::default(),
         };
         if c.x_quantum == f64::MAX {
             c.x_quantum = 0.0;
@@ -464,10 +484,6 @@ pub fn predict(cols: &[(String, Vec<f64>)], th: &[f64]) -> Vec<f64> {
     p
 }
 
-/// Longest lag (samples) the screening windows hold; the lag grid and its refinement stay
-/// within it.
-pub const LAG_MAX: usize = 80;
-
 /// The signals effect columns are computed from, at a set of rows of the record: either every
 /// sample (`rows` None, slices borrowed from the context) or a gathered subsample for screening
 /// (the values are exactly those of the full record at these rows, so screening sees the
@@ -481,9 +497,6 @@ pub struct Sig<'s> {
     pub sgn: &'s [f64],
     pub xn: &'s [f64],
     pub bp: &'s [f64],
-    /// Subsample only: `lag_win[j·(LAG_MAX+1)+k]` = full-record baseline prediction at
-    /// `rows[j] − k` (clamped at 0).
-    pub lag_win: &'s [f64],
 }
 
 impl<'s> Sig<'s> {
@@ -497,7 +510,6 @@ impl<'s> Sig<'s> {
             sgn: &ctx.sgn,
             xn: &ctx.xn,
             bp: &ctx.base_pred,
-            lag_win: &[],
         }
     }
     fn len(&self) -> usize {
@@ -515,19 +527,11 @@ pub struct SubSignals {
     pub sgn: Vec<f64>,
     pub xn: Vec<f64>,
     pub bp: Vec<f64>,
-    pub lag_win: Vec<f64>,
 }
 
 impl SubSignals {
     pub fn new(ctx: &Context, rows: Vec<usize>) -> Self {
         let g = |s: &[f64]| rows.iter().map(|&i| s[i]).collect::<Vec<f64>>();
-        let w = LAG_MAX + 1;
-        let mut lag_win = Vec::with_capacity(rows.len() * w);
-        for &i in &rows {
-            for k in 0..w {
-                lag_win.push(ctx.base_pred[i.saturating_sub(k)]);
-            }
-        }
         SubSignals {
             x: g(&ctx.rec.x),
             v: g(&ctx.rec.v),
@@ -535,7 +539,6 @@ impl SubSignals {
             sgn: g(&ctx.sgn),
             xn: g(&ctx.xn),
             bp: g(&ctx.base_pred),
-            lag_win,
             rows,
         }
     }
@@ -548,7 +551,6 @@ impl SubSignals {
             sgn: &self.sgn,
             xn: &self.xn,
             bp: &self.bp,
-            lag_win: &self.lag_win,
         }
     }
 }
@@ -648,6 +650,80 @@ pub fn compliance_columns_at(
                 .collect()
         })
         .collect()
+}
+
+/// `s` at `k` samples before sample `i` (k ≥ 0, fractional: linear interpolation between the
+/// two samples around that time; held at the record's first sample before it).
+pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
+    let t = i as f64 - k;
+    if t <= 0.0 || s.len() < 2 {
+        return s.first().copied().unwrap_or(0.0);
+    }
+    let j = (t.floor() as usize).min(s.len() - 2);
+    let al = t - j as f64;
+    s[j] + al * (s[j + 1] - s[j])
+}
+
+impl Context<'_> {
+    /// The delayed baseline of `lag`: the inertia, viscous and Coulomb coefficients of the
+    /// baseline fitted with its motion columns (a, v, sgn v) taken `tau` seconds earlier (the
+    /// offset and an electromagnetic column as they are), on at most `LAG_ROWS` training
+    /// samples in motion (strided). A force channel that lags the motion by τ is the device's
+    /// own force at t − τ: these are the device's coefficients, not biased by the delay as
+    /// the baseline fitted on the delayed record is. None when the fit is not a device's
+    /// (an inertia, viscous or Coulomb coefficient below 0, or fewer than 10 rows): the lag
+    /// column is then zero and `lag` is not named at this τ. Cached per τ.
+    pub fn lag_coefs(&self, tau: f64) -> Option<[f64; 3]> {
+        if let Ok(c) = self.lag_cache.lock() {
+            if let Some(th) = c.get(&tau.to_bits()) {
+                return *th;
+            }
+        }
+        let n = self.rec.len();
+        let lr = self.lag_rows.get_or_init(|| {
+            let hold = super::holdout_mask(n);
+            let cand: Vec<usize> = (0..n)
+                .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
+                .collect();
+            let step = cand.len().div_ceil(LAG_ROWS).max(1);
+            let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
+            let mut fixed = vec![vec![1.0; rows.len()]];
+            if let Some((_, c, _)) = em_column(self.rec) {
+                fixed.push(rows.iter().map(|&i| c[i]).collect());
+            }
+            let f = rows.iter().map(|&i| self.rec.f[i]).collect();
+            LagRows { rows, fixed, f }
+        });
+        let k = tau / self.dt;
+        let th = if lr.rows.len() < 10 || !k.is_finite() || k < 0.0 {
+            None
+        } else {
+            let r = self.rec;
+            let mut all: Vec<Vec<f64>> = [&r.a, &r.v, &self.sgn]
+                .iter()
+                .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
+                .collect();
+            all.extend(lr.fixed.iter().cloned());
+            let m = all.len();
+            let mut g = vec![0.0; m * m];
+            let mut bb = vec![0.0; m];
+            for p in 0..m {
+                for q in p..m {
+                    let d: f64 = all[p].iter().zip(&all[q]).map(|(x, y)| x * y).sum();
+                    g[p * m + q] = d;
+                    g[q * m + p] = d;
+                }
+                bb[p] = all[p].iter().zip(&lr.f).map(|(x, y)| x * y).sum();
+            }
+            let th = super::solve_sym(&g, &bb, m).th;
+            let c = [th[0], th[1], th[2]];
+            (c.iter().all(|v| v.is_finite() && *v >= 0.0) && c[0] > 0.0).then_some(c)
+        };
+        if let Ok(mut c) = self.lag_cache.lock() {
+            c.insert(tau.to_bits(), th);
+        }
+        th
+    }
 }
 
 impl Context<'_> {
@@ -868,13 +944,21 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             vec![col("rate_times_tc", z)]
         }
         EffectKind::Lag => {
-            let k = ((e.param / ctx.dt).round() as usize).max(1);
-            let z = match s.rows {
-                None => map(&|i| bp[i.saturating_sub(k)] - bp[i]),
-                Some(_) => {
-                    let w = LAG_MAX + 1;
-                    let k = k.min(LAG_MAX);
-                    map(&|j| s.lag_win[j * w + k] - bp[j])
+            // the whole force delayed by τ: the device's force at t − τ (its coefficients
+            // fitted on the motion delayed, `lag_coefs`) minus that force at t; with the
+            // baseline fitted jointly, a gain of 1 makes the model the delayed device force
+            let z = match ctx.lag_coefs(e.param) {
+                None => vec![0.0; n],
+                Some(th) => {
+                    let k = e.param / ctx.dt;
+                    let (ra, rv, rs) = (&ctx.rec.a, &ctx.rec.v, &ctx.sgn);
+                    let at = |j: usize| s.rows.map_or(j, |r| r[j]);
+                    map(&|j| {
+                        let i = at(j);
+                        th[0] * (delayed(ra, i, k) - ra[i])
+                            + th[1] * (delayed(rv, i, k) - rv[i])
+                            + th[2] * (delayed(rs, i, k) - rs[i])
+                    })
                 }
             };
             vec![col("delayed_minus_now", z)]
@@ -1259,9 +1343,13 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             .into_iter()
             .map(mk)
             .collect(),
-        EffectKind::Lag => [1usize, 2, 3, 4, 6, 8, 11, 16, 22, 32, 45, 64]
-            .iter()
-            .map(|&k| mk(k as f64 * ctx.dt))
+        // one sample to 64 (a skew beyond 64 ms at 1 kHz is not an acquisition's), 30 values
+        // 15 % apart: the ±15 % refinement reaches the neighbours, so the optimum is found
+        // whatever coarse value is nearest (a delay and its gain trade against each other on a
+        // narrowband motion, a coarser grid's nearest value took the gain out of its range)
+        EffectKind::Lag => logspace(ctx.dt, 64.0 * ctx.dt, 30)
+            .into_iter()
+            .map(mk)
             .collect(),
         // two hypotheses on which force the drive produces, both scanned, the data choosing:
         // the whole force (a motor-driven axis; parameter the level L > 0, N) or the drive's
@@ -1350,7 +1438,7 @@ pub fn interior(p: f64, lo: f64, hi: f64) -> bool {
 }
 
 /// Local refinement grid around a coarse best value.
-pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
+pub fn refine(_ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
     match e.kind {
         // each compliance value costs a pass of the resonator over the whole record: a
         // coarser refinement (7 values per level) keeps the scan cheap on long records
@@ -1360,26 +1448,19 @@ pub fn refine(ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
                 param: e.param * (1.0 + width * (i as f64 / 3.0 - 1.0)),
             })
             .collect(),
+        // a lag between samples (the delayed columns interpolated): the rig's delays and an
+        // acquisition skew are not whole samples
         EffectKind::PositionPeriodicFriction
         | EffectKind::Cogging
         | EffectKind::Stribeck
+        | EffectKind::Lag
         | EffectKind::CurrentLimit => (0..=20)
             .map(|i| Effect {
                 kind: e.kind,
                 param: e.param * (1.0 + width * (i as f64 / 10.0 - 1.0)),
             })
             .collect(),
-        EffectKind::Lag => {
-            let k = (e.param / ctx.dt).round() as i64;
-            let w = ((k as f64 * width).ceil() as i64).max(1);
-            (k - w..=k + w)
-                .filter(|&j| j >= 1 && j <= LAG_MAX as i64)
-                .map(|j| Effect {
-                    kind: e.kind,
-                    param: j as f64 * ctx.dt,
-                })
-                .collect()
-        }
+
         _ => vec![],
     }
 }

@@ -1564,6 +1564,113 @@ mod tests {
             ids.push((2, round));
         }
     }
+
+    /// A closed-form record: a three-tone motion with its exact velocity and acceleration, and
+    /// the force M·a + Fv·v + Fc·sign(v) of a device evaluated at t − τ, white noise 0.3 N.
+    fn delayed_record(m: f64, fv: f64, fc: f64, tau: f64) -> Record {
+        let (fs, n) = (1000.0, 12_000);
+        let tones = [(0.31, 0.012, 0.3), (0.73, 0.008, 1.9), (1.37, 0.004, 4.1)];
+        let motion = |t: f64| {
+            tones
+                .iter()
+                .fold((0.0, 0.0, 0.0), |(x, v, a), &(f, amp, ph)| {
+                    let w = std::f64::consts::TAU * f;
+                    let (sn, cs) = (w * t + ph).sin_cos();
+                    (x + amp * sn, v + amp * w * cs, a - amp * w * w * sn)
+                })
+        };
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut noise = || {
+            // xorshift64*, sum of 12 uniforms − 6: unit variance
+            (0..12)
+                .map(|_| {
+                    seed ^= seed >> 12;
+                    seed ^= seed << 25;
+                    seed ^= seed >> 27;
+                    (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 / fs;
+            let (x, v, a) = motion(t);
+            let (_, vd, ad) = motion(t - tau);
+            rec.t.push(t);
+            rec.x.push(x);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f
+                .push(m * ad + fv * vd + fc * vd.signum() + 0.3 * noise());
+        }
+        rec
+    }
+
+    /// A force channel delayed by τ = 12.5 samples (not a whole number) on a closed-form
+    /// record (`delayed_record`). The delayed baseline (`lag_coefs` at the true τ) gives the
+    /// device's M, Fv, Fc (the baseline fitted on the delayed record does not), and the
+    /// diagnosis names `lag` alone, its delay and its unit gain within the bounds below.
+    #[test]
+    fn lag_is_the_whole_force_delayed() {
+        let (m, fv, fc, tau) = (40.0, 300.0, 20.0, 0.0125);
+        let rec = delayed_record(m, fv, fc, tau);
+        let ctx = effects::Context::new(&rec);
+        let th = ctx.lag_coefs(tau).expect("a device's coefficients");
+        let dev = [th[0] / m - 1.0, th[1] / fv - 1.0, th[2] / fc - 1.0];
+        println!(
+            "delayed baseline {th:?}: {dev:?}; baseline {:?}",
+            &ctx.base_th[..3]
+        );
+        // measured: +0.17 %, −0.19 %, +0.14 % (the sign's linear band ±0.2 % of the peak speed
+        // and the noise); asserted 0.6 % (3× the largest)
+        assert!(dev.iter().all(|d| d.abs() < 6e-3), "{dev:?}");
+        // the bias it removes: the baseline fitted on the delayed record has an inertia 21 %
+        // below M (measured 31.6 kg)
+        assert!(ctx.base_th[0] < 0.9 * m, "{}", ctx.base_th[0]);
+        let d = diagnose(&rec, &Options::default());
+        let names: Vec<&str> = d
+            .findings
+            .iter()
+            .filter(|f| f.effect != "unexplained")
+            .map(|f| f.effect.as_str())
+            .collect();
+        let p = |k: &str| {
+            d.findings
+                .first()?
+                .parameters
+                .iter()
+                .find(|p| p.0 == k)
+                .map(|p| p.1)
+        };
+        let (lag, gain) = (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0));
+        println!(
+            "{names:?}: lag {lag} s ({:+.3} %), gain {gain}",
+            100.0 * (lag / tau - 1.0)
+        );
+        assert_eq!(names, ["lag"], "{:?}", d.verdicts);
+        // measured: lag +1.57 % (refined on the screening subsample), gain −0.94 %; asserted
+        // 5 % and 3 % (3× the measured, rounded up)
+        assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
+        assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
+    }
+
+    /// The delayed baseline must be a device's: a force channel delayed on a device whose
+    /// viscous coefficient is negative (an active drive pushing with the motion, −300 N·s/m)
+    /// has no delayed device's coefficients at the true delay and is not named `lag` (with the
+    /// rule removed, `lag_coefs` gives Fv = −300 and the test fails).
+    #[test]
+    fn lag_needs_a_physical_delayed_device() {
+        let rec = delayed_record(40.0, -300.0, 20.0, 0.0125);
+        let ctx = effects::Context::new(&rec);
+        assert_eq!(ctx.lag_coefs(0.0125), None);
+        let d = diagnose(&rec, &Options::default());
+        assert!(
+            d.findings.iter().all(|f| f.effect != "lag"),
+            "{:?}",
+            d.verdicts
+        );
+    }
 }
 
 #[cfg(test)]

@@ -219,6 +219,19 @@ pub fn generate_csv(s: &SynthSpec) -> String {
             }
             continue;
         }
+        if e.kind == EffectKind::Lag {
+            // the device's baseline force delayed by τ (gain c[0]): its inertia, viscous and
+            // Coulomb terms at t − τ (the diagnosis's column fits these coefficients itself)
+            let k = e.param / dt;
+            let d = crate::diagnose::effects::delayed;
+            for (i, fi) in f.iter_mut().enumerate() {
+                *fi += c[0]
+                    * (s.mass_kg * (d(&rec.a, i, k) - rec.a[i])
+                        + s.viscous * (d(&rec.v, i, k) - rec.v[i])
+                        + s.coulomb * (d(&ctx.sgn, i, k) - ctx.sgn[i]));
+            }
+            continue;
+        }
         for ((_, col), k) in effect_columns(&ctx, e).iter().zip(c) {
             for (fi, ci) in f.iter_mut().zip(col) {
                 *fi += k * ci;
