@@ -841,6 +841,10 @@ pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String
             .into_iter()
             .map(|z| dahl_columns(&z, s.sgn))
             .collect(),
+        (EffectKind::Backlash, _) => play_columns_at(ctx, &params, s.rows)
+            .into_iter()
+            .map(|c| vec![(format!("{}.play_minus_free", kind.name()), c)])
+            .collect(),
         _ => effs.iter().map(|e| columns_on(ctx, s, e)).collect(),
     }
 }
@@ -976,14 +980,7 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             let l = e.param;
             vec![col("clip_minus_free", map(&|i| bp[i].clamp(-l, l) - bp[i]))]
         }
-        EffectKind::Backlash => {
-            let z = play_column(ctx, e.param);
-            let y = match s.rows {
-                None => z,
-                Some(r) => r.iter().map(|&i| z[i]).collect(),
-            };
-            vec![col("play_minus_free", y)]
-        }
+        EffectKind::Backlash => vec![col("play_minus_free", play_column_at(ctx, e.param, s.rows))],
         EffectKind::PreslidingHysteresis => {
             // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
             // force becomes Fc·z: column z − sgn v (coefficient Fc)
@@ -1164,31 +1161,95 @@ pub fn play_output(x: &[f64], b: f64) -> Vec<f64> {
 /// friction near reversals, over a displacement, while inertia and viscous friction stay; play
 /// removes every force over a dead band of position and then adds an impact.
 pub fn play_column(ctx: &Context, b: f64) -> Vec<f64> {
+    play_column_at(ctx, b, None)
+}
+
+thread_local! {
+    /// Scratch of the play column's derivative filter, kept for the thread's next width (a
+    /// record-long buffer allocated once rather than page-faulted anew per scanned width).
+    static PLAY_SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// `play_column` at the ascending sample indices `rows` only (every sample when None): the
+/// play operator and its derivative filter walk the whole record, the derivatives and the
+/// column are evaluated at the rows (the same expressions: the values are `play_column`'s,
+/// bit for bit, `tests::play_column_at_rows_is_play_column`).
+pub fn play_column_at(ctx: &Context, b: f64, rows: Option<&[usize]>) -> Vec<f64> {
+    play_columns_k::<1>(ctx, &[b], rows)
+        .pop()
+        .unwrap_or_default()
+}
+
+/// `play_column_at` of several widths, their derivative filters run four at a time in one
+/// pass (`filtfilt_multi_into`: independent recurrences, each bit for bit its own).
+pub fn play_columns_at(ctx: &Context, widths: &[f64], rows: Option<&[usize]>) -> Vec<Vec<f64>> {
+    let mut out = Vec::with_capacity(widths.len());
+    let mut ch = widths.chunks_exact(4);
+    for c in ch.by_ref() {
+        out.extend(play_columns_k::<4>(ctx, c, rows));
+    }
+    for &b in ch.remainder() {
+        out.extend(play_columns_k::<1>(ctx, &[b], rows));
+    }
+    out
+}
+
+/// `play_column_at` of `K` widths (`widths.len() == K`) in one filter pass.
+fn play_columns_k<const K: usize>(
+    ctx: &Context,
+    widths: &[f64],
+    rows: Option<&[usize]>,
+) -> Vec<Vec<f64>> {
     let x = &ctx.rec.x;
     let n = x.len();
-    let xm = play_output(x, b);
-    let d: Vec<f64> = x.iter().zip(&xm).map(|(a, b)| a - b).collect();
+    let m = rows.map_or(n, |r| r.len());
     let (mi, fv, fc) = (
         ctx.base_th.first().copied().unwrap_or(0.0),
         ctx.base_th.get(1).copied().unwrap_or(0.0),
         ctx.base_th.get(2).copied().unwrap_or(0.0),
     );
-    if n < 3 || ctx.dt <= 0.0 {
-        return vec![0.0; n];
+    if n < 3 || ctx.dt <= 0.0 || widths.len() != K {
+        return vec![vec![0.0; m]; widths.len()];
     }
+    let xms: Vec<Vec<f64>> = widths.iter().map(|&b| play_output(x, b)).collect();
     let fs = 1.0 / ctx.dt;
-    let df = super::record::filtfilt(&d, fs / 20.0, fs);
-    let vd = super::record::central_diff(&df, ctx.dt);
-    let ad = super::record::central_diff(&vd, ctx.dt);
-    (0..n)
-        .map(|i| {
-            let vm = ctx.rec.v[i] - vd[i];
-            let am = ctx.rec.a[i] - ad[i];
-            mi * (am - ctx.rec.a[i])
-                + fv * (vm - ctx.rec.v[i])
-                + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
-        })
-        .collect()
+    let dt = ctx.dt;
+    PLAY_SCRATCH.with(|sc| {
+        let mut buf = sc.take();
+        let pad = super::record::filtfilt_multi_into::<K>(
+            &mut buf,
+            n,
+            |d| {
+                for (i, s) in d.chunks_exact_mut(K).enumerate() {
+                    for j in 0..K {
+                        s[j] = x[i] - xms[j][i];
+                    }
+                }
+            },
+            fs / 20.0,
+            fs,
+        );
+        let out = (0..K)
+            .map(|j| {
+                let df = |i: usize| buf[(pad + i) * K + j];
+                let at = |i: usize| {
+                    let vd = super::record::central_diff_by(n, df, i, dt);
+                    let ad = super::record::central_diff2_by(n, df, i, dt);
+                    let vm = ctx.rec.v[i] - vd;
+                    let am = ctx.rec.a[i] - ad;
+                    mi * (am - ctx.rec.a[i])
+                        + fv * (vm - ctx.rec.v[i])
+                        + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
+                };
+                match rows {
+                    None => (0..n).map(at).collect(),
+                    Some(r) => r.iter().map(|&i| at(i)).collect(),
+                }
+            })
+            .collect();
+        sc.replace(buf);
+        out
+    })
 }
 
 /// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
@@ -1689,6 +1750,53 @@ mod tests {
             let z = dahl(&x, xc);
             for (j, &r) in rows.iter().enumerate() {
                 assert_eq!(zb[k][j].to_bits(), z[r].to_bits(), "xc {xc}, row {r}");
+            }
+        }
+    }
+
+    /// The play column at the screening rows (`play_column_at`, derivatives evaluated at the
+    /// rows, filter buffer reused across widths) is the whole-record column written out
+    /// directly (the play's offset filtered by `filtfilt`, `central_diff` twice, f̂₀(x_m) −
+    /// f̂₀(x)), bit for bit, at every width including the first and last samples.
+    #[test]
+    fn play_column_at_rows_is_play_column() {
+        use crate::diagnose::record::{central_diff, filtfilt};
+        let spec = crate::diagnose::synth::SynthSpec::random_hidden(7, 6000, 1);
+        let rec = crate::diagnose::synth::generate(&spec);
+        let ctx = Context::new(&rec);
+        let mut rows: Vec<usize> = (0..rec.len()).step_by(13).collect();
+        rows.push(rec.len() - 1);
+        let (mi, fv, fc) = (ctx.base_th[0], ctx.base_th[1], ctx.base_th[2]);
+        let fs = 1.0 / ctx.dt;
+        for b in [3e-6, 4e-5, 6e-4, 2e-3] {
+            let xm = play_output(&rec.x, b);
+            let d: Vec<f64> = rec.x.iter().zip(&xm).map(|(a, b)| a - b).collect();
+            let vd = central_diff(&filtfilt(&d, fs / 20.0, fs), ctx.dt);
+            let ad = central_diff(&vd, ctx.dt);
+            let want: Vec<f64> = (0..rec.len())
+                .map(|i| {
+                    let (vm, am) = (rec.v[i] - vd[i], rec.a[i] - ad[i]);
+                    mi * (am - rec.a[i])
+                        + fv * (vm - rec.v[i])
+                        + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
+                })
+                .collect();
+            assert!(
+                want.iter().any(|v| *v != 0.0),
+                "width {b}: a column to compare"
+            );
+            let full = play_column(&ctx, b);
+            let at = play_column_at(&ctx, b, Some(&rows));
+            // four widths and one more in a batch: each is the single-width column
+            let batch = play_columns_at(&ctx, &[b, 2.0 * b, 0.5 * b, b, 3.0 * b], Some(&rows));
+            for c in [&batch[0], &batch[3]] {
+                assert_eq!(c, &at, "width {b} in a batch");
+            }
+            for (i, w) in want.iter().enumerate() {
+                assert_eq!(full[i].to_bits(), w.to_bits(), "width {b}, sample {i}");
+            }
+            for (j, &r) in rows.iter().enumerate() {
+                assert_eq!(at[j].to_bits(), want[r].to_bits(), "width {b}, row {r}");
             }
         }
     }
