@@ -102,8 +102,14 @@ pub enum ModelEffect {
     },
     /// Play of total width between the motion and the device: across the gap the device
     /// stands still and carries no force (the offset, a sensor property, stays); where the
-    /// motion takes up the play the device is struck into its velocity (an impulse M·v).
-    Backlash { width_m: f64, gain: f64 },
+    /// motion takes up the play the device is struck into its velocity (an impulse M·v, or
+    /// `impact_mass_kg`·v when the diagnosis measured the impact's momentum).
+    Backlash {
+        width_m: f64,
+        gain: f64,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        impact_mass_kg: Option<f64>,
+    },
     /// Dahl friction: the Coulomb force builds up over the characteristic displacement after
     /// each reversal instead of switching with the sign of v.
     PreslidingHysteresis {
@@ -236,9 +242,16 @@ impl ModelEffect {
                 range(&k("modal_mass_kg"), m2, 0.0, 1e7, "kg")?;
                 range(&k("damping_ratio"), z, 0.0, 10.0, "")?;
             }
-            ModelEffect::Backlash { width_m, gain } => {
+            ModelEffect::Backlash {
+                width_m,
+                gain,
+                impact_mass_kg,
+            } => {
                 range(&k("width_m"), width_m, 0.0, 1.0, "m")?;
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
+                if let Some(mi) = impact_mass_kg {
+                    range(&k("impact_mass_kg"), mi, 0.0, 1e7, "kg")?;
+                }
             }
             ModelEffect::PreslidingHysteresis {
                 characteristic_displacement_m: xc,
@@ -450,7 +463,11 @@ impl ModelState {
                 ModelEffect::ReflectedInertia {
                     extra_driven_inertia_kg: j,
                 } if f * v > 0.0 => f += j * a,
-                ModelEffect::Backlash { width_m, gain } => {
+                ModelEffect::Backlash {
+                    width_m,
+                    gain,
+                    impact_mass_kg,
+                } => {
                     let h = 0.5 * width_m;
                     let xm = &mut self.play[i];
                     let contact = if *xm < x - h {
@@ -469,7 +486,10 @@ impl ModelState {
                     } else if struck {
                         // the device side, at rest across the gap, is struck into the
                         // motion's velocity: the impulse M·v within this step
-                        f += gain * m.inertia_kg * v / self.dt;
+                        f += match impact_mass_kg {
+                            Some(mi) => mi * v / self.dt,
+                            None => gain * m.inertia_kg * v / self.dt,
+                        };
                     }
                 }
                 ModelEffect::CurrentLimit {
@@ -614,6 +634,7 @@ mod tests {
         m.effects = vec![ModelEffect::Backlash {
             width_m: 0.002,
             gain: 1.0,
+            impact_mass_kg: None,
         }];
         let f = m.force_series(dt, &x, &v, &a);
         // the play is centred at the start: in contact after 1 mm (100 samples)

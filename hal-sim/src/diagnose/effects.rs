@@ -841,10 +841,6 @@ pub fn columns_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String
             .into_iter()
             .map(|z| dahl_columns(&z, s.sgn))
             .collect(),
-        (EffectKind::Backlash, _) => play_columns_at(ctx, &params, s.rows)
-            .into_iter()
-            .map(|c| vec![(format!("{}.play_minus_free", kind.name()), c)])
-            .collect(),
         _ => effs.iter().map(|e| columns_on(ctx, s, e)).collect(),
     }
 }
@@ -980,7 +976,7 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             let l = e.param;
             vec![col("clip_minus_free", map(&|i| bp[i].clamp(-l, l) - bp[i]))]
         }
-        EffectKind::Backlash => vec![col("play_minus_free", play_column_at(ctx, e.param, s.rows))],
+        EffectKind::Backlash => play_columns(ctx, s.rows, e.param),
         EffectKind::PreslidingHysteresis => {
             // Dahl: dz/dx = (1 − z·sgn dx)/x_c, exact over each position step; the Coulomb
             // force becomes Fc·z: column z − sgn v (coefficient Fc)
@@ -1019,7 +1015,8 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
 ///   construction, `compliance_zeta`);
 /// * `presliding_hysteresis`: the friction force it carries is positive and at most 1.5× the
 ///   Coulomb level;
-/// * `backlash`: unit gain (0.8 … 1.25: the device's own force, carried through the play);
+/// * `backlash`: unit gain of the force that stops across the gap (0.8 … 1.25: the device's
+///   own force) and an impact of the device's momentum (`impact_consistent`);
 /// * `actuator_lag`: 0 < ω_c·τ ≤ 1 (a delay of the force behind its command: the recorded
 ///   force leads; a recorded force that lags the motion is `lag`'s, and beyond ω_c·τ = 1 the
 ///   first-order column no longer is the delay, `actuator_tc`).
@@ -1060,7 +1057,8 @@ pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::Stribeck => coef[0] > 0.0,
         EffectKind::ScrewEfficiency => (-0.5..=1.0).contains(&coef[0]),
         EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
-        EffectKind::Lag | EffectKind::CurrentLimit | EffectKind::Backlash => unit(coef[0]),
+        EffectKind::Lag | EffectKind::CurrentLimit => unit(coef[0]),
+        EffectKind::Backlash => unit(coef[0]) && impact_consistent(&coef[1..], m),
         EffectKind::Compliance => coef[0] > 0.0,
         EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
         EffectKind::ActuatorLag => coef[0] > 0.0 && coef[0] <= 1.0,
@@ -1079,6 +1077,18 @@ pub fn actuator_tc(ctx: &Context) -> f64 {
         .copied()
         .unwrap_or(0.05 / ctx.dt);
     1.0 / (2.0 * std::f64::consts::PI * fc)
+}
+
+/// The `backlash` impact carries the device's momentum: the sum of its pulse's coefficients
+/// (momentum per unit relative velocity) lies between half the inertia `m` and twice it. An
+/// impact transfers (1 + e)·M·v, e the restitution (0 plastic … 1 elastic), so 1 … 2·M; the
+/// lower bound is halved for what the taps do not resolve (a pulse longer than
+/// `IMPACT_TAPS`, the contact instant's interpolation; 0.89 … 1.08·M measured on the rig's
+/// 60 Hz, ζ 0.5 contact). Presliding friction and a force with no play show no impact: the
+/// fitted pulse is then near 0 and the play is not named.
+pub fn impact_consistent(taps: &[f64], m: f64) -> bool {
+    let p: f64 = taps.iter().sum();
+    m > 0.0 && p >= 0.5 * m && p <= 2.0 * m
 }
 
 /// A clip level is consistent with the measured force when, on the samples it clips (baseline
@@ -1147,109 +1157,224 @@ pub fn play_output(x: &[f64], b: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The force play of total width `b` changes, at every sample: the device (its inertia,
-/// viscous and Coulomb friction: the baseline's coefficients) sits behind the gap and moves
-/// with the play operator's output x_m instead of the imposed x. Across the gap it stands
-/// still and carries no force (the offset, a sensor property, stays); where x takes up the
-/// play it is struck into motion, an impact of momentum M·v. Its velocity and acceleration
-/// are derived from x_m as the record's are from x (the reader's default zero-phase
-/// Butterworth-2 at fs/20, then central differences, applied to the play's offset x − x_m), so
-/// the impact is the same low-passed pulse the derived acceleration would show. Column
-/// f̂₀(x_m) − f̂₀(x) (coefficient 1 when the device is the baseline's).
-///
-/// That is what tells play from presliding friction (`dahl`): presliding changes only the
-/// friction near reversals, over a displacement, while inertia and viscous friction stay; play
-/// removes every force over a dead band of position and then adds an impact.
-pub fn play_column(ctx: &Context, b: f64) -> Vec<f64> {
-    play_column_at(ctx, b, None)
+/// Samples over which the `backlash` impact's force pulse is resolved (free shape, one
+/// coefficient per sample after the contact): a contact that brings the device to the
+/// motion's velocity within 12 sample periods (12 ms at 1 kHz; a contact mode above
+/// ≈ fs/40 with a damping ratio ≥ 0.3 settles within it).
+pub const IMPACT_TAPS: usize = 12;
+
+/// The device behind a play of total width `b` (`play_device`): its position, whether it is
+/// off both flanks (free: no force passes), and each impact (sample of the first contact,
+/// time from the contact to that sample in sample periods, relative velocity v − v_m).
+#[derive(Debug, Clone, Default)]
+pub struct PlayDevice {
+    pub xm: Vec<f64>,
+    pub free: Vec<bool>,
+    pub impacts: Vec<(usize, f64, f64)>,
 }
 
-thread_local! {
-    /// Scratch of the play column's derivative filter, kept for the thread's next width (a
-    /// record-long buffer allocated once rather than page-faulted anew per scanned width).
-    static PLAY_SCRATCH: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
-}
-
-/// `play_column` at the ascending sample indices `rows` only (every sample when None): the
-/// play operator and its derivative filter walk the whole record, the derivatives and the
-/// column are evaluated at the rows (the same expressions: the values are `play_column`'s,
-/// bit for bit, `tests::play_column_at_rows_is_play_column`).
-pub fn play_column_at(ctx: &Context, b: f64, rows: Option<&[usize]>) -> Vec<f64> {
-    play_columns_k::<1>(ctx, &[b], rows)
-        .pop()
-        .unwrap_or_default()
-}
-
-/// `play_column_at` of several widths, their derivative filters run four at a time in one
-/// pass (`filtfilt_multi_into`: independent recurrences, each bit for bit its own).
-pub fn play_columns_at(ctx: &Context, widths: &[f64], rows: Option<&[usize]>) -> Vec<Vec<f64>> {
-    let mut out = Vec::with_capacity(widths.len());
-    let mut ch = widths.chunks_exact(4);
-    for c in ch.by_ref() {
-        out.extend(play_columns_k::<4>(ctx, c, rows));
+/// The device (inertia `m`, viscous `fv` and Coulomb `fc` friction) behind a play of total
+/// width `b` driven by the imposed motion (`x`, `v`, `a`, `sg` = sgn v as the baseline uses
+/// it), started centred at x[0] with the motion's velocity. On a flank it moves with x as
+/// long as the flank pushes it: the force that moves it with the motion,
+/// `m·a + fv·v + fc·sgn v`, must point the flank's way (a contact cannot pull). When the
+/// motion decelerates faster than the device's own friction decelerates it, the device
+/// leaves the flank and coasts (`v_m → v_m·e^(−fv·dt/m) − sgn(v_m)·fc·dt/m`, stopping where
+/// friction holds it) and carries no force, until x reaches either flank again and strikes
+/// it into the motion's velocity (an impact of momentum m·(v − v_m); the contact instant is
+/// interpolated between samples). A device that cannot coast (`fc` = ∞) stays where the flank
+/// left it: its position is then the play operator's, `play_output` (the test
+/// `play_device_without_coasting_is_the_play_operator` pins the two).
+#[allow(clippy::too_many_arguments)]
+pub fn play_device(
+    x: &[f64],
+    v: &[f64],
+    a: &[f64],
+    sg: &[f64],
+    dt: f64,
+    b: f64,
+    m: f64,
+    fv: f64,
+    fc: f64,
+) -> PlayDevice {
+    let n = x.len();
+    let h = 0.5 * b;
+    let mut out = PlayDevice {
+        xm: Vec::with_capacity(n),
+        free: Vec::with_capacity(n),
+        impacts: Vec::new(),
+    };
+    if n == 0 {
+        return out;
     }
-    for &b in ch.remainder() {
-        out.extend(play_columns_k::<1>(ctx, &[b], rows));
+    let (m, fv, fc) = (m.max(0.0), fv.max(0.0), fc.max(0.0));
+    let decay = if m > 0.0 { (-fv * dt / m).exp() } else { 0.0 };
+    let dv_c = if m > 0.0 { fc * dt / m } else { f64::INFINITY };
+    // flank in contact: +1 (x pushes the device towards +), −1, or 0 (free)
+    let mut flank = 0.0f64;
+    let (mut xm, mut vm) = (x[0], v[0]);
+    for i in 0..n {
+        if flank != 0.0 {
+            // on the flank while it pushes; otherwise the device left it after sample i − 1
+            let f = m * a[i] + fv * v[i] + fc * sg[i];
+            if flank * f >= 0.0 {
+                xm = x[i] - flank * h;
+                vm = v[i];
+            } else {
+                flank = 0.0;
+            }
+        }
+        if flank == 0.0 && i > 0 {
+            let (xp, dp) = (xm, x[i - 1] - xm);
+            // velocity linear over the step (viscous decay and Coulomb deceleration); stopped
+            // where it reaches 0 (friction then holds the device)
+            let w = vm * decay - vm.signum() * dv_c;
+            let (travel, vn) = if vm == 0.0 {
+                (0.0, 0.0)
+            } else if w * vm > 0.0 {
+                (0.5 * (vm + w) * dt, w)
+            } else {
+                (0.5 * vm * dt * (vm / (vm - w)), 0.0)
+            };
+            xm = xp + travel;
+            vm = vn;
+            let d = x[i] - xm;
+            for s in [1.0, -1.0] {
+                if s * d >= h {
+                    let vr = v[i] - vm;
+                    xm = x[i] - s * h;
+                    if s * vr > 0.0 {
+                        // the flank catches the device up: struck into the motion
+                        let phi = ((s * h - dp) / (d - dp)).clamp(0.0, 1.0);
+                        out.impacts.push((i, 1.0 - phi, vr));
+                        flank = s;
+                        vm = v[i];
+                    }
+                }
+            }
+        }
+        out.xm.push(xm);
+        out.free.push(flank == 0.0);
     }
     out
 }
 
-/// `play_column_at` of `K` widths (`widths.len() == K`) in one filter pass.
-fn play_columns_k<const K: usize>(
-    ctx: &Context,
-    widths: &[f64],
-    rows: Option<&[usize]>,
-) -> Vec<Vec<f64>> {
-    let x = &ctx.rec.x;
-    let n = x.len();
-    let m = rows.map_or(n, |r| r.len());
+/// The device's inertia, viscous and Coulomb coefficients (with the force offset) fitted by
+/// least squares on the samples where `dev` is on a flank, not at rest and not within
+/// `IMPACT_TAPS` samples after an impact; None when a coefficient is negative or the fit is
+/// not of full rank.
+fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
+    let r = ctx.rec;
+    let n = r.x.len();
+    let mut skip = vec![false; n];
+    for &(i, _, _) in &dev.impacts {
+        for s in skip.iter_mut().skip(i).take(IMPACT_TAPS) {
+            *s = true;
+        }
+    }
+    let mut g = [0.0; 16];
+    let mut bv = [0.0; 4];
+    for i in 0..n {
+        if dev.free[i] || skip[i] || ctx.rest.get(i).copied().unwrap_or(false) {
+            continue;
+        }
+        let c = [r.a[i], r.v[i], ctx.sgn[i], 1.0];
+        for j in 0..4 {
+            bv[j] += c[j] * r.f[i];
+            for k in 0..4 {
+                g[j * 4 + k] += c[j] * c[k];
+            }
+        }
+    }
+    let sol = super::solve_sym(&g, &bv, 4);
+    let t = &sol.th;
+    (sol.rank == 4 && t[..3].iter().all(|c| *c >= 0.0 && c.is_finite())).then(|| (t[0], t[1], t[2]))
+}
+
+/// The force play of total width `b` changes (`play_device`, the device with the baseline's
+/// inertia, viscous and Coulomb coefficients), on the rows of `s`: column `free` is the
+/// device's force where it is off both flanks, −(M·a + Fv·v + Fc·sgn v) (across the gap and
+/// while it coasts ahead of the motion no force passes; the offset, a sensor property, stays),
+/// coefficient 1 when the device is the baseline's; columns `impact_k` (k < `IMPACT_TAPS`) are
+/// the impact: at each contact the relative velocity v − v_m times fs, on the k-th sample
+/// period after the contact (linearly interpolated between the taps by the contact's instant
+/// within its sample), so that the coefficients are the impact's force pulse per unit
+/// relative velocity and their sum its momentum per unit velocity, (1 + e)·M for an impact of
+/// restitution e.
+///
+/// That is what tells play from presliding friction (`dahl`): presliding changes only the
+/// friction near reversals, over a displacement, while inertia and viscous friction stay and
+/// no impact follows; play removes every force over a dead band of position and then strikes
+/// the device with its own momentum.
+pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(String, Vec<f64>)> {
+    let r = ctx.rec;
+    let n = r.x.len();
     let (mi, fv, fc) = (
         ctx.base_th.first().copied().unwrap_or(0.0),
         ctx.base_th.get(1).copied().unwrap_or(0.0),
         ctx.base_th.get(2).copied().unwrap_or(0.0),
     );
-    if n < 3 || ctx.dt <= 0.0 || widths.len() != K {
-        return vec![vec![0.0; m]; widths.len()];
+    let len = rows.map_or(n, |r| r.len());
+    let name = EffectKind::Backlash.name();
+    let mut cols: Vec<(String, Vec<f64>)> = std::iter::once("free".to_string())
+        .chain((0..IMPACT_TAPS).map(|k| format!("impact_{k}")))
+        .map(|c| (format!("{name}.{c}"), vec![0.0; len]))
+        .collect();
+    if n < 3 || ctx.dt <= 0.0 {
+        return cols;
     }
-    let xms: Vec<Vec<f64>> = widths.iter().map(|&b| play_output(x, b)).collect();
+    let dev = play_device(&r.x, &r.v, &r.a, &ctx.sgn, ctx.dt, b, mi, fv, fc);
+    // the device's own coefficients, fitted where it moves with the motion (in contact,
+    // outside the impacts' pulses and the samples at rest; the baseline's, fitted on every
+    // sample, are biased low by the gap's missing force), then the device walked again with
+    // them: the column's force is the device's, not the biased baseline's
+    let (mi, fv, fc) = match play_device_fit(ctx, &dev) {
+        Some(c) => c,
+        None => (mi, fv, fc),
+    };
+    let dev = play_device(&r.x, &r.v, &r.a, &ctx.sgn, ctx.dt, b, mi, fv, fc);
+    let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
+    // position of sample i among the rows (None when not a row)
+    let slot = |i: usize| match rows {
+        None => Some(i),
+        Some(rw) => rw.binary_search(&i).ok(),
+    };
+    match rows {
+        None => {
+            for i in 0..n {
+                if dev.free[i] {
+                    cols[0].1[i] = free_force(i);
+                }
+            }
+        }
+        Some(rw) => {
+            for (j, &i) in rw.iter().enumerate() {
+                if dev.free[i] {
+                    cols[0].1[j] = free_force(i);
+                }
+            }
+        }
+    }
     let fs = 1.0 / ctx.dt;
-    let dt = ctx.dt;
-    PLAY_SCRATCH.with(|sc| {
-        let mut buf = sc.take();
-        let pad = super::record::filtfilt_multi_into::<K>(
-            &mut buf,
-            n,
-            |d| {
-                for (i, s) in d.chunks_exact_mut(K).enumerate() {
-                    for j in 0..K {
-                        s[j] = x[i] - xms[j][i];
-                    }
-                }
-            },
-            fs / 20.0,
-            fs,
-        );
-        let out = (0..K)
-            .map(|j| {
-                let df = |i: usize| buf[(pad + i) * K + j];
-                let at = |i: usize| {
-                    let vd = super::record::central_diff_by(n, df, i, dt);
-                    let ad = super::record::central_diff2_by(n, df, i, dt);
-                    let vm = ctx.rec.v[i] - vd;
-                    let am = ctx.rec.a[i] - ad;
-                    mi * (am - ctx.rec.a[i])
-                        + fv * (vm - ctx.rec.v[i])
-                        + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
-                };
-                match rows {
-                    None => (0..n).map(at).collect(),
-                    Some(r) => r.iter().map(|&i| at(i)).collect(),
-                }
-            })
-            .collect();
-        sc.replace(buf);
-        out
-    })
+    for &(i, delta, vr) in &dev.impacts {
+        for jj in 0..=IMPACT_TAPS {
+            let Some(q) = slot(i + jj).filter(|_| i + jj < n) else {
+                continue;
+            };
+            // the sample lies (jj + delta) periods after the contact; tap k stands for the
+            // pulse k + ½ periods after it
+            let t = (jj as f64 + delta - 0.5).max(0.0);
+            let k0 = t.floor() as usize;
+            let al = t - k0 as f64;
+            if k0 < IMPACT_TAPS {
+                cols[1 + k0].1[q] += vr * fs * (1.0 - al);
+            }
+            if k0 + 1 < IMPACT_TAPS {
+                cols[2 + k0].1[q] += vr * fs * al;
+            }
+        }
+    }
+    cols
 }
 
 /// Dahl friction state (−1 … 1) along the path `x` with characteristic displacement `xc`:
@@ -1597,7 +1722,11 @@ pub fn parameters(
         ],
         EffectKind::Backlash => vec![
             ("width_m".into(), e.param),
-            ("gain".into(), get("play_minus_free")),
+            ("gain".into(), get("free")),
+            (
+                "impact_mass_kg".into(),
+                (0..IMPACT_TAPS).map(|k| get(&format!("impact_{k}"))).sum(),
+            ),
         ],
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
@@ -1754,50 +1883,103 @@ mod tests {
         }
     }
 
-    /// The play column at the screening rows (`play_column_at`, derivatives evaluated at the
-    /// rows, filter buffer reused across widths) is the whole-record column written out
-    /// directly (the play's offset filtered by `filtfilt`, `central_diff` twice, f̂₀(x_m) −
-    /// f̂₀(x)), bit for bit, at every width including the first and last samples.
+    /// A device that cannot coast (infinite Coulomb friction: it stops where the flank leaves
+    /// it) follows the play operator bit for bit: `play_device` and `play_output` are the same
+    /// play (sine with reversals, exact velocity).
     #[test]
-    fn play_column_at_rows_is_play_column() {
-        use crate::diagnose::record::{central_diff, filtfilt};
-        let spec = crate::diagnose::synth::SynthSpec::random_hidden(7, 6000, 1);
-        let rec = crate::diagnose::synth::generate(&spec);
-        let ctx = Context::new(&rec);
-        let mut rows: Vec<usize> = (0..rec.len()).step_by(13).collect();
-        rows.push(rec.len() - 1);
-        let (mi, fv, fc) = (ctx.base_th[0], ctx.base_th[1], ctx.base_th[2]);
-        let fs = 1.0 / ctx.dt;
-        for b in [3e-6, 4e-5, 6e-4, 2e-3] {
-            let xm = play_output(&rec.x, b);
-            let d: Vec<f64> = rec.x.iter().zip(&xm).map(|(a, b)| a - b).collect();
-            let vd = central_diff(&filtfilt(&d, fs / 20.0, fs), ctx.dt);
-            let ad = central_diff(&vd, ctx.dt);
-            let want: Vec<f64> = (0..rec.len())
-                .map(|i| {
-                    let (vm, am) = (rec.v[i] - vd[i], rec.a[i] - ad[i]);
-                    mi * (am - rec.a[i])
-                        + fv * (vm - rec.v[i])
-                        + fc * (sgn(vm, ctx.v_eps) - ctx.sgn[i])
-                })
-                .collect();
-            assert!(
-                want.iter().any(|v| *v != 0.0),
-                "width {b}: a column to compare"
-            );
-            let full = play_column(&ctx, b);
-            let at = play_column_at(&ctx, b, Some(&rows));
-            // four widths and one more in a batch: each is the single-width column
-            let batch = play_columns_at(&ctx, &[b, 2.0 * b, 0.5 * b, b, 3.0 * b], Some(&rows));
-            for c in [&batch[0], &batch[3]] {
-                assert_eq!(c, &at, "width {b} in a batch");
+    fn play_device_without_coasting_is_the_play_operator() {
+        let dt = 1e-3;
+        let (x, v, a): (Vec<f64>, Vec<f64>, Vec<f64>) = (0..6000)
+            .map(|i| {
+                let t = i as f64 * dt;
+                let (w1, w2) = (2.3, 7.1);
+                (
+                    0.02 * (w1 * t).sin() + 0.002 * (w2 * t).sin(),
+                    0.02 * w1 * (w1 * t).cos() + 0.002 * w2 * (w2 * t).cos(),
+                    -0.02 * w1 * w1 * (w1 * t).sin() - 0.002 * w2 * w2 * (w2 * t).sin(),
+                )
+            })
+            .fold((vec![], vec![], vec![]), |mut o, (x, v, a)| {
+                o.0.push(x);
+                o.1.push(v);
+                o.2.push(a);
+                o
+            });
+        let sg: Vec<f64> = v.iter().map(|v| v.signum()).collect();
+        for b in [1e-4, 1e-3, 4e-3] {
+            let d = play_device(&x, &v, &a, &sg, dt, b, 10.0, 50.0, f64::INFINITY);
+            let p = play_output(&x, b);
+            for i in 0..x.len() {
+                assert_eq!(d.xm[i].to_bits(), p[i].to_bits(), "b {b}, sample {i}");
             }
-            for (i, w) in want.iter().enumerate() {
-                assert_eq!(full[i].to_bits(), w.to_bits(), "width {b}, sample {i}");
-            }
-            for (j, &r) in rows.iter().enumerate() {
-                assert_eq!(at[j].to_bits(), want[r].to_bits(), "width {b}, row {r}");
-            }
+            assert!(d.impacts.len() >= 4, "{}", d.impacts.len());
         }
+    }
+
+    /// The device left by a motion that stops dead coasts the closed-form distance: with
+    /// viscous friction only v0·M/Fv (the trapezoid over the exact exponential decay is within
+    /// (dt/τ)²/12 of it), with Coulomb friction only v0²·M/(2·Fc) (exact: the velocity falls
+    /// linearly and the step where it stops is cut at the stop); no force passes while it
+    /// coasts, and the motion's return strikes it with the relative velocity.
+    #[test]
+    fn play_device_coasts_the_closed_form_distance() {
+        let (dt, v0, b, m) = (1e-3, 0.01, 4e-3, 10.0);
+        let n = 3000;
+        let k0 = 1000;
+        let x: Vec<f64> = (0..n).map(|i| v0 * dt * (i.min(k0) as f64)).collect();
+        let v: Vec<f64> = (0..n).map(|i| if i < k0 { v0 } else { 0.0 }).collect();
+        let a: Vec<f64> = (0..n)
+            .map(|i| if i == k0 { -v0 / dt } else { 0.0 })
+            .collect();
+        let sg: Vec<f64> = v.iter().map(|v| v.signum()).collect();
+        // started centred, the motion takes up half the gap and strikes the device at rest
+        for (fv, fc, want) in [
+            (100.0, 0.0, v0 * m / 100.0),
+            (0.0, 0.5, v0 * v0 * m / (2.0 * 0.5)),
+        ] {
+            let mut v1 = v.clone();
+            v1[0] = 0.0;
+            let d = play_device(&x, &v1, &a, &sg, dt, b, m, fv, fc);
+            let stop = x[k0 - 1] - 0.5 * b; // left the flank after sample k0 − 1
+            let got = d.xm[n - 1] - stop;
+            assert!(
+                (got / want - 1.0).abs() < 1e-4,
+                "fv {fv} fc {fc}: coasted {got} m, closed form {want} m"
+            );
+            assert!(d.free[k0] && d.free[n - 1] && !d.free[k0 - 1]);
+            // one impact: at rest, struck at v0 after half the gap
+            assert_eq!(d.impacts.len(), 1);
+            let (i, _, vr) = d.impacts[0];
+            assert_eq!(vr, v0);
+            assert!((x[i] - 0.5 * b).abs() <= v0 * dt * 1.0001, "{}", x[i]);
+        }
+    }
+
+    /// The impact's momentum rule: (1 + e)·M for a restitution e in [0, 1], the lower bound
+    /// halved (`impact_consistent`); no impact, or one of the wrong sign, is no play.
+    #[test]
+    fn impact_momentum_rule() {
+        let m = 40.0;
+        assert!(impact_consistent(&[10.0, 10.0, 20.0], m));
+        assert!(impact_consistent(&[20.0; 4], m));
+        assert!(!impact_consistent(&[20.0; 5], m));
+        assert!(!impact_consistent(&[5.0, 5.0, 5.0], m));
+        assert!(!impact_consistent(&[-40.0], m));
+        assert!(!impact_consistent(&[40.0], -1.0));
+        let base = [m, 300.0, 30.0, 0.0];
+        let e = Effect {
+            kind: EffectKind::Backlash,
+            param: 1e-3,
+        };
+        let mut coef = vec![1.0];
+        coef.extend([m / IMPACT_TAPS as f64; IMPACT_TAPS]);
+        assert!(plausible(&e, &coef, &base));
+        coef[0] = 1.3;
+        assert!(!plausible(&e, &coef, &base));
+        coef[0] = 1.0;
+        for c in coef.iter_mut().skip(1) {
+            *c = 0.0;
+        }
+        assert!(!plausible(&e, &coef, &base));
     }
 }

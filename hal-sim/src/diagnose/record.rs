@@ -295,41 +295,6 @@ pub fn read_csv(path: &std::path::Path, cutoff_hz: Option<f64>) -> Result<Record
 /// Forward-backward (zero-phase) 2nd-order Butterworth low-pass, bilinear transform with
 /// prewarping; the state starts at the first (resp. last) sample so there is no start-up step.
 pub fn filtfilt(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
-    let n = x.len();
-    let mut y = Vec::new();
-    let pad = filtfilt_into(&mut y, n, |s| s.copy_from_slice(x), fc, fs);
-    y.truncate(pad + n);
-    y.drain(..pad);
-    y
-}
-
-/// The computation of `filtfilt` in a caller's buffer (grown when shorter, reused as it is
-/// otherwise, so that repeated filtering of long signals does not page-fault fresh memory):
-/// `fill` writes the n input samples, the filtered signal is left in `buf[pad..pad + n]`,
-/// `pad` returned. The backward pass runs over the buffer from its end (the same operations in
-/// the same order as filtering the reversed sequence: the result is bit for bit `filtfilt`'s).
-pub fn filtfilt_into(
-    buf: &mut Vec<f64>,
-    n: usize,
-    fill: impl FnOnce(&mut [f64]),
-    fc: f64,
-    fs: f64,
-) -> usize {
-    filtfilt_multi_into::<1>(buf, n, fill, fc, fs)
-}
-
-/// `filtfilt_into` of `K` signals at once, interleaved (sample i of signal j at
-/// `buf[i·K + j]`, `fill` writes the n·K input values; the filtered signals are left in
-/// `buf[(pad + i)·K + j]`). Each signal sees the operations of `filtfilt` in the same order
-/// (bit for bit its result); the K recurrences are independent, so the pass is bound by
-/// arithmetic throughput rather than by one filter's feedback latency.
-pub fn filtfilt_multi_into<const K: usize>(
-    buf: &mut Vec<f64>,
-    n: usize,
-    fill: impl FnOnce(&mut [f64]),
-    fc: f64,
-    fs: f64,
-) -> usize {
     let fc = fc.min(0.45 * fs);
     let k = (std::f64::consts::PI * fc / fs).tan();
     let s2 = std::f64::consts::SQRT_2;
@@ -339,82 +304,36 @@ pub fn filtfilt_multi_into<const K: usize>(
     let b2 = b0;
     let a1 = 2.0 * (k * k - 1.0) * norm;
     let a2 = (1.0 - s2 * k + k * k) * norm;
-    let step = |xin: f64, st: &mut [f64; 4]| {
-        let [x1, x2, y1, y2] = *st;
-        let y = b0 * xin + b1 * x1 + b2 * x2 - a1 * y1 - a2 * y2;
-        *st = [xin, x1, y, y1];
-        y
+    let run = |inp: &mut Vec<f64>| {
+        let x0 = inp[0];
+        let (mut x1, mut x2, mut y1, mut y2) = (x0, x0, x0, x0);
+        for s in inp.iter_mut() {
+            let xin = *s;
+            let y = b0 * xin + b1 * x1 + b2 * x2 - a1 * y1 - a2 * y2;
+            x2 = x1;
+            x1 = xin;
+            y2 = y1;
+            y1 = y;
+            *s = y;
+        }
     };
     // odd reflection padding at both ends (as scipy's filtfilt), so the edges carry no
     // start-up transient: pad = 3 time constants of the filter, at most n-1 samples
-    let pad = ((3.0 * fs / fc).ceil() as usize).min(n.saturating_sub(1));
-    let len = n + 2 * pad;
-    if buf.len() < len * K {
-        buf.resize(len * K, 0.0);
+    let n = x.len();
+    let pad = ((3.0 * fs / fc).ceil() as usize).min(n - 1);
+    let mut y = Vec::with_capacity(n + 2 * pad);
+    for i in (1..=pad).rev() {
+        y.push(2.0 * x[0] - x[i]);
     }
-    let y = &mut buf[..len * K];
-    fill(&mut y[pad * K..(pad + n) * K]);
-    if n == 0 {
-        return pad;
+    y.extend_from_slice(x);
+    for i in 1..=pad {
+        y.push(2.0 * x[n - 1] - x[n - 1 - i]);
     }
-    for j in 0..K {
-        let (x0, xl) = (y[pad * K + j], y[(pad + n - 1) * K + j]);
-        for i in 1..=pad {
-            y[(pad - i) * K + j] = 2.0 * x0 - y[(pad + i) * K + j];
-            y[(pad + n - 1 + i) * K + j] = 2.0 * xl - y[(pad + n - 1 - i) * K + j];
-        }
-    }
-    let mut st = [[0.0; 4]; K];
-    for j in 0..K {
-        st[j] = [y[j]; 4];
-    }
-    for s in y.chunks_exact_mut(K) {
-        for j in 0..K {
-            s[j] = step(s[j], &mut st[j]);
-        }
-    }
-    for j in 0..K {
-        st[j] = [y[(len - 1) * K + j]; 4];
-    }
-    for s in y.chunks_exact_mut(K).rev() {
-        for j in 0..K {
-            s[j] = step(s[j], &mut st[j]);
-        }
-    }
-    pad
-}
-
-/// `central_diff(x, dt)[i]` alone (the same expression).
-pub fn central_diff_at(x: &[f64], i: usize, dt: f64) -> f64 {
-    central_diff_by(x.len(), |j| x[j], i, dt)
-}
-
-/// `central_diff_at` of the n-sample signal whose sample j is `x(j)`.
-pub fn central_diff_by(n: usize, x: impl Fn(usize) -> f64, i: usize, dt: f64) -> f64 {
-    if i == 0 {
-        (x(1) - x(0)) / dt
-    } else if i == n - 1 {
-        (x(n - 1) - x(n - 2)) / dt
-    } else {
-        (x(i + 1) - x(i - 1)) / (2.0 * dt)
-    }
-}
-
-/// `central_diff(&central_diff(x, dt), dt)[i]` alone (the same expressions; n ≥ 3).
-pub fn central_diff2_at(x: &[f64], i: usize, dt: f64) -> f64 {
-    central_diff2_by(x.len(), |j| x[j], i, dt)
-}
-
-/// `central_diff2_at` of the n-sample signal whose sample j is `x(j)`.
-pub fn central_diff2_by(n: usize, x: impl Fn(usize) -> f64 + Copy, i: usize, dt: f64) -> f64 {
-    let v = |j: usize| central_diff_by(n, x, j, dt);
-    if i == 0 {
-        (v(1) - v(0)) / dt
-    } else if i == n - 1 {
-        (v(n - 1) - v(n - 2)) / dt
-    } else {
-        (v(i + 1) - v(i - 1)) / (2.0 * dt)
-    }
+    run(&mut y);
+    y.reverse();
+    run(&mut y);
+    y.reverse();
+    y[pad..pad + n].to_vec()
 }
 
 /// Central differences (one-sided at the ends).
@@ -427,74 +346,4 @@ pub fn central_diff(x: &[f64], dt: f64) -> Vec<f64> {
     d[0] = (x[1] - x[0]) / dt;
     d[n - 1] = (x[n - 1] - x[n - 2]) / dt;
     d
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `filtfilt` (in place, backward pass run from the buffer's end) is the forward-backward
-    /// filter written out with explicit reversals, bit for bit, on signals from 1 sample to
-    /// longer than the padding, into a fresh and into a longer reused buffer; the derivatives
-    /// at single indices are `central_diff`'s.
-    #[test]
-    fn filtfilt_in_place_is_reversed_filtering() {
-        let reference = |x: &[f64], fc: f64, fs: f64| -> Vec<f64> {
-            let fc = fc.min(0.45 * fs);
-            let k = (std::f64::consts::PI * fc / fs).tan();
-            let s2 = std::f64::consts::SQRT_2;
-            let norm = 1.0 / (1.0 + s2 * k + k * k);
-            let (b0, a1, a2) = (
-                k * k * norm,
-                2.0 * (k * k - 1.0) * norm,
-                (1.0 - s2 * k + k * k) * norm,
-            );
-            let (b1, b2) = (2.0 * b0, b0);
-            let run = |inp: &mut Vec<f64>| {
-                let x0 = inp[0];
-                let (mut x1, mut x2, mut y1, mut y2) = (x0, x0, x0, x0);
-                for s in inp.iter_mut() {
-                    let y = b0 * *s + b1 * x1 + b2 * x2 - a1 * y1 - a2 * y2;
-                    (x2, x1, y2, y1) = (x1, *s, y1, y);
-                    *s = y;
-                }
-            };
-            let n = x.len();
-            let pad = ((3.0 * fs / fc).ceil() as usize).min(n - 1);
-            let mut y: Vec<f64> = (1..=pad).rev().map(|i| 2.0 * x[0] - x[i]).collect();
-            y.extend_from_slice(x);
-            y.extend((1..=pad).map(|i| 2.0 * x[n - 1] - x[n - 1 - i]));
-            run(&mut y);
-            y.reverse();
-            run(&mut y);
-            y.reverse();
-            y[pad..pad + n].to_vec()
-        };
-        let mut reused = vec![7.0; 5000];
-        for n in [1usize, 2, 3, 17, 61, 1000] {
-            let x: Vec<f64> = (0..n)
-                .map(|i| (0.37 * i as f64).sin() + 1e-3 * ((i * i) % 11) as f64)
-                .collect();
-            let want = reference(&x, 50.0, 1000.0);
-            let got = filtfilt(&x, 50.0, 1000.0);
-            assert_eq!(got.len(), n);
-            let pad = filtfilt_into(&mut reused, n, |s| s.copy_from_slice(&x), 50.0, 1000.0);
-            for i in 0..n {
-                assert_eq!(got[i].to_bits(), want[i].to_bits(), "n {n}, sample {i}");
-                assert_eq!(
-                    reused[pad + i].to_bits(),
-                    want[i].to_bits(),
-                    "reused, n {n}"
-                );
-            }
-            if n >= 3 {
-                let v = central_diff(&x, 1e-3);
-                let a = central_diff(&v, 1e-3);
-                for i in 0..n {
-                    assert_eq!(central_diff_at(&x, i, 1e-3).to_bits(), v[i].to_bits());
-                    assert_eq!(central_diff2_at(&x, i, 1e-3).to_bits(), a[i].to_bits());
-                }
-            }
-        }
-    }
 }
