@@ -1599,6 +1599,139 @@ pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
             .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
 }
 
+/// The samples (true) at which a position ripple of wavelength `lambda` lies well inside the
+/// band where the derived acceleration follows the motion: its time frequency |v|/λ at most
+/// half the derivative filter's cutoff (the forward-backward Butterworth-2 passes 1/(1 + (f/fc)⁴):
+/// at most 6 % lost). Above it the record's inertial force M·a is not measured, and a ripple of
+/// the motion locked to position leaves M·(a − a_derived) in the residual at that wavelength.
+/// `None` when the acceleration is measured (no derivative cutoff in the metadata).
+pub fn ripple_in_band(ctx: &Context, lambda: f64) -> Option<Vec<bool>> {
+    let fc = *ctx.rec.meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
+    Some(
+        ctx.rec
+            .v
+            .iter()
+            .map(|v| v.abs() <= 0.5 * fc * lambda)
+            .collect(),
+    )
+}
+
+/// A periodic finding's ripple on the samples where it lies inside the acceleration's band
+/// (`ripple_in_band`): the model (`cols`, the finding's columns at `span`) refitted on the
+/// samples in motion with the finding's columns split into their in-band and out-of-band
+/// parts. Returns the Wald statistic of the in-band pair (the rise of the rss when it is
+/// removed over the residual variance: χ² with 2 degrees of freedom when it carries nothing)
+/// and the in-band and out-of-band amplitudes, and the Wald statistic of their difference
+/// (the rise of the rss when both parts are one column again: χ² with 2 degrees of freedom
+/// when the ripple has one amplitude and phase at every speed; 0 when no sample lies above
+/// the band).
+pub fn in_band_ripple(
+    ctx: &Context,
+    cols: &[(String, Vec<f64>)],
+    span: (usize, usize),
+    in_band: &[bool],
+) -> RippleInBand {
+    let (a, b) = span;
+    let split = |inside: bool| -> Vec<Vec<f64>> {
+        cols[a..b]
+            .iter()
+            .map(|(_, c)| {
+                c.iter()
+                    .zip(in_band)
+                    .map(|(v, &ib)| if ib == inside { *v } else { 0.0 })
+                    .collect()
+            })
+            .collect()
+    };
+    let (cin, cout) = (split(true), split(false));
+    let mut refs: Vec<&[f64]> = cols
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j < a || *j >= b)
+        .map(|(_, c)| c.1.as_slice())
+        .collect();
+    let m0 = refs.len();
+    refs.extend(cout.iter().map(|c| c.as_slice()));
+    refs.extend(cin.iter().map(|c| c.as_slice()));
+    let part: Vec<u8> = ctx
+        .rest
+        .iter()
+        .map(|&r| if r { super::AT_REST } else { super::TRAIN })
+        .collect();
+    let (tr, _) = super::normals(&refs, &ctx.rec.f, &part, 1);
+    let th = tr.solve();
+    let rss = tr.rss(&th);
+    let k = b - a;
+    let keep: Vec<usize> = (0..m0 + k).collect();
+    let t2 = tr.select(&keep);
+    let rss_without = t2.rss(&t2.solve());
+    let dof = tr.n.saturating_sub(refs.len()).max(1) as f64;
+    let var = (rss / dof).max(f64::MIN_POSITIVE);
+    let wald = (rss_without - rss) / var;
+    // the two parts merged again (column out_j + in_j): G' = Tᵀ·G·T, b' = Tᵀ·b
+    let m = m0 + 2 * k;
+    let src = |r: usize| -> Vec<usize> {
+        if r < m0 {
+            vec![r]
+        } else {
+            vec![r, r + k]
+        }
+    };
+    let mut merged = tr.select(&(0..m0 + k).collect::<Vec<_>>());
+    for r in 0..m0 + k {
+        merged.b[r] = src(r).iter().map(|&i| tr.b[i]).sum();
+        for c in 0..m0 + k {
+            merged.g[r * (m0 + k) + c] = src(r)
+                .iter()
+                .flat_map(|&i| src(c).into_iter().map(move |j| (i, j)))
+                .map(|(i, j)| tr.g[i * m + j])
+                .sum();
+        }
+    }
+    let above = cout.iter().any(|c| c.iter().any(|v| *v != 0.0));
+    let wald_diff = if above {
+        (merged.rss(&merged.solve()) - rss) / var
+    } else {
+        0.0
+    };
+    let amp = |s: &[f64]| s.iter().map(|c| c * c).sum::<f64>().sqrt();
+    let (ain, aout) = (&th[m0 + k..], &th[m0..m0 + k]);
+    let diff: Vec<f64> = ain.iter().zip(aout).map(|(a, b)| a - b).collect();
+    RippleInBand {
+        wald,
+        amp_in: amp(ain),
+        amp_above: amp(aout),
+        wald_diff,
+        rel_diff: amp(&diff) / amp(ain).max(amp(aout)).max(f64::MIN_POSITIVE),
+    }
+}
+
+/// `in_band_ripple`'s evidence.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RippleInBand {
+    /// Wald statistic of the in-band part (χ², 2 degrees of freedom, when it carries nothing).
+    pub wald: f64,
+    /// Amplitude of the ripple fitted on the samples inside the band, N.
+    pub amp_in: f64,
+    /// Amplitude of the ripple fitted on the samples above the band, N (0 when none is).
+    pub amp_above: f64,
+    /// Wald statistic of the difference between the two (0 when no sample lies above).
+    pub wald_diff: f64,
+    /// |A_in − A_above| / max(|A_in|, |A_above|), the coefficient vectors (amplitude and phase).
+    pub rel_diff: f64,
+}
+
+impl RippleInBand {
+    /// The ripple is a force locked to position: the samples where the acceleration is measured
+    /// carry it (Wald ≥ t²), and where some lie above the band it has the same amplitude and
+    /// phase there: a difference both significant (Wald ≥ t²) and larger than 1/t of the
+    /// ripple rejects it (t = `AGREEMENT_T`: a coefficient determined to within a third of its
+    /// value, as the segments' agreement asks).
+    pub fn locked_to_position(&self, t: f64) -> bool {
+        self.wald >= t * t && !(self.wald_diff >= t * t && self.rel_diff > 1.0 / t)
+    }
+}
+
 /// The scanned range [lo, hi] of a coarse grid that `best` belongs to: the values of the same
 /// sign (the two hypotheses of `current_limit` are two grids, told apart by the sign).
 pub fn scan_range(coarse: &[Effect], best: &Effect) -> (f64, f64) {

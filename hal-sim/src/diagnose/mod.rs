@@ -1100,17 +1100,77 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             })
             .collect()
     };
+    // A periodic finding names a force locked to position: it must be carried by the samples
+    // where its time frequency |v|/λ lies inside the band where the derived acceleration
+    // follows the motion (`effects::ripple_in_band`). Above that band a ripple of the motion
+    // itself leaves M·(a − a_derived) in the residual at the same wavelength, an inertial
+    // force the record does not measure; inside it that artefact vanishes and a force ripple
+    // does not. The in-band part of its columns must stand AGREEMENT_T standard errors out of
+    // the noise (Wald statistic ≥ AGREEMENT_T²: χ² with 2 degrees of freedom, 1 %).
+    let ripple_measured: Vec<Option<effects::RippleInBand>> = chosen
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            if !matches!(
+                e.kind,
+                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+            ) {
+                return None;
+            }
+            effects::ripple_in_band(&ctx, e.param)
+                .map(|mask| effects::in_band_ripple(&ctx, &cols, spans[k], &mask))
+        })
+        .collect();
+    for (k, r) in ripple_measured.iter().enumerate() {
+        if let (Some(r), Some(f)) = (r, findings.get_mut(k)) {
+            let above = if r.amp_above > 0.0 {
+                format!(
+                    "above it {:.3} N (differing by {:.0} %, Wald {:.1})",
+                    r.amp_above,
+                    100.0 * r.rel_diff,
+                    r.wald_diff
+                )
+            } else {
+                "no sample above it".to_string()
+            };
+            f.note.push_str(&format!(
+                "; inside the derived acceleration's band {:.3} N (Wald {:.1}), {above}",
+                r.amp_in, r.wald
+            ));
+        }
+    }
+    let ripple_locked: Vec<bool> = ripple_measured
+        .iter()
+        .map(|r| r.is_none_or(|r| r.locked_to_position(AGREEMENT_T)))
+        .collect();
     let kept: Vec<usize> = (0..chosen.len())
         .filter(|&k| {
             holds[k] >= STABILITY_MIN
                 && (signs[k].0 == 0 || signs[k].1 == 0)
                 && agreement[k] >= AGREEMENT_T
                 && ripple_shows[k]
+                && ripple_locked[k]
         })
         .collect();
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
+            if let (false, Some(r)) = (ripple_locked[k], ripple_measured[k]) {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but it is not a force locked to position: inside the derived acceleration's band (|v|/λ ≤ half its cutoff) {:.3} N (Wald {:.1}, at least {:.0} needed), above it, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(&ctx, &chosen[k]),
+                    r.amp_in,
+                    r.wald,
+                    AGREEMENT_T * AGREEMENT_T,
+                    r.amp_above,
+                    100.0 * r.rel_diff,
+                    r.wald_diff,
+                    100.0 / AGREEMENT_T,
+                    AGREEMENT_T * AGREEMENT_T,
+                ));
+                continue;
+            }
             if !ripple_shows[k] {
                 dropped_notes.push(format!(
                     "{} ({}) selected, but the residual it explains shows no peak at its wavelength in the spectrum over position (no ripple stands 30× above the spectrum's median within 3 %): not kept",
