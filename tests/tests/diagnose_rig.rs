@@ -137,10 +137,12 @@ fn rig_sample() {
     let exact: usize = t.values().map(|t| t.exact).sum();
     let detected: usize = t.values().map(|t| t.detected).sum();
     println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured 2026-11-24: 19/27 exactly right, 22/27 detected; the bounds guard what is reached,
-    // about 3 records of margin (a seeded sample: the figures move only with the code)
-    assert!(exact >= 16, "{exact}/{all} exactly right (measured 19)");
-    assert!(detected >= 19, "{detected}/{all} detected (measured 22)");
+    // measured 2026-11-24: 20/27 exactly right, 23/27 detected (a clipped drive on a rounded
+    // triangle named since its saturation speed is scanned over the speeds crossed); the
+    // bounds guard what is reached, 3 records of margin (a seeded sample: the figures move
+    // only with the code)
+    assert!(exact >= 17, "{exact}/{all} exactly right (measured 20)");
+    assert!(detected >= 20, "{detected}/{all} detected (measured 23)");
     // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
     // drift records, and no effect-free record gets a catalogue name (0/3); one record of
     // margin on the first (the check runs on the baseline residual of any motion)
