@@ -124,8 +124,8 @@ pub struct Context<'a> {
     /// Quantiles 80 … 99 % of |baseline prediction| (the current-limit grid of the whole
     /// force, a motor-driven axis).
     pub clip_levels: Vec<f64>,
-    /// Quantiles 80 … 99 % of |v| on the samples in motion (the current-limit grid of a drive
-    /// acting as a damper on an imposed motion: its force ∝ v saturates above a speed).
+    /// Speeds scanned as the saturation speed of a drive acting as a damper on an imposed
+    /// motion (its force ∝ v saturates above a speed): `speed_levels`.
     pub speed_levels: Vec<f64>,
     /// Motion bandwidth: the highest frequency where the spectrum of the position increments
     /// stands 100× above its noise floor (median of the upper half band). The compliance scan
@@ -343,22 +343,7 @@ impl<'a> Context<'a> {
                 v
             })
             .collect();
-        let mut av: Vec<f64> = rec
-            .v
-            .iter()
-            .zip(&c.rest)
-            .filter(|(_, &r)| !r)
-            .map(|(v, _)| v.abs())
-            .collect();
-        if !av.is_empty() {
-            av.sort_unstable_by(|a, b| a.total_cmp(b));
-            let last = av.len() - 1;
-            c.speed_levels = SPEED_QUANTILES
-                .iter()
-                .map(|q| av[(last as f64 * q) as usize])
-                .filter(|v| *v > 0.0)
-                .collect();
-        }
+        c.speed_levels = speed_levels(&rec.v, &c.rest);
         c
     }
 }
@@ -1487,6 +1472,60 @@ const SPEED_QUANTILES: [f64; 12] = [
     0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.85, 0.9, 0.93, 0.96, 0.99,
 ];
 
+/// The speeds scanned as the saturation speed v_L of a drive acting as a damper (samples in
+/// motion, `rest` false): the `SPEED_QUANTILES` of |v| over time, extended below and above
+/// their range by the same quantiles of the speeds the motion passes through (|v| weighted by
+/// the speed change |Δv| of its sample: each speed counted once per crossing, however long
+/// the motion stays at it), sorted. Inside the range of the time quantiles the grid is theirs
+/// (on EMPS, cruising at 0.042, 0.082 and 0.125 m/s, a crossing quantile at 0.119 m/s let a
+/// drive clip be selected that held on 0/5 segments and displaced a finding).
+/// A drive saturates at a speed, and the record resolves it where the motion crosses it; time
+/// at a speed says nothing of where the drive saturates: on a motion that cruises at one speed
+/// (a rounded triangle's constant-speed flanks) the quantiles over time all lie within 1 % of
+/// the cruise speed, and a saturation below it (the rig's clipped drive, 0.45 … 0.8 of the
+/// peak speed) lies outside the scanned range (not bracketed, not named). On a sinusoid the
+/// crossings are uniform over [0, v̂] (quantile q at q·v̂), the time quantiles at sin(qπ/2)·v̂.
+pub fn speed_levels(v: &[f64], rest: &[bool]) -> Vec<f64> {
+    let n = v.len();
+    // (|v|, |Δv|) of the samples in motion, Δv the central difference of v
+    let mut av: Vec<(f64, f64)> = (0..n)
+        .filter(|&i| !rest[i])
+        .map(|i| {
+            let dv = 0.5 * (v[(i + 1).min(n - 1)] - v[i.saturating_sub(1)]);
+            (v[i].abs(), dv.abs())
+        })
+        .collect();
+    if av.is_empty() {
+        return Vec::new();
+    }
+    av.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let last = av.len() - 1;
+    let mut out: Vec<f64> = SPEED_QUANTILES
+        .iter()
+        .map(|q| av[(last as f64 * q) as usize].0)
+        .collect();
+    let (lo, hi) = (out[0], out[out.len() - 1]);
+    let total: f64 = av.iter().map(|p| p.1).sum();
+    if total > 0.0 {
+        let mut cum = 0.0;
+        let mut qi = 0;
+        for p in &av {
+            cum += p.1;
+            while qi < SPEED_QUANTILES.len() && cum >= SPEED_QUANTILES[qi] * total {
+                // only where they extend the range the time quantiles span
+                if p.0 < lo || p.0 > hi {
+                    out.push(p.0);
+                }
+                qi += 1;
+            }
+        }
+    }
+    out.retain(|v| *v > 0.0);
+    out.sort_unstable_by(|a, b| a.total_cmp(b));
+    out.dedup();
+    out
+}
+
 /// Quantiles of |f̂₀| scanned as current-limit levels.
 const CLIP_QUANTILES: [f64; 7] = [0.80, 0.85, 0.9, 0.93, 0.96, 0.98, 0.99];
 
@@ -1921,6 +1960,49 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `speed_levels` against closed forms. A sinusoid v = v̂·sin(ωt) over whole periods: the
+    /// time quantile q of |v| is v̂·sin(qπ/2), the crossing quantile (|v| weighted by |Δv|)
+    /// q·v̂; the time quantiles are in the grid, and the crossing quantiles below the lowest
+    /// time quantile (q = 0.2, 0.3: below sin(0.1π) = 0.309), none inside their range
+    /// (within 0.5 % of v̂: 20,000 samples per period). A
+    /// motion cruising at v̂ for 90 % of the time with linear ramps (a triangle's flanks): the
+    /// time quantiles all lie at v̂, the crossing quantiles at q·v̂, so the grid still reaches
+    /// down to 0.2·v̂. Break: without the crossing quantiles the cruise grid's lowest value is
+    /// v̂ (and the sinusoid misses q·v̂).
+    #[test]
+    fn speed_levels_span_the_speeds_crossed() {
+        let n = 100_000;
+        let v: Vec<f64> = (0..n)
+            .map(|i| 0.1 * (std::f64::consts::TAU * 5.0 * i as f64 / n as f64).sin())
+            .collect();
+        let rest = vec![false; n];
+        let g = speed_levels(&v, &rest);
+        let has = |g: &[f64], x: f64| g.iter().any(|y| (y - x).abs() < 5e-4);
+        assert_eq!(g.len(), SPEED_QUANTILES.len() + 2, "{g:?}");
+        for q in SPEED_QUANTILES {
+            if q < 0.309 {
+                assert!(has(&g, 0.1 * q), "crossing quantile {q}: {g:?}");
+            }
+            assert!(
+                has(&g, 0.1 * (q * std::f64::consts::FRAC_PI_2).sin()),
+                "time quantile {q}"
+            );
+        }
+        // cruise: ramps of 500 samples, 9,000 at v̂, both directions
+        let mut v = Vec::new();
+        for s in [1.0, -1.0, 1.0, -1.0] {
+            v.extend((0..500).map(|i| s * 0.1 * i as f64 / 500.0));
+            v.extend(std::iter::repeat_n(s * 0.1, 9000));
+            v.extend((0..500).map(|i| s * 0.1 * (500 - i) as f64 / 500.0));
+        }
+        let g = speed_levels(&v, &vec![false; v.len()]);
+        let lo = g.iter().cloned().fold(f64::MAX, f64::min);
+        assert!((lo / 0.02 - 1.0).abs() < 0.01, "lowest speed scanned {lo}");
+        for q in SPEED_QUANTILES {
+            assert!(has(&g, 0.1 * q), "cruise crossing quantile {q}: {g:?}");
+        }
+    }
 
     /// Monotone motion from z = 0: the Dahl state is the closed form 1 − exp(−x/x_c); after a
     /// reversal at x_r with state z_r, z = −1 + (z_r + 1)·exp(−(x_r − x)/x_c). `dahl_at` gives
