@@ -76,9 +76,11 @@ fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
         p("viscous_pos_Ns_per_m"),
         p("viscous_neg_Ns_per_m")
     );
-    // Published: viscous +166.71 / -240.42 N·s/m; 10 % tolerance for the filter difference.
-    assert!((p("viscous_pos_Ns_per_m") / 166.71 - 1.0).abs() < 0.1);
-    assert!((p("viscous_neg_Ns_per_m") / 240.42 - 1.0).abs() < 0.1);
+    // Published: viscous +166.71 / -240.42 N·s/m; measured 168.0 / 241.5 (+0.77 %, +0.45 %:
+    // the published fit uses the parallel-filtered force, this one the raw force with the
+    // derivative filter); asserted 2.5 %, about 3× the larger deviation.
+    assert!((p("viscous_pos_Ns_per_m") / 166.71 - 1.0).abs() < 0.025);
+    assert!((p("viscous_neg_Ns_per_m") / 240.42 - 1.0).abs() < 0.025);
     // Relative error of the diagnosed model fitted on the whole estimation record, as the
     // published figures are: must come within both published figures.
     println!(
