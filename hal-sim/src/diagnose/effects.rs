@@ -1623,6 +1623,16 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
     }
 }
 
+/// True when `kind` times the force channel against the motion (`lag`: the recorded force
+/// behind it; `actuator_lag`: ahead of it, a command the force follows) and `chosen` already
+/// holds the other: the channel has one net delay, so a record is not given both (one cause,
+/// one name; a `lag` fitted a little off its delay is otherwise topped up by an
+/// `actuator_lag` of the difference).
+pub fn same_channel_timing(kind: EffectKind, chosen: &[Effect]) -> bool {
+    let timing = |k: EffectKind| matches!(k, EffectKind::Lag | EffectKind::ActuatorLag);
+    timing(kind) && chosen.iter().any(|c| timing(c.kind) && c.kind != kind)
+}
+
 /// True when `e` is a periodic effect (cogging or position-periodic friction) whose wavelength
 /// lies within 3 % of a periodic effect in `chosen` (the same spatial cause: one name).
 pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
@@ -2196,5 +2206,19 @@ mod tests {
             *c = 0.0;
         }
         assert!(!plausible(&e, &coef, &base));
+    }
+
+    /// The force channel's timing has one name: `lag` (force behind the motion) and
+    /// `actuator_lag` (force ahead of it) exclude each other, either order; neither excludes
+    /// itself (its own kind is the scan's rule) nor another kind.
+    #[test]
+    fn channel_timing_is_named_once() {
+        let e = |kind| Effect { kind, param: 1.0 };
+        let (lag, act) = (EffectKind::Lag, EffectKind::ActuatorLag);
+        assert!(same_channel_timing(act, &[e(lag)]));
+        assert!(same_channel_timing(lag, &[e(EffectKind::Cogging), e(act)]));
+        assert!(!same_channel_timing(lag, &[e(lag)]));
+        assert!(!same_channel_timing(lag, &[e(EffectKind::Cogging)]));
+        assert!(!same_channel_timing(EffectKind::Cogging, &[e(lag), e(act)]));
     }
 }

@@ -792,7 +792,9 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
         let k0 = base_refs.len() + set.iter().filter(|e| e.kind.scanned()).count();
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
-            if set.iter().any(|c| c.kind == cand.kind) {
+            if set.iter().any(|c| c.kind == cand.kind)
+                || effects::same_channel_timing(cand.kind, set)
+            {
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64) {
