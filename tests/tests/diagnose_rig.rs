@@ -49,12 +49,7 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
             let spec = RigSpec::random(seed, kind, traj, samples);
             let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
             let d = diagnose(&rec, &Options::default());
-            let names: Vec<&str> = d
-                .findings
-                .iter()
-                .filter(|f| f.effect != "unexplained")
-                .map(|f| f.effect.as_str())
-                .collect();
+            let names = d.catalogue_names();
             let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
             let want = spec.hidden.expected();
             let detected = match want {
@@ -184,12 +179,7 @@ fn drift_is_reported_as_a_slow_change() {
             .iter()
             .filter(|f| f.effect == "unexplained")
             .find_map(|f| f.parameters.iter().find(|p| p.0 == "change_N").map(|p| p.1));
-        let names: Vec<&str> = d
-            .findings
-            .iter()
-            .filter(|f| f.effect != "unexplained")
-            .map(|f| f.effect.as_str())
-            .collect();
+        let names = d.catalogue_names();
         println!(
             "seed {seed} {}: hidden drift {total_n:.2} N -> slow change {change:?} N, names {names:?}",
             spec.trajectory.name()
@@ -272,12 +262,7 @@ fn backlash_is_named_with_its_width() {
         };
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
         let d = diagnose(&rec, &Options::default());
-        let names: Vec<&str> = d
-            .findings
-            .iter()
-            .filter(|f| f.effect != "unexplained")
-            .map(|f| f.effect.as_str())
-            .collect();
+        let names = d.catalogue_names();
         assert_eq!(names, ["backlash"], "seed {seed}");
         let f = &d.findings.iter().find(|f| f.effect == "backlash").unwrap();
         let p = |k: &str| f.parameters.iter().find(|(n, _)| n == k).unwrap().1;

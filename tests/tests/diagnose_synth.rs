@@ -10,11 +10,7 @@ use hal_sim::diagnose::{diagnose, synth, Options};
 const SAMPLES: usize = 12_000;
 
 fn extension_names(d: &hal_sim::diagnose::Diagnosis) -> Vec<String> {
-    d.findings
-        .iter()
-        .filter(|f| f.effect != "unexplained")
-        .map(|f| f.effect.clone())
-        .collect()
+    d.catalogue_names().into_iter().map(String::from).collect()
 }
 
 #[test]

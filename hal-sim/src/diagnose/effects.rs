@@ -147,35 +147,28 @@ pub struct Context<'a> {
     pub zeta_cache: std::sync::Mutex<std::collections::HashMap<u64, f64>>,
     /// The damping-ratio profile's rows with the baseline columns and the force there (the
     /// same for every frequency: built once).
-    pub profile_rows: std::sync::OnceLock<ProfileRows>,
+    pub profile_rows: std::sync::OnceLock<FitRows>,
     /// The training rows the delayed baseline of `lag` is fitted on (built once).
-    pub lag_rows: std::sync::OnceLock<LagRows>,
+    pub lag_rows: std::sync::OnceLock<FitRows>,
     /// `lag_coefs` per delay (bits of τ).
     pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
 }
 
-/// Rows of the delayed baseline's fit (`Context::lag_coefs`): at most `LAG_ROWS` training
-/// samples in motion, strided over the record, with the baseline columns that are not the
-/// motion's (offset, electromagnetic force) and the force there.
+/// Rows of a fit on a strided subset of the training samples in motion
+/// (`Context::training_rows`), with the columns and the force there: for the delayed
+/// baseline (`Context::lag_coefs`: at most `LAG_ROWS` over the record, the columns not
+/// delayed — offset, electromagnetic force) and for the damping-ratio profile
+/// (`Context::compliance_zeta`: at most `PROFILE_ROWS` over the first `PROFILE_WINDOW`
+/// samples, the baseline columns).
 #[derive(Debug, Clone, Default)]
-pub struct LagRows {
+pub struct FitRows {
     pub rows: Vec<usize>,
-    pub fixed: Vec<Vec<f64>>,
+    pub cols: Vec<Vec<f64>>,
     pub f: Vec<f64>,
 }
 
 /// Training samples the delayed baseline of `lag` is fitted on (strided).
 pub const LAG_ROWS: usize = 20_000;
-
-/// Rows of the damping-ratio profile (`Context::compliance_zeta`): at most
-/// `PROFILE_ROWS` training samples in motion, strided over the first `PROFILE_WINDOW`
-/// samples, with the baseline columns and the force at them.
-#[derive(Debug, Clone, Default)]
-pub struct ProfileRows {
-    pub rows: Vec<usize>,
-    pub base: Vec<Vec<f64>>,
-    pub f: Vec<f64>,
-}
 
 /// Training samples the damping-ratio profile fits (strided).
 pub const PROFILE_ROWS: usize = 4000;
@@ -650,6 +643,17 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
 }
 
 impl Context<'_> {
+    /// Training samples in motion among the first `window` samples, strided to at most `max`
+    /// (the rows the delayed baseline of `lag` and the damping-ratio profile are fitted on).
+    fn training_rows(&self, window: usize, max: usize) -> Vec<usize> {
+        let hold = super::holdout_mask(self.rec.len());
+        let cand: Vec<usize> = (0..window)
+            .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
+            .collect();
+        let step = cand.len().div_ceil(max).max(1);
+        cand.into_iter().step_by(step).collect()
+    }
+
     /// The delayed baseline of `lag`: the inertia, viscous and Coulomb coefficients of the
     /// baseline fitted with its motion columns (a, v, sgn v) taken `tau` seconds earlier (the
     /// offset and an electromagnetic column as they are), on at most `LAG_ROWS` training
@@ -666,18 +670,13 @@ impl Context<'_> {
         }
         let n = self.rec.len();
         let lr = self.lag_rows.get_or_init(|| {
-            let hold = super::holdout_mask(n);
-            let cand: Vec<usize> = (0..n)
-                .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
-                .collect();
-            let step = cand.len().div_ceil(LAG_ROWS).max(1);
-            let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
-            let mut fixed = vec![vec![1.0; rows.len()]];
+            let rows = self.training_rows(n, LAG_ROWS);
+            let mut cols = vec![vec![1.0; rows.len()]];
             if let Some((_, c, _)) = em_column(self.rec) {
-                fixed.push(rows.iter().map(|&i| c[i]).collect());
+                cols.push(rows.iter().map(|&i| c[i]).collect());
             }
             let f = rows.iter().map(|&i| self.rec.f[i]).collect();
-            LagRows { rows, fixed, f }
+            FitRows { rows, cols, f }
         });
         let k = tau / self.dt;
         let th = if lr.rows.len() < 10 || !k.is_finite() || k < 0.0 {
@@ -688,19 +687,10 @@ impl Context<'_> {
                 .iter()
                 .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
                 .collect();
-            all.extend(lr.fixed.iter().cloned());
-            let m = all.len();
-            let mut g = vec![0.0; m * m];
-            let mut bb = vec![0.0; m];
-            for p in 0..m {
-                for q in p..m {
-                    let d: f64 = all[p].iter().zip(&all[q]).map(|(x, y)| x * y).sum();
-                    g[p * m + q] = d;
-                    g[q * m + p] = d;
-                }
-                bb[p] = all[p].iter().zip(&lr.f).map(|(x, y)| x * y).sum();
-            }
-            let th = super::solve_sym(&g, &bb, m).th;
+            all.extend(lr.cols.iter().cloned());
+            let refs: Vec<&[f64]> = all.iter().map(|c| c.as_slice()).collect();
+            let train = vec![super::TRAIN; lr.f.len()];
+            let th = super::normals(&refs, &lr.f, &train, 1).0.solve();
             let c = [th[0], th[1], th[2]];
             (c.iter().all(|v| v.is_finite() && *v >= 0.0) && c[0] > 0.0).then_some(c)
         };
@@ -732,13 +722,8 @@ impl Context<'_> {
         }
         let n = self.rec.len();
         let pr = self.profile_rows.get_or_init(|| {
-            let hold = super::holdout_mask(n);
-            let cand: Vec<usize> = (0..n.min(PROFILE_WINDOW))
-                .filter(|&i| !self.rest[i] && hold[i] == super::TRAIN)
-                .collect();
-            let step = cand.len().div_ceil(PROFILE_ROWS).max(1);
-            let rows: Vec<usize> = cand.into_iter().step_by(step).collect();
-            let base: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
+            let rows = self.training_rows(n.min(PROFILE_WINDOW), PROFILE_ROWS);
+            let cols: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
                 Vec::new()
             } else {
                 base_columns(self)
@@ -747,9 +732,9 @@ impl Context<'_> {
                     .collect()
             };
             let f = rows.iter().map(|&i| self.rec.f[i]).collect();
-            ProfileRows { rows, base, f }
+            FitRows { rows, cols, f }
         });
-        let (rows, base, f) = (&pr.rows, &pr.base, &pr.f);
+        let (rows, base, f) = (&pr.rows, &pr.cols, &pr.f);
         let z = if rows.len() < 10 || self.base_pred.len() != n {
             COMPLIANCE_ZETAS[4]
         } else {

@@ -493,6 +493,17 @@ pub struct Diagnosis {
     pub fit_condition: f64,
 }
 
+impl Diagnosis {
+    /// The catalogue names among the findings, in order (`unexplained` left out).
+    pub fn catalogue_names(&self) -> Vec<&str> {
+        self.findings
+            .iter()
+            .filter(|f| f.effect != "unexplained")
+            .map(|f| f.effect.as_str())
+            .collect()
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct CrossCheck {
     pub baseline_rel_error: f64,
@@ -1691,12 +1702,7 @@ mod tests {
         // below M (measured 31.6 kg)
         assert!(ctx.base_th[0] < 0.9 * m, "{}", ctx.base_th[0]);
         let d = diagnose(&rec, &Options::default());
-        let names: Vec<&str> = d
-            .findings
-            .iter()
-            .filter(|f| f.effect != "unexplained")
-            .map(|f| f.effect.as_str())
-            .collect();
+        let names = d.catalogue_names();
         let p = |k: &str| {
             d.findings
                 .first()?
