@@ -122,6 +122,7 @@ fn reader_and_pipeline_never_panic() {
             } else {
                 10_000
             },
+            ..Options::default()
         };
         let res = std::panic::catch_unwind(|| {
             let Ok(rec) = parse_csv(&text, cutoff) else {

@@ -152,6 +152,10 @@ pub struct Context<'a> {
     pub lag_rows: std::sync::OnceLock<FitRows>,
     /// `lag_coefs` per delay (bits of τ).
     pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
+    /// Samples from the start the candidates are screened on (`super::SCREEN_WINDOW`, at most
+    /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
+    /// lowest resonance) and the delayed baseline's rows are taken over them.
+    pub window: usize,
 }
 
 /// Rows of a fit on a strided subset of the training samples in motion
@@ -252,7 +256,14 @@ pub fn sgn(v: f64, v_eps: f64) -> f64 {
 }
 
 impl<'a> Context<'a> {
+    /// The context of a record screened over its first `super::screen_window` samples.
     pub fn new(rec: &'a Record) -> Self {
+        Self::windowed(rec, super::screen_window(rec.len()))
+    }
+
+    /// The context of a record screened over its first `window` samples (at least 3, at most
+    /// the record's length).
+    pub fn windowed(rec: &'a Record, window: usize) -> Self {
         let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
         let v_eps = 2e-3 * vmax;
         let xmin = rec.x.iter().cloned().fold(f64::MAX, f64::min);
@@ -287,6 +298,7 @@ impl<'a> Context<'a> {
             profile_rows: Default::default(),
             lag_rows: Default::default(),
             lag_cache: Default::default(),
+            window: window.clamp(3.min(rec.len()), rec.len()),
         };
         if c.x_quantum == f64::MAX {
             c.x_quantum = 0.0;
@@ -321,7 +333,10 @@ impl<'a> Context<'a> {
             .take(4)
             .map(|p| p.wavelength_m)
             .collect();
-        let mut ab: Vec<f64> = c.base_pred.iter().map(|f| f.abs()).collect();
+        // the grids of the scanned levels are those of the samples screened (the screening
+        // window, `super::screen_window`)
+        let w = c.window;
+        let mut ab: Vec<f64> = c.base_pred[..w].iter().map(|f| f.abs()).collect();
         let last = ab.len() - 1;
         // ascending quantiles: each selection only searches above the previous one
         let mut from = 0;
@@ -336,7 +351,7 @@ impl<'a> Context<'a> {
                 v
             })
             .collect();
-        c.speed_levels = speed_levels(&rec.v, &c.rest);
+        c.speed_levels = speed_levels(&rec.v[..w], &c.rest[..w]);
         c
     }
 }
@@ -668,9 +683,8 @@ impl Context<'_> {
                 return *th;
             }
         }
-        let n = self.rec.len();
         let lr = self.lag_rows.get_or_init(|| {
-            let rows = self.training_rows(n, LAG_ROWS);
+            let rows = self.training_rows(self.window, LAG_ROWS);
             let mut cols = vec![vec![1.0; rows.len()]];
             if let Some((_, c, _)) = em_column(self.rec) {
                 cols.push(rows.iter().map(|&i| c[i]).collect());
@@ -722,7 +736,7 @@ impl Context<'_> {
         }
         let n = self.rec.len();
         let pr = self.profile_rows.get_or_init(|| {
-            let rows = self.training_rows(n.min(PROFILE_WINDOW), PROFILE_ROWS);
+            let rows = self.training_rows(self.window.min(PROFILE_WINDOW), PROFILE_ROWS);
             let cols: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
                 Vec::new()
             } else {
@@ -1235,7 +1249,8 @@ pub fn play_device(
 /// not of full rank.
 fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     let r = ctx.rec;
-    let n = r.x.len();
+    // the samples walked (`dev` may end before the record)
+    let n = dev.free.len().min(r.x.len());
     let mut skip = vec![false; n];
     for &(i, _, _) in &dev.impacts {
         for s in skip.iter_mut().skip(i).take(IMPACT_TAPS) {
@@ -1293,7 +1308,27 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
     if n < 3 || ctx.dt <= 0.0 {
         return cols;
     }
-    let dev = play_device(&r.x, &r.v, &r.a, &ctx.sgn, ctx.dt, b, mi, fv, fc);
+    // the device is walked up to the end of the screening window when the column is asked at
+    // screening rows (the whole record when they lie beyond it), over the whole record
+    // otherwise: its coefficients are fitted on the samples walked
+    let end = match rows {
+        Some(rw) => rw.last().map_or(0, |l| l + 1).max(ctx.window).min(n),
+        None => n,
+    };
+    let walk = |mi: f64, fv: f64, fc: f64| {
+        play_device(
+            &r.x[..end],
+            &r.v[..end],
+            &r.a[..end],
+            &ctx.sgn[..end],
+            ctx.dt,
+            b,
+            mi,
+            fv,
+            fc,
+        )
+    };
+    let dev = walk(mi, fv, fc);
     // the device's own coefficients, fitted where it moves with the motion (in contact,
     // outside the impacts' pulses and the samples at rest; the baseline's, fitted on every
     // sample, are biased low by the gap's missing force), then the device walked again with
@@ -1302,7 +1337,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
         Some(c) => c,
         None => (mi, fv, fc),
     };
-    let dev = play_device(&r.x, &r.v, &r.a, &ctx.sgn, ctx.dt, b, mi, fv, fc);
+    let dev = walk(mi, fv, fc);
     let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
@@ -1328,7 +1363,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
     let fs = 1.0 / ctx.dt;
     for &(i, delta, vr) in &dev.impacts {
         for jj in 0..=IMPACT_TAPS {
-            let Some(q) = slot(i + jj).filter(|_| i + jj < n) else {
+            let Some(q) = slot(i + jj).filter(|_| i + jj < end) else {
                 continue;
             };
             // the sample lies (jj + delta) periods after the contact; tap k stands for the
@@ -1587,7 +1622,8 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
             // derivative filter's default cutoff (fs/20): above it the derived acceleration is
             // attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so
             // a mode's force cannot be told from the filter's loss
-            let t = ctx.dt * ctx.rec.len() as f64;
+            // (the samples the candidates are screened on: the screening window)
+            let t = ctx.dt * ctx.window as f64;
             // and to a quarter of the derivative filter's cutoff when the record states it
             // (the resonator's band then lies where the zero-phase Butterworth-2 passes the
             // derived acceleration within 6 %)
