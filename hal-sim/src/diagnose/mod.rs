@@ -280,41 +280,68 @@ pub fn normals(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Norma
     (tr, ho)
 }
 
-/// Training / held-out weights (1/0 and 0/1) of the samples, for branch-free sums.
+/// Training / held-out weights (1/0 and 0/1) of the samples, and the runs of consecutive
+/// training or held-out samples (samples at rest in neither).
 pub struct HoldWeights {
     pub train: Vec<f64>,
     pub hold: Vec<f64>,
+    /// (start, end, held out) of each run of samples of one part.
+    pub runs: Vec<(usize, usize, bool)>,
 }
 
 impl HoldWeights {
     pub fn new(part: &[u8]) -> Self {
+        let mut runs: Vec<(usize, usize, bool)> = Vec::new();
+        for (i, &h) in part.iter().enumerate() {
+            if h != TRAIN && h != HELD_OUT {
+                continue;
+            }
+            let held = h == HELD_OUT;
+            match runs.last_mut() {
+                Some(r) if r.1 == i && r.2 == held => r.1 = i + 1,
+                _ => runs.push((i, i + 1, held)),
+            }
+        }
         HoldWeights {
             train: part.iter().map(|&h| (h == TRAIN) as u8 as f64).collect(),
             hold: part.iter().map(|&h| (h == HELD_OUT) as u8 as f64).collect(),
+            runs,
         }
     }
 }
 
-/// (Σ a·b·wt, Σ a·b·wh) over contiguous slices, four partial sums each (independent
-/// accumulation chains, so the loop runs at arithmetic throughput).
-fn dot2(a: &[f64], b: &[f64], wt: &[f64], wh: &[f64]) -> (f64, f64) {
-    let n = a.len().min(b.len()).min(wt.len()).min(wh.len());
-    let (mut t, mut h) = ([0.0f64; 4], [0.0f64; 4]);
+/// (Σ a·b·w_train, Σ a·b·w_held) over contiguous slices, four partial sums each (independent
+/// accumulation chains, so the loop runs at arithmetic throughput): sample i goes to partial
+/// sum i mod 4 (the last len mod 4 samples to the first), the four summed pairwise. Only the
+/// runs of training and held-out samples are visited, each product added to its part's sums
+/// alone: the weighted sum over every sample adds the same products in the same order plus
+/// zeros, so the result is the same bit for bit (`tests::dot2_runs_match_weighted_sums`).
+fn dot2(a: &[f64], b: &[f64], w: &HoldWeights) -> (f64, f64) {
+    let n = a.len().min(b.len()).min(w.train.len());
+    let mut acc = [[0.0f64; 4]; 2];
     let m = n / 4 * 4;
-    let mut i = 0;
-    while i < m {
-        for l in 0..4 {
-            let p = a[i + l] * b[i + l];
-            t[l] += p * wt[i + l];
-            h[l] += p * wh[i + l];
+    for &(s, e, held) in &w.runs {
+        let e = e.min(n);
+        let acc = &mut acc[held as usize];
+        let lane = |i: usize| if i < m { i % 4 } else { 0 };
+        let mut i = s;
+        while i < e && i % 4 != 0 {
+            acc[lane(i)] += a[i] * b[i];
+            i += 1;
         }
-        i += 4;
+        let body = e.min(m);
+        while i + 4 <= body {
+            for l in 0..4 {
+                acc[l] += a[i + l] * b[i + l];
+            }
+            i += 4;
+        }
+        while i < e {
+            acc[lane(i)] += a[i] * b[i];
+            i += 1;
+        }
     }
-    for j in m..n {
-        let p = a[j] * b[j];
-        t[0] += p * wt[j];
-        h[0] += p * wh[j];
-    }
+    let [t, h] = acc;
     ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
 }
 
@@ -347,13 +374,13 @@ pub fn extend_normals_dense(
     for c in 0..k {
         let row = p + c;
         for (j, bc) in bcols.iter().chain(z[..=c].iter()).enumerate() {
-            let (t, h) = dot2(z[c], bc, &w.train, &w.hold);
+            let (t, h) = dot2(z[c], bc, w);
             out.0.g[row * m + j] = t;
             out.0.g[j * m + row] = t;
             out.1.g[row * m + j] = h;
             out.1.g[j * m + row] = h;
         }
-        let (t, h) = dot2(z[c], f, &w.train, &w.hold);
+        let (t, h) = dot2(z[c], f, w);
         out.0.b[row] = t;
         out.1.b[row] = h;
     }
@@ -362,12 +389,12 @@ pub fn extend_normals_dense(
 
 /// The Gram entries of a candidate's columns already computed against base columns (each
 /// base column's identity, given by the caller, with its training and held-out products),
-/// against each other and against the force. During forward selection the base only grows by
-/// appended columns, so a candidate screened again in a later round needs only the products
-/// with the new base columns (the others are the same sums over the same rows).
+/// against each other and against the force. A candidate screened again on another base (a
+/// later round, or the swap pass's sets without one finding) needs only the products with the
+/// base columns it has not met (the others are the same sums over the same rows).
 #[derive(Debug, Default, Clone)]
 pub struct GramCache {
-    /// Per candidate column: per base column (its (address, length)), the products.
+    /// Per candidate column: per base column met (its identity), the products.
     cross: Vec<Vec<(ColumnId, TrainHold)>>,
     /// Per candidate column c: products with candidate columns 0..=c, then with the force.
     own: Vec<(Vec<TrainHold>, TrainHold)>,
@@ -383,8 +410,8 @@ type TrainHold = (f64, f64);
 
 /// `extend_normals_dense` keeping the products already computed in `gc` (see `GramCache`): the
 /// result is the same, entry by entry (`tests::cached_gram_matches_dense`). Products with a base
-/// column whose identity (`bids`, one per column of `bcols`) differs from the cached one are
-/// recomputed from there on.
+/// column whose identity (`bids`, one per column of `bcols`) is not in the cache are computed
+/// and kept.
 pub fn extend_normals_cached(
     base: &(Normal, Normal),
     bcols: &[&[f64]],
@@ -400,10 +427,8 @@ pub fn extend_normals_cached(
     if gc.own.len() != k {
         gc.own = (0..k)
             .map(|c| {
-                let zz = (0..=c)
-                    .map(|j| dot2(z[c], z[j], &w.train, &w.hold))
-                    .collect();
-                (zz, dot2(z[c], f, &w.train, &w.hold))
+                let zz = (0..=c).map(|j| dot2(z[c], z[j], w)).collect();
+                (zz, dot2(z[c], f, w))
             })
             .collect();
         gc.cross = vec![Vec::new(); k];
@@ -412,17 +437,20 @@ pub fn extend_normals_cached(
     for c in 0..k {
         let row = p + c;
         let cr = &mut gc.cross[c];
-        let same = cr
-            .iter()
-            .zip(bids)
-            .take_while(|(e, id)| e.0 == **id)
-            .count();
-        cr.truncate(same);
-        for (bc, id) in bcols[same..].iter().zip(&bids[same..]) {
-            cr.push((*id, dot2(z[c], bc, &w.train, &w.hold)));
+        let mut prods = Vec::with_capacity(m);
+        for (bc, id) in bcols.iter().zip(bids) {
+            let th = match cr.iter().find(|e| e.0 == *id) {
+                Some(e) => e.1,
+                None => {
+                    let th = dot2(z[c], bc, w);
+                    cr.push((*id, th));
+                    th
+                }
+            };
+            prods.push(th);
         }
         let (zz, zf) = &gc.own[c];
-        for (j, &(t, h)) in cr.iter().map(|e| &e.1).chain(zz.iter()).enumerate() {
+        for (j, &(t, h)) in prods.iter().chain(zz.iter()).enumerate() {
             out.0.g[row * m + j] = t;
             out.0.g[j * m + row] = t;
             out.1.g[row * m + j] = h;
@@ -1653,6 +1681,51 @@ mod tests {
     /// The Gram entries kept across a growing base (`extend_normals_cached`) are those
     /// `extend_normals_dense` computes from scratch, bit for bit, round after round; a base
     /// column replaced by another is recomputed.
+    /// The weighted sums `dot2` stands for, over every sample (four partial sums, the last
+    /// len mod 4 samples to the first).
+    fn dot2_weighted(a: &[f64], b: &[f64], wt: &[f64], wh: &[f64]) -> (f64, f64) {
+        let n = a.len();
+        let (mut t, mut h) = ([0.0f64; 4], [0.0f64; 4]);
+        let m = n / 4 * 4;
+        for i in 0..n {
+            let l = if i < m { i % 4 } else { 0 };
+            let p = a[i] * b[i];
+            t[l] += p * wt[i];
+            h[l] += p * wh[i];
+        }
+        ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
+    }
+
+    #[test]
+    fn dot2_runs_match_weighted_sums() {
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for n in [1usize, 3, 4, 5, 17, 1000, 1003] {
+            let a: Vec<f64> = (0..n).map(|_| rnd() * 1e3).collect();
+            let b: Vec<f64> = (0..n).map(|_| rnd()).collect();
+            // blocks of the holdout mask with samples at rest scattered, runs of any length
+            let mut part = holdout_mask(n);
+            for p in part.iter_mut() {
+                if rnd() > 0.3 {
+                    *p = AT_REST;
+                }
+            }
+            let w = HoldWeights::new(&part);
+            let (t, h) = dot2(&a, &b, &w);
+            let (t0, h0) = dot2_weighted(&a, &b, &w.train, &w.hold);
+            assert_eq!(
+                (t.to_bits(), h.to_bits()),
+                (t0.to_bits(), h0.to_bits()),
+                "n = {n}"
+            );
+        }
+    }
+
     #[test]
     fn cached_gram_matches_dense() {
         let n = 1000;
@@ -1683,6 +1756,20 @@ mod tests {
             }
             base_cols.push(col(0.1 + round as f64));
             ids.push((2, round));
+        }
+        // the swap pass's sets: one column left out of the middle, then the whole set again
+        // (the products met before are reused, whatever their position in the base)
+        for drop in [Some(2), None, Some(1), None] {
+            let keep: Vec<usize> = (0..ids.len()).filter(|&j| Some(j) != drop).collect();
+            let br: Vec<&[f64]> = keep.iter().map(|&j| base_cols[j].as_slice()).collect();
+            let bid: Vec<ColumnId> = keep.iter().map(|&j| ids[j]).collect();
+            let base = normals(&br, &f, &part, 1);
+            let dense = extend_normals_dense(&base, &br, &zr, &f, &w);
+            let cached = extend_normals_cached(&base, &br, &bid, &zr, &f, &w, &mut gc);
+            for (a, b) in [(&dense.0, &cached.0), (&dense.1, &cached.1)] {
+                assert_eq!(a.g, b.g, "without {drop:?}");
+                assert_eq!(a.b, b.b, "without {drop:?}");
+            }
         }
     }
 
