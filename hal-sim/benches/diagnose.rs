@@ -21,12 +21,24 @@ fn main() {
     let rec = parse_csv(&csv, None).expect("parses");
     let t_read = t0.elapsed();
     let t1 = Instant::now();
-    let d = diagnose(&rec, &Options::default());
+    // BENCH_WHOLE_RECORD=1: screened over the whole record instead of the screening window
+    // (the check that the window changes no finding on this record)
+    let opt = match std::env::var("BENCH_WHOLE_RECORD") {
+        Ok(_) => Options {
+            screen_window: n,
+            ..Options::default()
+        },
+        Err(_) => Options::default(),
+    };
+    let d = diagnose(&rec, &opt);
     let t_diag = t1.elapsed();
     let c1 = cpu_s();
     let found: Vec<&str> = d.findings.iter().map(|f| f.effect.as_str()).collect();
     let hidden: Vec<&str> = spec.hidden.iter().map(|(e, _)| e.kind.name()).collect();
     println!("record: {n} samples, hidden {hidden:?}, found {found:?}");
+    for f in d.findings.iter().filter(|f| f.effect != "unexplained") {
+        println!("  {}: {:?}", f.effect, f.parameters);
+    }
     println!(
         "parse + zero-phase derivatives: {:.3} s",
         t_read.as_secs_f64()
