@@ -648,11 +648,10 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             opt.screen_samples
         ));
     }
-    if opt.screen_window < opt.screen_samples {
+    if opt.screen_window < 100 {
         return Err(format!(
-            "option screen_window = {}: allowed range screen_samples ({}) ..= {}",
+            "option screen_window = {}: allowed range 100 ..= {}",
             opt.screen_window,
-            opt.screen_samples,
             usize::MAX
         ));
     }
