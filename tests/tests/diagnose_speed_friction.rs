@@ -142,9 +142,9 @@ fn plant_friction_building_up_with_speed() {
     let m = Fragment::from_toml(&frag(12.0))
         .expect("fragment loads")
         .model;
-    for v in [-0.1, -0.01, -0.002, 0.001, 0.005, 0.01, 0.03, 0.2] {
+    for v in [-0.1f64, -0.01, -0.002, 0.001, 0.005, 0.01, 0.03, 0.2] {
         let f = m.force_series(1e-3, &[0.0, 0.0], &[v, v], &[0.0, 0.0]);
-        let want = (10.0 + 12.0 * (1.0 - (-(v as f64).abs() / 0.01).exp())) * (v as f64).signum();
+        let want = (10.0 + 12.0 * (1.0 - (-v.abs() / 0.01).exp())) * v.signum();
         assert!((f[1] - want).abs() < 1e-9, "v {v}: {} against {want}", f[1]);
     }
     let err = Fragment::from_toml(&frag(-3.0)).expect_err("a negative rise refused");
