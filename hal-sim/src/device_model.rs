@@ -5,10 +5,10 @@
 //! (sgn linear inside ±`sign_band_m_s`) with each effect the diagnosis names, as physics
 //! stepped in time (docs/diagnose.md, "The loop"). Friction effects add to the friction
 //! (direction-dependent viscosity, a Coulomb level varying along the stroke or periodically,
-//! a Stribeck bump, Dahl presliding), `cogging` is a position-periodic force, `compliance` is a
-//! mass hung on a spring-damper, and the force path is then scaled when driven
-//! (`screw_efficiency`, `reflected_inertia`), interrupted across a play (`backlash`), clipped
-//! (`current_limit`) and delayed (`lag`), in that order. Parameter names are the report's.
+//! a Stribeck bump, a level building up with speed, Dahl presliding), `cogging` is a
+//! position-periodic force, `compliance` is a mass hung on a spring-damper, and the force path
+//! is then scaled when driven (`screw_efficiency`, `reflected_inertia`), interrupted across a
+//! play (`backlash`), clipped (`current_limit`) and delayed (`lag`), in that order. Parameter names are the report's.
 //!
 //! This is the simulator's own implementation of each effect, written from its physical
 //! description, not from the diagnosis's regressor columns.
@@ -73,6 +73,12 @@ pub enum ModelEffect {
     Stribeck {
         stribeck_velocity_m_s: f64,
         amplitude_N: f64,
+    },
+    /// Friction building up with speed (velocity strengthening): the Coulomb level rises by
+    /// `friction_rise_N` over the speed `buildup_velocity_m_s`, `ΔF·(1 − exp(−|v|/v_b))·sgn v`.
+    VelocityStrengtheningFriction {
+        buildup_velocity_m_s: f64,
+        friction_rise_N: f64,
     },
     /// The force is multiplied by this ratio while the device is driven (f·v > 0).
     ScrewEfficiency {
@@ -141,6 +147,7 @@ impl ModelEffect {
             ModelEffect::PositionPeriodicFriction { .. } => "position_periodic_friction",
             ModelEffect::Cogging { .. } => "cogging",
             ModelEffect::Stribeck { .. } => "stribeck",
+            ModelEffect::VelocityStrengtheningFriction { .. } => "velocity_strengthening_friction",
             ModelEffect::ScrewEfficiency { .. } => "screw_efficiency",
             ModelEffect::ReflectedInertia { .. } => "reflected_inertia",
             ModelEffect::Lag { .. } => "lag",
@@ -207,6 +214,13 @@ impl ModelEffect {
             } => {
                 range(&k("stribeck_velocity_m_s"), vs, 1e-9, 20.0, "m/s")?;
                 range(&k("amplitude_N"), a, 0.0, F, "N")?;
+            }
+            ModelEffect::VelocityStrengtheningFriction {
+                buildup_velocity_m_s: vb,
+                friction_rise_N: df,
+            } => {
+                range(&k("buildup_velocity_m_s"), vb, 1e-9, 20.0, "m/s")?;
+                range(&k("friction_rise_N"), df, 0.0, F, "N")?;
             }
             ModelEffect::ScrewEfficiency {
                 driven_over_driving_force_ratio: r,
@@ -410,6 +424,10 @@ impl ModelState {
                     stribeck_velocity_m_s: vs,
                     amplitude_N,
                 } => coulomb += amplitude_N * sg * (-(v / vs).powi(2)).exp(),
+                ModelEffect::VelocityStrengtheningFriction {
+                    buildup_velocity_m_s: vb,
+                    friction_rise_N,
+                } => coulomb += friction_rise_N * sg * (1.0 - (-v.abs() / vb).exp()),
                 ModelEffect::PreslidingHysteresis {
                     characteristic_displacement_m: xc,
                     friction_N,

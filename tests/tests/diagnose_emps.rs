@@ -55,9 +55,8 @@ fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
     );
     // The published coefficients are those of the published model, the baseline and the
     // direction-dependent friction alone: compared on the diagnosis limited to that model's
-    // size. (The final model's viscous coefficients move with its other terms: on this
-    // trajectory, which slows down towards the ends of the stroke, `position_dependent_friction`'s
-    // x̃²·sgn v correlates with |v| at −0.72.)
+    // size. (The final model's viscous coefficients move with its other terms: the friction
+    // building up with speed takes part of the viscous force.)
     let d1 = diagnose(
         &est,
         &Options {
@@ -99,6 +98,50 @@ fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
         d.final_holdout_rel_error < 0.0408,
         "{}",
         d.final_holdout_rel_error
+    );
+    // The target, held-out error on the raw force ≤ 2.9 % with only physically
+    // consistent findings: measured 2.24 %, asserted at the target (without
+    // `velocity_strengthening_friction` the diagnosis reaches 2.92 % and fails it).
+    assert!(
+        d.final_holdout_rel_error <= 0.029,
+        "{}",
+        d.final_holdout_rel_error
+    );
+    // The friction's speed dependence is named as such, not as a position dependence: this
+    // trajectory slows down towards the ends of the stroke (x̃²·sgn v correlates with |v| at
+    // −0.72), and without the speed effect `position_dependent_friction` and a 114 mm
+    // `position_periodic_friction` took it. The level builds up with speed (rise > 0, on a
+    // low-speed Coulomb level ≥ 0).
+    let names = d.catalogue_names();
+    assert!(
+        !names.iter().any(|n| matches!(
+            *n,
+            "position_dependent_friction" | "position_periodic_friction"
+        )),
+        "a position effect named on the speed dependence: {names:?}"
+    );
+    let vs = d
+        .findings
+        .iter()
+        .find(|f| f.effect == "velocity_strengthening_friction")
+        .unwrap_or_else(|| panic!("no velocity_strengthening_friction: {names:?}"));
+    let q = |k: &str| vs.parameters.iter().find(|(n, _)| n == k).unwrap().1;
+    println!(
+        "velocity strengthening: rise {:.2} N over {:.2} mm/s",
+        q("friction_rise_N"),
+        1e3 * q("buildup_velocity_m_s")
+    );
+    assert!(q("friction_rise_N") > 0.0);
+    // the fragment (`--model`) carries it for the simulator's plant
+    let toml = hal_sim::diagnose::report::model_toml(&est, &d);
+    let m = hal_sim::device_model::Fragment::from_toml(&toml)
+        .expect("the EMPS fragment loads")
+        .model;
+    assert!(
+        m.effects
+            .iter()
+            .any(|e| e.name() == "velocity_strengthening_friction"),
+        "{toml}"
     );
     let c = d.cross.as_ref().unwrap();
     println!(
