@@ -1488,7 +1488,11 @@ pub fn catalogue(_ctx: &Context) -> Vec<Effect> {
 
 /// Highest frequency where the Welch spectrum of the position increments (at most 64
 /// segments) stands 100× (in power) above the median of its upper half band, which is the
-/// sensor noise floor wherever the motion is band-limited well below fs/4.
+/// sensor noise floor wherever the motion is band-limited well below fs/4, plus one bin width:
+/// the edge is known to the bin width only (a Hann-windowed line between two bins shows in
+/// both, its main lobe spans ±2 bins), so the motion still drives a mode up to a bin above
+/// the last bin that shows it (rig seed 300006: a 2.643 Hz mode, the last bin 2.686 Hz, the
+/// fit's optimum 2.718 Hz was above the scan's top and not bracketed).
 pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
     let dx: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
     if dx.len() < 64 {
@@ -1498,10 +1502,11 @@ pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
     let mut up: Vec<f64> = sp[sp.len() / 2..].iter().map(|p| p.1 * p.1).collect();
     let k = up.len() / 2;
     let floor = *up.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let bin = sp.get(1).map_or(0.0, |p| p.0);
     sp.iter()
         .rev()
         .find(|p| p.1 * p.1 > 100.0 * floor)
-        .map_or(0.0, |p| p.0)
+        .map_or(0.0, |p| p.0 + bin)
 }
 
 /// Quantiles of |v| (samples in motion) scanned as the speed above which a drive acting as a
