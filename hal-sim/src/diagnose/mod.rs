@@ -1837,6 +1837,94 @@ mod tests {
         assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
     }
 
+    /// A point-to-point record in closed form: minimum-jerk moves of ±`amp` over 0.5 s, each
+    /// followed by a 0.6 s dwell, position quantised to 1 µm, exact v and a; the force is the
+    /// device's at t − τ, M·a + Fv·v + Fc·sign(v) while it slides and, while it rests, a static
+    /// friction of 0.6·Fc in the direction of its last move (anywhere within its breakaway
+    /// level: what a stopped device's bristles hold), white noise 0.3 N.
+    fn delayed_moves(m: f64, fv: f64, fc: f64, tau: f64) -> Record {
+        let (fs, n, amp, tm, td) = (1000.0, 12_000, 0.04, 0.5, 0.6);
+        // position, velocity, acceleration and the direction of the last move at time t
+        let motion = |t: f64| {
+            let t = t.max(0.0);
+            let k = (t / (tm + td)).floor();
+            let dir = if k as i64 % 2 == 0 { 1.0 } else { -1.0 };
+            let x0 = if k as i64 % 2 == 0 { 0.0 } else { amp };
+            let s = ((t - k * (tm + td)) / tm).min(1.0);
+            let p = 10.0 * s.powi(3) - 15.0 * s.powi(4) + 6.0 * s.powi(5);
+            let dp = (30.0 * s * s - 60.0 * s.powi(3) + 30.0 * s.powi(4)) / tm;
+            let ddp = (60.0 * s - 180.0 * s * s + 120.0 * s.powi(3)) / (tm * tm);
+            let moving = s < 1.0 && s > 0.0;
+            (x0 + dir * amp * p, dir * amp * dp, dir * amp * ddp, dir, moving)
+        };
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut noise = || {
+            (0..12)
+                .map(|_| {
+                    seed ^= seed >> 12;
+                    seed ^= seed << 25;
+                    seed ^= seed >> 27;
+                    (seed.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 / fs;
+            let (x, v, a, _, _) = motion(t);
+            let (_, vd, ad, dir, moving) = motion(t - tau);
+            let dev = if moving {
+                m * ad + fv * vd + fc * vd.signum()
+            } else {
+                0.6 * fc * dir
+            };
+            rec.t.push(t);
+            rec.x.push((x * 1e6).round() * 1e-6);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f.push(dev + 0.3 * noise());
+        }
+        rec
+    }
+
+    /// A force channel delayed by τ = 25 ms on point-to-point moves (`delayed_moves`): during
+    /// the first τ of each move the force is still the dwell's static friction. The samples
+    /// whose motion τ earlier is at rest (`Context::lag_rest_rows`) are left out of the lag's
+    /// fits and of the baseline it is compared with, and `lag` is named alone with its delay
+    /// and unit gain. With the rule removed (no row left out) the lag's gain on the held-out
+    /// samples falls below the margin and nothing is named.
+    #[test]
+    fn lag_leaves_out_the_delayed_rest() {
+        let (m, fv, fc, tau) = (40.0, 300.0, 20.0, 0.025);
+        let rec = delayed_moves(m, fv, fc, tau);
+        let ctx = effects::Context::new(&rec);
+        let rows = ctx.lag_rest_rows(tau, None);
+        let d = diagnose(&rec, &Options::default());
+        let names = d.catalogue_names();
+        let p = |k: &str| {
+            d.findings
+                .first()?
+                .parameters
+                .iter()
+                .find(|p| p.0 == k)
+                .map(|p| p.1)
+        };
+        let (lag, gain) = (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0));
+        println!(
+            "{} samples left out at τ; {names:?}: lag {lag} s ({:+.3} %), gain {gain}; held-out {:.3} % -> {:.3} %",
+            rows.len(),
+            100.0 * (lag / tau - 1.0),
+            100.0 * d.baseline_holdout_rel_error,
+            100.0 * d.final_holdout_rel_error
+        );
+        // 10 move starts, each ≈ τ·fs samples past its at-rest window
+        assert!(rows.len() > 5 * 25, "{}", rows.len());
+        assert_eq!(names, ["lag"], "{:?}", d.verdicts);
+        assert!((lag / tau - 1.0).abs() < 1.0, "lag {lag}");
+        assert!((gain - 1.0).abs() < 1.0, "gain {gain}");
+    }
+
     /// The delayed baseline must be a device's: a force channel delayed on a device whose
     /// viscous coefficient is negative (an active drive pushing with the motion, −300 N·s/m)
     /// has no delayed device's coefficients at the true delay and is not named `lag` (with the
