@@ -734,7 +734,12 @@ impl Context<'_> {
                 .iter()
                 .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
                 .collect();
-            all.push(lr.rows.iter().map(|&i| self.sliding_delayed(i, k)).collect());
+            all.push(
+                lr.rows
+                    .iter()
+                    .map(|&i| self.sliding_delayed(i, k))
+                    .collect(),
+            );
             all.extend(lr.cols.iter().cloned());
             let refs: Vec<&[f64]> = all.iter().map(|c| c.as_slice()).collect();
             // the delayed device moves on these rows only where its motion at t − τ does

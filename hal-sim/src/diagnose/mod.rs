@@ -1837,8 +1837,10 @@ mod tests {
         assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
     }
 
-    /// A point-to-point record in closed form: minimum-jerk moves of ±`amp` over 0.5 s, each
-    /// followed by a 0.6 s dwell, position quantised to 1 µm, exact v and a; the force is the
+    /// A point-to-point record in closed form: moves of ±`amp` over 0.5 s at constant
+    /// acceleration then deceleration (a triangular speed, which passes through the Coulomb
+    /// sign's ±0.2 % band within a sample), each followed by a 0.6 s dwell, position quantised
+    /// to 1 µm, exact v and a; the force is the
     /// device's at t − τ, M·a + Fv·v + Fc·sign(v) while it slides and, while it rests, a static
     /// friction of 0.6·Fc in the direction of its last move (anywhere within its breakaway
     /// level: what a stopped device's bristles hold), white noise 0.3 N.
@@ -1851,11 +1853,22 @@ mod tests {
             let dir = if k as i64 % 2 == 0 { 1.0 } else { -1.0 };
             let x0 = if k as i64 % 2 == 0 { 0.0 } else { amp };
             let s = ((t - k * (tm + td)) / tm).min(1.0);
-            let p = 10.0 * s.powi(3) - 15.0 * s.powi(4) + 6.0 * s.powi(5);
-            let dp = (30.0 * s * s - 60.0 * s.powi(3) + 30.0 * s.powi(4)) / tm;
-            let ddp = (60.0 * s - 180.0 * s * s + 120.0 * s.powi(3)) / (tm * tm);
+            let (p, dp, ddp) = if s >= 1.0 {
+                (1.0, 0.0, 0.0)
+            } else if s < 0.5 {
+                (2.0 * s * s, 4.0 * s / tm, 4.0 / (tm * tm))
+            } else {
+                let r = 1.0 - s;
+                (1.0 - 2.0 * r * r, 4.0 * r / tm, -4.0 / (tm * tm))
+            };
             let moving = s < 1.0 && s > 0.0;
-            (x0 + dir * amp * p, dir * amp * dp, dir * amp * ddp, dir, moving)
+            (
+                x0 + dir * amp * p,
+                dir * amp * dp,
+                dir * amp * ddp,
+                dir,
+                moving,
+            )
         };
         let mut seed = 0x2545_F491_4F6C_DD1Du64;
         let mut noise = || {
@@ -1918,11 +1931,13 @@ mod tests {
             100.0 * d.baseline_holdout_rel_error,
             100.0 * d.final_holdout_rel_error
         );
-        // 10 move starts, each ≈ τ·fs samples past its at-rest window
+        // measured: 275 samples (11 move starts, 25 each), lag +0.039 %, gain −0.52 %;
+        // asserted: more than half of them, lag within 0.12 % and gain within 1.6 % (3× the
+        // measured deviations)
         assert!(rows.len() > 5 * 25, "{}", rows.len());
         assert_eq!(names, ["lag"], "{:?}", d.verdicts);
-        assert!((lag / tau - 1.0).abs() < 1.0, "lag {lag}");
-        assert!((gain - 1.0).abs() < 1.0, "gain {gain}");
+        assert!((lag / tau - 1.0).abs() < 1.2e-3, "lag {lag}");
+        assert!((gain - 1.0).abs() < 1.6e-2, "gain {gain}");
     }
 
     /// The delayed baseline must be a device's: a force channel delayed on a device whose
