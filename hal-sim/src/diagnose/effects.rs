@@ -655,23 +655,6 @@ impl Context<'_> {
         self.rest[j] || self.rest[j1]
     }
 
-    /// The delayed device's Coulomb sign `k` samples before sample `i`: the direction of its
-    /// sliding, sign v(t − τ), exact. Where its motion at t − τ is at rest the sample is left
-    /// out of the lag's fits (`lag_rest_rows`); everywhere else the delayed device slides, so
-    /// its friction is the full Coulomb level in the direction of motion (the linear band of
-    /// `sgn` is for the derivative noise at rest, which these samples are not). The lag's
-    /// column takes it at t − τ and at t (k = 0), so the column is the delay alone: at τ → 0
-    /// it vanishes, and it carries no change of the sign's shape (with the band at t and the
-    /// exact sign at t − τ, a lag of one sample was named on a Stribeck record, seed 400003).
-    pub fn sliding_delayed(&self, i: usize, k: f64) -> f64 {
-        let v = delayed(&self.rec.v, i, k);
-        if v == 0.0 {
-            0.0
-        } else {
-            v.signum()
-        }
-    }
-
     /// The samples in motion now whose motion `tau` seconds earlier is at rest: indices into
     /// `rows` (into the record when None). Under a force channel delayed by τ the force at t is
     /// the device's at t − τ, so there it is the force of a device at rest (static friction,
@@ -730,16 +713,10 @@ impl Context<'_> {
             None
         } else {
             let r = self.rec;
-            let mut all: Vec<Vec<f64>> = [&r.a, &r.v]
+            let mut all: Vec<Vec<f64>> = [&r.a, &r.v, &self.sgn]
                 .iter()
                 .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
                 .collect();
-            all.push(
-                lr.rows
-                    .iter()
-                    .map(|&i| self.sliding_delayed(i, k))
-                    .collect(),
-            );
             all.extend(lr.cols.iter().cloned());
             let refs: Vec<&[f64]> = all.iter().map(|c| c.as_slice()).collect();
             // the delayed device moves on these rows only where its motion at t − τ does
@@ -986,13 +963,13 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
                 None => vec![0.0; n],
                 Some(th) => {
                     let k = e.param / ctx.dt;
-                    let (ra, rv) = (&ctx.rec.a, &ctx.rec.v);
+                    let (ra, rv, rs) = (&ctx.rec.a, &ctx.rec.v, &ctx.sgn);
                     let at = |j: usize| s.rows.map_or(j, |r| r[j]);
                     map(&|j| {
                         let i = at(j);
                         th[0] * (delayed(ra, i, k) - ra[i])
                             + th[1] * (delayed(rv, i, k) - rv[i])
-                            + th[2] * (ctx.sliding_delayed(i, k) - ctx.sliding_delayed(i, 0.0))
+                            + th[2] * (delayed(rs, i, k) - rs[i])
                     })
                 }
             };
