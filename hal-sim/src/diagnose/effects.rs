@@ -666,6 +666,36 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
 }
 
 impl Context<'_> {
+    /// True when the motion `k` samples before sample `i` (fractional: either sample around
+    /// that time) is at rest (`at_rest`), or lies before the record.
+    pub fn rest_delayed(&self, i: usize, k: f64) -> bool {
+        let t = i as f64 - k;
+        if t < 0.0 || !t.is_finite() {
+            return true;
+        }
+        let j = (t.floor() as usize).min(self.rest.len().saturating_sub(1));
+        let j1 = (t.ceil() as usize).min(self.rest.len().saturating_sub(1));
+        self.rest[j] || self.rest[j1]
+    }
+
+    /// The samples in motion now whose motion `tau` seconds earlier is at rest: indices into
+    /// `rows` (into the record when None). Under a force channel delayed by τ the force at t is
+    /// the device's at t − τ, so there it is the force of a device at rest (static friction,
+    /// anywhere within its breakaway level, no Coulomb sign): the delayed model, and the model
+    /// it is compared against, leave these samples out as `at_rest` leaves out the samples
+    /// at rest now.
+    pub fn lag_rest_rows(&self, tau: f64, rows: Option<&[usize]>) -> Vec<usize> {
+        let k = tau / self.dt;
+        let at = |j: usize| rows.map_or(j, |r| r[j]);
+        let n = rows.map_or(self.rest.len(), |r| r.len());
+        (0..n)
+            .filter(|&j| {
+                let i = at(j);
+                !self.rest[i] && self.rest_delayed(i, k)
+            })
+            .collect()
+    }
+
     /// Training samples in motion among the first `window` samples, strided to at most `max`
     /// (the rows the delayed baseline of `lag` and the damping-ratio profile are fitted on).
     fn training_rows(&self, window: usize, max: usize) -> Vec<usize> {
@@ -711,10 +741,22 @@ impl Context<'_> {
                 .collect();
             all.extend(lr.cols.iter().cloned());
             let refs: Vec<&[f64]> = all.iter().map(|c| c.as_slice()).collect();
-            let train = vec![super::TRAIN; lr.f.len()];
-            let th = super::normals(&refs, &lr.f, &train, 1).0.solve();
+            // the delayed device moves on these rows only where its motion at t − τ does
+            let train: Vec<u8> = lr
+                .rows
+                .iter()
+                .map(|&i| {
+                    if self.rest_delayed(i, k) {
+                        super::AT_REST
+                    } else {
+                        super::TRAIN
+                    }
+                })
+                .collect();
+            let nt = super::normals(&refs, &lr.f, &train, 1).0;
+            let th = nt.solve();
             let c = [th[0], th[1], th[2]];
-            (c.iter().all(|v| v.is_finite() && *v >= 0.0) && c[0] > 0.0).then_some(c)
+            (nt.n >= 10 && c.iter().all(|v| v.is_finite() && *v >= 0.0) && c[0] > 0.0).then_some(c)
         };
         if let Ok(mut c) = self.lag_cache.lock() {
             c.insert(tau.to_bits(), th);
