@@ -716,8 +716,11 @@ impl Controller {
     /// The last period's electrical power out of the machine, `−3/2·(v_d·i_d + v_q·i_q)`
     /// ([`Telemetry::p_elec`]), alone: the period's energy sum (`crate::period`) reads it
     /// every period without building the whole [`Telemetry`] (its currents, bus voltage,
-    /// speed and position conversions: ≈ 180 host instructions a period).
-    #[inline]
+    /// speed and position conversions: ≈ 180 host instructions a period). Inline on the
+    /// host (the simulator's loop); one copy on the board, which [`Controller::telemetry`]
+    /// shares (inlined into the interrupt too it cost 108 bytes of flash).
+    #[cfg_attr(target_os = "none", inline(never))]
+    #[cfg_attr(not(target_os = "none"), inline)]
     pub fn p_elec(&self) -> Q {
         let (v, i) = (self.rec.v_dq, self.rec.i_dq);
         let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
