@@ -713,11 +713,24 @@ impl Controller {
         }
     }
 
+    /// The last period's electrical power out of the machine, `−3/2·(v_d·i_d + v_q·i_q)`
+    /// ([`Telemetry::p_elec`]), alone: the period's energy sum (`crate::period`) reads it
+    /// every period without building the whole [`Telemetry`] (its currents, bus voltage,
+    /// speed and position conversions: ≈ 180 host instructions a period). Inline on the
+    /// host (the simulator's loop); one copy on the board, which [`Controller::telemetry`]
+    /// shares (inlined into the interrupt too it cost 108 bytes of flash).
+    #[cfg_attr(target_os = "none", inline(never))]
+    #[cfg_attr(not(target_os = "none"), inline)]
+    pub fn p_elec(&self) -> Q {
+        let (v, i) = (self.rec.v_dq, self.rec.i_dq);
+        let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
+        p.saturating_add(p / 2).saturating_neg()
+    }
+
     /// Telemetry of the last period (derived here from what the step stored).
     pub fn telemetry(&self) -> Telemetry {
         let (g, r) = (&self.g, &self.rec);
         let (v, i) = (r.v_dq, r.i_dq);
-        let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
         Telemetry {
             i_abc: r.sample.i_abc.map(|c| amps_of_code(g, c)),
             i_dq: i,
@@ -727,7 +740,7 @@ impl Controller {
             omega_m: self.enc.omega_m(&g.enc),
             x: self.enc.x(&g.enc),
             theta_e: r.theta_e,
-            p_elec: p.saturating_add(p / 2).saturating_neg(),
+            p_elec: self.p_elec(),
             duties: r.duties,
             v_saturated: r.v_saturated,
             brake: self.brake,

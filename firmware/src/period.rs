@@ -158,9 +158,7 @@ impl Period {
     #[inline(always)]
     pub fn step(&mut self, ctl: &mut Controller, s: &RawSample) -> Actuation {
         let a = ctl.step_outputs(s);
-        self.energy = self
-            .energy
-            .saturating_add(ctl.telemetry().p_elec.to_bits() as i64);
+        self.energy = self.energy.saturating_add(ctl.p_elec().to_bits() as i64);
         a
     }
 
@@ -191,11 +189,17 @@ impl Period {
     /// the simulator after [`Period::finish`]. A configuration is installed with fixed-size
     /// copies and the slow terms' refresh ([`Controller::install`], the same work whatever
     /// changed: 1,217 instructions as the board builds it, ≈ 9 µs, `docs/m4check.md`).
-    #[inline(never)]
+    /// The empty mailbox's check is inline (the simulator calls this every period), the
+    /// changes out of line.
+    #[inline(always)]
     pub fn apply<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
-        if mail.is_empty() {
-            return;
+        if !mail.is_empty() {
+            self.apply_changes(ctl, mail, hw);
         }
+    }
+
+    #[inline(never)]
+    fn apply_changes<H: PeriodHw>(&mut self, ctl: &mut Controller, mail: &mut Pending, hw: &mut H) {
         if let Slot::Full(f) = mail.clear {
             // The console's copy checked the cause is gone; if it came back since, the
             // controller refuses and the fault stays latched (the console shows it).
