@@ -190,6 +190,12 @@ pub const PROFILE_ROWS: usize = 4000;
 /// admits on a 20 s record; records up to this length are profiled over all their samples).
 pub const PROFILE_WINDOW: usize = 200_000;
 
+/// The median of `v` (the upper one of an even count), reordering `v`. `v` is not empty.
+pub fn median(v: &mut [f64]) -> f64 {
+    let k = v.len() / 2;
+    *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+}
+
 /// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
 /// of the default derivative filter (fs/20), the span over which the derived velocity averages.
 pub const REST_HALF_WINDOW: usize = 20;
@@ -216,8 +222,7 @@ pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
         .windows(3)
         .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
         .collect();
-    let k = d2.len() / 2;
-    let med = *d2.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let med = median(&mut d2);
     let sigma = med / 0.6745 / 6f64.sqrt();
     let thr = q + 3.0 * sigma;
     // the slowest speed the sensor resolves: thr over the window
@@ -314,8 +319,7 @@ impl<'a> Context<'a> {
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;
         let mut steps: Vec<f64> = rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        let k = steps.len() / 2;
-        let med = *steps.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+        let med = median(&mut steps);
         c.lambda_min = (stroke / 400.0).max(8.0 * med).min(stroke / 4.0);
         // baseline fit on the whole record gives the force proxy for the pred-based effects
         let cols = base_columns(&c);
@@ -1221,8 +1225,7 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
     if abs.len() < 100 {
         return None;
     }
-    let k = abs.len() / 2;
-    let sigma = *abs.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 / 0.6745;
+    let sigma = median(&mut abs) / 0.6745;
     let (mut dir, mut x_rev, mut armed) = (0.0f64, 0.0, false);
     let mut travels = Vec::new();
     for i in 0..n {
@@ -1244,8 +1247,7 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
     if travels.len() < 3 {
         return None;
     }
-    let k = travels.len() / 2;
-    let t = *travels.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let t = median(&mut travels);
     let near = travels
         .iter()
         .filter(|&&u| (u / t - 1.0).abs() <= 0.2)
@@ -1594,8 +1596,7 @@ pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
     }
     let sp = super::report::welch_spread(&dx, dt, 64);
     let mut up: Vec<f64> = sp[sp.len() / 2..].iter().map(|p| p.1 * p.1).collect();
-    let k = up.len() / 2;
-    let floor = *up.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let floor = median(&mut up);
     let bin = sp.get(1).map_or(0.0, |p| p.0);
     sp.iter()
         .rev()

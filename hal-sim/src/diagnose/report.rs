@@ -148,8 +148,7 @@ pub fn spectral_peaks(r: &[f64], dt: f64) -> Vec<Peak> {
         return vec![];
     }
     let mut pw: Vec<f64> = sp.iter().skip(1).map(|s| s.1 * s.1).collect();
-    let k = pw.len() / 2;
-    let med = *pw.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let med = super::effects::median(&mut pw);
     let rms = (r.iter().map(|x| x * x).sum::<f64>() / r.len() as f64).sqrt();
     let mut peaks = Vec::new();
     for i in 2..sp.len() - 1 {
@@ -374,8 +373,7 @@ pub fn position_spectrum(rec: &Record, r: &[f64]) -> PositionSpectrum {
     if steps.is_empty() {
         return out;
     }
-    let k = steps.len() / 2;
-    let med = *steps.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1;
+    let med = super::effects::median(&mut steps);
     let span = x1 - x0;
     let fit = (span / (2.0 * med)).max(1.0);
     let mut nb = 16usize;
@@ -487,8 +485,7 @@ fn spatial_peaks(
         return vec![];
     }
     let mut sorted: Vec<f64> = pw[1..].to_vec();
-    let m = sorted.len() / 2;
-    let med = *sorted.select_nth_unstable_by(m, |a, b| a.total_cmp(b)).1;
+    let med = super::effects::median(&mut sorted);
     let mut peaks = Vec::new();
     for k in 3..top {
         let p = pw[k];
