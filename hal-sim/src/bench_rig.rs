@@ -17,12 +17,15 @@
 //! most 40 draws). When all 40 fail, the trajectory's own parameters are redrawn within its
 //! family (a new draw of the motion's random stream: another period and sharpness of a
 //! rounded triangle, other sines, moves or excitation) and the effect's 40 draws are made on
-//! that motion, at most 8 motions in all; only then is the record generated with the last
-//! draw and flagged `observable = false`. The effect's size ranges are physical and fixed; an
-//! effect the motion cannot show (a Stribeck band crossed only at the reversals of a
-//! triangle that cruises at one speed) is a property of the test, so the test is what
-//! changes. A record observable on its first motion is unchanged by the rule. A recorded
-//! trajectory has no parameters to redraw.
+//! that motion, at most 8 motions in all. When its family cannot show the effect on any of
+//! them (a Stribeck band crossed only at the reversals of a triangle that cruises at one
+//! speed; a recorded trajectory has no parameters to redraw), the record is drawn in the next
+//! parametric family (multisine → rounded triangle → point-to-point → narrowband → multisine),
+//! 8 motions each, and says so (`requested` keeps the family it was asked for); only when no
+//! family shows it is the record generated with its own family's last draw and flagged
+//! `observable = false`. The effect's size ranges are physical and fixed; an effect the motion
+//! cannot show is a property of the test, so the test is what changes. A record observable on
+//! its first motion is unchanged by the rule.
 
 use std::f64::consts::TAU;
 use std::fmt::Write as _;
@@ -207,6 +210,9 @@ pub struct RigSpec {
     pub base_x_char_m: f64,
     /// Draw of the trajectory's own parameters (0: the first; see the observability rule).
     pub motion_draw: u64,
+    /// The trajectory family the record was asked for (`trajectory` is another one when that
+    /// family could not show the hidden effect; see the observability rule).
+    pub requested: &'static str,
 }
 
 /// Imposed motion at the substep rate: (x, v, a), drawn from the record's motion stream.
@@ -505,7 +511,7 @@ impl RigSpec {
             seed,
             fs: 1000.0,
             samples,
-            trajectory,
+            trajectory: trajectory.clone(),
             amplitude_m: rng.uni(0.02, 0.06),
             mass_kg: rng.uni(20.0, 100.0),
             drive_damping: rng.uni(200.0, 900.0),
@@ -520,6 +526,7 @@ impl RigSpec {
             effect_rms_n: 0.0,
             base_x_char_m: 2e-6,
             motion_draw: 0,
+            requested: trajectory.name(),
         }
         .with_base_friction()
         .with_hidden(kind, seed)
@@ -559,6 +566,38 @@ impl RigSpec {
             return self;
         }
         let mut rng = RigRng::new(seed ^ 0xA5A5_5A5A_1234_8765);
+        if self.observable_on_family(kind, &mut rng) {
+            return self;
+        }
+        // the family cannot show the effect: the next parametric families, in turn
+        const FAMILIES: [Trajectory; 4] = [
+            Trajectory::Multisine,
+            Trajectory::RoundedTriangle,
+            Trajectory::PointToPoint,
+            Trajectory::Narrowband,
+        ];
+        let own = FAMILIES.iter().position(|f| *f == self.trajectory);
+        let start = own.map_or(0, |k| k + 1);
+        let mut other = self.clone();
+        for k in 0..FAMILIES.len() {
+            let fam = &FAMILIES[(start + k) % FAMILIES.len()];
+            if Some((start + k) % FAMILIES.len()) == own {
+                continue;
+            }
+            other.trajectory = fam.clone();
+            other.motion_draw = 0;
+            other = other.with_base_friction();
+            if other.observable_on_family(kind, &mut rng) {
+                return other;
+            }
+        }
+        self
+    }
+
+    /// The observability rule on the record's own family: up to 8 motions (1 for a recorded
+    /// one), 40 draws of the effect on each; true when a draw is observable (the record then
+    /// holds it), false with the last draw held.
+    fn observable_on_family(&mut self, kind: &str, rng: &mut RigRng) -> bool {
         let motions = if matches!(self.trajectory, Trajectory::Recorded(_)) {
             1
         } else {
@@ -569,26 +608,26 @@ impl RigSpec {
                 // the effect is not observable on this motion: the next draw of the
                 // trajectory's parameters (the device's own presliding re-sized for it)
                 self.motion_draw = m;
-                self = self.with_base_friction();
+                *self = self.clone().with_base_friction();
             }
-            let (x, v, a) = motion_of(&self);
-            let f0 = device_force(&self, Hidden::None, &x, &v, &a);
+            let (x, v, a) = motion_of(self);
+            let f0 = device_force(self, Hidden::None, &x, &v, &a);
             let vmax = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
             let f0r = rms(&f0);
             for _ in 0..40 {
-                let hd = draw_hidden(kind, &self, vmax, &mut rng);
-                let f1 = device_force(&self, hd, &x, &v, &a);
+                let hd = draw_hidden(kind, self, vmax, rng);
+                let f1 = device_force(self, hd, &x, &v, &a);
                 let d: Vec<f64> = f1.iter().zip(&f0).map(|(a, b)| a - b).collect();
                 let r = rms(&d);
                 self.hidden = hd;
                 self.effect_rms_n = r;
                 self.observable = r >= 5.0 * self.noise_n && r >= 0.03 * f0r;
                 if self.observable {
-                    return self;
+                    return true;
                 }
             }
         }
-        self
+        false
     }
 
     /// The record as CSV text in the diagnosis schema (t_s, x_m, f_N; lead as metadata).
@@ -599,10 +638,11 @@ impl RigSpec {
         let mut out = String::with_capacity(self.samples * 40);
         let _ = writeln!(
             out,
-            "# bench rig record, seed {}, trajectory {} (draw {}), hidden {:?}",
+            "# bench rig record, seed {}, trajectory {} (draw {}; asked for {}), hidden {:?}",
             self.seed,
             self.trajectory.name(),
             self.motion_draw,
+            self.requested,
             self.hidden
         );
         let _ = writeln!(
