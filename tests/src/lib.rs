@@ -34,3 +34,19 @@ impl Rng {
         }
     }
 }
+
+/// The imposed two-sine motion of the closed-form diagnosis records (0.4 Hz ±40 mm and
+/// 1.1 Hz ±15 mm, phases 0 and 1 rad; peak speed ≈ 0.2 m/s): position, velocity and
+/// acceleration at `t` seconds, in closed form.
+pub fn two_sine(t: f64) -> (f64, f64, f64) {
+    use std::f64::consts::TAU;
+    let (mut x, mut v, mut a) = (0.0, 0.0, 0.0);
+    for (amp, f, ph) in [(0.040, 0.4, 0.0), (0.015, 1.1, 1.0)] {
+        let w = TAU * f;
+        let (s, c) = (w * t + ph).sin_cos();
+        x += amp * s;
+        v += amp * w * c;
+        a -= amp * w * w * s;
+    }
+    (x, v, a)
+}

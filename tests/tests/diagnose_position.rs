@@ -229,19 +229,12 @@ fn motion_ripple_record(seed: u64, delta_m: f64, lambda: f64, cog_n: f64) -> Str
     use std::fmt::Write;
     let (m, fv, fc) = (50.0, 300.0, 25.0);
     let k = TAU / lambda;
-    // two sines: 0.4 Hz ±40 mm and 1.1 Hz ±15 mm (peak speed 0.2 m/s)
-    let comps = [(0.040, 0.4, 0.0), (0.015, 1.1, 1.0)];
     let mut rng = Rng::new(seed);
     let mut out = String::from("# motion with a position-locked ripple\nt_s,x_m,f_N\n");
     for i in 0..SAMPLES {
         let t = i as f64 * 1e-3;
-        let (mut s, mut sd, mut sdd) = (0.0, 0.0, 0.0);
-        for &(a, f, ph) in &comps {
-            let w = TAU * f;
-            s += a * (w * t + ph).sin();
-            sd += a * w * (w * t + ph).cos();
-            sdd -= a * w * w * (w * t + ph).sin();
-        }
+        // two sines: 0.4 Hz ±40 mm and 1.1 Hz ±15 mm (peak speed 0.2 m/s)
+        let (s, sd, sdd) = regen_tests::two_sine(t);
         let (sn, cs) = (k * s).sin_cos();
         let x = s + delta_m * sn;
         let v = sd * (1.0 + delta_m * k * cs);

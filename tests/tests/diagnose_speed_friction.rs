@@ -15,21 +15,13 @@ const SAMPLES: usize = 12_000;
 /// (a Stribeck bump), 0.3 N force noise. The force is computed from the true motion; the
 /// diagnosis derives v and a from the position.
 fn record(seed: u64, rise_n: f64, vb: f64, bump_n: f64, vs: f64) -> String {
-    use std::f64::consts::TAU;
     use std::fmt::Write;
     let (m, fv, fc) = (50.0, 300.0, 25.0);
-    let comps = [(0.040, 0.4, 0.0), (0.015, 1.1, 1.0)];
     let mut rng = Rng::new(seed);
     let mut out = String::from("# two-sine motion, friction building up with speed\nt_s,x_m,f_N\n");
     for i in 0..SAMPLES {
         let t = i as f64 * 1e-3;
-        let (mut x, mut v, mut a) = (0.0, 0.0, 0.0);
-        for &(amp, f, ph) in &comps {
-            let w = TAU * f;
-            x += amp * (w * t + ph).sin();
-            v += amp * w * (w * t + ph).cos();
-            a -= amp * w * w * (w * t + ph).sin();
-        }
+        let (x, v, a) = regen_tests::two_sine(t);
         let sg = v.signum();
         let f = m * a
             + fv * v
