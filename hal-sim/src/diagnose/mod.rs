@@ -241,6 +241,80 @@ pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> LsSolution {
 /// true) samples, visiting every `stride`-th sample.
 /// `part` holds `TRAIN`, `HELD_OUT` or `AT_REST` (in neither) per sample.
 pub fn normals(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
+    // up to 10 columns (the baseline, a drift and the findings' columns of a record): the
+    // same sums with the column count known when compiled (`normals_k`)
+    match cols.len() {
+        1 => normals_k::<1>(cols, f, part, stride),
+        2 => normals_k::<2>(cols, f, part, stride),
+        3 => normals_k::<3>(cols, f, part, stride),
+        4 => normals_k::<4>(cols, f, part, stride),
+        5 => normals_k::<5>(cols, f, part, stride),
+        6 => normals_k::<6>(cols, f, part, stride),
+        7 => normals_k::<7>(cols, f, part, stride),
+        8 => normals_k::<8>(cols, f, part, stride),
+        9 => normals_k::<9>(cols, f, part, stride),
+        10 => normals_k::<10>(cols, f, part, stride),
+        _ => normals_any(cols, f, part, stride),
+    }
+}
+
+/// `normals` for `M` columns: each sum takes the same products in the same order as
+/// `normals_any`, so the result is the same bit for bit (`tests::normals_k_matches_any`); the
+/// loops over the columns are unrolled and the sums kept in fixed arrays.
+fn normals_k<const M: usize>(
+    cols: &[&[f64]],
+    f: &[f64],
+    part: &[u8],
+    stride: usize,
+) -> (Normal, Normal) {
+    let n = f.len();
+    let c: [&[f64]; M] = std::array::from_fn(|k| &cols[k][..n]);
+    let part = &part[..n];
+    let mut g = [[[0.0f64; M]; M]; 2];
+    let mut b = [[0.0f64; M]; 2];
+    let mut ff = [0.0f64; 2];
+    let mut cnt = [0usize; 2];
+    let mut i = 0;
+    while i < n {
+        let s = match part[i] {
+            TRAIN => 0,
+            HELD_OUT => 1,
+            _ => {
+                i += stride;
+                continue;
+            }
+        };
+        let row: [f64; M] = std::array::from_fn(|k| c[k][i]);
+        let fi = f[i];
+        let (g, b) = (&mut g[s], &mut b[s]);
+        for p in 0..M {
+            let rp = row[p];
+            b[p] += rp * fi;
+            for q in p..M {
+                g[p][q] += rp * row[q];
+            }
+        }
+        ff[s] += fi * fi;
+        cnt[s] += 1;
+        i += stride;
+    }
+    let out = |s: usize| {
+        let mut nm = Normal::new(M);
+        for p in 0..M {
+            for q in 0..M {
+                nm.g[p * M + q] = if q >= p { g[s][p][q] } else { g[s][q][p] };
+            }
+            nm.b[p] = b[s][p];
+        }
+        nm.ff = ff[s];
+        nm.n = cnt[s];
+        nm
+    };
+    (out(0), out(1))
+}
+
+/// `normals` for any number of columns.
+fn normals_any(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
     let m = cols.len();
     let mut tr = Normal::new(m);
     let mut ho = Normal::new(m);
@@ -1912,6 +1986,33 @@ mod tests {
                     (t0.to_bits(), h0.to_bits()),
                     "n = {n}, batched"
                 );
+            }
+        }
+    }
+
+    /// `normals` with the column count known when compiled gives, entry by entry, the sums of
+    /// the loop for any count (1 to 10 columns, samples at rest scattered, strides 1 and 3).
+    #[test]
+    fn normals_k_matches_any() {
+        let n = 1003;
+        let col = |s: f64| -> Vec<f64> { (0..n).map(|i| (s * i as f64).sin() + 0.1 * s).collect() };
+        let f = col(0.37);
+        let part: Vec<u8> = (0..n)
+            .map(|i| [TRAIN, HELD_OUT, AT_REST][i % 7 % 3])
+            .collect();
+        let cs: Vec<Vec<f64>> = (0..10).map(|k| col(0.011 + 0.013 * k as f64)).collect();
+        for m in 1..=10 {
+            let r: Vec<&[f64]> = cs[..m].iter().map(|v| v.as_slice()).collect();
+            for stride in [1, 3] {
+                let (a, b) = (
+                    normals(&r, &f, &part, stride),
+                    normals_any(&r, &f, &part, stride),
+                );
+                for (x, y) in [(&a.0, &b.0), (&a.1, &b.1)] {
+                    assert_eq!(x.g, y.g, "m = {m}");
+                    assert_eq!(x.b, y.b, "m = {m}");
+                    assert_eq!((x.ff.to_bits(), x.n, x.m), (y.ff.to_bits(), y.n, y.m));
+                }
             }
         }
     }
