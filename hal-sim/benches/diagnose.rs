@@ -1,5 +1,7 @@
 //! Time to diagnose a 1,000,000-sample record (target: under 1 s on one core). Prints the
-//! figure; run with `cargo bench -p hal-sim --bench diagnose`.
+//! figure; run with `cargo bench -p hal-sim --bench diagnose`. `BENCH_N=200000` diagnoses a
+//! record of that many samples instead (a short run under callgrind, whose instruction counts
+//! do not depend on the machine's load).
 use hal_sim::diagnose::synth::{self, SynthSpec};
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
 use std::time::Instant;
@@ -13,7 +15,14 @@ fn cpu_s() -> Option<f64> {
 }
 
 fn main() {
-    let n = 1_000_000;
+    let n = match std::env::var("BENCH_N").map(|s| s.parse::<usize>()) {
+        Ok(Ok(k)) if k >= 1000 => k,
+        Ok(_) => {
+            eprintln!("BENCH_N: a number of samples of at least 1000 expected; 1000000 used");
+            1_000_000
+        }
+        Err(_) => 1_000_000,
+    };
     let spec = SynthSpec::random_hidden(42, n, 2);
     let csv = synth::generate_csv(&spec);
     let c0 = cpu_s();

@@ -241,6 +241,80 @@ pub fn solve_sym(g: &[f64], b: &[f64], m: usize) -> LsSolution {
 /// true) samples, visiting every `stride`-th sample.
 /// `part` holds `TRAIN`, `HELD_OUT` or `AT_REST` (in neither) per sample.
 pub fn normals(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
+    // up to 10 columns (the baseline, a drift and the findings' columns of a record): the
+    // same sums with the column count known when compiled (`normals_k`)
+    match cols.len() {
+        1 => normals_k::<1>(cols, f, part, stride),
+        2 => normals_k::<2>(cols, f, part, stride),
+        3 => normals_k::<3>(cols, f, part, stride),
+        4 => normals_k::<4>(cols, f, part, stride),
+        5 => normals_k::<5>(cols, f, part, stride),
+        6 => normals_k::<6>(cols, f, part, stride),
+        7 => normals_k::<7>(cols, f, part, stride),
+        8 => normals_k::<8>(cols, f, part, stride),
+        9 => normals_k::<9>(cols, f, part, stride),
+        10 => normals_k::<10>(cols, f, part, stride),
+        _ => normals_any(cols, f, part, stride),
+    }
+}
+
+/// `normals` for `M` columns: each sum takes the same products in the same order as
+/// `normals_any`, so the result is the same bit for bit (`tests::normals_k_matches_any`); the
+/// loops over the columns are unrolled and the sums kept in fixed arrays.
+fn normals_k<const M: usize>(
+    cols: &[&[f64]],
+    f: &[f64],
+    part: &[u8],
+    stride: usize,
+) -> (Normal, Normal) {
+    let n = f.len();
+    let c: [&[f64]; M] = std::array::from_fn(|k| &cols[k][..n]);
+    let part = &part[..n];
+    let mut g = [[[0.0f64; M]; M]; 2];
+    let mut b = [[0.0f64; M]; 2];
+    let mut ff = [0.0f64; 2];
+    let mut cnt = [0usize; 2];
+    let mut i = 0;
+    while i < n {
+        let s = match part[i] {
+            TRAIN => 0,
+            HELD_OUT => 1,
+            _ => {
+                i += stride;
+                continue;
+            }
+        };
+        let row: [f64; M] = std::array::from_fn(|k| c[k][i]);
+        let fi = f[i];
+        let (g, b) = (&mut g[s], &mut b[s]);
+        for p in 0..M {
+            let rp = row[p];
+            b[p] += rp * fi;
+            for q in p..M {
+                g[p][q] += rp * row[q];
+            }
+        }
+        ff[s] += fi * fi;
+        cnt[s] += 1;
+        i += stride;
+    }
+    let out = |s: usize| {
+        let mut nm = Normal::new(M);
+        for p in 0..M {
+            for q in 0..M {
+                nm.g[p * M + q] = if q >= p { g[s][p][q] } else { g[s][q][p] };
+            }
+            nm.b[p] = b[s][p];
+        }
+        nm.ff = ff[s];
+        nm.n = cnt[s];
+        nm
+    };
+    (out(0), out(1))
+}
+
+/// `normals` for any number of columns.
+fn normals_any(cols: &[&[f64]], f: &[f64], part: &[u8], stride: usize) -> (Normal, Normal) {
     let m = cols.len();
     let mut tr = Normal::new(m);
     let mut ho = Normal::new(m);
@@ -317,32 +391,77 @@ impl HoldWeights {
 /// alone: the weighted sum over every sample adds the same products in the same order plus
 /// zeros, so the result is the same bit for bit (`tests::dot2_runs_match_weighted_sums`).
 fn dot2(a: &[f64], b: &[f64], w: &HoldWeights) -> (f64, f64) {
-    let n = a.len().min(b.len()).min(w.train.len());
-    let mut acc = [[0.0f64; 4]; 2];
+    dot2_k(a, [b], w)[0]
+}
+
+/// `dot2` of `a` with each of `K` columns of one length in one pass over `a` (its loads shared,
+/// 4·K independent chains): each column's partial sums take the same products in the same
+/// order as `dot2` alone, so each result is `dot2`'s bit for bit.
+#[inline(always)]
+fn dot2_k<const K: usize>(a: &[f64], bs: [&[f64]; K], w: &HoldWeights) -> [(f64, f64); K] {
+    let n = bs
+        .iter()
+        .fold(a.len().min(w.train.len()), |n, b| n.min(b.len()));
+    let a = &a[..n];
+    let bs = bs.map(|b| &b[..n]);
+    let mut acc = [[[0.0f64; 4]; 2]; K];
     let m = n / 4 * 4;
+    let lane = |i: usize| if i < m { i % 4 } else { 0 };
     for &(s, e, held) in &w.runs {
         let e = e.min(n);
-        let acc = &mut acc[held as usize];
-        let lane = |i: usize| if i < m { i % 4 } else { 0 };
+        let mut loc = acc.map(|p| p[held as usize]);
         let mut i = s;
         while i < e && i % 4 != 0 {
-            acc[lane(i)] += a[i] * b[i];
+            for k in 0..K {
+                loc[k][lane(i)] += a[i] * bs[k][i];
+            }
             i += 1;
         }
         let body = e.min(m);
         while i + 4 <= body {
-            for l in 0..4 {
-                acc[l] += a[i + l] * b[i + l];
+            let ai = &a[i..i + 4];
+            for k in 0..K {
+                let bi = &bs[k][i..i + 4];
+                for l in 0..4 {
+                    loc[k][l] += ai[l] * bi[l];
+                }
             }
             i += 4;
         }
         while i < e {
-            acc[lane(i)] += a[i] * b[i];
+            for k in 0..K {
+                loc[k][lane(i)] += a[i] * bs[k][i];
+            }
             i += 1;
         }
+        for k in 0..K {
+            acc[k][held as usize] = loc[k];
+        }
     }
-    let [t, h] = acc;
-    ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3]))
+    acc.map(|[t, h]| ((t[0] + t[1]) + (t[2] + t[3]), (h[0] + h[1]) + (h[2] + h[3])))
+}
+
+/// `dot2` of `a` with each column of `bs`, four (then two, then one) columns per pass over `a`
+/// (`dot2_k`): the same results as `dot2` column by column, bit for bit.
+fn dot2_many(a: &[f64], bs: &[&[f64]], w: &HoldWeights) -> Vec<TrainHold> {
+    let mut out = Vec::with_capacity(bs.len());
+    let mut rest = bs;
+    // the columns of one pass must have one length (`dot2_k` takes the shortest)
+    let same = |c: &[&[f64]]| c.iter().all(|b| b.len() == c[0].len());
+    while !rest.is_empty() {
+        let take = if rest.len() >= 4 && same(&rest[..4]) {
+            out.extend(dot2_k(a, [rest[0], rest[1], rest[2], rest[3]], w));
+            4
+        } else if rest.len() >= 2 && same(&rest[..2]) {
+            out.extend(dot2_k(a, [rest[0], rest[1]], w));
+            2
+        } else {
+            out.push(dot2(a, rest[0], w));
+            1
+        };
+        rest = &rest[take..];
+    }
+    out
 }
 
 /// Normal equations of `p` columns copied into the top-left block of `m`-column ones.
@@ -373,14 +492,15 @@ pub fn extend_normals_dense(
     let mut out = (embed(&base.0, p, m), embed(&base.1, p, m));
     for c in 0..k {
         let row = p + c;
-        for (j, bc) in bcols.iter().chain(z[..=c].iter()).enumerate() {
-            let (t, h) = dot2(z[c], bc, w);
+        let others: Vec<&[f64]> = bcols.iter().chain(&z[..=c]).chain([&f]).copied().collect();
+        let prods = dot2_many(z[c], &others, w);
+        for (j, &(t, h)) in prods[..row + 1].iter().enumerate() {
             out.0.g[row * m + j] = t;
             out.0.g[j * m + row] = t;
             out.1.g[row * m + j] = h;
             out.1.g[j * m + row] = h;
         }
-        let (t, h) = dot2(z[c], f, w);
+        let (t, h) = prods[row + 1];
         out.0.b[row] = t;
         out.1.b[row] = h;
     }
@@ -427,8 +547,10 @@ pub fn extend_normals_cached(
     if gc.own.len() != k {
         gc.own = (0..k)
             .map(|c| {
-                let zz = (0..=c).map(|j| dot2(z[c], z[j], w)).collect();
-                (zz, dot2(z[c], f, w))
+                let others: Vec<&[f64]> = z[..=c].iter().chain([&f]).copied().collect();
+                let mut zz = dot2_many(z[c], &others, w);
+                let zf = zz.pop().unwrap_or_default();
+                (zz, zf)
             })
             .collect();
         gc.cross = vec![Vec::new(); k];
@@ -437,18 +559,21 @@ pub fn extend_normals_cached(
     for c in 0..k {
         let row = p + c;
         let cr = &mut gc.cross[c];
-        let mut prods = Vec::with_capacity(m);
-        for (bc, id) in bcols.iter().zip(bids) {
-            let th = match cr.iter().find(|e| e.0 == *id) {
-                Some(e) => e.1,
-                None => {
-                    let th = dot2(z[c], bc, w);
-                    cr.push((*id, th));
-                    th
-                }
-            };
-            prods.push(th);
+        // the products with the base columns not met yet, in one batch
+        let (new_ids, new_cols): (Vec<ColumnId>, Vec<&[f64]>) = bids
+            .iter()
+            .zip(bcols)
+            .filter(|(id, _)| !cr.iter().any(|e| e.0 == **id))
+            .map(|(id, bc)| (*id, *bc))
+            .unzip();
+        for (id, th) in new_ids.into_iter().zip(dot2_many(z[c], &new_cols, w)) {
+            cr.push((id, th));
         }
+        let prods: Vec<TrainHold> = bids
+            .iter()
+            .zip(bcols)
+            .map(|(id, _)| cr.iter().find(|e| e.0 == *id).map_or((0.0, 0.0), |e| e.1))
+            .collect();
         let (zz, zf) = &gc.own[c];
         for (j, &(t, h)) in prods.iter().chain(zz.iter()).enumerate() {
             out.0.g[row * m + j] = t;
@@ -734,12 +859,12 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             MIN_MOVING / 4
         ));
     }
-    Ok(diagnose_checked(rec, opt))
+    Ok(diagnose_checked(rec, opt, rest))
 }
 
-fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
+fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let n = rec.len();
-    let ctx = effects::Context::windowed(rec, opt.screen_window.min(n));
+    let ctx = effects::Context::windowed_at_rest(rec, opt.screen_window.min(n), rest);
     let mut hold = holdout_mask(n);
     for (h, &r) in hold.iter_mut().zip(&ctx.rest) {
         if r {
@@ -790,7 +915,15 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             .find(|e| e.kind == EffectKind::Lag)
             .map(|e| e.param)
     };
-    let lag_rest_sub = |tau: f64| ctx.lag_rest_rows(tau, Some(&sub.rows));
+    // (the same rows every time a τ comes back: kept per τ)
+    let lag_rest_kept = std::cell::RefCell::new(std::collections::HashMap::new());
+    let lag_rest_sub = |tau: f64| -> Vec<usize> {
+        lag_rest_kept
+            .borrow_mut()
+            .entry(tau.to_bits())
+            .or_insert_with(|| ctx.lag_rest_rows(tau, Some(&sub.rows)))
+            .clone()
+    };
     let mut sub_cols: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&sub.rows, v)).collect();
     let spread_f = gather(&spread_rows, &rec.f);
     let spread_hold: Vec<u8> = spread_rows.iter().map(|&i| hold[i]).collect();
@@ -1839,6 +1972,48 @@ mod tests {
                 (t0.to_bits(), h0.to_bits()),
                 "n = {n}"
             );
+            // several columns in one pass (four, two and one at a time): each the same sums
+            let bs: Vec<Vec<f64>> = (0..7)
+                .map(|_| (0..n).map(|_| rnd() * 10.0).collect())
+                .collect();
+            let br: Vec<&[f64]> = bs.iter().map(|v| v.as_slice()).collect();
+            let many = dot2_many(&a, &br, &w);
+            assert_eq!(many.len(), bs.len());
+            for (b, (t, h)) in bs.iter().zip(many) {
+                let (t0, h0) = dot2_weighted(&a, b, &w.train, &w.hold);
+                assert_eq!(
+                    (t.to_bits(), h.to_bits()),
+                    (t0.to_bits(), h0.to_bits()),
+                    "n = {n}, batched"
+                );
+            }
+        }
+    }
+
+    /// `normals` with the column count known when compiled gives, entry by entry, the sums of
+    /// the loop for any count (1 to 10 columns, samples at rest scattered, strides 1 and 3).
+    #[test]
+    fn normals_k_matches_any() {
+        let n = 1003;
+        let col = |s: f64| -> Vec<f64> { (0..n).map(|i| (s * i as f64).sin() + 0.1 * s).collect() };
+        let f = col(0.37);
+        let part: Vec<u8> = (0..n)
+            .map(|i| [TRAIN, HELD_OUT, AT_REST][i % 7 % 3])
+            .collect();
+        let cs: Vec<Vec<f64>> = (0..10).map(|k| col(0.011 + 0.013 * k as f64)).collect();
+        for m in 1..=10 {
+            let r: Vec<&[f64]> = cs[..m].iter().map(|v| v.as_slice()).collect();
+            for stride in [1, 3] {
+                let (a, b) = (
+                    normals(&r, &f, &part, stride),
+                    normals_any(&r, &f, &part, stride),
+                );
+                for (x, y) in [(&a.0, &b.0), (&a.1, &b.1)] {
+                    assert_eq!(x.g, y.g, "m = {m}");
+                    assert_eq!(x.b, y.b, "m = {m}");
+                    assert_eq!((x.ff.to_bits(), x.n, x.m), (y.ff.to_bits(), y.n, y.m));
+                }
+            }
         }
     }
 

@@ -66,6 +66,26 @@ impl Record {
 /// acceleration was derived through (absent when `a_m_s2` is measured).
 pub const DERIVATIVE_CUTOFF_KEY: &str = "derivative_cutoff_hz";
 
+/// The pieces of `s` between the occurrences of the ASCII byte `sep` (as `str::split` with
+/// that character), found by a plain scan of the bytes: the lines and fields of a record are
+/// short, and a scan per piece costs less than a searcher's set-up.
+fn split_byte(s: &str, sep: u8) -> impl Iterator<Item = &str> {
+    let mut rest = Some(s);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        match r.bytes().position(|b| b == sep) {
+            Some(p) => {
+                rest = Some(&r[p + 1..]);
+                Some(&r[..p])
+            }
+            None => {
+                rest = None;
+                Some(r)
+            }
+        }
+    })
+}
+
 /// Parse a record from CSV text. `cutoff_hz`: low-pass cutoff for derived v and a
 /// (None = fs/20).
 pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
@@ -74,7 +94,10 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
     let mut cols: Vec<Vec<f64>> = Vec::new();
     let mut header_line = 0;
     let mut first_data_line = Vec::new();
-    for (ln0, raw) in text.lines().enumerate() {
+    // lines and fields are split on their bytes (`split_byte`: a newline and a comma are
+    // single-byte characters, so every piece is a `str`); a line's trailing `\r` goes with
+    // its trim
+    for (ln0, raw) in split_byte(text, b'\n').enumerate() {
         let ln = ln0 + 1;
         let line = raw.trim();
         if line.is_empty() {
@@ -113,7 +136,7 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
             }
             Some(h) => {
                 let mut nf = 0;
-                for (j, fld) in line.split(',').enumerate() {
+                for (j, fld) in split_byte(line, b',').enumerate() {
                     nf = j + 1;
                     if j >= h.len() {
                         break;
