@@ -1391,7 +1391,7 @@ fn diagnose_checked(rec: &Record, opt: &Options) -> Diagnosis {
             }
             if let (false, Some(wald)) = (ripple_apart[k], ripple_reversal[k]) {
                 dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (the motion turns at the same positions, where such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
+                    "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
                     chosen[k].kind.name(),
                     effects::describe(&ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
