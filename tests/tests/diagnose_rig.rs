@@ -439,3 +439,197 @@ fn impact_travel_is_the_play_width() {
 
 /// Bound of `impact_travel_is_the_play_width`: 3× the largest measured deviation.
 const TRAVEL_BOUND: f64 = 0.021;
+
+/// Single records of the long run (`RIG_SEEDS=300017,400042 cargo test -p regen-tests --test
+/// diagnose_rig rig_seeds -- --ignored --nocapture`): the kind and trajectory family follow
+/// from the seed as in `run`; `RIG_EVIDENCE` prints each finding's evidence and the verdicts.
+#[test]
+#[ignore]
+fn rig_seeds() {
+    let emps = emps_x();
+    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
+    for seed in seeds
+        .split(',')
+        .filter_map(|s| s.trim().parse::<u64>().ok())
+    {
+        let (ki, j) = (((seed - 1) / 100_000) as usize, (seed - 1) % 100_000);
+        let Some(kind) = Hidden::KINDS.get(ki) else {
+            continue;
+        };
+        let traj = match j % 5 {
+            0 => Trajectory::Multisine,
+            1 => Trajectory::RoundedTriangle,
+            2 => Trajectory::PointToPoint,
+            3 => Trajectory::Narrowband,
+            _ => match &emps {
+                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
+                None => Trajectory::Multisine,
+            },
+        };
+        let spec = RigSpec::random(seed, kind, traj, 12_000);
+        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+        let d = diagnose(&rec, &Options::default());
+        println!(
+            "{kind:>20} {:>16} seed {seed}: hidden {:?} (rms {:.2} N, noise {:.2} N, observable {}, draw {}) -> {:?} held-out {:.2} % -> {:.2} %",
+            spec.trajectory.name(),
+            spec.hidden,
+            spec.effect_rms_n,
+            spec.noise_n,
+            spec.observable,
+            spec.motion_draw,
+            d.catalogue_names(),
+            100.0 * d.baseline_holdout_rel_error,
+            100.0 * d.final_holdout_rel_error,
+        );
+        if std::env::var("RIG_EVIDENCE").is_ok() {
+            for f in &d.findings {
+                println!(
+                    "    {} {:?}: held-out rss -{:.2} %, ΔBIC {:.1}, held on {:.0} % of segments; {}",
+                    f.effect,
+                    f.parameters,
+                    100.0 * f.holdout_rss_drop,
+                    f.delta_bic,
+                    100.0 * f.consistency,
+                    f.note
+                );
+            }
+            for v in &d.verdicts {
+                println!("    verdict: {v}");
+            }
+        }
+    }
+}
+
+/// The rounded triangle's true acceleration (the rig's motion recomputed here from its seed:
+/// period and sharpness drawn from the motion stream, substep integration, the two moving
+/// averages, centring and scaling, as the rig builds it), for measuring what the derived
+/// acceleration misses: `(v_true, a_true at the record's samples, period s)`.
+fn triangle_true_acceleration(s: &RigSpec) -> (Vec<f64>, Vec<f64>, f64) {
+    use hal_sim::bench_rig::{RigRng, SUB};
+    let seed = s
+        .seed
+        .wrapping_add(7)
+        .wrapping_add(s.motion_draw.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let mut rng = RigRng::new(seed);
+    let n = s.samples * SUB;
+    let h = 1.0 / (s.fs * SUB as f64);
+    let period = rng.uni(1.5, 4.0);
+    let sharp = rng.uni(3.0, 10.0);
+    let mut x = vec![0.0; n];
+    let mut p = 0.0;
+    for (i, xi) in x.iter_mut().enumerate() {
+        p += (sharp * (std::f64::consts::TAU * i as f64 * h / period).sin()).tanh() * h;
+        *xi = p;
+    }
+    let smooth = |x: &[f64]| -> Vec<f64> {
+        let mut out = vec![0.0; x.len()];
+        let mut acc = 0.0;
+        for i in 0..x.len() {
+            acc += x[i];
+            if i >= SUB {
+                acc -= x[i - SUB];
+            }
+            out[i] = acc / (i + 1).min(SUB) as f64;
+        }
+        out
+    };
+    let x = smooth(&smooth(&x));
+    let lo = x.iter().cloned().fold(f64::MAX, f64::min);
+    let hi = x.iter().cloned().fold(f64::MIN, f64::max);
+    let k = s.amplitude_m / (0.5 * (hi - lo));
+    let a: Vec<f64> = (0..s.samples)
+        .map(|i| {
+            let j = (i * SUB).clamp(2, n - 3);
+            k * (x[j + 2] - 2.0 * x[j] + x[j - 2]) / (4.0 * h * h)
+        })
+        .collect();
+    let v: Vec<f64> = (0..s.samples)
+        .map(|i| {
+            let j = (i * SUB).clamp(1, n - 2);
+            k * (x[j + 1] - x[j - 1]) / (2.0 * h)
+        })
+        .collect();
+    (v, a, period)
+}
+
+/// Rounded-triangle records diagnosed with the rig's true acceleration given as `a_m_s2`
+/// beside the derived one (`RIG_SEEDS=500002,… cargo test -p regen-tests --test diagnose_rig
+/// rig_true_acceleration -- --ignored --nocapture`): the inertial error M·(a − a_derived) at
+/// the reversals and what the diagnosis names without it.
+#[test]
+#[ignore]
+fn rig_true_acceleration() {
+    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
+    for seed in seeds
+        .split(',')
+        .filter_map(|s| s.trim().parse::<u64>().ok())
+    {
+        let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
+        let spec = RigSpec::random(seed, kind, Trajectory::RoundedTriangle, 12_000);
+        let (v_true, a_true, period) = triangle_true_acceleration(&spec);
+        let text = spec.csv();
+        let rec = parse_csv(&text, None).expect("rig record parses");
+        let err: Vec<f64> = rec
+            .a
+            .iter()
+            .zip(&a_true)
+            .map(|(ad, at)| spec.mass_kg * (at - ad))
+            .collect();
+        let amax = a_true.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        // reversals: where |a| exceeds a fifth of its peak
+        let (mut e_rev, mut n_rev, mut e_all) = (0.0, 0usize, 0.0);
+        for (e, a) in err.iter().zip(&a_true).skip(100).take(err.len() - 200) {
+            e_all += e * e;
+            if a.abs() > 0.2 * amax {
+                e_rev += e * e;
+                n_rev += 1;
+            }
+        }
+        let m = (err.len() - 200) as f64;
+        println!(
+            "{kind} seed {seed}: period {period:.3} s, quantum {:.1e} m, mass {:.1} kg, peak a {amax:.2} m/s², M·(a − a_derived) rms {:.3} N overall, {:.3} N on the {n_rev} reversal samples; noise {:.2} N, effect {:.2} N rms",
+            spec.quantum_m,
+            spec.mass_kg,
+            (e_all / m).sqrt(),
+            (e_rev / n_rev.max(1) as f64).sqrt(),
+            spec.noise_n,
+            spec.effect_rms_n
+        );
+        let mut lines = text.lines();
+        let mut with_a = String::new();
+        for l in lines.by_ref() {
+            if l.starts_with('#') {
+                with_a.push_str(l);
+                with_a.push('\n');
+            } else {
+                with_a.push_str(l);
+                with_a.push_str(",v_m_s,a_m_s2\n");
+                break;
+            }
+        }
+        for ((l, v), a) in lines.zip(&v_true).zip(&a_true) {
+            with_a.push_str(&format!("{l},{v:.9e},{a:.9e}\n"));
+        }
+        let rec2 = parse_csv(&with_a, None).expect("record with a parses");
+        for (label, r) in [("derived a", &rec), ("true a", &rec2)] {
+            let d = diagnose(r, &Options::default());
+            println!(
+                "    {label}: {:?} held-out {:.2} % -> {:.2} %",
+                d.catalogue_names(),
+                100.0 * d.baseline_holdout_rel_error,
+                100.0 * d.final_holdout_rel_error
+            );
+            if std::env::var("RIG_EVIDENCE").is_ok() {
+                for f in &d.findings {
+                    println!(
+                        "      {} {:?}: held-out rss -{:.2} %, held on {:.0} %",
+                        f.effect,
+                        f.parameters,
+                        100.0 * f.holdout_rss_drop,
+                        100.0 * f.consistency
+                    );
+                }
+            }
+        }
+    }
+}

@@ -2021,6 +2021,88 @@ impl RippleInBand {
     }
 }
 
+/// Travel since the last reversal and the direction of motion at each sample: `(u, d)`, d = ±1
+/// the sign of the velocity beyond ±v_eps (held through the band), u = |x − x_r|, x_r the
+/// position where the motion last turned (the extreme reached in the previous direction; the
+/// first sample's position before the first reversal).
+pub fn travel_since_reversal(ctx: &Context) -> (Vec<f64>, Vec<f64>) {
+    let (x, v) = (&ctx.rec.x, &ctx.rec.v);
+    let mut d = v
+        .iter()
+        .find(|v| v.abs() > ctx.v_eps)
+        .map_or(1.0, |v| v.signum());
+    let mut x_r = x.first().copied().unwrap_or(0.0);
+    let mut ext = x_r;
+    let mut u = Vec::with_capacity(x.len());
+    let mut dir = Vec::with_capacity(x.len());
+    for (&xi, &vi) in x.iter().zip(v) {
+        if vi.abs() > ctx.v_eps && vi.signum() != d {
+            d = vi.signum();
+            x_r = ext;
+            ext = xi;
+        }
+        if (xi - ext) * d > 0.0 {
+            ext = xi;
+        }
+        u.push((xi - x_r).abs());
+        dir.push(d);
+    }
+    (u, dir)
+}
+
+/// A periodic finding's ripple against a ripple locked to the last reversal. A force that the
+/// reversals excite (a mode's ringing, a friction transient, the inertial force the derived
+/// acceleration misses at a reversal) is a function of the travel (or time) since the last
+/// reversal whose sign follows the new direction of motion: on a motion that always turns at
+/// the same positions (a triangle of one stroke), x = x_r + d·u, so the part of a position
+/// ripple sin(2πx/λ + φ) that is odd about the stroke's centre is exactly such a force,
+/// d·sin(2πu/λ + φ'), and the record cannot tell the two apart; where the turning points
+/// vary they differ. The model (`cols`, the finding's columns at `span`) is refitted on the
+/// samples in motion with d·sin(2πu/λ), d·cos(2πu/λ) beside it; returns the Wald statistic of
+/// the finding's columns there (the rise of the rss when they are removed over the residual
+/// variance: χ² with 2 degrees of freedom when the reversal-locked ripple carries all that
+/// the record tells of the position ripple).
+pub fn ripple_apart_from_reversals(
+    ctx: &Context,
+    cols: &[(String, Vec<f64>)],
+    span: (usize, usize),
+    lambda: f64,
+) -> f64 {
+    let (u, d) = travel_since_reversal(ctx);
+    let k = std::f64::consts::TAU / lambda;
+    let (rs, rc): (Vec<f64>, Vec<f64>) = u
+        .iter()
+        .zip(&d)
+        .map(|(u, d)| {
+            let (sn, cs) = (k * u).sin_cos();
+            (d * sn, d * cs)
+        })
+        .unzip();
+    let (a, b) = span;
+    let mut refs: Vec<&[f64]> = cols
+        .iter()
+        .enumerate()
+        .filter(|(j, _)| *j < a || *j >= b)
+        .map(|(_, c)| c.1.as_slice())
+        .collect();
+    refs.push(&rs);
+    refs.push(&rc);
+    let m0 = refs.len();
+    refs.extend(cols[a..b].iter().map(|c| c.1.as_slice()));
+    let part: Vec<u8> = ctx
+        .rest
+        .iter()
+        .map(|&r| if r { super::AT_REST } else { super::TRAIN })
+        .collect();
+    let (tr, _) = super::normals(&refs, &ctx.rec.f, &part, 1);
+    let rss = tr.rss(&tr.solve());
+    let t2 = tr.select(&(0..m0).collect::<Vec<_>>());
+    let rss_without = t2.rss(&t2.solve());
+    let dof = tr.n.saturating_sub(refs.len()).max(1) as f64;
+    let var = (rss / dof).max(f64::MIN_POSITIVE);
+    (rss_without - rss) / var
+}
+
 /// The scanned range [lo, hi] of a coarse grid that `best` belongs to: the values of the same
 /// sign (the two hypotheses of `current_limit` are two grids, told apart by the sign).
 pub fn scan_range(coarse: &[Effect], best: &Effect) -> (f64, f64) {

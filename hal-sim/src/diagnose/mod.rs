@@ -1465,6 +1465,34 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         .iter()
         .map(|r| r.is_none_or(|r| r.locked_to_position(AGREEMENT_T)))
         .collect();
+    // A periodic finding names a force locked to position, not to the reversals: beside a
+    // ripple locked to the last reversal whose sign follows the direction of motion (what a
+    // reversal excites: a mode's ringing, a friction transient; on a motion that turns at the
+    // same positions it is the position ripple's part odd about the stroke's centre) its
+    // columns must stand AGREEMENT_T standard errors out of the noise
+    // (`effects::ripple_apart_from_reversals`).
+    let ripple_reversal: Vec<Option<f64>> = chosen
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            matches!(
+                e.kind,
+                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+            )
+            .then(|| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], e.param))
+        })
+        .collect();
+    for (k, w) in ripple_reversal.iter().enumerate() {
+        if let (Some(w), Some(f)) = (w, findings.get_mut(k)) {
+            f.note.push_str(&format!(
+                "; beside a ripple locked to the last reversal Wald {w:.1}"
+            ));
+        }
+    }
+    let ripple_apart: Vec<bool> = ripple_reversal
+        .iter()
+        .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
+        .collect();
     let kept: Vec<usize> = (0..chosen.len())
         .filter(|&k| {
             holds[k] >= STABILITY_MIN
@@ -1472,6 +1500,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 && agreement[k] >= AGREEMENT_T
                 && ripple_shows[k]
                 && ripple_locked[k]
+                && ripple_apart[k]
         })
         .collect();
     let mut dropped_notes = Vec::new();
@@ -1489,6 +1518,15 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     100.0 * r.rel_diff,
                     r.wald_diff,
                     100.0 / AGREEMENT_T,
+                    AGREEMENT_T * AGREEMENT_T,
+                ));
+                continue;
+            }
+            if let (false, Some(wald)) = (ripple_apart[k], ripple_reversal[k]) {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(&ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
                 ));
                 continue;
