@@ -632,4 +632,28 @@ fn rig_true_acceleration() {
             }
         }
     }
+
+/// A recorded (EMPS position) record whose near-stops drew a false
+/// `velocity_strengthening_friction`: backlash 600050 (encoder 1.6 µm), exactly right by the
+/// build-up's band rule (`effects::buildup_in_band`: the rise where the derived signals follow
+/// the build-up, 12.4 N, differs from the one at the motion's fast near-stops, 6.3 N, by 49 %
+/// at Wald 12.4). Break: the rule removed names the friction beside `backlash`.
+#[test]
+fn recorded_near_stops_name_no_speed_friction() {
+    let Some(x) = emps_x() else {
+        return;
+    };
+    let spec = RigSpec::random(
+        600050,
+        "backlash",
+        Trajectory::Recorded(x[..12_000].to_vec()),
+        12_000,
+    );
+    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let d = diagnose(&rec, &Options::default());
+    println!("seed 600050: {:?}", d.catalogue_names());
+    for v in &d.verdicts {
+        println!("  verdict: {v}");
+    }
+    assert_eq!(d.catalogue_names(), vec!["backlash"]);
 }

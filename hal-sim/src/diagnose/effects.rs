@@ -1905,6 +1905,28 @@ pub fn ripple_in_band(ctx: &Context, lambda: f64) -> Option<Vec<bool>> {
     )
 }
 
+/// The samples (true) at which a friction building up over the speed `v_b` changes slowly
+/// enough for the derived signals to follow it: the column (1 − e^(−|v|/v_b))·sgn v changes at
+/// the rate e^(−|v|/v_b)·|a|/v_b (per unit of its swing), at most π·fc, the rate of a unit
+/// ripple at half the derivative filter's cutoff (`ripple_in_band`'s band). Where the motion
+/// passes below v_b faster (a stop or near-stop within a few derivative filter time constants)
+/// the column is a transient in time at the stop, where the record's inertial force and any
+/// other effect's transient (a play's gap, a delayed Coulomb switch) are not measured either.
+/// Where the build-up is complete (|v| ≫ v_b) the column is constant and in band. `None` when
+/// the acceleration is measured (no derivative cutoff in the metadata).
+pub fn buildup_in_band(ctx: &Context, v_b: f64) -> Option<Vec<bool>> {
+    let fc = *ctx.rec.meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
+    let iv = 1.0 / v_b;
+    Some(
+        ctx.rec
+            .v
+            .iter()
+            .zip(&ctx.rec.a)
+            .map(|(v, a)| (-(v.abs() * iv)).exp() * a.abs() * iv <= std::f64::consts::PI * fc)
+            .collect(),
+    )
+}
+
 /// A periodic finding's ripple on the samples where it lies inside the acceleration's band
 /// (`ripple_in_band`): the model (`cols`, the finding's columns at `span`) refitted on the
 /// samples in motion with the finding's columns split into their in-band and out-of-band
