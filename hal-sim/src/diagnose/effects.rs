@@ -1451,7 +1451,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
     };
     let dev = walk(mi, fv, fc);
     // the device's own coefficients, fitted where it moves with the motion (in contact,
-    // outside the impacts' pulses and the samples at rest; the baseline's, fitted on every
+    // outside the contacts' transients and the samples at rest; the baseline's, fitted on every
     // sample, are biased low by the gap's missing force), then the device walked again with
     // them: the column's force is the device's, not the biased baseline's
     let (mi, fv, fc) = match play_device_fit(ctx, &dev) {
