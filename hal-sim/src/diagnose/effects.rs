@@ -1345,6 +1345,13 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
 /// ≈ fs/40 with a damping ratio ≥ 0.3 settles within it).
 pub const IMPACT_TAPS: usize = 12;
 
+/// Samples after each contact left out of the fit of the device behind the play
+/// (`play_device_fit`): the pulse's `IMPACT_TAPS` and as many again. A contact can only push:
+/// it releases the device after its pulse's first half-period and catches it again (the
+/// device bounces), so the force departs from the device's own M·a + Fv·v + Fc·sgn v for
+/// longer than the pulse the taps resolve.
+pub const CONTACT_SETTLE: usize = 2 * IMPACT_TAPS;
+
 /// The device behind a play of total width `b` (`play_device`): its position, whether it is
 /// off both flanks (free: no force passes), and each impact (sample of the first contact,
 /// time from the contact to that sample in sample periods, relative velocity v − v_m).
@@ -1443,15 +1450,15 @@ pub fn play_device(
 
 /// The device's inertia, viscous and Coulomb coefficients (with the force offset) fitted by
 /// least squares on the samples where `dev` is on a flank, not at rest and not within
-/// `IMPACT_TAPS` samples after an impact; None when a coefficient is negative or the fit is
+/// `CONTACT_SETTLE` samples after an impact; None when a coefficient is negative or the fit is
 /// not of full rank.
-fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
+pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     let r = ctx.rec;
     // the samples walked (`dev` may end before the record)
     let n = dev.free.len().min(r.x.len());
     let mut skip = vec![false; n];
     for &(i, _, _) in &dev.impacts {
-        for s in skip.iter_mut().skip(i).take(IMPACT_TAPS) {
+        for s in skip.iter_mut().skip(i).take(CONTACT_SETTLE) {
             *s = true;
         }
     }
@@ -1528,7 +1535,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
     };
     let dev = walk(mi, fv, fc);
     // the device's own coefficients, fitted where it moves with the motion (in contact,
-    // outside the impacts' pulses and the samples at rest; the baseline's, fitted on every
+    // outside the contacts' transients and the samples at rest; the baseline's, fitted on every
     // sample, are biased low by the gap's missing force), then the device walked again with
     // them: the column's force is the device's, not the biased baseline's
     let (mi, fv, fc) = match play_device_fit(ctx, &dev) {
