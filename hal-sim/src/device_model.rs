@@ -15,6 +15,7 @@
 
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
+use crate::diagnose::effects::PlayWalk;
 use std::f64::consts::TAU;
 
 /// The diagnosed device: baseline and effects, parameters named as in the report.
@@ -106,15 +107,21 @@ pub enum ModelEffect {
         modal_mass_kg: f64,
         damping_ratio: f64,
     },
-    /// Play of total width between the motion and the device: across the gap the device
-    /// stands still and carries no force (the offset, a sensor property, stays); where the
-    /// motion takes up the play the device is struck into its velocity (an impulse M·v, or
-    /// `impact_mass_kg`·v when the diagnosis measured the impact's momentum).
+    /// Play of total width between the motion and the device (the diagnosis's physics,
+    /// `effects::PlayWalk`, one implementation): the device, of the model's inertia and
+    /// friction, moves with a flank while the flank pushes it, leaves it and coasts (viscous
+    /// decay, Coulomb deceleration) when the motion decelerates faster, and carries no force
+    /// off both flanks (the offset, a sensor property, stays); where a flank catches it up it
+    /// is struck into the motion's velocity: an impulse M·(v − v_m), or `impact_mass_kg`·(v −
+    /// v_m) when the diagnosis measured the impact's momentum, spread as a half-sine pulse
+    /// over `contact_time_s` (within one step without it).
     Backlash {
         width_m: f64,
         gain: f64,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         impact_mass_kg: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        contact_time_s: Option<f64>,
     },
     /// Dahl friction: the Coulomb force builds up over the characteristic displacement after
     /// each reversal instead of switching with the sign of v.
@@ -260,11 +267,15 @@ impl ModelEffect {
                 width_m,
                 gain,
                 impact_mass_kg,
+                contact_time_s,
             } => {
                 range(&k("width_m"), width_m, 0.0, 1.0, "m")?;
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
                 if let Some(mi) = impact_mass_kg {
                     range(&k("impact_mass_kg"), mi, 0.0, 1e7, "kg")?;
+                }
+                if let Some(tc) = contact_time_s {
+                    range(&k("contact_time_s"), tc, 0.0, 1.0, "s")?;
                 }
             }
             ModelEffect::PreslidingHysteresis {
@@ -352,11 +363,11 @@ impl DeviceModel {
 pub struct ModelState {
     m: DeviceModel,
     dt: f64,
-    /// Per effect: resonator (y, ẏ), play position, Dahl state, lag buffer.
+    /// Per effect: resonator (y, ẏ), the device behind a play, Dahl state, lag buffer.
     y: Vec<(f64, f64)>,
-    play: Vec<f64>,
-    /// Per effect: the play's gap was open at the previous step.
-    gap_was_open: Vec<bool>,
+    play: Vec<Option<PlayWalk>>,
+    /// Per effect: the play's impact pulse in progress (time since the contact, momentum).
+    pulse: Vec<(f64, f64)>,
     dahl: Vec<(f64, f64)>,
     lag: Vec<(usize, VecDeque<f64>)>,
 }
@@ -370,8 +381,21 @@ impl ModelState {
             m: m.clone(),
             dt,
             y: vec![(x0, v0); ne],
-            play: vec![x0; ne],
-            gap_was_open: vec![false; ne],
+            play: m
+                .effects
+                .iter()
+                .map(|e| match *e {
+                    ModelEffect::Backlash { width_m, .. } => Some(PlayWalk::new(
+                        width_m,
+                        m.inertia_kg,
+                        m.viscous_friction_Ns_per_m,
+                        m.coulomb_friction_N,
+                        dt,
+                    )),
+                    _ => None,
+                })
+                .collect(),
+            pulse: vec![(0.0, 0.0); ne],
             dahl: vec![(0.0, x0); ne],
             lag: m
                 .effects
@@ -482,32 +506,40 @@ impl ModelState {
                     extra_driven_inertia_kg: j,
                 } if f * v > 0.0 => f += j * a,
                 ModelEffect::Backlash {
-                    width_m,
                     gain,
                     impact_mass_kg,
+                    contact_time_s,
+                    ..
                 } => {
-                    let h = 0.5 * width_m;
-                    let xm = &mut self.play[i];
-                    let contact = if *xm < x - h {
-                        *xm = x - h;
-                        true
-                    } else if *xm > x + h {
-                        *xm = x + h;
-                        true
-                    } else {
-                        false
+                    let Some(walk) = self.play[i].as_mut() else {
+                        continue;
                     };
-                    let struck = contact && self.gap_was_open[i];
-                    self.gap_was_open[i] = !contact;
-                    if !contact {
+                    let (free, impact) = walk.step(x, v, a, sg);
+                    if free {
                         f += gain * (m.force_offset_N - f);
-                    } else if struck {
-                        // the device side, at rest across the gap, is struck into the
-                        // motion's velocity: the impulse M·v within this step
-                        f += match impact_mass_kg {
-                            Some(mi) => mi * v / self.dt,
-                            None => gain * m.inertia_kg * v / self.dt,
-                        };
+                    }
+                    let dt = self.dt;
+                    let (t, p) = &mut self.pulse[i];
+                    if let Some((since, vr)) = impact {
+                        // struck into the motion's velocity: momentum M·(v − v_m)
+                        *t = since * dt;
+                        *p = impact_mass_kg.unwrap_or(gain * m.inertia_kg) * vr;
+                    }
+                    if *p != 0.0 {
+                        match contact_time_s {
+                            Some(tc) if tc > dt && *t < 12.0 * tc => {
+                                // a contact that starts at its peak and decays over tc (its
+                                // mean time), carrying the momentum: the step's mean force
+                                let (e0, e1) = ((-*t / tc).exp(), (-(*t + dt) / tc).exp());
+                                f += *p * (e0 - e1) / dt;
+                                *t += dt;
+                            }
+                            Some(tc) if tc > dt => *p = 0.0,
+                            _ => {
+                                f += *p / dt;
+                                *p = 0.0;
+                            }
+                        }
                     }
                 }
                 ModelEffect::CurrentLimit {
