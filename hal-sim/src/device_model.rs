@@ -13,9 +13,9 @@
 //! This is the simulator's own implementation of each effect, written from its physical
 //! description, not from the diagnosis's regressor columns.
 
+use crate::diagnose::effects::PlayWalk;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
-use crate::diagnose::effects::PlayWalk;
 use std::f64::consts::TAU;
 
 /// The diagnosed device: baseline and effects, parameters named as in the report.

@@ -1442,6 +1442,35 @@ fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     (sol.rank == 4 && t[..3].iter().all(|c| *c >= 0.0 && c.is_finite())).then(|| (t[0], t[1], t[2]))
 }
 
+/// The coefficients (inertia, viscous, Coulomb) of the device behind a play of total width
+/// `b`, walked over the first `end` samples: the device walked with the baseline's, then its
+/// own fitted where it moves with the motion (in contact, outside the impacts' pulses and the
+/// samples at rest; the baseline's, fitted on every sample, are biased low by the gap's
+/// missing force), the baseline's when that fit fails. The column's force is the device's,
+/// not the biased baseline's, and the report gives these (the simulator walks the same
+/// device).
+pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64) -> (f64, f64, f64) {
+    let r = ctx.rec;
+    let end = end.min(r.x.len()).min(ctx.sgn.len());
+    let (mi, fv, fc) = (
+        ctx.base_th.first().copied().unwrap_or(0.0),
+        ctx.base_th.get(1).copied().unwrap_or(0.0),
+        ctx.base_th.get(2).copied().unwrap_or(0.0),
+    );
+    let dev = play_device(
+        &r.x[..end],
+        &r.v[..end],
+        &r.a[..end],
+        &ctx.sgn[..end],
+        ctx.dt,
+        b,
+        mi,
+        fv,
+        fc,
+    );
+    play_device_fit(ctx, &dev).unwrap_or((mi, fv, fc))
+}
+
 /// The force play of total width `b` changes (`play_device`, the device with the baseline's
 /// inertia, viscous and Coulomb coefficients), on the rows of `s`: column `free` is the
 /// device's force where it is off both flanks, −(M·a + Fv·v + Fc·sgn v) (across the gap and
@@ -1460,11 +1489,6 @@ fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
 pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(String, Vec<f64>)> {
     let r = ctx.rec;
     let n = r.x.len();
-    let (mi, fv, fc) = (
-        ctx.base_th.first().copied().unwrap_or(0.0),
-        ctx.base_th.get(1).copied().unwrap_or(0.0),
-        ctx.base_th.get(2).copied().unwrap_or(0.0),
-    );
     let len = rows.map_or(n, |r| r.len());
     let name = EffectKind::Backlash.name();
     let mut cols: Vec<(String, Vec<f64>)> = std::iter::once("free".to_string())
@@ -1494,15 +1518,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
             fc,
         )
     };
-    let dev = walk(mi, fv, fc);
-    // the device's own coefficients, fitted where it moves with the motion (in contact,
-    // outside the impacts' pulses and the samples at rest; the baseline's, fitted on every
-    // sample, are biased low by the gap's missing force), then the device walked again with
-    // them: the column's force is the device's, not the biased baseline's
-    let (mi, fv, fc) = match play_device_fit(ctx, &dev) {
-        Some(c) => c,
-        None => (mi, fv, fc),
-    };
+    let (mi, fv, fc) = play_device_coefficients(ctx, end, b);
     let dev = walk(mi, fv, fc);
     let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
@@ -2115,14 +2131,20 @@ pub fn parameters(
             ("limit_N".into(), e.param),
             ("gain".into(), get("clip_minus_free")),
         ],
-        EffectKind::Backlash => vec![
-            ("width_m".into(), e.param),
-            ("gain".into(), get("free")),
-            (
-                "impact_mass_kg".into(),
-                (0..IMPACT_TAPS).map(|k| get(&format!("impact_{k}"))).sum(),
-            ),
-        ],
+        EffectKind::Backlash => {
+            let (mi, fvd, fcd) = play_device_coefficients(ctx, ctx.rec.x.len(), e.param);
+            vec![
+                ("width_m".into(), e.param),
+                ("gain".into(), get("free")),
+                (
+                    "impact_mass_kg".into(),
+                    (0..IMPACT_TAPS).map(|k| get(&format!("impact_{k}"))).sum(),
+                ),
+                ("device_inertia_kg".into(), mi),
+                ("device_viscous_Ns_per_m".into(), fvd),
+                ("device_coulomb_N".into(), fcd),
+            ]
+        }
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
             ("friction_N".into(), get("dahl_minus_sgn")),
