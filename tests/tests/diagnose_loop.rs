@@ -207,10 +207,6 @@ fn compliance_is_reproduced_by_the_simulator() {
     let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
     let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur));
     let _ = std::fs::remove_dir_all(&dir);
-    // the model stepped on the record's own samples, without the simulator
-    let mut series = rec.clone();
-    series.f = m.force_series(rec.dt(), &rec.x, &rec.v, &rec.a);
-    let e_series = holdout_error(&rec, &series);
     let (g_diag, g_sim) = (
         d.baseline_holdout_rel_error / d.final_holdout_rel_error,
         e_base / e_ext,
