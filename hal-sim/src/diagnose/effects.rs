@@ -1387,37 +1387,91 @@ pub fn play_device(
     fc: f64,
 ) -> PlayDevice {
     let n = x.len();
-    let h = 0.5 * b;
     let mut out = PlayDevice {
         xm: Vec::with_capacity(n),
         free: Vec::with_capacity(n),
         impacts: Vec::new(),
     };
-    if n == 0 {
-        return out;
-    }
-    let (m, fv, fc) = (m.max(0.0), fv.max(0.0), fc.max(0.0));
-    let decay = if m > 0.0 { (-fv * dt / m).exp() } else { 0.0 };
-    let dv_c = if m > 0.0 { fc * dt / m } else { f64::INFINITY };
-    // flank in contact: +1 (x pushes the device towards +), −1, or 0 (free)
-    let mut flank = 0.0f64;
-    let (mut xm, mut vm) = (x[0], v[0]);
+    let mut walk = PlayWalk::new(b, m, fv, fc, dt);
     for i in 0..n {
-        if flank != 0.0 {
-            // on the flank while it pushes; otherwise the device left it after sample i − 1
-            let f = m * a[i] + fv * v[i] + fc * sg[i];
-            if flank * f >= 0.0 {
-                xm = x[i] - flank * h;
-                vm = v[i];
+        let (free, impact) = walk.step(x[i], v[i], a[i], sg[i]);
+        if let Some((since, vr)) = impact {
+            out.impacts.push((i, since, vr));
+        }
+        out.xm.push(walk.xm);
+        out.free.push(free);
+    }
+    out
+}
+
+/// The walk of [`play_device`] one sample at a time: the diagnosis's column walks a record
+/// with it, the simulator's plant (`device_model`'s `backlash`) its own steps, so the physics
+/// the report names is the physics the simulator replays.
+#[derive(Debug, Clone)]
+pub struct PlayWalk {
+    h: f64,
+    m: f64,
+    fv: f64,
+    fc: f64,
+    decay: f64,
+    dv_c: f64,
+    dt: f64,
+    /// flank in contact: +1 (x pushes the device towards +), −1, or 0 (free)
+    flank: f64,
+    /// The device's position and velocity.
+    pub xm: f64,
+    vm: f64,
+    /// The motion's position at the last step (None before the first).
+    x_last: Option<f64>,
+}
+
+impl PlayWalk {
+    /// A device of inertia `m`, viscous `fv` and Coulomb `fc` friction behind a play of total
+    /// width `b`, stepped every `dt` seconds; it starts centred on the first step's position
+    /// with its velocity.
+    pub fn new(b: f64, m: f64, fv: f64, fc: f64, dt: f64) -> Self {
+        let (m, fv, fc) = (m.max(0.0), fv.max(0.0), fc.max(0.0));
+        PlayWalk {
+            h: 0.5 * b,
+            m,
+            fv,
+            fc,
+            decay: if m > 0.0 { (-fv * dt / m).exp() } else { 0.0 },
+            dv_c: if m > 0.0 { fc * dt / m } else { f64::INFINITY },
+            dt,
+            flank: 0.0,
+            xm: 0.0,
+            vm: 0.0,
+            x_last: None,
+        }
+    }
+
+    /// The next sample of the motion (x, v, a, and sgn v as the baseline takes it): whether
+    /// the device is off both flanks after it, and the impact when a flank strikes it within
+    /// this step (the time from the contact to the sample, in steps, and the relative
+    /// velocity v − v_m).
+    pub fn step(&mut self, x: f64, v: f64, a: f64, sg: f64) -> (bool, Option<(f64, f64)>) {
+        let (h, dt) = (self.h, self.dt);
+        let Some(x_prev) = self.x_last.replace(x) else {
+            (self.xm, self.vm) = (x, v);
+            return (true, None);
+        };
+        let mut impact = None;
+        if self.flank != 0.0 {
+            // on the flank while it pushes; otherwise the device left it after the last step
+            let f = self.m * a + self.fv * v + self.fc * sg;
+            if self.flank * f >= 0.0 {
+                self.xm = x - self.flank * h;
+                self.vm = v;
             } else {
-                flank = 0.0;
+                self.flank = 0.0;
             }
         }
-        if flank == 0.0 && i > 0 {
-            let (xp, dp) = (xm, x[i - 1] - xm);
+        if self.flank == 0.0 {
+            let (xp, dp, vm) = (self.xm, x_prev - self.xm, self.vm);
             // velocity linear over the step (viscous decay and Coulomb deceleration); stopped
             // where it reaches 0 (friction then holds the device)
-            let w = vm * decay - vm.signum() * dv_c;
+            let w = vm * self.decay - vm.signum() * self.dv_c;
             let (travel, vn) = if vm == 0.0 {
                 (0.0, 0.0)
             } else if w * vm > 0.0 {
@@ -1425,27 +1479,25 @@ pub fn play_device(
             } else {
                 (0.5 * vm * dt * (vm / (vm - w)), 0.0)
             };
-            xm = xp + travel;
-            vm = vn;
-            let d = x[i] - xm;
+            self.xm = xp + travel;
+            self.vm = vn;
+            let d = x - self.xm;
             for s in [1.0, -1.0] {
                 if s * d >= h {
-                    let vr = v[i] - vm;
-                    xm = x[i] - s * h;
+                    let vr = v - self.vm;
+                    self.xm = x - s * h;
                     if s * vr > 0.0 {
                         // the flank catches the device up: struck into the motion
                         let phi = ((s * h - dp) / (d - dp)).clamp(0.0, 1.0);
-                        out.impacts.push((i, 1.0 - phi, vr));
-                        flank = s;
-                        vm = v[i];
+                        impact = Some((1.0 - phi, vr));
+                        self.flank = s;
+                        self.vm = v;
                     }
                 }
             }
         }
-        out.xm.push(xm);
-        out.free.push(flank == 0.0);
+        (self.flank == 0.0, impact)
     }
-    out
 }
 
 /// The device's inertia, viscous and Coulomb coefficients (with the force offset) fitted by
@@ -1481,6 +1533,35 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
     (sol.rank == 4 && t[..3].iter().all(|c| *c >= 0.0 && c.is_finite())).then(|| (t[0], t[1], t[2]))
 }
 
+/// The coefficients (inertia, viscous, Coulomb) of the device behind a play of total width
+/// `b`, walked over the first `end` samples: the device walked with the baseline's, then its
+/// own fitted where it moves with the motion (`play_device_fit`: in contact, outside the
+/// contacts' transients and the samples at rest; the baseline's, fitted on every sample, are
+/// biased low by the gap's missing force), the baseline's when that fit fails. The column's force is the device's,
+/// not the biased baseline's, and the report gives these (the simulator walks the same
+/// device).
+pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64) -> (f64, f64, f64) {
+    let r = ctx.rec;
+    let end = end.min(r.x.len()).min(ctx.sgn.len());
+    let (mi, fv, fc) = (
+        ctx.base_th.first().copied().unwrap_or(0.0),
+        ctx.base_th.get(1).copied().unwrap_or(0.0),
+        ctx.base_th.get(2).copied().unwrap_or(0.0),
+    );
+    let dev = play_device(
+        &r.x[..end],
+        &r.v[..end],
+        &r.a[..end],
+        &ctx.sgn[..end],
+        ctx.dt,
+        b,
+        mi,
+        fv,
+        fc,
+    );
+    play_device_fit(ctx, &dev).unwrap_or((mi, fv, fc))
+}
+
 /// The force play of total width `b` changes (`play_device`, the device with the baseline's
 /// inertia, viscous and Coulomb coefficients), on the rows of `s`: column `free` is the
 /// device's force where it is off both flanks, −(M·a + Fv·v + Fc·sgn v) (across the gap and
@@ -1499,11 +1580,6 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
 pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(String, Vec<f64>)> {
     let r = ctx.rec;
     let n = r.x.len();
-    let (mi, fv, fc) = (
-        ctx.base_th.first().copied().unwrap_or(0.0),
-        ctx.base_th.get(1).copied().unwrap_or(0.0),
-        ctx.base_th.get(2).copied().unwrap_or(0.0),
-    );
     let len = rows.map_or(n, |r| r.len());
     let name = EffectKind::Backlash.name();
     let mut cols: Vec<(String, Vec<f64>)> = std::iter::once("free".to_string())
@@ -1533,15 +1609,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
             fc,
         )
     };
-    let dev = walk(mi, fv, fc);
-    // the device's own coefficients, fitted where it moves with the motion (in contact,
-    // outside the contacts' transients and the samples at rest; the baseline's, fitted on every
-    // sample, are biased low by the gap's missing force), then the device walked again with
-    // them: the column's force is the device's, not the biased baseline's
-    let (mi, fv, fc) = match play_device_fit(ctx, &dev) {
-        Some(c) => c,
-        None => (mi, fv, fc),
-    };
+    let (mi, fv, fc) = play_device_coefficients(ctx, end, b);
     let dev = walk(mi, fv, fc);
     let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
@@ -2258,14 +2326,20 @@ pub fn parameters(
             ("limit_N".into(), e.param),
             ("gain".into(), get("clip_minus_free")),
         ],
-        EffectKind::Backlash => vec![
-            ("width_m".into(), e.param),
-            ("gain".into(), get("free")),
-            (
-                "impact_mass_kg".into(),
-                (0..IMPACT_TAPS).map(|k| get(&format!("impact_{k}"))).sum(),
-            ),
-        ],
+        EffectKind::Backlash => {
+            let (mi, fvd, fcd) = play_device_coefficients(ctx, ctx.rec.x.len(), e.param);
+            vec![
+                ("width_m".into(), e.param),
+                ("gain".into(), get("free")),
+                (
+                    "impact_mass_kg".into(),
+                    (0..IMPACT_TAPS).map(|k| get(&format!("impact_{k}"))).sum(),
+                ),
+                ("device_inertia_kg".into(), mi),
+                ("device_viscous_Ns_per_m".into(), fvd),
+                ("device_coulomb_N".into(), fcd),
+            ]
+        }
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
             ("friction_N".into(), get("dahl_minus_sgn")),

@@ -36,6 +36,14 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
         for (k, v) in &f.parameters {
             t.insert(k.clone(), toml::Value::Float(*v));
         }
+        if e.kind == super::EffectKind::Backlash {
+            // the impact's force pulse as fitted (whole-record coefficients), per tap
+            let taps: Vec<toml::Value> = (0..super::effects::IMPACT_TAPS)
+                .map(|k| toml::Value::Float(get(&format!("backlash.impact_{k}")).unwrap_or(0.0)))
+                .collect();
+            t.insert("impact_pulse_kg".into(), toml::Value::Array(taps));
+            t.insert("impact_tap_s".into(), toml::Value::Float(rec.dt()));
+        }
         let eff: ModelEffect = toml::Value::Table(t)
             .try_into()
             .map_err(|err| format!("{}: {err}", e.kind.name()))?;
