@@ -632,6 +632,7 @@ fn rig_true_acceleration() {
             }
         }
     }
+}
 
 /// A recorded (EMPS position) record whose near-stops drew a false
 /// `velocity_strengthening_friction`: backlash 600050 (encoder 1.6 µm), exactly right by the
