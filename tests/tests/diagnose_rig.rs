@@ -440,66 +440,6 @@ fn impact_travel_is_the_play_width() {
 /// Bound of `impact_travel_is_the_play_width`: 3× the largest measured deviation.
 const TRAVEL_BOUND: f64 = 0.021;
 
-/// Single records of the long run (`RIG_SEEDS=300017,400042 cargo test -p regen-tests --test
-/// diagnose_rig rig_seeds -- --ignored --nocapture`): the kind and trajectory family follow
-/// from the seed as in `run`; `RIG_EVIDENCE` prints each finding's evidence and the verdicts.
-#[test]
-#[ignore]
-fn rig_seeds() {
-    let emps = emps_x();
-    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
-    for seed in seeds
-        .split(',')
-        .filter_map(|s| s.trim().parse::<u64>().ok())
-    {
-        let (ki, j) = (((seed - 1) / 100_000) as usize, (seed - 1) % 100_000);
-        let Some(kind) = Hidden::KINDS.get(ki) else {
-            continue;
-        };
-        let traj = match j % 5 {
-            0 => Trajectory::Multisine,
-            1 => Trajectory::RoundedTriangle,
-            2 => Trajectory::PointToPoint,
-            3 => Trajectory::Narrowband,
-            _ => match &emps {
-                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
-                None => Trajectory::Multisine,
-            },
-        };
-        let spec = RigSpec::random(seed, kind, traj, 12_000);
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
-        println!(
-            "{kind:>20} {:>16} seed {seed}: hidden {:?} (rms {:.2} N, noise {:.2} N, observable {}, draw {}) -> {:?} held-out {:.2} % -> {:.2} %",
-            spec.trajectory.name(),
-            spec.hidden,
-            spec.effect_rms_n,
-            spec.noise_n,
-            spec.observable,
-            spec.motion_draw,
-            d.catalogue_names(),
-            100.0 * d.baseline_holdout_rel_error,
-            100.0 * d.final_holdout_rel_error,
-        );
-        if std::env::var("RIG_EVIDENCE").is_ok() {
-            for f in &d.findings {
-                println!(
-                    "    {} {:?}: held-out rss -{:.2} %, ΔBIC {:.1}, held on {:.0} % of segments; {}",
-                    f.effect,
-                    f.parameters,
-                    100.0 * f.holdout_rss_drop,
-                    f.delta_bic,
-                    100.0 * f.consistency,
-                    f.note
-                );
-            }
-            for v in &d.verdicts {
-                println!("    verdict: {v}");
-            }
-        }
-    }
-}
-
 /// The rounded triangle's true acceleration (the rig's motion recomputed here from its seed:
 /// period and sharpness drawn from the motion stream, substep integration, the two moving
 /// averages, centring and scaling, as the rig builds it), for measuring what the derived
