@@ -346,14 +346,14 @@ fn backlash_is_reproduced_by_the_simulator() {
         "the model stepped on the record's samples: {:.3} %",
         100.0 * e_series
     );
-    // Measured (2026-11-24): width 0.8788 mm against the rig's 0.8704 (+0.96 %); diagnosis
-    // 57.702 % → 8.001 % (7.21×), its prediction 7.840 %; the model on the record's samples
-    // 7.866 %; replay 57.701 % → 7.980 % (7.23×), backlash dropped 57.740 %; the replayed
-    // force against the prediction 0.89 %. Bounds 3× the measured deviations: width 3 %,
-    // replay against the prediction 2.7 %, the replay's gain within 1 % of the diagnosis's;
-    // dropping the play loses at least half of the gain. Without the device's coasting, its
-    // own coefficients or the fitted pulse in the plant the replay is 39–106 % (measured: a
-    // device that cannot coast, 105.5 %, fails the second assert).
+    // Measured (2026-11-24): width 0.8491 mm against the rig's 0.8704 (−2.45 %); diagnosis
+    // 57.702 % → 11.765 % (4.90×), its prediction 11.662 %; the model on the record's samples
+    // 11.670 %; replay 57.701 % → 11.795 % (4.89×), backlash dropped 57.743 %; the replayed
+    // force against the prediction 1.04 %. Bounds 3× the measured deviations: width 7.5 %,
+    // replay against the prediction 3.1 %, the replay's gain within 1 % of the diagnosis's
+    // (measured 0.2 %); dropping the play loses at least half of the gain. Without the
+    // device's coasting, its own coefficients or the fitted pulse in the plant the replay is
+    // 39–106 % (measured: a device that cannot coast, 105.5 %, fails the second assert).
     let hp = |k: &str| {
         d.findings
             .iter()
@@ -369,7 +369,7 @@ fn backlash_is_reproduced_by_the_simulator() {
         unreachable!()
     };
     assert!(
-        (hp("width_m") / width_m - 1.0).abs() < 0.03,
+        (hp("width_m") / width_m - 1.0).abs() < 0.075,
         "width {}",
         hp("width_m")
     );
