@@ -262,8 +262,14 @@ pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
     rest
 }
 
-/// Smoothed sign: exact sign outside ±v_eps, linear inside (v_eps = 0.2 % of the peak speed,
-/// so derivative noise at rest does not flip the Coulomb term).
+/// The Coulomb sign's linear band of a record's velocity `v`: 0.2 % of the peak speed (so
+/// derivative noise at rest does not flip the Coulomb term); the diagnosis's `Context::v_eps`
+/// and the model fragment's `sign_band_m_s`.
+pub fn sign_band(v: &[f64]) -> f64 {
+    2e-3 * v.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12)
+}
+
+/// Smoothed sign: exact sign outside ±v_eps, linear inside (`sign_band`).
 pub fn sgn(v: f64, v_eps: f64) -> f64 {
     (v / v_eps).clamp(-1.0, 1.0)
 }
@@ -284,7 +290,7 @@ impl<'a> Context<'a> {
     /// computed by the caller).
     pub fn windowed_at_rest(rec: &'a Record, window: usize, rest: Vec<bool>) -> Self {
         let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
-        let v_eps = 2e-3 * vmax;
+        let v_eps = sign_band(&rec.v);
         let xmin = rec.x.iter().cloned().fold(f64::MAX, f64::min);
         let xmax = rec.x.iter().cloned().fold(f64::MIN, f64::max);
         let x_mid = 0.5 * (xmin + xmax);

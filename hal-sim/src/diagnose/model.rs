@@ -5,12 +5,6 @@
 use super::{Diagnosis, Record};
 use crate::device_model::{DeviceModel, Fragment, ModelEffect};
 
-/// The Coulomb sign band the diagnosis uses on this record (`effects::Context::v_eps`: 0.2 % of
-/// the peak speed).
-fn sign_band(rec: &Record) -> f64 {
-    2e-3 * rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12)
-}
-
 /// The extended model of a diagnosis as plant physics, or why it cannot be one (nothing
 /// fitted, a non-physical baseline, a parameter outside its range).
 pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> {
@@ -54,7 +48,7 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
         viscous_friction_Ns_per_m: fv,
         coulomb_friction_N: fc,
         force_offset_N: off,
-        sign_band_m_s: sign_band(rec),
+        sign_band_m_s: super::effects::sign_band(&rec.v),
         effects,
     };
     dm.check()?;
