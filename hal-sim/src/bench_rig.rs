@@ -630,6 +630,15 @@ impl RigSpec {
         false
     }
 
+    /// The imposed motion's velocity and acceleration at the record's samples, as the rig's
+    /// physics takes them (before the encoder's quantum): for measuring what a record's derived
+    /// signals miss.
+    pub fn true_motion(&self) -> (Vec<f64>, Vec<f64>) {
+        let (_, v, a) = motion_of(self);
+        let at = |u: &[f64]| (0..self.samples).map(|i| u[i * SUB]).collect();
+        (at(&v), at(&a))
+    }
+
     /// The record as CSV text in the diagnosis schema (t_s, x_m, f_N; lead as metadata).
     pub fn csv(&self) -> String {
         let (x, v, a) = motion_of(self);

@@ -440,58 +440,6 @@ fn impact_travel_is_the_play_width() {
 /// Bound of `impact_travel_is_the_play_width`: 3× the largest measured deviation.
 const TRAVEL_BOUND: f64 = 0.021;
 
-/// The rounded triangle's true acceleration (the rig's motion recomputed here from its seed:
-/// period and sharpness drawn from the motion stream, substep integration, the two moving
-/// averages, centring and scaling, as the rig builds it), for measuring what the derived
-/// acceleration misses: `(v_true, a_true at the record's samples, period s)`.
-fn triangle_true_acceleration(s: &RigSpec) -> (Vec<f64>, Vec<f64>, f64) {
-    use hal_sim::bench_rig::{RigRng, SUB};
-    let seed = s
-        .seed
-        .wrapping_add(7)
-        .wrapping_add(s.motion_draw.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    let mut rng = RigRng::new(seed);
-    let n = s.samples * SUB;
-    let h = 1.0 / (s.fs * SUB as f64);
-    let period = rng.uni(1.5, 4.0);
-    let sharp = rng.uni(3.0, 10.0);
-    let mut x = vec![0.0; n];
-    let mut p = 0.0;
-    for (i, xi) in x.iter_mut().enumerate() {
-        p += (sharp * (std::f64::consts::TAU * i as f64 * h / period).sin()).tanh() * h;
-        *xi = p;
-    }
-    let smooth = |x: &[f64]| -> Vec<f64> {
-        let mut out = vec![0.0; x.len()];
-        let mut acc = 0.0;
-        for i in 0..x.len() {
-            acc += x[i];
-            if i >= SUB {
-                acc -= x[i - SUB];
-            }
-            out[i] = acc / (i + 1).min(SUB) as f64;
-        }
-        out
-    };
-    let x = smooth(&smooth(&x));
-    let lo = x.iter().cloned().fold(f64::MAX, f64::min);
-    let hi = x.iter().cloned().fold(f64::MIN, f64::max);
-    let k = s.amplitude_m / (0.5 * (hi - lo));
-    let a: Vec<f64> = (0..s.samples)
-        .map(|i| {
-            let j = (i * SUB).clamp(2, n - 3);
-            k * (x[j + 2] - 2.0 * x[j] + x[j - 2]) / (4.0 * h * h)
-        })
-        .collect();
-    let v: Vec<f64> = (0..s.samples)
-        .map(|i| {
-            let j = (i * SUB).clamp(1, n - 2);
-            k * (x[j + 1] - x[j - 1]) / (2.0 * h)
-        })
-        .collect();
-    (v, a, period)
-}
-
 /// Rounded-triangle records diagnosed with the rig's true acceleration given as `a_m_s2`
 /// beside the derived one (`RIG_SEEDS=500002,… cargo test -p regen-tests --test diagnose_rig
 /// rig_true_acceleration -- --ignored --nocapture`): the inertial error M·(a − a_derived) at
@@ -506,7 +454,7 @@ fn rig_true_acceleration() {
     {
         let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
         let spec = RigSpec::random(seed, kind, Trajectory::RoundedTriangle, 12_000);
-        let (v_true, a_true, period) = triangle_true_acceleration(&spec);
+        let (v_true, a_true) = spec.true_motion();
         let text = spec.csv();
         let rec = parse_csv(&text, None).expect("rig record parses");
         let err: Vec<f64> = rec
@@ -527,7 +475,7 @@ fn rig_true_acceleration() {
         }
         let m = (err.len() - 200) as f64;
         println!(
-            "{kind} seed {seed}: period {period:.3} s, quantum {:.1e} m, mass {:.1} kg, peak a {amax:.2} m/s², M·(a − a_derived) rms {:.3} N overall, {:.3} N on the {n_rev} reversal samples; noise {:.2} N, effect {:.2} N rms",
+            "{kind} seed {seed}: quantum {:.1e} m, mass {:.1} kg, peak a {amax:.2} m/s², M·(a − a_derived) rms {:.3} N overall, {:.3} N on the {n_rev} reversal samples; noise {:.2} N, effect {:.2} N rms",
             spec.quantum_m,
             spec.mass_kg,
             (e_all / m).sqrt(),
