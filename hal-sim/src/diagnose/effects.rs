@@ -1547,25 +1547,31 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
 /// not the biased baseline's, and the report gives these (the simulator walks the same
 /// device).
 pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64) -> (f64, f64, f64) {
-    let r = ctx.rec;
-    let end = end.min(r.x.len()).min(ctx.sgn.len());
     let (mi, fv, fc) = (
         ctx.base_th.first().copied().unwrap_or(0.0),
         ctx.base_th.get(1).copied().unwrap_or(0.0),
         ctx.base_th.get(2).copied().unwrap_or(0.0),
     );
-    let dev = play_device(
+    let dev = play_device_on(ctx, end, b, (mi, fv, fc));
+    play_device_fit(ctx, &dev).unwrap_or((mi, fv, fc))
+}
+
+/// `play_device` over the record's first `end` samples, with the device's (inertia, viscous,
+/// Coulomb) coefficients `c`.
+fn play_device_on(ctx: &Context, end: usize, b: f64, c: (f64, f64, f64)) -> PlayDevice {
+    let r = ctx.rec;
+    let end = end.min(r.x.len()).min(ctx.sgn.len());
+    play_device(
         &r.x[..end],
         &r.v[..end],
         &r.a[..end],
         &ctx.sgn[..end],
         ctx.dt,
         b,
-        mi,
-        fv,
-        fc,
-    );
-    play_device_fit(ctx, &dev).unwrap_or((mi, fv, fc))
+        c.0,
+        c.1,
+        c.2,
+    )
 }
 
 /// The force play of total width `b` changes (`play_device`, the device with the baseline's
@@ -1602,21 +1608,8 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
         Some(rw) => rw.last().map_or(0, |l| l + 1).max(ctx.window).min(n),
         None => n,
     };
-    let walk = |mi: f64, fv: f64, fc: f64| {
-        play_device(
-            &r.x[..end],
-            &r.v[..end],
-            &r.a[..end],
-            &ctx.sgn[..end],
-            ctx.dt,
-            b,
-            mi,
-            fv,
-            fc,
-        )
-    };
     let (mi, fv, fc) = play_device_coefficients(ctx, end, b);
-    let dev = walk(mi, fv, fc);
+    let dev = play_device_on(ctx, end, b, (mi, fv, fc));
     let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
