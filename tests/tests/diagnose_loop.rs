@@ -85,16 +85,31 @@ fn baseline_model(d: &hal_sim::diagnose::Diagnosis, m: &DeviceModel) -> DeviceMo
     }
 }
 
-/// A bench-rig record with a hidden Stribeck bump (static friction 1.5–2.5× Coulomb, LuGre in
-/// the rig) on a multisine, 12 s at 1 kHz: diagnosed, its fragment loaded, its motion
-/// replayed by the simulator with the extended model, with the baseline alone and with the
-/// finding dropped.
-#[test]
-fn held_out_gain_is_reproduced_by_the_simulator() {
-    let seed = 12;
-    let spec = RigSpec::random(seed, "stribeck", Trajectory::Multisine, 12_000);
+/// A rig record diagnosed, its fragment loaded (`effect` must be in it), and its motion
+/// replayed by the closed-loop simulator with the extended model, with the baseline alone and
+/// with `effect` dropped; each replay's held-out error against the measured force, the
+/// diagnosis's own (whole-record) prediction's, and the two gains.
+struct Loop {
+    rec: Record,
+    d: hal_sim::diagnose::Diagnosis,
+    toml: String,
+    m: DeviceModel,
+    /// the replay with the extended model
+    e_ext: f64,
+    /// the diagnosis's prediction
+    e_pred: f64,
+    /// the replayed force against the prediction
+    e_vs_pred: f64,
+    /// the replay with the baseline alone, and with `effect` dropped
+    e_base: f64,
+    e_drop: f64,
+    g_diag: f64,
+    g_sim: f64,
+}
+
+fn close_loop(spec: &RigSpec, tag: &str, effect: &str) -> Loop {
     let text = spec.csv();
-    let dir = std::env::temp_dir().join(format!("regen-diagloop-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("regen-diagloop-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rig.csv");
     std::fs::write(&path, &text).unwrap();
@@ -104,6 +119,72 @@ fn held_out_gain_is_reproduced_by_the_simulator() {
     let m = Fragment::from_toml(&toml)
         .expect("the fragment loads")
         .model;
+    let k = m
+        .effects
+        .iter()
+        .position(|e| e.name() == effect)
+        .unwrap_or_else(|| panic!("{effect} not named: {toml}"));
+    let dur = rec.t[rec.len() - 1];
+    let sim_ext = replay(&path, &m, dur);
+    let e_ext = holdout_error(&rec, &sim_ext);
+    // the simulator's force against the diagnosis's prediction of the same model
+    let mut pred = rec.clone();
+    pred.f = d.prediction.clone();
+    let e_vs_pred = holdout_error(&pred, &sim_ext);
+    let e_pred = holdout_error(&rec, &pred);
+    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
+    let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur));
+    let _ = std::fs::remove_dir_all(&dir);
+    let (g_diag, g_sim) = (
+        d.baseline_holdout_rel_error / d.final_holdout_rel_error,
+        e_base / e_ext,
+    );
+    Loop {
+        rec,
+        d,
+        toml,
+        m,
+        e_ext,
+        e_pred,
+        e_vs_pred,
+        e_base,
+        e_drop,
+        g_diag,
+        g_sim,
+    }
+}
+
+/// The parameter `name` of `d`'s finding `effect`.
+fn param(d: &hal_sim::diagnose::Diagnosis, effect: &str, name: &str) -> f64 {
+    d.findings
+        .iter()
+        .find(|f| f.effect == effect)
+        .and_then(|f| f.parameters.iter().find(|(n, _)| n == name))
+        .unwrap_or_else(|| panic!("{effect}.{name} not reported"))
+        .1
+}
+
+/// A bench-rig record with a hidden Stribeck bump (static friction 1.5–2.5× Coulomb, LuGre in
+/// the rig) on a multisine, 12 s at 1 kHz: diagnosed, its fragment loaded, its motion
+/// replayed by the simulator with the extended model, with the baseline alone and with the
+/// finding dropped.
+#[test]
+fn held_out_gain_is_reproduced_by_the_simulator() {
+    let seed = 12;
+    let spec = RigSpec::random(seed, "stribeck", Trajectory::Multisine, 12_000);
+    let Loop {
+        d,
+        toml,
+        m,
+        e_ext,
+        e_pred,
+        e_vs_pred,
+        e_base,
+        e_drop,
+        g_diag,
+        g_sim,
+        ..
+    } = close_loop(&spec, "s", "stribeck");
     // the fragment carries exactly the report's numbers
     let names: Vec<&str> = m.effects.iter().map(|e| e.name()).collect();
     assert_eq!(names, ["stribeck"], "{toml}");
@@ -119,23 +200,6 @@ fn held_out_gain_is_reproduced_by_the_simulator() {
         }
         _ => unreachable!(),
     }
-    let dur = rec.t[rec.len() - 1];
-    let sim_ext = replay(&path, &m, dur);
-    let e_ext = holdout_error(&rec, &sim_ext);
-    // the simulator's force against the diagnosis's prediction of the same model (two
-    // implementations of each effect: the plant's physics, the diagnosis's columns)
-    let mut pred = rec.clone();
-    pred.f = d.prediction.clone();
-    let e_vs_pred = holdout_error(&pred, &sim_ext);
-    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
-    let e_drop = holdout_error(&rec, &replay(&path, &m.without(0), dur));
-    let _ = std::fs::remove_dir_all(&dir);
-    // the diagnosis's own prediction with the same (whole-record) model
-    let e_pred = holdout_error(&rec, &pred);
-    let (g_diag, g_sim) = (
-        d.baseline_holdout_rel_error / d.final_holdout_rel_error,
-        e_base / e_ext,
-    );
     println!(
         "diagnosis: held-out {:.3} % → {:.3} % (gain {g_diag:.2}×), its whole-record model's prediction {:.3} %; simulator replay: {:.3} % → {:.3} % (gain {g_sim:.2}×); stribeck dropped from the fragment: {:.3} %; replay against the prediction {:.4} %",
         100.0 * d.baseline_holdout_rel_error,
@@ -181,36 +245,18 @@ fn held_out_gain_is_reproduced_by_the_simulator() {
 fn compliance_is_reproduced_by_the_simulator() {
     let seed = 13;
     let spec = RigSpec::random(seed, "resonance", Trajectory::Multisine, 12_000);
-    let text = spec.csv();
-    let dir = std::env::temp_dir().join(format!("regen-diagloop-c-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("rig.csv");
-    std::fs::write(&path, &text).unwrap();
-    let rec = parse_csv(&text, None).unwrap();
-    let d = diagnose(&rec, &Options::default());
-    let toml = report::model_toml(&rec, &d);
-    let m = Fragment::from_toml(&toml)
-        .expect("the fragment loads")
-        .model;
-    let k = m
-        .effects
-        .iter()
-        .position(|e| e.name() == "compliance")
-        .unwrap_or_else(|| panic!("compliance not named: {toml}"));
-    let dur = rec.t[rec.len() - 1];
-    let sim_ext = replay(&path, &m, dur);
-    let e_ext = holdout_error(&rec, &sim_ext);
-    let mut pred = rec.clone();
-    pred.f = d.prediction.clone();
-    let e_vs_pred = holdout_error(&pred, &sim_ext);
-    let e_pred = holdout_error(&rec, &pred);
-    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
-    let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur));
-    let _ = std::fs::remove_dir_all(&dir);
-    let (g_diag, g_sim) = (
-        d.baseline_holdout_rel_error / d.final_holdout_rel_error,
-        e_base / e_ext,
-    );
+    let Loop {
+        d,
+        m,
+        e_ext,
+        e_pred,
+        e_vs_pred,
+        e_base,
+        e_drop,
+        g_diag,
+        g_sim,
+        ..
+    } = close_loop(&spec, "c", "compliance");
     println!(
         "hidden {:?}; model {:?}\ndiagnosis: held-out {:.3} % → {:.3} % (gain {g_diag:.2}×), its whole-record model's prediction {:.3} %; simulator replay: {:.3} % → {:.3} % (gain {g_sim:.2}×); compliance dropped: {:.3} %; replay against the prediction {:.4} %",
         spec.hidden,
@@ -230,17 +276,7 @@ fn compliance_is_reproduced_by_the_simulator() {
     // against the prediction 0.029 %. Bounds 3× the measured deviations: parameters 6 %, 0.5 %,
     // 6 %; replay against prediction 0.09 %; gain within 30 %; dropping the mode loses at least
     // half of the gain.
-    let hp = |k: &str| {
-        d.findings
-            .iter()
-            .find(|f| f.effect == "compliance")
-            .unwrap()
-            .parameters
-            .iter()
-            .find(|(n, _)| n == k)
-            .unwrap()
-            .1
-    };
+    let hp = |k: &str| param(&d, "compliance", k);
     let hal_sim::bench_rig::Hidden::Resonance {
         mass_kg,
         freq_hz,
@@ -286,50 +322,23 @@ fn compliance_is_reproduced_by_the_simulator() {
 fn backlash_is_reproduced_by_the_simulator() {
     let seed = 600_001;
     let spec = RigSpec::random(seed, "backlash", Trajectory::Multisine, 12_000);
-    let text = spec.csv();
-    let dir = std::env::temp_dir().join(format!("regen-diagloop-b-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("rig.csv");
-    std::fs::write(&path, &text).unwrap();
-    let rec = parse_csv(&text, None).unwrap();
-    let d = diagnose(&rec, &Options::default());
-    let toml = report::model_toml(&rec, &d);
-    let m = Fragment::from_toml(&toml)
-        .expect("the fragment loads")
-        .model;
-    let k = m
-        .effects
-        .iter()
-        .position(|e| e.name() == "backlash")
-        .unwrap_or_else(|| panic!("backlash not named: {toml}"));
-    let dur = rec.t[rec.len() - 1];
-    let sim_ext = replay(&path, &m, dur);
-    let e_ext = holdout_error(&rec, &sim_ext);
-    let mut pred = rec.clone();
-    pred.f = d.prediction.clone();
-    let e_vs_pred = holdout_error(&pred, &sim_ext);
-    let e_pred = holdout_error(&rec, &pred);
-    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
-    let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur));
-    let _ = std::fs::remove_dir_all(&dir);
+    let Loop {
+        rec,
+        d,
+        m,
+        e_ext,
+        e_pred,
+        e_vs_pred,
+        e_base,
+        e_drop,
+        g_diag,
+        g_sim,
+        ..
+    } = close_loop(&spec, "b", "backlash");
     // the model stepped on the record's own samples, without the simulator
     let mut series = rec.clone();
     series.f = m.force_series(rec.dt(), &rec.x, &rec.v, &rec.a);
     let e_series = holdout_error(&rec, &series);
-    if std::env::var("DUMP").is_ok() {
-        let mut o = String::new();
-        for i in 0..rec.len() {
-            o += &format!(
-                "{},{},{},{},{},{}\n",
-                rec.x[i], rec.v[i], rec.a[i], rec.f[i], pred.f[i], series.f[i]
-            );
-        }
-        std::fs::write("/tmp/bl_dump.csv", o).unwrap();
-    }
-    let (g_diag, g_sim) = (
-        d.baseline_holdout_rel_error / d.final_holdout_rel_error,
-        e_base / e_ext,
-    );
     println!(
         "hidden {:?}; model {:?}\ndiagnosis: held-out {:.3} % → {:.3} % (gain {g_diag:.2}×), its whole-record model's prediction {:.3} %; simulator replay: {:.3} % → {:.3} % (gain {g_sim:.2}×); backlash dropped: {:.3} %; replay against the prediction {:.4} %",
         spec.hidden,
@@ -354,17 +363,7 @@ fn backlash_is_reproduced_by_the_simulator() {
     // (measured 0.2 %); dropping the play loses at least half of the gain. Without the
     // device's coasting, its own coefficients or the fitted pulse in the plant the replay is
     // 39–106 % (measured: a device that cannot coast, 105.5 %, fails the second assert).
-    let hp = |k: &str| {
-        d.findings
-            .iter()
-            .find(|f| f.effect == "backlash")
-            .unwrap()
-            .parameters
-            .iter()
-            .find(|(n, _)| n == k)
-            .unwrap()
-            .1
-    };
+    let hp = |k: &str| param(&d, "backlash", k);
     let hal_sim::bench_rig::Hidden::Backlash { width_m } = spec.hidden else {
         unreachable!()
     };
