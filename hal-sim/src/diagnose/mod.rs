@@ -1509,27 +1509,24 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
-            if let (false, Some(r), EffectKind::VelocityStrengthening) =
-                (ripple_locked[k], ripple_measured[k], chosen[k].kind)
-            {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not a friction of the speed: where its build-up is slow enough for the derived signals (e^(−|v|/v_b)·|a|/v_b ≤ π·fc) {:.3} N (Wald {:.1}, at least {:.0} needed), at the stops the motion passes faster, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    r.amp_in,
-                    r.wald,
-                    AGREEMENT_T * AGREEMENT_T,
-                    r.amp_above,
-                    100.0 * r.rel_diff,
-                    r.wald_diff,
-                    100.0 / AGREEMENT_T,
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
             if let (false, Some(r)) = (ripple_locked[k], ripple_measured[k]) {
+                // a friction of the speed is tested where its build-up is followed, a ripple
+                // where its time frequency is: the same split, worded for each
+                let (not, band, outside) = if chosen[k].kind == EffectKind::VelocityStrengthening {
+                    (
+                        "a friction of the speed",
+                        "where its build-up is slow enough for the derived signals (e^(−|v|/v_b)·|a|/v_b ≤ π·fc)",
+                        "at the stops the motion passes faster",
+                    )
+                } else {
+                    (
+                        "a force locked to position",
+                        "inside the derived acceleration's band (|v|/λ ≤ half its cutoff)",
+                        "above it",
+                    )
+                };
                 dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not a force locked to position: inside the derived acceleration's band (|v|/λ ≤ half its cutoff) {:.3} N (Wald {:.1}, at least {:.0} needed), above it, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
+                    "{} ({}) selected, but it is not {not}: {band} {:.3} N (Wald {:.1}, at least {:.0} needed), {outside}, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
                     chosen[k].kind.name(),
                     effects::describe(&ctx, &chosen[k]),
                     r.amp_in,
