@@ -952,58 +952,6 @@ fn compliance_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String,
         .collect()
 }
 
-/// (sin t, cos t) for the periodic columns, inlined into their loop: the argument reduced by
-/// π/2 in three parts (Cody–Waite, the split of fdlibm's `__rem_pio2`: exact products for
-/// |t| < 2²⁰·π/2), then fdlibm's minimax kernels `__kernel_sin` / `__kernel_cos` on
-/// [−π/4, π/4] and the quadrant chosen without a branch. Half the time of the C library's
-/// `sincos` called per sample (10⁷ arguments up to 3000, both in one run), and within an ulp
-/// of it over the arguments the columns take (`tests::sin_cos_matches_std`). Larger or
-/// non-finite arguments: the library's.
-#[inline(always)]
-pub fn sin_cos(t: f64) -> (f64, f64) {
-    // π/2 = P1 + P2 + P3 (33 + 33 + 53 bits): q·P1 and q·P2 exact for |q| < 2²⁰
-    const P1: f64 = 1.5707963267341256;
-    const P2: f64 = 6.077100506303966e-11;
-    const P3: f64 = 2.0222662487111665e-21;
-    const S: [f64; 6] = [
-        -0.16666666666666632,
-        0.00833333333332249,
-        -0.0001984126982985795,
-        2.7557313707070068e-06,
-        -2.5050760253406863e-08,
-        1.58969099521155e-10,
-    ];
-    const C: [f64; 6] = [
-        0.0416666666666666,
-        -0.001388888888887411,
-        2.480158728947673e-05,
-        -2.7557314351390663e-07,
-        2.087572321298175e-09,
-        -1.1359647557788195e-11,
-    ];
-    // rounding to the nearest integer by the 1.5·2⁵² shift (no `round` call)
-    const SHIFT: f64 = 6_755_399_441_055_744.0;
-    let qf = (t * std::f64::consts::FRAC_2_PI + SHIFT) - SHIFT;
-    // beyond the reduction's range, or not finite (a NaN fails every comparison)
-    if qf.abs() >= 1_048_576.0 || qf.is_nan() {
-        return t.sin_cos();
-    }
-    let r = ((t - qf * P1) - qf * P2) - qf * P3;
-    let z = r * r;
-    let sr = S[1] + z * (S[2] + z * (S[3] + z * (S[4] + z * S[5])));
-    let sn = r + z * r * (S[0] + z * sr);
-    let cr = z * (C[0] + z * (C[1] + z * (C[2] + z * (C[3] + z * (C[4] + z * C[5])))));
-    let hz = 0.5 * z;
-    let w = 1.0 - hz;
-    let cs = w + (((1.0 - w) - hz) + z * cr);
-    // quadrant q mod 4: (s, c), (c, −s), (−s, −c), (−c, s)
-    let q = qf as i64;
-    let (a, b) = if q & 1 == 0 { (sn, cs) } else { (cs, sn) };
-    let sa = if q & 2 == 0 { a } else { -a };
-    let cb = if (q + 1) & 2 == 0 { b } else { -b };
-    (sa, cb)
-}
-
 /// Unit-coefficient shape of an effect for synthesis and fitting: the regressor columns at
 /// every sample of the record.
 pub fn effect_columns(ctx: &Context, e: &Effect) -> Vec<(String, Vec<f64>)> {
@@ -1029,7 +977,9 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
             let mut sn_c = Vec::with_capacity(n);
             let mut cs_c = Vec::with_capacity(n);
             for i in 0..n {
-                let (sn, cs) = sin_cos(k * x[i]);
+                // `libm`'s port of fdlibm's `sincos`: with the release build's fat LTO it costs the
+                // same as a hand-inlined fdlibm kernel (docs/diagnose.md, "Speed")
+                let (sn, cs) = libm::sincos(k * x[i]);
                 let g = if fr { sg[i] } else { 1.0 };
                 sn_c.push(sn * g);
                 cs_c.push(cs * g);
@@ -2403,42 +2353,6 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// `sin_cos` against the library's over the arguments the periodic columns take (k·x up to
-    /// 2π·stroke/λ_min: 2π·400 for a centred stroke, more for an offset one; here |t| ≤ 10⁵,
-    /// log-spread, with both signs, and the multiples of π/4 where the quadrant changes).
-    /// Measured: largest difference 1.1e-16 (half an ulp of 1: both are within an ulp of the
-    /// true value); bound 3.3e-16, three times that. Beyond the reduction's range
-    /// (|t| ≥ 2²⁰·π/2) and for a NaN it is the library's. Breaks: the kernel's last cosine
-    /// term C[5] dropped (3.9e-13), the cosine's sign flipped in one quadrant (1.4): each
-    /// fails; the reduction's third part P3 dropped stays within the bound up to 10⁵
-    /// (2.2e-16: q·P3 < 1.4e-16 there).
-    #[test]
-    fn sin_cos_matches_std() {
-        let mut worst = 0.0f64;
-        let mut check = |t: f64| {
-            let (s, c) = sin_cos(t);
-            let (s0, c0) = t.sin_cos();
-            worst = worst.max((s - s0).abs()).max((c - c0).abs());
-        };
-        for i in 0..200_000 {
-            let t = 10f64.powf(-6.0 + 11.0 * i as f64 / 200_000.0);
-            check(t);
-            check(-t);
-        }
-        for k in -4000..4000 {
-            let t = k as f64 * std::f64::consts::FRAC_PI_4;
-            for d in [-1e-12, 0.0, 1e-12] {
-                check(t + d);
-            }
-        }
-        assert!(worst <= 3.3e-16, "largest difference {worst:e}");
-        for t in [2e6, -3e7, 1e300] {
-            assert_eq!(sin_cos(t), t.sin_cos());
-        }
-        let (s, c) = sin_cos(f64::NAN);
-        assert!(s.is_nan() && c.is_nan());
-    }
 
     /// `speed_levels` against closed forms. A sinusoid v = v̂·sin(ωt) over whole periods: the
     /// time quantile q of |v| is v̂·sin(qπ/2), the crossing quantile (|v| weighted by |Δv|)
