@@ -6,6 +6,8 @@
 //! position. The records are built here in closed form (the motion integrated from its
 //! velocity, the force from the device's terms), sharing nothing with the diagnosis.
 
+mod common;
+
 use hal_sim::diagnose::effects::{
     build_columns, ripple_apart_from_reversals, travel_since_reversal, Context, Effect, EffectKind,
 };
@@ -155,10 +157,7 @@ fn reversal_ripple_on_a_triangle_is_not_named_cogging() {
             d.verdicts
         );
         assert!(
-            !d.effects.iter().any(|e| matches!(
-                e.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )),
+            !common::names_a_periodic_effect(&d),
             "seed {seed}: the reversal-locked ripple named {names:?}"
         );
         let d = diagnose(
@@ -171,9 +170,7 @@ fn reversal_ripple_on_a_triangle_is_not_named_cogging() {
             d.findings.iter().map(|f| &f.note).collect::<Vec<_>>()
         );
         assert!(
-            d.effects
-                .iter()
-                .any(|e| e.kind == EffectKind::Cogging && (e.param / lambda - 1.0).abs() < 0.01),
+            common::names_cogging_at(&d, lambda),
             "seed {seed}: the cogging not named: {names:?}"
         );
     }

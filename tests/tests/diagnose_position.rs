@@ -2,6 +2,8 @@
 //! periodic in position hidden in a synthetic record and left in the residual must show as an
 //! `unexplained` spatial peak at its wavelength; clean records must show no spatial peak.
 
+mod common;
+
 use hal_sim::diagnose::effects::{Effect, EffectKind};
 use hal_sim::diagnose::synth::{Rng, SynthSpec};
 use hal_sim::diagnose::{diagnose, report, synth, Options};
@@ -271,10 +273,7 @@ fn motion_ripple_above_the_acceleration_band_is_not_named() {
             d.verdicts
         );
         assert!(
-            !d.effects.iter().any(|e| matches!(
-                e.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )),
+            !common::names_a_periodic_effect(&d),
             "seed {seed}: the motion's ripple named {names:?}"
         );
         let cog =
@@ -287,9 +286,7 @@ fn motion_ripple_above_the_acceleration_band_is_not_named() {
             d.findings.iter().map(|f| &f.note).collect::<Vec<_>>()
         );
         assert!(
-            d.effects
-                .iter()
-                .any(|e| e.kind == EffectKind::Cogging && (e.param / lambda - 1.0).abs() < 0.01),
+            common::names_cogging_at(&d, lambda),
             "seed {seed}: the cogging not named: {names:?}"
         );
     }
