@@ -602,3 +602,107 @@ fn play_device_is_fitted_off_the_contact_transient() {
 /// Bounds of `play_device_is_fitted_off_the_contact_transient` (inertia, viscous, Coulomb):
 /// 3× the largest measured deviation.
 const PLAY_DEVICE_BOUND: [f64; 3] = [0.105, 0.015, 0.02];
+
+/// The play's joint fit profiled over its width on records of the long run's backlash kind
+/// (`RIG_SEEDS=600007,600011 cargo test -p regen-tests --test diagnose_rig
+/// rig_play_width_profile -- --ignored --nocapture`): the play's columns
+/// (`effects::play_columns_with`) at the rig's width × (1 + 0.02k), k = −10 … 10, fitted with
+/// the baseline's columns on the training part; per width the held-out rss against the
+/// baseline's, the free force's gain and the impact's sum (kg), with the device the diagnosis
+/// fits (`play_device_coefficients`) and with the rig's own (inertia, drive damping plus
+/// viscous friction, Coulomb). It separates what the device's fit costs from what the walk
+/// lacks. The trajectory of a seed is the long run's (`run`: seed 600001 + j, family j mod 5).
+#[test]
+#[ignore]
+fn rig_play_width_profile() {
+    use hal_sim::diagnose::effects::{
+        impact_travel, play_columns_with, play_device_coefficients, Context,
+    };
+    use hal_sim::diagnose::{holdout_mask, normals, AT_REST};
+    let emps = emps_x();
+    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
+    for seed in seeds
+        .split(',')
+        .filter_map(|s| s.trim().parse::<u64>().ok())
+        .filter(|s| (600_001..700_000).contains(s))
+    {
+        let j = (seed - 600_001) as usize;
+        let traj = match j % 5 {
+            0 => Trajectory::Multisine,
+            1 => Trajectory::RoundedTriangle,
+            2 => Trajectory::PointToPoint,
+            3 => Trajectory::Narrowband,
+            _ => match &emps {
+                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
+                None => Trajectory::Multisine,
+            },
+        };
+        let spec = RigSpec::random(seed, "backlash", traj, 12_000);
+        let Hidden::Backlash { width_m } = spec.hidden else {
+            println!("seed {seed}: not a play record");
+            continue;
+        };
+        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+        let ctx = Context::new(&rec);
+        let n = rec.len();
+        let mut part = holdout_mask(n);
+        for (p, &r) in part.iter_mut().zip(&ctx.rest) {
+            if r {
+                *p = AT_REST;
+            }
+        }
+        let ones = vec![1.0; n];
+        let fit = |extra: &[(String, Vec<f64>)]| -> (f64, Vec<f64>) {
+            let mut cols: Vec<&[f64]> = vec![&rec.a, &rec.v, &ctx.sgn, &ones];
+            cols.extend(extra.iter().map(|c| c.1.as_slice()));
+            let (tr, ho) = normals(&cols, &rec.f, &part, 1);
+            let th = tr.solve();
+            (ho.rss(&th), th)
+        };
+        let (rss0, th0) = fit(&[]);
+        let rig = (
+            spec.mass_kg,
+            spec.drive_damping + spec.viscous,
+            spec.coulomb,
+        );
+        let fitted = play_device_coefficients(&ctx, n, width_m);
+        // the device walked once more, from the one fitted (None: that fit fails)
+        let refit = hal_sim::diagnose::effects::play_device_fit(
+            &ctx,
+            &hal_sim::diagnose::effects::play_device(
+                &rec.x, &rec.v, &rec.a, &ctx.sgn, ctx.dt, width_m, fitted.0, fitted.1, fitted.2,
+            ),
+        );
+        println!(
+            "seed {seed} ({}): width {:.4e} m, impacts' width {:?}; baseline M {:.1} Fv {:.1} Fc {:.1}; device fitted {:.1} {:.1} {:.2}, rig's {:.1} {:.1} {:.2} (Fv/M {:.1} s⁻¹)",
+            spec.trajectory.name(),
+            width_m,
+            impact_travel(&ctx).map(|t| t / width_m),
+            th0[0],
+            th0[1],
+            th0[2],
+            fitted.0,
+            fitted.1,
+            fitted.2,
+            rig.0,
+            rig.1,
+            rig.2,
+            rig.1 / rig.0
+        );
+        for k in -10..=10 {
+            let b = width_m * (1.0 + 0.02 * k as f64);
+            let mut line = format!("  {:+3} %:", 2 * k);
+            for dev in [None, Some(rig)].into_iter().chain(refit.map(Some)) {
+                let cols = play_columns_with(&ctx, None, b, dev);
+                let (rss, th) = fit(&cols);
+                line.push_str(&format!(
+                    "  held-out rss {:6.2} %, gain {:+.2}, impact {:6.1} kg;",
+                    100.0 * rss / rss0,
+                    th[4],
+                    th[5..].iter().sum::<f64>()
+                ));
+            }
+            println!("{line}");
+        }
+    }
+}

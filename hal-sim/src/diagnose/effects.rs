@@ -1540,6 +1540,19 @@ fn play_device_on(ctx: &Context, end: usize, b: f64, c: (f64, f64, f64)) -> Play
 /// no impact follows; play removes every force over a dead band of position and then strikes
 /// the device with its own momentum.
 pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(String, Vec<f64>)> {
+    play_columns_with(ctx, rows, b, None)
+}
+
+/// `play_columns` with the device's (inertia, viscous, Coulomb) coefficients given (`device`;
+/// None: fitted as `play_columns` fits them, `play_device_coefficients`): the rig's tests walk
+/// the device with the rig's own coefficients to separate what the device's fit costs from
+/// what the walk lacks (`rig_play_width_profile`).
+pub fn play_columns_with(
+    ctx: &Context,
+    rows: Option<&[usize]>,
+    b: f64,
+    device: Option<(f64, f64, f64)>,
+) -> Vec<(String, Vec<f64>)> {
     let r = ctx.rec;
     let n = r.x.len();
     let len = rows.map_or(n, |r| r.len());
@@ -1558,7 +1571,7 @@ pub fn play_columns(ctx: &Context, rows: Option<&[usize]>, b: f64) -> Vec<(Strin
         Some(rw) => rw.last().map_or(0, |l| l + 1).max(ctx.window).min(n),
         None => n,
     };
-    let (mi, fv, fc) = play_device_coefficients(ctx, end, b);
+    let (mi, fv, fc) = device.unwrap_or_else(|| play_device_coefficients(ctx, end, b));
     let dev = play_device_on(ctx, end, b, (mi, fv, fc));
     let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
