@@ -771,6 +771,18 @@ pub fn jackknife_t(fits: &[Vec<f64>]) -> f64 {
     }
 }
 
+/// `jackknife_t` of the segment fits on which a finding holds (`held`): the fits that
+/// determined its coefficients.
+pub fn agreement_of_held(fits: &[Vec<f64>], held: &[bool]) -> f64 {
+    let kept: Vec<Vec<f64>> = fits
+        .iter()
+        .zip(held)
+        .filter(|(_, h)| **h)
+        .map(|(f, _)| f.clone())
+        .collect();
+    jackknife_t(&kept)
+}
+
 /// Samples in motion the diagnosis needs at least (training and held-out together).
 pub const MIN_MOVING: usize = 200;
 
@@ -1336,6 +1348,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let mut holds = vec![0usize; chosen.len()];
     let mut signs = vec![(0usize, 0usize); chosen.len()];
     let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
+    let mut seg_held: Vec<Vec<bool>> = vec![Vec::new(); chosen.len()];
     let mut stab_hold = spread_hold.clone();
     for j in lag_of(&chosen)
         .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
@@ -1366,9 +1379,11 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             let (t2, h2) = (tr.select(&keep), ho.select(&keep));
             let rss_without = h2.rss(&t2.solve());
             let phys = effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)]);
-            if phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain) {
+            let held = phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain);
+            if held {
                 holds[k] += 1;
             }
+            seg_held[k].push(held);
             seg_coefs[k].push(th[a..b].to_vec());
             if th[a] > 0.0 {
                 signs[k].0 += 1;
@@ -1377,7 +1392,24 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             }
         }
     }
-    let agreement: Vec<f64> = seg_coefs.iter().map(|c| jackknife_t(c)).collect();
+    // A play's impact taps are the contact pulse's shape, resolved only by the contacts on the
+    // fitted rows: on a record with few reversals a fit without them leaves the taps in their
+    // null space (alternating ±10³ kg, their sum off the impact's momentum) and that segment
+    // does not hold (its impact outside the momentum rule or its held-out rss not lowered).
+    // The play's agreement is asked of the segments where it holds (`agreement_of_held`), at
+    // least STABILITY_MIN of them; every other effect's of all five.
+    let agreement: Vec<f64> = seg_coefs
+        .iter()
+        .zip(&seg_held)
+        .zip(&chosen)
+        .map(|((c, h), e)| {
+            if e.kind == EffectKind::Backlash {
+                agreement_of_held(c, h)
+            } else {
+                jackknife_t(c)
+            }
+        })
+        .collect();
     // A periodic finding names a ripple: the residual it explains (the whole-record residual
     // with its own contribution added back) must show that ripple as a peak of the spectrum
     // over position (30× the median level, the `unexplained` criterion) within the 3 % of
@@ -1887,6 +1919,27 @@ mod tests {
         let g = (0..m * m).map(|k| dot(&c[k / m], &c[k % m])).collect();
         let b = c.iter().map(|ci| dot(ci, y)).collect();
         (g, b)
+    }
+
+    /// A play's agreement is that of the segment fits where it holds: one fit without the
+    /// record's contacts (taps in their null space) spoils the jackknife t of all five, not
+    /// that of the four that hold. Broken (all five taken) it fails.
+    #[test]
+    fn agreement_is_asked_of_the_segments_that_hold() {
+        // four segment fits of a play (gain, three taps) agreeing within 1 %, and one fit
+        // without the record's contacts: its taps in their null space (±2,000 kg)
+        let good = |e: f64| vec![1.0 + e, 15.0 * (1.0 + e), 22.0 * (1.0 - e), 8.0];
+        let mut fits: Vec<Vec<f64>> = [0.01, -0.01, 0.005, 0.0].iter().map(|e| good(*e)).collect();
+        fits.insert(0, vec![1.0, 0.0, 2000.0, -2000.0]);
+        let held = [false, true, true, true, true];
+        let all = jackknife_t(&fits);
+        let of_held = agreement_of_held(&fits, &held);
+        assert!(all < AGREEMENT_T, "all five: t = {all}");
+        assert!(
+            of_held > 10.0 * AGREEMENT_T,
+            "the four that hold: t = {of_held}"
+        );
+        assert_eq!(of_held, jackknife_t(&fits[1..]));
     }
 
     /// The jackknife t of leave-one-segment-out fits against its closed form: scalar fits
