@@ -1079,6 +1079,8 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let rss_h0 = base_fit.1.rss(&th_b);
         let rss_t0 = base_fit.0.rss(&th_b);
         let k0 = base_refs.len() + set.iter().filter(|e| e.kind.scanned()).count();
+        // where each effect of the set sits among the base columns (after the fixed terms)
+        let set_spans = effect_spans(set, n_fixed, &*cache);
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
             if set.iter().any(|c| c.kind == cand.kind)
@@ -1123,6 +1125,11 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     }
                 }
                 let t = nn.0.solve();
+                // a set is a device's only when every effect in it stays physical with the
+                // candidate beside it (the stability check asks the same of the whole set)
+                if !set_physical(set, &set_spans, &t) {
+                    return (f64::INFINITY, 0.0);
+                }
                 if !effects::plausible(eff, &t[nb..], &t[..nb.min(4)])
                     || (eff.kind == EffectKind::CurrentLimit
                         && !effects::clip_consistent(
@@ -1899,6 +1906,34 @@ pub fn cross_check(d: &mut Diagnosis, other: &Record) {
     });
 }
 
+/// The screening columns of each candidate value, keyed by its kind and parameter's bits.
+type ScreenColumns = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
+
+/// The column span of each effect of `set` in a design whose first `n_fixed` columns are the
+/// fixed terms, followed by each effect's columns in the set's order (`cache` holds them).
+fn effect_spans(set: &[Effect], n_fixed: usize, cache: &ScreenColumns) -> Vec<(usize, usize)> {
+    let mut at = n_fixed;
+    set.iter()
+        .map(|e| {
+            let k = cache
+                .get(&(e.kind as usize, e.param.to_bits()))
+                .map_or(0, |z| z.len());
+            at += k;
+            (at - k, at)
+        })
+        .collect()
+}
+
+/// Every effect of `set` (at `spans` in the coefficients `th`, the baseline's first) inside its
+/// physical range (`effects::plausible`): an effect added beside others can move their fit out
+/// of it (on the rig's clipped multisine 100051 a `screw_efficiency` beside the drive's clip
+/// took part of the viscous force and left the clip's damping above the viscous coefficient).
+pub fn set_physical(set: &[Effect], spans: &[(usize, usize)], th: &[f64]) -> bool {
+    set.iter().zip(spans).all(|(e, &(a, b))| {
+        b <= th.len() && effects::plausible(e, &th[a..b], &th[..4.min(th.len())])
+    })
+}
+
 /// True when a scanned range has more than one value (an edge can be told from the interior).
 fn coarse_len_gt1(lo: f64, hi: f64) -> bool {
     hi > lo
@@ -1911,6 +1946,33 @@ fn refs(c: &[(String, Vec<f64>)]) -> Vec<&[f64]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `set_physical` checks every effect of a set in its own span: baseline M 40 kg, Fv 300,
+    /// Fc 20 N, offset 0, then a drive's clip (damping c_d) and a Stribeck bump. The clip is a
+    /// device's only with Fv/2 ≤ c_d ≤ Fv, the bump only positive; either one out of range
+    /// makes the set non-physical, whichever candidate stands beside it. Break: `all` taken
+    /// as `any` (one physical effect enough) passes the clip of 350 > 300 beside a physical
+    /// bump and fails the second assertion.
+    #[test]
+    fn set_physical_checks_each_effect_in_its_span() {
+        let set = [
+            Effect {
+                kind: EffectKind::CurrentLimit,
+                param: -0.08,
+            },
+            Effect {
+                kind: EffectKind::Stribeck,
+                param: 0.004,
+            },
+        ];
+        let spans = [(4, 5), (5, 6)];
+        let th = |cd: f64, bump: f64| vec![40.0, 300.0, 20.0, 0.0, cd, bump, 0.3];
+        assert!(set_physical(&set, &spans, &th(250.0, 5.0)));
+        assert!(!set_physical(&set, &spans, &th(350.0, 5.0)));
+        assert!(!set_physical(&set, &spans, &th(100.0, 5.0)));
+        assert!(!set_physical(&set, &spans, &th(250.0, -5.0)));
+        assert!(set_physical(&[], &[], &th(350.0, -5.0)));
+    }
 
     /// Gram matrix and right-hand side of columns `c` against `y`.
     fn normal_eq(c: &[Vec<f64>], y: &[f64]) -> (Vec<f64>, Vec<f64>) {
