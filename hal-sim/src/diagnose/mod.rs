@@ -1957,6 +1957,40 @@ mod tests {
         assert_eq!(jackknife_t(&f[..2]), 0.0);
     }
 
+    /// The derivative cutoff from the position quantum is applied only when the reader chose
+    /// the cutoff: a synthetic record (1.6 µm quantum, 60 kg, 0.5 N noise: M·σ_a at fs/20
+    /// 0.46 N, above a quarter of the noise) is derived again below fs/20 and the report says
+    /// so; the same record with `--cutoff-hz` 50 or with its force filtered keeps 50 Hz.
+    /// Break: the reader's `DERIVATIVE_CUTOFF_DEFAULT_KEY` not set (or the rule's call
+    /// removed) fails the first assert; the key kept by `filter_force` fails the last.
+    #[test]
+    fn quantum_cutoff_only_when_the_reader_chose_it() {
+        let csv = synth::generate_csv(&synth::SynthSpec::clean(3, 12_000));
+        let rec = parse_csv(&csv, None).unwrap();
+        let d = diagnose(&rec, &Options::default());
+        assert!(
+            d.derivative_method
+                .contains("cutoff lowered from 50.000 Hz"),
+            "{}",
+            d.derivative_method
+        );
+        let given = parse_csv(&csv, Some(50.0)).unwrap();
+        let d = diagnose(&given, &Options::default());
+        assert!(
+            !d.derivative_method.contains("lowered"),
+            "{}",
+            d.derivative_method
+        );
+        let mut filtered = parse_csv(&csv, None).unwrap();
+        filtered.filter_force(None);
+        let d = diagnose(&filtered, &Options::default());
+        assert!(
+            !d.derivative_method.contains("lowered"),
+            "{}",
+            d.derivative_method
+        );
+    }
+
     /// Straight line through noisy points: the closed-form slope Sxy/Sxx and intercept
     /// ȳ − slope·x̄, with columns of very different scale (x in µm-sized units, offset 1).
     #[test]
