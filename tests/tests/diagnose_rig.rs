@@ -823,3 +823,54 @@ fn rig_effect_at_rest() {
         );
     }
 }
+
+/// The derivative filter's cutoff from the position quantum (`diagnose::quantum_rederive`) on
+/// rounded-triangle records of the rig (`RIG_SEEDS=500002,… cargo test -p regen-tests --test
+/// diagnose_rig rig_quantum_cutoff -- --ignored --nocapture`): the cutoff the rule chooses and
+/// the inertial error M·(a − â) (M the rig's mass, a its true acceleration) at the default
+/// cutoff and at the rule's, against the rig's force noise.
+#[test]
+#[ignore]
+fn rig_quantum_cutoff() {
+    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
+    for seed in seeds
+        .split(',')
+        .filter_map(|s| s.trim().parse::<u64>().ok())
+    {
+        let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
+        let spec = RigSpec::random(seed, kind, Trajectory::RoundedTriangle, 12_000);
+        let (_, a_true) = spec.true_motion();
+        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+        let rest = hal_sim::diagnose::effects::at_rest(&rec.x, &rec.v, rec.dt());
+        let rule = hal_sim::diagnose::quantum_rederive(&rec, &rest, &Options::default());
+        let err = |a: &[f64]| {
+            let m = a.len() - 200;
+            (a.iter()
+                .zip(&a_true)
+                .skip(100)
+                .take(m)
+                .map(|(ad, at)| (spec.mass_kg * (at - ad)).powi(2))
+                .sum::<f64>()
+                / m as f64)
+                .sqrt()
+        };
+        let e0 = err(&rec.a);
+        match rule {
+            Some((fc, why)) => {
+                let mut r2 = rec.clone();
+                r2.rederive(fc, &why).expect("the rule's cutoff is valid");
+                println!(
+                    "{kind} seed {seed}: quantum {:.1e} m, mass {:.1} kg, noise {:.2} N: cutoff {fc:.2} Hz ({why}); M·(a − â) rms {e0:.3} N at the default, {:.3} N at the rule's",
+                    spec.quantum_m,
+                    spec.mass_kg,
+                    spec.noise_n,
+                    err(&r2.a)
+                );
+            }
+            None => println!(
+                "{kind} seed {seed}: quantum {:.1e} m, mass {:.1} kg, noise {:.2} N: default cutoff kept; M·(a − â) rms {e0:.3} N",
+                spec.quantum_m, spec.mass_kg, spec.noise_n
+            ),
+        }
+    }
+}
