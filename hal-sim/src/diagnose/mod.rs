@@ -150,6 +150,11 @@ impl Normal {
     }
 }
 
+/// Rank of a `lag` τ whose gain only the errors-in-variables correction brings into the unit
+/// range, scaled by (1 + |corrected gain − 1|): above any held-out rss, so such a τ is taken
+/// only when no τ's least-squares gain is a unit one.
+const CORRECTED_RANK: f64 = 1e200;
+
 /// The errors-in-variables corrected fit of `lag` (Fuller 1987, §2.2): the training normal
 /// equations with the derived signals' noise taken out, (XᵀX − n·S)·θ = Xᵀf, S
 /// (`Context::lag_noise`) the per-row noise covariance of the columns at `idx` (inertia,
@@ -175,7 +180,7 @@ pub fn lag_corrected(
         }
     }
     let z = idx[2] * m + idx[2];
-    if !(g[z] >= 0.5 * tr.g[z]) {
+    if g[z].is_nan() || g[z] < 0.5 * tr.g[z] {
         return None;
     }
     let th = solve_sym(&g, &tr.b, m).th;
@@ -1155,11 +1160,16 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 // with the other candidates by is the least-squares fit's, as theirs
                 let mut key = None;
                 let mut tc = None;
+                // a delay whose least-squares gain is a unit one ranks by its held-out rss, as
+                // every candidate; one whose gain only the correction brings into the range
+                // ranks after all of those, by the corrected gain's distance from 1; a τ whose
+                // column is more than half noise is not resolved by either fit
                 if eff.kind == EffectKind::Lag {
                     if let Some(sn) = ctx.lag_noise(eff.param) {
                         match lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) {
+                            Some(_) if effects::plausible(eff, &t[nb..], &t[..nb.min(4)]) => {}
                             Some((c, _)) => {
-                                key = Some((c[nb] - 1.0).abs());
+                                key = Some(CORRECTED_RANK * (1.0 + (c[nb] - 1.0).abs()));
                                 tc = Some(c);
                             }
                             None => return (f64::INFINITY, 0.0, f64::INFINITY),
@@ -1426,7 +1436,8 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
             let (t2, h2) = (tr.select(&keep), ho.select(&keep));
             let rss_without = h2.rss(&t2.solve());
-            // (`lag`'s range on its fit corrected for the derived signals' noise, as in the scan)
+            // (`lag`'s range on its least-squares fit or, failing that, on its fit corrected for
+            // the derived signals' noise, as in the scan)
             let corrected = match chosen[k].kind {
                 EffectKind::Lag => ctx
                     .lag_noise(chosen[k].param)
@@ -1435,7 +1446,10 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             };
             let phys = match &corrected {
                 Some(None) => false,
-                Some(Some(tc)) => effects::plausible(&chosen[k], &tc[a..b], &tc[..4.min(n_base)]),
+                Some(Some(tc)) => {
+                    effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)])
+                        || effects::plausible(&chosen[k], &tc[a..b], &tc[..4.min(n_base)])
+                }
                 None => effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)]),
             };
             if phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain) {
