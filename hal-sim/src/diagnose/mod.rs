@@ -2341,6 +2341,10 @@ mod tests {
             .map(|&(r, c)| s[r][c] / cov(r, c))
             .collect();
         println!("predicted / measured (aa, vv, zz, za, zv): {ratio:?}");
+        // measured: 0.94, 0.93, 0.90, 0.91, 0.82 (the quantisation error of a motion crossing
+        // 1–4 quanta per sample is not quite white); asserted within 30 % (1.7× the largest
+        // deviation: the cross terms' sign, a shift's direction, fail it: the shift reversed
+        // gives −0.48 for zv)
         for r in &ratio {
             assert!((r - 1.0).abs() < 0.3, "{ratio:?}");
         }
@@ -2371,6 +2375,8 @@ mod tests {
             d.verdicts
         );
         assert_eq!(names, ["lag"], "{:?}", d.verdicts);
+        // measured: lag +1.27 %, least-squares gain 0.63 (below the unit range: without the
+        // correction nothing is named); asserted 5 % (as `lag_is_the_whole_force_delayed`)
         assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
     }
 
