@@ -160,6 +160,8 @@ pub struct Context<'a> {
     pub lag_rows: std::sync::OnceLock<FitRows>,
     /// `lag_coefs` per delay (bits of τ).
     pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
+    /// The derived velocity's and acceleration's noise (`DerivNoise`, built once).
+    pub deriv_noise: std::sync::OnceLock<Option<DerivNoise>>,
     /// Samples from the start the candidates are screened on (`super::SCREEN_WINDOW`, at most
     /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
     /// lowest resonance) and the delayed baseline's rows are taken over them.
@@ -355,6 +357,7 @@ impl<'a> Context<'a> {
             profile_rows: Default::default(),
             lag_rows: Default::default(),
             lag_cache: Default::default(),
+            deriv_noise: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
@@ -837,6 +840,121 @@ impl Context<'_> {
             c.insert(tau.to_bits(), th);
         }
         th
+    }
+}
+
+/// The noise the record's derivation puts into the derived velocity and acceleration: the
+/// position's quantisation error (white, variance q²/12, q the position quantum) through the
+/// record's own zero-phase low-pass and central differences (`record::filtfilt`,
+/// `record::central_diff` at the record's `derivative_cutoff_hz`), as their responses to a
+/// unit position sample. These are the errors in the variables of `lag`'s column, which
+/// differences a and v over τ (`Context::lag_noise`).
+#[derive(Debug, Clone)]
+pub struct DerivNoise {
+    /// Variance of the position's error (m²).
+    s2: f64,
+    /// Responses of a (index 0) and v (index 1) to a unit position sample.
+    h: [Vec<f64>; 2],
+    /// σ²·Σ h_p[i]·h_q[i + d] for |d| ≤ `DerivNoise::D`: [aa, av, va, vv][d + D].
+    k: [Vec<f64>; 4],
+}
+
+impl DerivNoise {
+    /// Shifts tabulated (beyond: summed when asked).
+    const D: isize = 128;
+
+    /// The noise of a record whose v and a are derived from a position of quantum `q` through
+    /// a low-pass at `fc` (Hz), sampled every `dt` s. None when there is no quantum.
+    pub fn new(q: f64, fc: f64, dt: f64) -> Option<DerivNoise> {
+        let fs = 1.0 / dt;
+        if !(q > 0.0 && fc > 0.0 && fc < 0.5 * fs) {
+            return None;
+        }
+        // the filter's impulse response has decayed to rounding well within 12 periods of its
+        // cutoff each way; the tabulated shifts beside it
+        let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
+        let mut x = vec![0.0; 2 * half + 1];
+        x[half] = 1.0;
+        let v = super::record::central_diff(&super::record::filtfilt(&x, fc, fs), dt);
+        let a = super::record::central_diff(&v, dt);
+        let mut nz = DerivNoise {
+            s2: q * q / 12.0,
+            h: [a, v],
+            k: Default::default(),
+        };
+        let pairs = [(0, 0), (0, 1), (1, 0), (1, 1)];
+        nz.k = pairs.map(|(p, q)| (-Self::D..=Self::D).map(|d| nz.sum(p, q, d)).collect());
+        Some(nz)
+    }
+
+    fn sum(&self, p: usize, q: usize, d: isize) -> f64 {
+        let (hp, hq) = (&self.h[p], &self.h[q]);
+        let n = hp.len() as isize;
+        let (lo, hi) = ((-d).max(0), (n - d).min(n));
+        self.s2
+            * (lo..hi)
+                .map(|i| hp[i as usize] * hq[(i + d) as usize])
+                .sum::<f64>()
+    }
+
+    /// E[p(t − m)·q(t − l)] with d = m − l (p, q: 0 the acceleration, 1 the velocity).
+    pub fn cov(&self, p: usize, q: usize, d: isize) -> f64 {
+        if d.abs() <= Self::D {
+            self.k[2 * p + q][(d + Self::D) as usize]
+        } else {
+            self.sum(p, q, d)
+        }
+    }
+
+    /// Covariance of two sums Σ c·s(t − m) of the derived signals ((signal, m, c) terms).
+    pub fn cov_sum(&self, x: &[(usize, isize, f64)], y: &[(usize, isize, f64)]) -> f64 {
+        let mut s = 0.0;
+        for &(p, m, c) in x {
+            for &(q, l, e) in y {
+                s += c * e * self.cov(p, q, m - l);
+            }
+        }
+        s
+    }
+}
+
+impl Context<'_> {
+    /// The noise of the record's derived v and a (`DerivNoise`), when they are derived from a
+    /// quantised position (the record states its derivative cutoff and a quantum shows).
+    pub fn deriv_noise(&self) -> Option<&DerivNoise> {
+        self.deriv_noise
+            .get_or_init(|| {
+                let fc = *self.rec.meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
+                DerivNoise::new(self.x_quantum, fc, self.dt)
+            })
+            .as_ref()
+    }
+
+    /// The errors-in-variables covariance, per row, of the baseline's inertia and viscous
+    /// columns (a, v) and `lag`'s column at `tau` (its delayed device's coefficients M, Fv
+    /// from `lag_coefs`): S = E[ε εᵀ], ε the noise of (a, v, M·(a(t−τ) − a(t)) +
+    /// Fv·(v(t−τ) − v(t))), the delayed values interpolated as the column does. The Coulomb
+    /// sign's noise is not in it (a sign flips only within its band, near rest). None when
+    /// the record has no derivation noise (`deriv_noise`) or no delayed device at τ.
+    pub fn lag_noise(&self, tau: f64) -> Option<[[f64; 3]; 3]> {
+        let nz = self.deriv_noise()?;
+        let th = self.lag_coefs(tau)?;
+        let k = tau / self.dt;
+        let j = k.floor();
+        let al = k - j;
+        let j = j as isize;
+        let z: Vec<(usize, isize, f64)> = [(0, th[0]), (1, th[1])]
+            .into_iter()
+            .flat_map(|(p, c)| [(p, j, c * (1.0 - al)), (p, j + 1, c * al), (p, 0, -c)])
+            .collect();
+        let cols = [vec![(0, 0, 1.0)], vec![(1, 0, 1.0)], z];
+        let mut s = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for c in 0..3 {
+                s[r][c] = nz.cov_sum(&cols[r], &cols[c]);
+            }
+        }
+        Some(s)
     }
 }
 
