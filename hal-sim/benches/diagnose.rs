@@ -27,12 +27,7 @@ fn main() {
     let csv = synth::generate_csv(&spec);
     let c0 = cpu_s();
     let t0 = Instant::now();
-    // BENCH_CUTOFF_GIVEN=1: the derivative cutoff given as fs/20 (as `--cutoff-hz`), so the
-    // cutoff from the position quantum is not applied (its cost measured against this)
-    let given = std::env::var("BENCH_CUTOFF_GIVEN")
-        .ok()
-        .map(|_| spec.fs / 20.0);
-    let rec = parse_csv(&csv, given).expect("parses");
+    let rec = parse_csv(&csv, None).expect("parses");
     let t_read = t0.elapsed();
     let t1 = Instant::now();
     // BENCH_WHOLE_RECORD=1: screened over the whole record instead of the screening window

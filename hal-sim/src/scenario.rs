@@ -689,17 +689,8 @@ impl Scenario {
         let mut d = self.drive.clone();
         if let Drive::Imposed { motion } = &mut d {
             if let Motion::Record { path, cutoff_hz } = motion {
-                let mut r =
-                    crate::diagnose::read_csv(std::path::Path::new(path.as_str()), *cutoff_hz)
-                        .map_err(|e| format!("drive.motion.path: {e}"))?;
-                // without a cutoff, the motion derived as the diagnosis derives it (the cutoff
-                // from the position quantum, `diagnose::quantum_rederive`)
-                let rest = crate::diagnose::effects::at_rest(&r.x, &r.v, r.dt());
-                let opt = crate::diagnose::Options::default();
-                if let Some((fc, why)) = crate::diagnose::quantum_rederive(&r, &rest, &opt) {
-                    r.rederive(fc, &why)
-                        .map_err(|e| format!("drive.motion.path: {e}"))?;
-                }
+                let r = crate::diagnose::read_csv(std::path::Path::new(path.as_str()), *cutoff_hz)
+                    .map_err(|e| format!("drive.motion.path: {e}"))?;
                 *motion = Motion::Recorded {
                     t_s: r.t,
                     x_m: r.x,

@@ -214,7 +214,12 @@ pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
     if n < 2 * w + 1 {
         return vec![false; n];
     }
-    let q = position_quantum(x);
+    let q = x
+        .windows(2)
+        .map(|p| (p[1] - p[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::MAX, f64::min);
+    let q = if q == f64::MAX { 0.0 } else { q };
     let mut d2: Vec<f64> = x
         .windows(3)
         .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
@@ -257,48 +262,6 @@ pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
         }
     }
     rest
-}
-
-/// The position quantum: the smallest non-zero step of x (0 when x never moves).
-pub fn position_quantum(x: &[f64]) -> f64 {
-    let q = x
-        .windows(2)
-        .map(|p| (p[1] - p[0]).abs())
-        .filter(|d| *d > 0.0)
-        .fold(f64::MAX, f64::min);
-    if q == f64::MAX {
-        0.0
-    } else {
-        q
-    }
-}
-
-/// The baseline's inertia coefficient fitted on the samples in motion among `rows` (the
-/// baseline columns of `base_columns` on those rows only: a strided subsample costs a
-/// fraction of the whole record's fit). `None` when no row is in motion.
-pub fn baseline_inertia(rec: &Record, rest: &[bool], rows: &[usize]) -> Option<f64> {
-    let rows: Vec<usize> = rows.iter().copied().filter(|&i| !rest[i]).collect();
-    if rows.is_empty() {
-        return None;
-    }
-    let g = |c: &[f64]| -> Vec<f64> { rows.iter().map(|&i| c[i]).collect() };
-    let sub = Record {
-        t: g(&rec.t),
-        x: g(&rec.x),
-        f: g(&rec.f),
-        v: g(&rec.v),
-        a: g(&rec.a),
-        meta: rec.meta.clone(),
-        extra: rec.extra.iter().map(|(k, c)| (k.clone(), g(c))).collect(),
-        derivative_method: String::new(),
-    };
-    let v_eps = sign_band(&rec.v);
-    let sg: Vec<f64> = sub.v.iter().map(|&v| sgn(v, v_eps)).collect();
-    let cols = base_columns_of(&sub, sg);
-    let refs: Vec<&[f64]> = cols.iter().map(|(_, v)| v.as_slice()).collect();
-    let all = vec![super::TRAIN; rows.len()];
-    let (tr, _) = super::normals(&refs, &sub.f, &all, 1);
-    tr.solve().first().copied()
 }
 
 /// The Coulomb sign's linear band of a record's velocity `v`: 0.2 % of the peak speed (so
@@ -351,7 +314,12 @@ impl<'a> Context<'a> {
             spatial_wavelengths: Vec::new(),
             rest,
             base_th: Vec::new(),
-            x_quantum: position_quantum(&rec.x),
+            x_quantum: rec
+                .x
+                .windows(2)
+                .map(|p| (p[1] - p[0]).abs())
+                .filter(|d| *d > 0.0)
+                .fold(f64::MAX, f64::min),
             base_resid_rms: 0.0,
             zeta_cache: Default::default(),
             profile_rows: Default::default(),
@@ -360,6 +328,9 @@ impl<'a> Context<'a> {
             deriv_noise: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
+        if c.x_quantum == f64::MAX {
+            c.x_quantum = 0.0;
+        }
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;
         let mut steps: Vec<f64> = rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
@@ -413,15 +384,11 @@ impl<'a> Context<'a> {
 }
 
 fn base_columns(ctx: &Context) -> Vec<(String, Vec<f64>)> {
-    base_columns_of(ctx.rec, ctx.sgn.clone())
-}
-
-/// The baseline columns of a record whose Coulomb sign is `sgn` (`base_columns`).
-fn base_columns_of(r: &Record, sgn: Vec<f64>) -> Vec<(String, Vec<f64>)> {
+    let r = ctx.rec;
     let mut c = vec![
         ("inertia".into(), r.a.clone()),
         ("viscous".into(), r.v.clone()),
-        ("coulomb".into(), sgn),
+        ("coulomb".into(), ctx.sgn.clone()),
         ("offset".into(), vec![1.0; r.len()]),
     ];
     if let Some((name, col, _)) = em_column(r) {

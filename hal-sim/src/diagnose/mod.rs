@@ -915,46 +915,7 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             MIN_MOVING / 4
         ));
     }
-    if let Some((fc, why)) = quantum_rederive(rec, &rest, opt) {
-        let mut r2 = rec.clone();
-        if r2.rederive(fc, &why).is_ok() {
-            return try_diagnose(&r2, opt);
-        }
-    }
     Ok(diagnose_checked(rec, opt, rest))
-}
-
-/// The derivative filter's cutoff the record's position quantum asks for
-/// (`record::quantum_cutoff`: the quantum's contribution to M·â held to a quarter of the force
-/// noise, the cutoff at least 4× the motion's band), when the reader chose the cutoff
-/// (`record::DERIVATIVE_CUTOFF_DEFAULT_KEY`) and the rule lowers it, with the reason stated;
-/// `None` otherwise (the record is diagnosed as read). M is the baseline's inertia coefficient
-/// (`effects::baseline_inertia` on `screen_samples` rows spread over the record) taken by its
-/// size: whatever its sign, it multiplies the derived acceleration's error in every fit. The
-/// force noise is taken over the screening window, the motion's band
-/// (`record::motion_band_of_peaks`) over the samples in motion.
-pub fn quantum_rederive(rec: &Record, rest: &[bool], opt: &Options) -> Option<(f64, String)> {
-    if rec.meta.get(record::DERIVATIVE_CUTOFF_DEFAULT_KEY) != Some(&1.0) {
-        return None;
-    }
-    let fc0 = *rec.meta.get(record::DERIVATIVE_CUTOFF_KEY)?;
-    let n = rec.len();
-    let q = effects::position_quantum(&rec.x);
-    let sigma_f = record::force_noise(&rec.f[..opt.screen_window.min(n)]);
-    let band = record::motion_band_of_peaks(&rec.v, &rec.a, rest);
-    let rows: Vec<usize> = (0..n)
-        .step_by(n.div_ceil(opt.screen_samples).max(1))
-        .collect();
-    let mass = effects::baseline_inertia(rec, rest, &rows)?.abs();
-    let fc = record::quantum_cutoff(q, mass, sigma_f, 1.0 / rec.dt(), band)?;
-    (fc < fc0).then(|| {
-        (
-            fc,
-            format!(
-                "cutoff lowered from {fc0:.3} Hz: position quantum {q:.3e} m, baseline inertia {mass:.2} kg, force noise {sigma_f:.3} N, motion band {band:.3} Hz"
-            ),
-        )
-    })
 }
 
 fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
@@ -2156,40 +2117,6 @@ mod tests {
             .collect();
         assert!(jackknife_t(&z) < AGREEMENT_T, "{}", jackknife_t(&z));
         assert_eq!(jackknife_t(&f[..2]), 0.0);
-    }
-
-    /// The derivative cutoff from the position quantum is applied only when the reader chose
-    /// the cutoff: a synthetic record (1.6 µm quantum, 60 kg, 0.5 N noise: M·σ_a at fs/20
-    /// 0.46 N, above a quarter of the noise) is derived again below fs/20 and the report says
-    /// so; the same record with `--cutoff-hz` 50 or with its force filtered keeps 50 Hz.
-    /// Break: the reader's `DERIVATIVE_CUTOFF_DEFAULT_KEY` not set (or the rule's call
-    /// removed) fails the first assert; the key kept by `filter_force` fails the last.
-    #[test]
-    fn quantum_cutoff_only_when_the_reader_chose_it() {
-        let csv = synth::generate_csv(&synth::SynthSpec::clean(3, 12_000));
-        let rec = parse_csv(&csv, None).unwrap();
-        let d = diagnose(&rec, &Options::default());
-        assert!(
-            d.derivative_method
-                .contains("cutoff lowered from 50.000 Hz"),
-            "{}",
-            d.derivative_method
-        );
-        let given = parse_csv(&csv, Some(50.0)).unwrap();
-        let d = diagnose(&given, &Options::default());
-        assert!(
-            !d.derivative_method.contains("lowered"),
-            "{}",
-            d.derivative_method
-        );
-        let mut filtered = parse_csv(&csv, None).unwrap();
-        filtered.filter_force(None);
-        let d = diagnose(&filtered, &Options::default());
-        assert!(
-            !d.derivative_method.contains("lowered"),
-            "{}",
-            d.derivative_method
-        );
     }
 
     /// Straight line through noisy points: the closed-form slope Sxy/Sxx and intercept

@@ -66,110 +66,6 @@ impl Record {
 /// acceleration was derived through (absent when `a_m_s2` is measured).
 pub const DERIVATIVE_CUTOFF_KEY: &str = "derivative_cutoff_hz";
 
-/// Metadata key (value 1) the reader sets when it derived v and a from x_m at its default
-/// cutoff fs/20 (no cutoff given): the diagnosis may then lower the cutoff to the record's
-/// position quantum (`quantum_cutoff`). A cutoff given by the user is kept.
-pub const DERIVATIVE_CUTOFF_DEFAULT_KEY: &str = "derivative_cutoff_default";
-
-/// The cutoff (Hz) of the derivative filter at which the position quantum's contribution to
-/// the inertial force M·â is `QUANTUM_FORCE_SHARE` of the force noise, kept between
-/// `MOTION_BAND_FACTOR` × the motion's band and the default fs/20.
-///
-/// The quantisation error of x (quantum q, uniform: variance q²/12, white at the sample rate
-/// fs, one-sided density 2σ²/fs) passes the forward-backward Butterworth-2 (power gain
-/// 1/(1 + (f/fc)⁴)²) and two derivatives ((2πf)⁴):
-/// σ_a² = q²/12 · 2/fs · (2π)⁴ · fc⁵ · ∫₀^∞ u⁴/(1 + u⁴)² du, the integral π/(8√2)
-/// (¼·B(5/4, 3/4)). The central differences pass sin(2πf/fs)·fs < 2πf, so this bounds the
-/// derived acceleration's quantum noise from above (by 3 % in rms at fc = fs/20). Setting
-/// M·σ_a = k·σ_f gives fc = (k²σ_f² / (M²·C))^(1/5), C = q²/12 · 2/fs · (2π)⁴ · π/(8√2).
-/// The lower bound keeps the motion's acceleration (`motion_band_of_peaks`): the filter
-/// passes 1/(1 + (f/fc)⁴), at a quarter of the cutoff 99.6 %. `None` when an input is not usable (no quantum, a mass not
-/// positive, a non-finite value): the default is kept.
-pub fn quantum_cutoff(q: f64, mass: f64, sigma_f: f64, fs: f64, f_motion: f64) -> Option<f64> {
-    let ok = |v: f64| v.is_finite() && v >= 0.0;
-    if !(ok(q) && q > 0.0 && ok(mass) && mass > 0.0 && ok(sigma_f) && ok(fs) && fs > 0.0)
-        || !ok(f_motion)
-    {
-        return None;
-    }
-    let c = quantum_accel_var_coef(q, fs);
-    let k = QUANTUM_FORCE_SHARE * sigma_f / mass;
-    let fc_q = (k * k / c).powf(0.2);
-    Some(fc_q.max(MOTION_BAND_FACTOR * f_motion).min(fs / 20.0))
-}
-
-/// The motion's band for `quantum_cutoff`: the frequency of the sinusoid with the record's
-/// peak speed and peak derived acceleration over the samples in motion (`rest` false),
-/// max|a| / (2π·max|v|). On a sinusoid it is its frequency; on a reversal v = V·tanh(t/τ) it
-/// is 1/(2πτ), and the reversal's acceleration (V/τ·sech²(t/τ)) has its spectrum fall as
-/// e^(−π²fτ): at 4× this band, e^(−2π) = 0.2 % of its level. The derived acceleration's
-/// noise only raises the peak (a higher band: the cutoff lowered less). The position
-/// spectrum's band (`effects::motion_bandwidth`) is not used: on a coarse encoder the
-/// quantisation of a constant-speed flank is periodic, and its lines stand above that
-/// spectrum's floor up to 365–480 Hz (the rig's rounded triangles at 0.4–6.4 µm).
-pub fn motion_band_of_peaks(v: &[f64], a: &[f64], rest: &[bool]) -> f64 {
-    let (mut vm, mut am) = (0.0f64, 0.0f64);
-    for ((v, a), r) in v.iter().zip(a).zip(rest) {
-        if !r {
-            vm = vm.max(v.abs());
-            am = am.max(a.abs());
-        }
-    }
-    if vm > 0.0 {
-        am / (std::f64::consts::TAU * vm)
-    } else {
-        f64::INFINITY
-    }
-}
-
-/// σ_a² / fc⁵ of the derived acceleration's quantum noise (`quantum_cutoff`): the derived
-/// acceleration's quantum rms at cutoff fc is √(C·fc⁵).
-pub fn quantum_accel_var_coef(q: f64, fs: f64) -> f64 {
-    let tau = std::f64::consts::TAU;
-    q * q / 12.0 * 2.0 / fs * tau.powi(4) * std::f64::consts::PI / (8.0 * std::f64::consts::SQRT_2)
-}
-
-/// Share k of the force noise the quantum's contribution to M·â is held to (`quantum_cutoff`):
-/// a quarter, its variance 1/16 of the noise's, so it raises the residual's rms by at most 3 %
-/// (√(1 + 1/16)) on a record the model fits to its noise.
-pub const QUANTUM_FORCE_SHARE: f64 = 0.25;
-
-/// The derivative filter's cutoff stays at least this many times above the motion's band
-/// (`quantum_cutoff`).
-pub const MOTION_BAND_FACTOR: f64 = 4.0;
-
-/// The force channel's white noise, robustly from its second differences: a white noise σ
-/// gives Δ²f of variance 6σ², and the median absolute value of a normal variable is 0.6745 of
-/// its σ. The motion's own force is smooth at the sample rate (its second difference is
-/// (2πf/fs)² of it, below 4·10⁻⁴ for content under fs/50), so it does not enter.
-pub fn force_noise(f: &[f64]) -> f64 {
-    let mut d: Vec<f64> = f
-        .windows(3)
-        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
-        .collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    let mid = d.len() / 2;
-    let med = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
-    med / (0.6745 * 6f64.sqrt())
-}
-
-/// Velocity and acceleration derived from the position: the zero-phase Butterworth-2
-/// low-pass of x at `fc`, then central differences (the one derivation of the reader and of
-/// `Record::rederive`).
-pub fn derive(x: &[f64], fc: f64, dt: f64) -> (Vec<f64>, Vec<f64>) {
-    let fs = 1.0 / dt;
-    let xf = filtfilt(x, fc, fs);
-    let v = central_diff(&xf, dt);
-    let a = central_diff(&v, dt);
-    (v, a)
-}
-
-fn derived_from_x(fc: f64) -> String {
-    format!("zero-phase Butterworth-2 low-pass of x_m at {fc:.3} Hz (forward-backward), then central differences")
-}
-
 /// The pieces of `s` between the occurrences of the ASCII byte `sep` (as `str::split` with
 /// that character), found by a plain scan of the bytes: the lines and fields of a record are
 /// short, and a scan per piece costs less than a searcher's set-up.
@@ -330,8 +226,6 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
     let fs = 1.0 / dt;
     let fc = cutoff_hz.unwrap_or(fs / 20.0);
     check_cutoff(fc, fs)?;
-    // set below only when the reader chose the cutoff (not from the file's comments)
-    meta.remove(DERIVATIVE_CUTOFF_DEFAULT_KEY);
     let (v, a, method) = match (idx("v_m_s"), idx("a_m_s2")) {
         (Some(iv), Some(ia)) => (
             std::mem::take(&mut cols[iv]),
@@ -344,11 +238,10 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
             (std::mem::take(&mut cols[iv]), a, format!("measured v_m_s; a = central difference of zero-phase Butterworth-2 ({fc:.3} Hz, forward-backward) v"))
         }
         _ => {
-            if cutoff_hz.is_none() {
-                meta.insert(DERIVATIVE_CUTOFF_DEFAULT_KEY.to_string(), 1.0);
-            }
-            let (v, a) = derive(&x, fc, dt);
-            (v, a, derived_from_x(fc))
+            let xf = filtfilt(&x, fc, fs);
+            let v = central_diff(&xf, dt);
+            let a = central_diff(&v, dt);
+            (v, a, format!("zero-phase Butterworth-2 low-pass of x_m at {fc:.3} Hz (forward-backward), then central differences"))
         }
     };
     if idx("a_m_s2").is_none() {
@@ -375,24 +268,6 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
 }
 
 impl Record {
-    /// Derive v and a from x again at the cutoff `fc` (`derive`), as the reader does; records
-    /// the cutoff and clears `DERIVATIVE_CUTOFF_DEFAULT_KEY`. Refused (nothing changed) for a
-    /// cutoff outside (0, fs/2) or a record of fewer than 3 samples.
-    pub fn rederive(&mut self, fc: f64, why: &str) -> Result<(), RecordError> {
-        if self.len() < 3 {
-            return Err(err(None, "rederive: fewer than 3 samples"));
-        }
-        let dt = self.dt();
-        check_cutoff(fc, 1.0 / dt)?;
-        let (v, a) = derive(&self.x, fc, dt);
-        self.v = v;
-        self.a = a;
-        self.meta.insert(DERIVATIVE_CUTOFF_KEY.to_string(), fc);
-        self.meta.remove(DERIVATIVE_CUTOFF_DEFAULT_KEY);
-        self.derivative_method = format!("{} ({why})", derived_from_x(fc));
-        Ok(())
-    }
-
     /// Low-pass the force with the same zero-phase filter as the derived velocity and
     /// acceleration ("parallel filtering", the EMPS benchmark's processing): force content
     /// above the cutoff, which the derived acceleration cannot follow, is removed from both
@@ -408,9 +283,6 @@ impl Record {
             return;
         }
         self.f = filtfilt(&self.f, fc, fs);
-        // parallel filtering: the derivatives stay at the force's cutoff (and the filtered
-        // force no longer shows its white noise, which `quantum_cutoff` needs)
-        self.meta.remove(DERIVATIVE_CUTOFF_DEFAULT_KEY);
         self.derivative_method.push_str(&format!(
             "; force f_N low-passed by the same filter ({fc:.3} Hz, parallel filtering)"
         ));
@@ -497,108 +369,4 @@ pub fn central_diff(x: &[f64], dt: f64) -> Vec<f64> {
     d[0] = (x[1] - x[0]) / dt;
     d[n - 1] = (x[n - 1] - x[n - 2]) / dt;
     d
-}
-
-#[cfg(test)]
-mod quantum_tests {
-    use super::*;
-    use crate::diagnose::synth::Rng;
-
-    /// A closed-form motion (two sines, 0.3 and 0.7 Hz, ±6 mm: up to 2.6 quanta per sample at
-    /// the fastest, slower near the stops) quantised to 6.4 µm at 1 kHz, with a 35 kg mass and
-    /// a 1 N force noise (white, seeded): the rule's cutoff is the closed form's, and the
-    /// derived acceleration's error M·(a − â) at that cutoff (the true a known in closed
-    /// form; its attenuation by the filter at 0.7 Hz is below 10⁻⁸) stays within the bound
-    /// the rule argues (a quarter of the force noise). Measured: see the asserts' comments.
-    /// Breaks (each fails here): the integral π/(8√2) written π/(8·2) (the cutoff 7 % higher,
-    /// the error 19 % higher), a 2 % error in the quantum's variance q²/12, fc⁵ solved as fc⁴.
-    #[test]
-    fn quantum_error_within_rule() {
-        let (fs, q, mass, sigma) = (1000.0, 6.4e-6, 35.0, 1.0);
-        let n = 60_000;
-        let dt = 1.0 / fs;
-        let w1 = std::f64::consts::TAU * 0.3;
-        let w2 = std::f64::consts::TAU * 0.7;
-        let (a1, a2) = (4e-3, 2e-3);
-        let xt: Vec<f64> = (0..n)
-            .map(|i| {
-                let t = i as f64 * dt;
-                a1 * (w1 * t).sin() + a2 * (w2 * t + 0.4).sin()
-            })
-            .collect();
-        let at: Vec<f64> = (0..n)
-            .map(|i| {
-                let t = i as f64 * dt;
-                -a1 * w1 * w1 * (w1 * t).sin() - a2 * w2 * w2 * (w2 * t + 0.4).sin()
-            })
-            .collect();
-        let xq: Vec<f64> = xt.iter().map(|x| (x / q).round() * q).collect();
-        let mut rng = Rng::new(7);
-        let f: Vec<f64> = (0..n).map(|_| sigma * rng.normal()).collect();
-        let sigma_f = force_noise(&f);
-        // the robust estimate of a white normal noise: within 2 % on 60,000 samples (the
-        // median's standard error there is ≈ 0.5 %)
-        assert!(
-            (sigma_f / sigma - 1.0).abs() < 0.02,
-            "force noise {sigma_f}"
-        );
-        let fc = quantum_cutoff(q, mass, sigma_f, fs, 0.7).expect("usable inputs");
-        // closed form: M²·q²/12·2/fs·(2π)⁴·π/(8√2)·fc⁵ = (k·σ_f)²
-        let c = q * q / 12.0 * 2.0 / fs * 1_558.545_456_544_038_6 * 0.277_680_183_634_897_9;
-        let fc_closed = ((QUANTUM_FORCE_SHARE * sigma_f / mass).powi(2) / c).powf(0.2);
-        assert!(
-            (fc / fc_closed - 1.0).abs() < 1e-9,
-            "fc {fc} against {fc_closed}"
-        );
-        assert!(fc < fs / 20.0 && fc > MOTION_BAND_FACTOR * 0.7);
-        let (_, a) = derive(&xq, fc, dt);
-        let skip = (3.0 * fs / fc) as usize;
-        let e2: f64 = a[skip..n - skip]
-            .iter()
-            .zip(&at[skip..n - skip])
-            .map(|(ad, at)| (mass * (ad - at)).powi(2))
-            .sum::<f64>()
-            / (n - 2 * skip) as f64;
-        let e = e2.sqrt();
-        let bound = QUANTUM_FORCE_SHARE * sigma_f;
-        // the rule's claim: the error stays below its bound. Measured 0.2509 N against 0.2516
-        // (0.997: the white-noise formula is exact to the central differences' sin(x)/x at
-        // this cutoff); the lower limit 0.99 is 3× that deviation
-        let r = e / bound;
-        assert!(
-            (0.99..=1.0).contains(&r),
-            "M·(a − â) rms {e} N against the rule's bound {bound} N (ratio {r})"
-        );
-        // at the default cutoff fs/20 the same record's error against the formula there:
-        // measured 1.0064 N against 1.0635 N (0.946, the central differences' attenuation
-        // at 50 Hz), the lower limit 3× that deviation
-        let (_, a50) = derive(&xq, fs / 20.0, dt);
-        let e50 = (a50[skip..n - skip]
-            .iter()
-            .zip(&at[skip..n - skip])
-            .map(|(ad, at)| (mass * (ad - at)).powi(2))
-            .sum::<f64>()
-            / (n - 2 * skip) as f64)
-            .sqrt();
-        let r50 = e50 / (mass * (c * (fs / 20.0f64).powi(5)).sqrt());
-        assert!((0.84..=1.0).contains(&r50), "at fs/20: ratio {r50}");
-    }
-
-    /// The rule's bounds: a fine quantum keeps the default fs/20; a wide motion band holds
-    /// the cutoff at 4× it; unusable inputs give `None`. Break: the `min(fs/20)` removed
-    /// raises a fine encoder's cutoff above the default and fails here.
-    #[test]
-    fn quantum_cutoff_bounds() {
-        assert_eq!(quantum_cutoff(1e-9, 35.0, 1.0, 1000.0, 1.0), Some(50.0));
-        let fc = quantum_cutoff(6.4e-6, 35.0, 1.0, 1000.0, 10.0).unwrap();
-        assert_eq!(fc, 40.0);
-        for bad in [
-            quantum_cutoff(0.0, 35.0, 1.0, 1000.0, 1.0),
-            quantum_cutoff(6.4e-6, -3.0, 1.0, 1000.0, 1.0),
-            quantum_cutoff(6.4e-6, 35.0, f64::NAN, 1000.0, 1.0),
-            quantum_cutoff(6.4e-6, 35.0, 1.0, 1000.0, f64::INFINITY),
-        ] {
-            assert_eq!(bad, None);
-        }
-    }
 }
