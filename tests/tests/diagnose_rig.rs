@@ -13,6 +13,37 @@ fn emps_x() -> Option<Vec<f64>> {
     Some(r.x)
 }
 
+/// The long run's trajectory of record `j` of a kind (families in turn; the recorded one is
+/// EMPS's position, a multisine without the data).
+fn trajectory(j: usize, emps: &Option<Vec<f64>>, samples: usize) -> Trajectory {
+    match j % 5 {
+        0 => Trajectory::Multisine,
+        1 => Trajectory::RoundedTriangle,
+        2 => Trajectory::PointToPoint,
+        3 => Trajectory::Narrowband,
+        _ => match emps {
+            Some(x) => Trajectory::Recorded(x[..samples.min(x.len())].to_vec()),
+            None => Trajectory::Multisine,
+        },
+    }
+}
+
+/// The long run's record of a seed (`rig_long_run`: seed 1 + 100,000·kind + j, 12,000 samples).
+fn long_run_spec(seed: u64, emps: &Option<Vec<f64>>) -> RigSpec {
+    let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
+    let j = ((seed - 1) % 100_000) as usize;
+    RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000)
+}
+
+/// The seeds listed in `RIG_SEEDS` (comma-separated).
+fn env_seeds() -> Vec<u64> {
+    std::env::var("RIG_SEEDS")
+        .unwrap_or_default()
+        .split(',')
+        .filter_map(|s| s.trim().parse().ok())
+        .collect()
+}
+
 #[derive(Default)]
 struct Tally {
     records: usize,
@@ -46,17 +77,7 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
             if seeds.as_ref().is_some_and(|s| !s.contains(&seed)) {
                 continue;
             }
-            let traj = match j % 5 {
-                0 => Trajectory::Multisine,
-                1 => Trajectory::RoundedTriangle,
-                2 => Trajectory::PointToPoint,
-                3 => Trajectory::Narrowband,
-                _ => match &emps {
-                    Some(x) => Trajectory::Recorded(x[..samples.min(x.len())].to_vec()),
-                    None => Trajectory::Multisine,
-                },
-            };
-            let spec = RigSpec::random(seed, kind, traj, samples);
+            let spec = RigSpec::random(seed, kind, trajectory(j, &emps, samples), samples);
             let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
             let d = diagnose(&rec, &Options::default());
             let names = d.catalogue_names();
@@ -447,11 +468,7 @@ const TRAVEL_BOUND: f64 = 0.021;
 #[test]
 #[ignore]
 fn rig_true_acceleration() {
-    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
-    for seed in seeds
-        .split(',')
-        .filter_map(|s| s.trim().parse::<u64>().ok())
-    {
+    for seed in env_seeds() {
         let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
         let spec = RigSpec::random(seed, kind, Trajectory::RoundedTriangle, 12_000);
         let (v_true, a_true) = spec.true_motion();
@@ -620,24 +637,11 @@ fn rig_play_width_profile() {
     };
     use hal_sim::diagnose::{holdout_mask, normals, AT_REST};
     let emps = emps_x();
-    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
-    for seed in seeds
-        .split(',')
-        .filter_map(|s| s.trim().parse::<u64>().ok())
+    for seed in env_seeds()
+        .into_iter()
         .filter(|s| (600_001..700_000).contains(s))
     {
-        let j = (seed - 600_001) as usize;
-        let traj = match j % 5 {
-            0 => Trajectory::Multisine,
-            1 => Trajectory::RoundedTriangle,
-            2 => Trajectory::PointToPoint,
-            3 => Trajectory::Narrowband,
-            _ => match &emps {
-                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
-                None => Trajectory::Multisine,
-            },
-        };
-        let spec = RigSpec::random(seed, "backlash", traj, 12_000);
+        let spec = long_run_spec(seed, &emps);
         let Hidden::Backlash { width_m } = spec.hidden else {
             println!("seed {seed}: not a play record");
             continue;
@@ -779,23 +783,9 @@ fn clip_is_not_left_non_physical_by_a_second_effect() {
 #[ignore]
 fn rig_effect_at_rest() {
     let emps = emps_x();
-    let seeds = std::env::var("RIG_SEEDS").unwrap_or_default();
-    for seed in seeds
-        .split(',')
-        .filter_map(|s| s.trim().parse::<u64>().ok())
-    {
+    for seed in env_seeds() {
         let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
-        let traj = match (seed - 1) % 100_000 % 5 {
-            0 => Trajectory::Multisine,
-            1 => Trajectory::RoundedTriangle,
-            2 => Trajectory::PointToPoint,
-            3 => Trajectory::Narrowband,
-            _ => match &emps {
-                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
-                None => Trajectory::Multisine,
-            },
-        };
-        let spec = RigSpec::random(seed, kind, traj, 12_000);
+        let spec = long_run_spec(seed, &emps);
         let mut free = spec.clone();
         free.hidden = Hidden::None;
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
