@@ -1053,7 +1053,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     }
     // The screening columns of every candidate value are the same in every round: computed
     // once (on the subsample, at most `screen_samples` rows each) and kept.
-    type Cache = std::collections::HashMap<(usize, u64), Vec<(String, Vec<f64>)>>;
+    type Cache = ScreenColumns;
     let mut cache = Cache::new();
     // and their Gram entries against the base columns, extended as the base grows
     let grams =
