@@ -2082,6 +2082,16 @@ pub fn buildup_in_band(ctx: &Context, v_b: f64) -> Option<Vec<bool>> {
     )
 }
 
+/// The design's columns without the finding's span `a..b` (the model the finding is tested
+/// beside).
+fn refs_without(cols: &[(String, Vec<f64>)], (a, b): (usize, usize)) -> Vec<&[f64]> {
+    cols.iter()
+        .enumerate()
+        .filter(|(j, _)| *j < a || *j >= b)
+        .map(|(_, c)| c.1.as_slice())
+        .collect()
+}
+
 /// A periodic finding's ripple on the samples where it lies inside the acceleration's band
 /// (`ripple_in_band`): the model (`cols`, the finding's columns at `span`) refitted on the
 /// samples in motion with the finding's columns split into their in-band and out-of-band
@@ -2110,12 +2120,7 @@ pub fn in_band_ripple(
             .collect()
     };
     let (cin, cout) = (split(true), split(false));
-    let mut refs: Vec<&[f64]> = cols
-        .iter()
-        .enumerate()
-        .filter(|(j, _)| *j < a || *j >= b)
-        .map(|(_, c)| c.1.as_slice())
-        .collect();
+    let mut refs = refs_without(cols, (a, b));
     let m0 = refs.len();
     refs.extend(cout.iter().map(|c| c.as_slice()));
     refs.extend(cin.iter().map(|c| c.as_slice()));
@@ -2256,12 +2261,7 @@ pub fn ripple_apart_from_reversals(
         })
         .unzip();
     let (a, b) = span;
-    let mut refs: Vec<&[f64]> = cols
-        .iter()
-        .enumerate()
-        .filter(|(j, _)| *j < a || *j >= b)
-        .map(|(_, c)| c.1.as_slice())
-        .collect();
+    let mut refs = refs_without(cols, (a, b));
     refs.push(&rs);
     refs.push(&rc);
     let m0 = refs.len();
