@@ -2033,6 +2033,20 @@ fn refs(c: &[(String, Vec<f64>)]) -> Vec<&[f64]> {
 mod tests {
     use super::*;
 
+    /// The first finding's `lag_s` and `gain` (0 where it has none: a lag test's first
+    /// finding is the lag it expects).
+    fn first_lag(d: &Diagnosis) -> (f64, f64) {
+        let p = |k: &str| {
+            d.findings
+                .first()?
+                .parameters
+                .iter()
+                .find(|p| p.0 == k)
+                .map(|p| p.1)
+        };
+        (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0))
+    }
+
     /// `set_physical` checks every effect of a set in its own span: baseline M 40 kg, Fv 300,
     /// Fc 20 N, offset 0, then a drive's clip (damping c_d) and a Stribeck bump. The clip is a
     /// device's only with Fv/2 ≤ c_d ≤ Fv, the bump only positive; either one out of range
@@ -2390,15 +2404,7 @@ mod tests {
         assert!(ctx.base_th[0] < 0.9 * m, "{}", ctx.base_th[0]);
         let d = diagnose(&rec, &Options::default());
         let names = d.catalogue_names();
-        let p = |k: &str| {
-            d.findings
-                .first()?
-                .parameters
-                .iter()
-                .find(|p| p.0 == k)
-                .map(|p| p.1)
-        };
-        let (lag, gain) = (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0));
+        let (lag, gain) = first_lag(&d);
         println!(
             "{names:?}: lag {lag} s ({:+.3} %), gain {gain}",
             100.0 * (lag / tau - 1.0)
@@ -2475,15 +2481,7 @@ mod tests {
         let rec = delayed_csv(tau, 3.2e-6);
         let d = diagnose(&rec, &Options::default());
         let names = d.catalogue_names();
-        let p = |k: &str| {
-            d.findings
-                .first()?
-                .parameters
-                .iter()
-                .find(|p| p.0 == k)
-                .map(|p| p.1)
-        };
-        let (lag, gain) = (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0));
+        let (lag, gain) = first_lag(&d);
         println!(
             "{names:?}: lag {lag} s ({:+.3} %), gain {gain}; {:?}",
             100.0 * (lag / tau - 1.0),
@@ -2562,15 +2560,7 @@ mod tests {
         let rows = ctx.lag_rest_rows(tau, None);
         let d = diagnose(&rec, &Options::default());
         let names = d.catalogue_names();
-        let p = |k: &str| {
-            d.findings
-                .first()?
-                .parameters
-                .iter()
-                .find(|p| p.0 == k)
-                .map(|p| p.1)
-        };
-        let (lag, gain) = (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0));
+        let (lag, gain) = first_lag(&d);
         println!(
             "{} samples left out at τ; {names:?}: lag {lag} s ({:+.3} %), gain {gain}; held-out {:.3} % -> {:.3} %",
             rows.len(),
