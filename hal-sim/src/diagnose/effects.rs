@@ -842,8 +842,7 @@ impl DerivNoise {
         let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
         let mut x = vec![0.0; 2 * half + 1];
         x[half] = 1.0;
-        let v = super::record::central_diff(&super::record::filtfilt(&x, fc, fs), dt);
-        let a = super::record::central_diff(&v, dt);
+        let (v, a) = super::record::derive_from_x(&x, fc, dt);
         let mut nz = DerivNoise {
             s2: q * q / 12.0,
             h: [a, v],

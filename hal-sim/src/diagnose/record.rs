@@ -238,9 +238,7 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
             (std::mem::take(&mut cols[iv]), a, format!("measured v_m_s; a = central difference of zero-phase Butterworth-2 ({fc:.3} Hz, forward-backward) v"))
         }
         _ => {
-            let xf = filtfilt(&x, fc, fs);
-            let v = central_diff(&xf, dt);
-            let a = central_diff(&v, dt);
+            let (v, a) = derive_from_x(&x, fc, dt);
             (v, a, format!("zero-phase Butterworth-2 low-pass of x_m at {fc:.3} Hz (forward-backward), then central differences"))
         }
     };
@@ -313,6 +311,15 @@ pub fn read_csv(path: &std::path::Path, cutoff_hz: Option<f64>) -> Result<Record
         line: e.line,
         msg: format!("{}: {}", path.display(), e.msg),
     })
+}
+
+/// Velocity and acceleration derived from a position: the zero-phase Butterworth-2 low-pass
+/// at `fc` (forward-backward), then central differences. The reader's derivation, and the
+/// one `effects::DerivNoise` propagates the position quantum through.
+pub fn derive_from_x(x: &[f64], fc: f64, dt: f64) -> (Vec<f64>, Vec<f64>) {
+    let v = central_diff(&filtfilt(x, fc, 1.0 / dt), dt);
+    let a = central_diff(&v, dt);
+    (v, a)
 }
 
 /// Forward-backward (zero-phase) 2nd-order Butterworth low-pass, bilinear transform with
