@@ -2259,10 +2259,22 @@ pub fn ripple_apart_from_reversals(
             (d * sn, d * cs)
         })
         .unzip();
+    wald_beside(ctx, cols, span, [&rs, &rc])
+}
+
+/// The Wald statistic of a finding's columns (`cols` at `span`) in the model refitted on the
+/// samples in motion with the two columns `extra` beside it: the rise of the rss when the
+/// finding's columns are removed over the residual variance (χ² with 2 degrees of freedom
+/// when `extra` carries all that the record tells of the finding).
+fn wald_beside(
+    ctx: &Context,
+    cols: &[(String, Vec<f64>)],
+    span: (usize, usize),
+    extra: [&[f64]; 2],
+) -> f64 {
     let (a, b) = span;
     let mut refs = refs_without(cols, (a, b));
-    refs.push(&rs);
-    refs.push(&rc);
+    refs.extend(extra);
     let m0 = refs.len();
     refs.extend(cols[a..b].iter().map(|c| c.1.as_slice()));
     let part: Vec<u8> = ctx
@@ -2277,6 +2289,81 @@ pub fn ripple_apart_from_reversals(
     let dof = tr.n.saturating_sub(refs.len()).max(1) as f64;
     let var = (rss / dof).max(f64::MIN_POSITIVE);
     (rss_without - rss) / var
+}
+
+/// The strongest force at one time frequency in the residual `r` (zero at rest): the highest
+/// spectral peak that `report::spectral_peaks` flags `unexplained` (30× the spectrum's
+/// median, its amplitude a fifth of the residual's rms), as the report names it. Its
+/// frequency is refined on the samples in motion to the least-squares sinusoid's best within
+/// one Welch bin of the peak (steps of 1/20 bin, then a golden section within a step: a
+/// step's error alone, 0.006 Hz, drifts the phase by 0.07 period over 12 s, and leaves a
+/// fifth of a hum correlated with whatever the motion does). None when no such peak stands.
+pub fn hum_in_residual(ctx: &Context, r: &[f64]) -> Option<f64> {
+    let peak = super::report::spectral_peaks(r, ctx.dt)
+        .into_iter()
+        .find(|p| p.unexplained)?;
+    let seg = super::report::welch(r, ctx.dt).len() * 2;
+    let bin = 1.0 / (seg as f64 * ctx.dt);
+    let t = &ctx.rec.t;
+    let energy = |f: f64| -> f64 {
+        let w = std::f64::consts::TAU * f;
+        let (mut ss, mut cc, mut sc, mut rs, mut rc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for ((&ti, &ri), &rest) in t.iter().zip(r).zip(&ctx.rest) {
+            if rest {
+                continue;
+            }
+            let (s, c) = (w * ti).sin_cos();
+            ss += s * s;
+            cc += c * c;
+            sc += s * c;
+            rs += ri * s;
+            rc += ri * c;
+        }
+        // the projection of r on span{s, c}: bᵀ·G⁻¹·b
+        let det = ss * cc - sc * sc;
+        if det <= 0.0 {
+            return 0.0;
+        }
+        (cc * rs * rs - 2.0 * sc * rs * rc + ss * rc * rc) / det
+    };
+    let step = bin / 20.0;
+    let best = (-20..=20)
+        .map(|i| peak.freq_hz + step * i as f64)
+        .filter(|f| *f > 0.0)
+        .map(|f| (f, energy(f)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))?
+        .0;
+    // then the golden section within a step either side (the energy is one lobe there: its
+    // main lobe is 1/T_record wide, 4 steps over a 12 s record)
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut lo, mut hi) = (best - step, best + step);
+    for _ in 0..30 {
+        let (a, b) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        if energy(a) < energy(b) {
+            lo = a;
+        } else {
+            hi = b;
+        }
+    }
+    Some(0.5 * (lo + hi))
+}
+
+/// A finding of a force of the motion (a friction of the speed, a ripple of the position)
+/// against a force at one time frequency `f_hz` (`hum_in_residual`: a hum of the supply, a
+/// machine nearby): the Wald statistic of the finding's columns with sin(2πft), cos(2πft)
+/// beside them (`wald_beside`). A motion that passes the same speeds or positions at moments
+/// spread over the hum's phase decorrelates the two; where the record shows the finding only
+/// through the hum (a few moves, the near-stops of a recorded motion), its columns carry
+/// nothing beside it.
+pub fn finding_apart_from_hum(
+    ctx: &Context,
+    cols: &[(String, Vec<f64>)],
+    span: (usize, usize),
+    f_hz: f64,
+) -> f64 {
+    let w = std::f64::consts::TAU * f_hz;
+    let (hs, hc): (Vec<f64>, Vec<f64>) = ctx.rec.t.iter().map(|t| (w * t).sin_cos()).unzip();
+    wald_beside(ctx, cols, span, [&hs, &hc])
 }
 
 /// The scanned range [lo, hi] of a coarse grid that `best` belongs to: the values of the same

@@ -1621,6 +1621,45 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         .iter()
         .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
         .collect();
+    // A friction of the speed or a ripple of the position names a force of the motion, not
+    // one at a fixed time frequency: where the residual's spectrum holds a peak standing out
+    // of the residual (`effects::hum_in_residual`: a hum of the supply, a machine nearby),
+    // the finding's columns must stand AGREEMENT_T standard errors out of the noise beside
+    // that sinusoid (`effects::finding_apart_from_hum`).
+    let hum_kind = |k: EffectKind| {
+        matches!(
+            k,
+            EffectKind::Stribeck | EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+        )
+    };
+    // The hum is sought in the residual of the fixed terms and the finding alone: another
+    // finding of the set (a resonance at the hum's frequency) may carry it until it is dropped.
+    let hum: Vec<Option<(f64, f64)>> = chosen
+        .iter()
+        .enumerate()
+        .map(|(k, e)| {
+            if !hum_kind(e.kind) {
+                return None;
+            }
+            let idx: Vec<usize> = (0..n_fixed).chain(spans[k].0..spans[k].1).collect();
+            let own: Vec<(String, Vec<f64>)> = idx.iter().map(|&j| cols[j].clone()).collect();
+            let th = full.0.plus(&full.1).select(&idx).solve();
+            let f = effects::hum_in_residual(&ctx, &resid_of(&own, &th))?;
+            Some((f, effects::finding_apart_from_hum(&ctx, &cols, spans[k], f)))
+        })
+        .collect();
+    let hum_wald: Vec<Option<f64>> = hum.iter().map(|h| h.map(|h| h.1)).collect();
+    for (k, h) in hum.iter().enumerate() {
+        if let (Some((hz, w)), Some(f)) = (h, findings.get_mut(k)) {
+            f.note.push_str(&format!(
+                "; beside the residual's force at {hz:.3} Hz Wald {w:.1}"
+            ));
+        }
+    }
+    let hum_apart: Vec<bool> = hum_wald
+        .iter()
+        .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
+        .collect();
     let kept: Vec<usize> = (0..chosen.len())
         .filter(|&k| {
             holds[k] >= STABILITY_MIN
@@ -1629,6 +1668,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 && ripple_shows[k]
                 && ripple_locked[k]
                 && ripple_apart[k]
+                && hum_apart[k]
         })
         .collect();
     let mut dropped_notes = Vec::new();
@@ -1668,6 +1708,15 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             if let (false, Some(wald)) = (ripple_apart[k], ripple_reversal[k]) {
                 dropped_notes.push(format!(
                     "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(&ctx, &chosen[k]),
+                    AGREEMENT_T * AGREEMENT_T,
+                ));
+                continue;
+            }
+            if let (false, Some((hz, wald))) = (hum_apart[k], hum[k]) {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but it is not apart from the residual's force at {hz:.3} Hz (a force at one time frequency, which no function of the motion is): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
                     chosen[k].kind.name(),
                     effects::describe(&ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
