@@ -49,8 +49,11 @@ fn record(seed: u64, hum: f64, stribeck: f64) -> String {
     out
 }
 
+/// Named columns of a design.
+type Columns = Vec<(String, Vec<f64>)>;
+
 /// The Stribeck candidate's columns on a record and the span they take.
-fn stribeck_columns(ctx: &Context) -> (Vec<(String, Vec<f64>)>, (usize, usize)) {
+fn stribeck_columns(ctx: &Context) -> (Columns, (usize, usize)) {
     let e = Effect {
         kind: EffectKind::Stribeck,
         param: V_S,
