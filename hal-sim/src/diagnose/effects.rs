@@ -710,6 +710,15 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     s[j] + al * (s[j + 1] - s[j])
 }
 
+/// The Coulomb switch a delay of `k` samples (fractional) puts at sample `i`:
+/// sgn v(t − τ) − sgn v(t) of the record's Coulomb sign `sgn` (`Context::sgn`), the Coulomb
+/// part of `lag`'s column per unit of the delayed device's Coulomb coefficient. Non-zero for
+/// τ after each reversal: the switch's shape, which a `presliding_hysteresis` beside the lag
+/// must be told apart from (`diagnose`'s scan refits it with an amplitude of its own).
+pub fn delayed_switch(sgn: &[f64], i: usize, k: f64) -> f64 {
+    delayed(sgn, i, k) - sgn[i]
+}
+
 impl Context<'_> {
     /// True when the motion `k` samples before sample `i` (fractional: either sample around
     /// that time) is at rest (`at_rest`), or lies before the record.
@@ -1161,7 +1170,7 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
                         let i = at(j);
                         th[0] * (delayed(ra, i, k) - ra[i])
                             + th[1] * (delayed(rv, i, k) - rv[i])
-                            + th[2] * (delayed(rs, i, k) - rs[i])
+                            + th[2] * delayed_switch(rs, i, k)
                     })
                 }
             };

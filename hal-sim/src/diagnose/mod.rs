@@ -1105,6 +1105,39 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let set_k = |set: &[Effect], cache: &mut Cache| -> usize {
         set_cols(set, cache).len() + set.iter().filter(|e| e.kind.scanned()).count()
     };
+    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
+    // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
+    // margin, on the screening rows without the lag's `rows`.
+    let carries_beyond_switch =
+        |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
+            let k = tau / ctx.dt;
+            let parts: Vec<Vec<f64>> = [&rec.a, &rec.v]
+                .iter()
+                .map(|s| {
+                    sub.rows
+                        .iter()
+                        .map(|&i| effects::delayed(s, i, k) - s[i])
+                        .collect()
+                })
+                .chain([sub
+                    .rows
+                    .iter()
+                    .map(|&i| effects::delayed_switch(&ctx.sgn, i, k))
+                    .collect()])
+                .collect();
+            let all: Vec<&[f64]> = base_refs
+                .iter()
+                .copied()
+                .chain(parts.iter().map(|c| c.as_slice()))
+                .chain(zr.iter().copied())
+                .collect();
+            let nw = normals(&all, &sub_f, &sub_hold, 1);
+            let nw = change_rows(&nw, &all, &sub_f, &sub_hold, rows, -1.0);
+            let idx: Vec<usize> = (0..base_refs.len() + parts.len()).collect();
+            let (st, sh) = (nw.0.select(&idx), nw.1.select(&idx));
+            let with = nw.1.rss(&nw.0.solve());
+            1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
+        };
     // The best candidate to add to a set (every kind not in it, every grid value, refined):
     // (held-out rss of the set, and of the best candidate with its training BIC change).
     let scan = |set: &[Effect], cache: &mut Cache| -> (f64, Option<(f64, f64, Effect)>) {
@@ -1210,6 +1243,17 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                         ))
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
+                }
+                // a presliding transition beside a lag: the delay shifts the Coulomb switch
+                // by τ, and the lag's one gain (set by its inertial and viscous parts too,
+                // whose derived signals' noise biases it low) can leave part of that switch,
+                // a transition after each reversal that a Dahl state also draws; the
+                // presliding must carry the margin on top of the delayed switch given an
+                // amplitude of its own (`effects::delayed_switch`), on the lag's rows
+                if let (EffectKind::PreslidingHysteresis, Some(tau)) = (eff.kind, tau_s) {
+                    if !carries_beyond_switch(&base_refs, &zr, tau, &rows_s) {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
+                    }
                 }
                 let rt = nn.0.rss(&t);
                 let k_extra = z.len() + eff.kind.scanned() as usize;
