@@ -12,20 +12,28 @@
 //! thermal drift of the force offset).
 //!
 //! **Observability rule**: a hidden effect is kept only when the force it changes, simulated
-//! with and without it on the same motion, has an rms of at least 5× the force-sensor noise and
-//! at least 3 % of the rms of the force without it; otherwise its parameters are redrawn (at
-//! most 40 draws). When all 40 fail, the trajectory's own parameters are redrawn within its
-//! family (a new draw of the motion's random stream: another period and sharpness of a
-//! rounded triangle, other sines, moves or excitation) and the effect's 40 draws are made on
-//! that motion, at most 8 motions in all. When its family cannot show the effect on any of
+//! with and without it on the same motion, holds on the samples in motion (`rest_of`: the
+//! rig's own rest set, from its true motion and its encoder's quantum) an rms of at least 5×
+//! the force-sensor noise and at least 3 % of the rms the force without it holds there
+//! (`rms_in_motion`: the energy on the samples in motion per sample of the record); otherwise
+//! its parameters are redrawn (at most 40 draws). Samples at rest are excluded because no
+//! diagnosis may use them: friction at rest is static, anywhere within its breakaway level,
+//! and carries no Coulomb sign (the velocity is within its noise), so a force there is no
+//! evidence of any effect; this holds for every kind (the diagnosis leaves them out of every
+//! fit and of its residual analysis too, the spectral peaks and the slow change a hum or a
+//! drift is reported by). When all 40 fail, the trajectory's own parameters are redrawn
+//! within its family (a new draw of the motion's random stream: another period and sharpness
+//! of a rounded triangle, other sines, moves or excitation) and the effect's 40 draws are made
+//! on that motion, at most 8 motions in all. When its family cannot show the effect on any of
 //! them (a Stribeck band crossed only at the reversals of a triangle that cruises at one
 //! speed; a recorded trajectory has no parameters to redraw), the record is drawn in the next
 //! parametric family (multisine → rounded triangle → point-to-point → narrowband → multisine),
-//! 8 motions each, and says so (`requested` keeps the family it was asked for); only when no
-//! family shows it is the record generated with its own family's last draw and flagged
-//! `observable = false`. The effect's size ranges are physical and fixed; an effect the motion
-//! cannot show is a property of the test, so the test is what changes. A record observable on
-//! its first motion is unchanged by the rule.
+//! 8 motions each, and says so (`requested` keeps the family it was asked for). When no family
+//! shows it, the record keeps its own family's last motion and draw and the draw's size is
+//! raised to the least the rule accepts (`size_to_rule`: a hum's amplitude or a drift's total
+//! at most `SIZE_MAX_SCALE` times the draw, a clip's level down to `CLIP_MIN_FRACTION` of the
+//! drive's peak force); only when that maximum does not reach the rule is the record flagged
+//! `observable = false`. A record observable on its first motion is unchanged by the redraws.
 
 use std::f64::consts::TAU;
 use std::fmt::Write as _;
@@ -201,7 +209,8 @@ pub struct RigSpec {
     pub hidden: Hidden,
     /// The observability rule held for the hidden effect.
     pub observable: bool,
-    /// rms of the force the hidden effect changes, N.
+    /// rms the force the hidden effect changes holds on the samples in motion (`rest_of`,
+    /// `rms_in_motion`), N.
     pub effect_rms_n: f64,
     /// Presliding displacement of the device's own (LuGre) friction, m: 2 µm, halved until the
     /// force it changes against a rigid Coulomb switch on this motion is invisible to a
@@ -460,9 +469,66 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
     out
 }
 
-fn rms(x: &[f64]) -> f64 {
-    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+/// Samples of the rig's rest window: 20 ms at the rig's 1 kHz (see `rest_of`).
+pub const REST_WINDOW: usize = 20;
+
+/// The record's samples at rest as the rig's own sensor defines them, from the true motion:
+/// a sample is at rest when, within `REST_WINDOW` samples of it, the true speed falls below
+/// one encoder quantum per window, q·fs/`REST_WINDOW` (0.02, 0.08, 0.32 mm/s for the 0.4,
+/// 1.6, 6.4 µm encoders). Below that speed the encoder counts less than one quantum over
+/// the window, so no velocity derived from the record (whatever its filter, if it averages
+/// over no more than the window) tells the motion from standstill or its direction: friction
+/// there is static, anywhere within its breakaway level, and carries no Coulomb sign (the
+/// issue's "samples at rest (velocity within its noise)"). The samples within the window of
+/// such a sample are at rest too: a velocity averaged over the window mixes them with the
+/// unresolved ones. 20 ms is long enough that one quantum resolves speeds well below the
+/// motions' (their peaks are 40–300 mm/s) and short against their changes (the rounded
+/// reversals and minimum-jerk starts last 50 ms and more). `v` is the true velocity at the
+/// substep rate; the result is per record sample.
+fn rest_of(s: &RigSpec, v: &[f64]) -> Vec<bool> {
+    let w = REST_WINDOW;
+    let v_q = s.quantum_m * s.fs / w as f64;
+    let n = s.samples;
+    let still: Vec<bool> = (0..n).map(|i| v[i * SUB].abs() < v_q).collect();
+    let mut rest = vec![false; n];
+    let mut last: Option<usize> = None;
+    for i in 0..n {
+        if still[i] {
+            last = Some(i);
+        }
+        rest[i] = last.is_some_and(|j| i - j <= w);
+    }
+    let mut next: Option<usize> = None;
+    for i in (0..n).rev() {
+        if still[i] {
+            next = Some(i);
+        }
+        rest[i] |= next.is_some_and(|j| j - i <= w);
+    }
+    rest
 }
+
+/// The rms `x` (at the substep rate) holds on the samples in motion (`rest` per record
+/// sample): its energy there per substep of the whole record, √(Σ_motion x²/n). A fit's
+/// evidence for an effect is its energy on the samples the fit can use over the record's
+/// length (what a matched filter against the noise sees); averaging over the samples in
+/// motion only would inflate the evidence of a record that is mostly at rest. An effect with
+/// nothing at rest has the rms over every sample.
+fn rms_in_motion(x: &[f64], rest: &[bool]) -> f64 {
+    let mut e = 0.0;
+    for (c, &r) in x.chunks(SUB).zip(rest) {
+        if !r {
+            e += c.iter().map(|v| v * v).sum::<f64>();
+        }
+    }
+    (e / x.len().max(1) as f64).sqrt()
+}
+
+/// The largest factor by which `size_to_rule` scales a hum's amplitude or a drift's total
+/// (4: a hum up to 2× Coulomb, a drift up to 4× Coulomb), and the lowest clip level it
+/// reaches as a fraction of the drive's peak force (0.1, against the drawn 0.45–0.8).
+pub const SIZE_MAX_SCALE: f64 = 4.0;
+pub const CLIP_MIN_FRACTION: f64 = 0.1;
 
 /// Draw the parameters of a hidden effect of `kind` for a device (ranges per kind; the
 /// observability rule then accepts or redraws).
@@ -591,6 +657,8 @@ impl RigSpec {
                 return other;
             }
         }
+        // no family shows the effect at its drawn size: sized to the rule
+        self.size_to_rule();
         self
     }
 
@@ -613,21 +681,111 @@ impl RigSpec {
             let (x, v, a) = motion_of(self);
             let f0 = device_force(self, Hidden::None, &x, &v, &a);
             let vmax = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
-            let f0r = rms(&f0);
+            let rest = rest_of(self, &v);
+            let f0r = rms_in_motion(&f0, &rest);
             for _ in 0..40 {
                 let hd = draw_hidden(kind, self, vmax, rng);
-                let f1 = device_force(self, hd, &x, &v, &a);
-                let d: Vec<f64> = f1.iter().zip(&f0).map(|(a, b)| a - b).collect();
-                let r = rms(&d);
-                self.hidden = hd;
-                self.effect_rms_n = r;
-                self.observable = r >= 5.0 * self.noise_n && r >= 0.03 * f0r;
-                if self.observable {
+                if self.holds_rule(hd, &x, &v, &a, &f0, f0r, &rest) {
                     return true;
                 }
             }
         }
         false
+    }
+
+    /// The observability rule for effect `hd` on motion (x, v, a) with the effect-free force
+    /// `f0` (its rms in motion `f0r`): the force the effect changes, over the samples in
+    /// motion (`rest_of`), has an rms ≥ 5× the force noise and ≥ 3 % of `f0r`. Holds `hd`,
+    /// its rms and the verdict in the record.
+    #[allow(clippy::too_many_arguments)]
+    fn holds_rule(
+        &mut self,
+        hd: Hidden,
+        x: &[f64],
+        v: &[f64],
+        a: &[f64],
+        f0: &[f64],
+        f0r: f64,
+        rest: &[bool],
+    ) -> bool {
+        let f1 = device_force(self, hd, x, v, a);
+        let d: Vec<f64> = f1.iter().zip(f0).map(|(a, b)| a - b).collect();
+        let r = rms_in_motion(&d, rest);
+        self.hidden = hd;
+        self.effect_rms_n = r;
+        self.observable = r >= 5.0 * self.noise_n && r >= 0.03 * f0r;
+        self.observable
+    }
+
+    /// Effects sized to the rule: a record no family shows keeps its motion and its last draw,
+    /// and the draw's size is raised to the least that meets the observability rule. A hum's
+    /// amplitude and a drift's total add a force proportional to them, so the least size is
+    /// the draw's times max(5·noise, 0.03·f0r)/rms (and 10⁻⁶ above it, for rounding), at most
+    /// `SIZE_MAX_SCALE`; a clip's level is lowered by bisection (24 halvings) between the
+    /// drawn level and `CLIP_MIN_FRACTION` of the drive's peak force c·v_max, to the highest
+    /// level that meets it. Other kinds, or a size the maximum does not reach, stay flagged.
+    fn size_to_rule(&mut self) {
+        let (x, v, a) = motion_of(self);
+        let f0 = device_force(self, Hidden::None, &x, &v, &a);
+        let rest = rest_of(self, &v);
+        let f0r = rms_in_motion(&f0, &rest);
+        let hd = self.hidden;
+        // the least rms the rule accepts
+        let need = (5.0 * self.noise_n).max(0.03 * f0r);
+        match hd {
+            Hidden::Hum { .. } | Hidden::Drift { .. } => {
+                let r = self.effect_rms_n;
+                if r <= 0.0 {
+                    return;
+                }
+                let k = need / r * (1.0 + 1e-6);
+                if k > SIZE_MAX_SCALE {
+                    return;
+                }
+                let scaled = match hd {
+                    Hidden::Hum { freq_hz, amp_n } => Hidden::Hum {
+                        freq_hz,
+                        amp_n: amp_n * k,
+                    },
+                    Hidden::Drift { total_n } => Hidden::Drift {
+                        total_n: total_n * k,
+                    },
+                    _ => unreachable!(),
+                };
+                if !self.holds_rule(scaled, &x, &v, &a, &f0, f0r, &rest) {
+                    // not reached (the force is linear in the size): keep the draw flagged
+                    self.holds_rule(hd, &x, &v, &a, &f0, f0r, &rest);
+                }
+            }
+            Hidden::ClippedCurrentLoop { limit_n } => {
+                let vmax = v.iter().fold(0.0f64, |m, u| m.max(u.abs()));
+                let lo_n = CLIP_MIN_FRACTION * self.drive_damping * vmax;
+                let clip = |l: f64| Hidden::ClippedCurrentLoop { limit_n: l };
+                if lo_n >= limit_n || !self.holds_rule(clip(lo_n), &x, &v, &a, &f0, f0r, &rest) {
+                    self.holds_rule(hd, &x, &v, &a, &f0, f0r, &rest);
+                    return;
+                }
+                // lo meets the rule, hi does not
+                let (mut lo, mut hi) = (lo_n, limit_n);
+                for _ in 0..24 {
+                    let mid = 0.5 * (lo + hi);
+                    if self.holds_rule(clip(mid), &x, &v, &a, &f0, f0r, &rest) {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                self.holds_rule(clip(lo), &x, &v, &a, &f0, f0r, &rest);
+            }
+            _ => {}
+        }
+    }
+
+    /// The record's samples at rest by the rig's own definition (`rest_of`), from its true
+    /// motion.
+    pub fn rest(&self) -> Vec<bool> {
+        let (_, v, _) = motion_of(self);
+        rest_of(self, &v)
     }
 
     /// The imposed motion's velocity and acceleration at the record's samples, as the rig's
