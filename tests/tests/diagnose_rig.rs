@@ -554,16 +554,19 @@ fn impact_travel_is_the_play_width() {
 /// Bound of `impact_travel_is_the_play_width`: 3× the largest measured deviation.
 const TRAVEL_BOUND: f64 = 0.021;
 
-/// Rounded-triangle records diagnosed with the rig's true acceleration given as `a_m_s2`
-/// beside the derived one (`RIG_SEEDS=500002,… cargo test -p regen-tests --test diagnose_rig
-/// rig_true_acceleration -- --ignored --nocapture`): the inertial error M·(a − a_derived) at
-/// the reversals and what the diagnosis names without it.
+/// Records of the long run (`long_run_spec`, any family) diagnosed with the rig's true velocity
+/// and acceleration given as `v_m_s`, `a_m_s2` beside the derived ones (`RIG_SEEDS=500002,…
+/// cargo test -p regen-tests --test diagnose_rig rig_true_acceleration -- --ignored
+/// --nocapture`; `RIG_TRUE=v` or `RIG_TRUE=a` gives only that one the rig's, the other derived):
+/// the inertial error M·(a − a_derived) at the reversals and what the diagnosis names without
+/// the derived signals' errors.
 #[test]
 #[ignore]
 fn rig_true_acceleration() {
+    let emps = emps_x();
     for seed in env_seeds() {
         let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
-        let spec = RigSpec::random(seed, kind, Trajectory::RoundedTriangle, 12_000);
+        let spec = long_run_spec(seed, &emps);
         let (v_true, a_true) = spec.true_motion();
         let text = spec.csv();
         let rec = parse_csv(&text, None).expect("rig record parses");
@@ -605,7 +608,11 @@ fn rig_true_acceleration() {
                 break;
             }
         }
-        for ((l, v), a) in lines.zip(&v_true).zip(&a_true) {
+        // RIG_TRUE=v (or a): only that signal the rig's, the other the record's derived one
+        let only = std::env::var("RIG_TRUE").unwrap_or_default();
+        let v_in = if only == "a" { &rec.v } else { &v_true };
+        let a_in = if only == "v" { &rec.a } else { &a_true };
+        for ((l, v), a) in lines.zip(v_in).zip(a_in) {
             with_a.push_str(&format!("{l},{v:.9e},{a:.9e}\n"));
         }
         let rec2 = parse_csv(&with_a, None).expect("record with a parses");
