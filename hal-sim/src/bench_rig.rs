@@ -750,7 +750,7 @@ impl RigSpec {
                     Hidden::Drift { total_n } => Hidden::Drift {
                         total_n: total_n * k,
                     },
-                    _ => unreachable!(),
+                    _ => return,
                 };
                 if !self.holds_rule(scaled, &x, &v, &a, &f0, f0r, &rest) {
                     // not reached (the force is linear in the size): keep the draw flagged
