@@ -694,25 +694,7 @@ fn play_device_is_fitted_off_the_contact_transient() {
         );
         let (m, fv, fc) = hal_sim::diagnose::effects::play_device_fit(&ctx, &dev)
             .unwrap_or_else(|| panic!("seed {seed}: no device fit"));
-        let want = [
-            spec.mass_kg,
-            spec.drive_damping + spec.viscous,
-            spec.coulomb,
-        ];
-        let dev = [m / want[0] - 1.0, fv / want[1] - 1.0, fc / want[2] - 1.0];
-        println!(
-            "seed {seed}: M {m:.2} kg ({:+.2} %), Fv {fv:.1} N·s/m ({:+.2} %), Fc {fc:.2} N ({:+.2} %)",
-            100.0 * dev[0],
-            100.0 * dev[1],
-            100.0 * dev[2]
-        );
-        for (k, (d, bound)) in dev.iter().zip(PLAY_DEVICE_BOUND).enumerate() {
-            assert!(
-                d.abs() < bound,
-                "seed {seed}: coefficient {k} off by {:+.2} %",
-                100.0 * d
-            );
-        }
+        assert_device_is_the_rigs(&spec, (m, fv, fc), PLAY_DEVICE_BOUND);
     }
 }
 
@@ -1003,29 +985,36 @@ fn play_device_is_fitted_from_its_own_walk() {
         let ctx = hal_sim::diagnose::effects::Context::new(&rec);
         let (m, fv, fc) =
             hal_sim::diagnose::effects::play_device_coefficients(&ctx, rec.len(), width_m);
-        let want = [
-            spec.mass_kg,
-            spec.drive_damping + spec.viscous,
-            spec.coulomb,
-        ];
-        let dev = [m / want[0] - 1.0, fv / want[1] - 1.0, fc / want[2] - 1.0];
-        println!(
-            "seed {seed} ({}): M {m:.2} kg ({:+.2} %), Fv {fv:.1} N·s/m ({:+.2} %), Fc {fc:.2} N ({:+.2} %)",
-            spec.trajectory.name(),
-            100.0 * dev[0],
-            100.0 * dev[1],
-            100.0 * dev[2]
-        );
-        for (k, (d, bound)) in dev.iter().zip(PLAY_DEVICE_WALKED_BOUND).enumerate() {
-            assert!(
-                d.abs() < bound,
-                "seed {seed}: coefficient {k} off by {:+.2} %",
-                100.0 * d
-            );
-        }
+        assert_device_is_the_rigs(&spec, (m, fv, fc), PLAY_DEVICE_WALKED_BOUND);
     }
 }
 
 /// Bounds of `play_device_is_fitted_from_its_own_walk` (inertia, viscous, Coulomb): 3× the
 /// largest measured deviation.
 const PLAY_DEVICE_WALKED_BOUND: [f64; 3] = [0.115, 0.084, 0.105];
+
+/// The play's device (inertia, viscous, Coulomb) against the rig's own (its mass, drive
+/// damping plus viscous friction, Coulomb), each relative deviation within its bound.
+fn assert_device_is_the_rigs(spec: &RigSpec, (m, fv, fc): (f64, f64, f64), bound: [f64; 3]) {
+    let seed = spec.seed;
+    let want = [
+        spec.mass_kg,
+        spec.drive_damping + spec.viscous,
+        spec.coulomb,
+    ];
+    let dev = [m / want[0] - 1.0, fv / want[1] - 1.0, fc / want[2] - 1.0];
+    println!(
+        "seed {seed} ({}): M {m:.2} kg ({:+.2} %), Fv {fv:.1} N·s/m ({:+.2} %), Fc {fc:.2} N ({:+.2} %)",
+        spec.trajectory.name(),
+        100.0 * dev[0],
+        100.0 * dev[1],
+        100.0 * dev[2]
+    );
+    for (k, (d, b)) in dev.iter().zip(bound).enumerate() {
+        assert!(
+            d.abs() < b,
+            "seed {seed}: coefficient {k} off by {:+.2} %",
+            100.0 * d
+        );
+    }
+}
