@@ -1709,7 +1709,6 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             Some((f, effects::finding_apart_from_hum(&ctx, &cols, spans[k], f)))
         })
         .collect();
-    let hum_wald: Vec<Option<f64>> = hum.iter().map(|h| h.map(|h| h.1)).collect();
     for (k, h) in hum.iter().enumerate() {
         if let (Some((hz, w)), Some(f)) = (h, findings.get_mut(k)) {
             f.note.push_str(&format!(
@@ -1717,9 +1716,9 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             ));
         }
     }
-    let hum_apart: Vec<bool> = hum_wald
+    let hum_apart: Vec<bool> = hum
         .iter()
-        .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
+        .map(|h| h.is_none_or(|(_, w)| w >= AGREEMENT_T * AGREEMENT_T))
         .collect();
     let kept: Vec<usize> = (0..chosen.len())
         .filter(|&k| {
