@@ -2392,7 +2392,7 @@ pub fn hum_in_residual(ctx: &Context, r: &[f64]) -> Option<f64> {
     let peak = super::report::spectral_peaks(r, ctx.dt)
         .into_iter()
         .find(|p| p.unexplained)?;
-    let seg = super::report::welch(r, ctx.dt).len() * 2;
+    let seg = super::report::welch_segment(r.len());
     let bin = 1.0 / (seg as f64 * ctx.dt);
     let energy = |f: f64| sinusoid_energy(&ctx.rec.t, r, &ctx.rest, ctx.dt, f);
     let step = bin / 20.0;

@@ -92,13 +92,20 @@ pub fn welch(r: &[f64], dt: f64) -> Vec<(f64, f64)> {
     welch_spread(r, dt, usize::MAX)
 }
 
+/// The Welch segment's length for a record of `n` samples: 4096, halved while longer than
+/// the record, at least 16 (its bins are 1/(segment·dt) apart).
+pub fn welch_segment(n: usize) -> usize {
+    let mut seg = 4096usize;
+    while seg > n && seg > 16 {
+        seg /= 2;
+    }
+    seg
+}
+
 /// Welch spectrum averaging at most `max_segments` segments spread evenly over the record
 /// (each segment's mean removed).
 pub fn welch_spread(r: &[f64], dt: f64, max_segments: usize) -> Vec<(f64, f64)> {
-    let mut seg = 4096usize;
-    while seg > r.len() && seg > 16 {
-        seg /= 2;
-    }
+    let seg = welch_segment(r.len());
     let win: Vec<f64> = (0..seg)
         .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / seg as f64).cos())
         .collect();
