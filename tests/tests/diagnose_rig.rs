@@ -175,13 +175,12 @@ fn rig_sample() {
     let exact: usize = t.values().map(|t| t.exact).sum();
     let detected: usize = t.values().map(|t| t.detected).sum();
     println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured 2026-11-24 on the merged diagnosis: 20/27 exactly right, 23/27 detected (the
-    // point-to-point delay record 200502 named `lag` since the samples whose delayed motion
-    // is at rest are left out of its fits; 21/27, 24/27 on that change alone); the bounds
-    // guard what is reached, 2 records of margin (a seeded sample: the figures move only
-    // with the code)
-    assert!(exact >= 18, "{exact}/{all} exactly right (measured 20)");
-    assert!(detected >= 21, "{detected}/{all} detected (measured 23)");
+    // measured: 22/27 exactly right, 24/27 detected (the drift point-to-point 800502, its
+    // moves running one way then back, carried as a drift since the slow change is also
+    // tested beside the baseline's refit); the bounds guard what is reached, 3 records of
+    // margin (a seeded sample: the figures move only with the code)
+    assert!(exact >= 19, "{exact}/{all} exactly right (measured 22)");
+    assert!(detected >= 21, "{detected}/{all} detected (measured 24)");
     // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
     // drift records, and no effect-free record gets a catalogue name (0/3); one record of
     // margin on the first (the check runs on the baseline residual of any motion)
