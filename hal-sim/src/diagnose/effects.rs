@@ -766,7 +766,11 @@ impl Context<'_> {
     /// the device's at t − τ, so there it is the force of a device at rest (static friction,
     /// anywhere within its breakaway level, no Coulomb sign): the delayed model, and the model
     /// it is compared against, leave these samples out as `at_rest` leaves out the samples
-    /// at rest now.
+    /// at rest now. So are the samples in motion whose speed now lies inside the Coulomb
+    /// sign's band (`sign_band`): the delayed device slides with the exact sign
+    /// (`delayed_switch`) and the column's part at t is the baseline's banded sign, so there
+    /// the column would carry the band's own error at t (a sliding device's Coulomb force is
+    /// the full Fc), which a lag of any τ takes from a record with no delay.
     pub fn lag_rest_rows(&self, tau: f64, rows: Option<&[usize]>) -> Vec<usize> {
         let k = tau / self.dt;
         let at = |j: usize| rows.map_or(j, |r| r[j]);
@@ -774,7 +778,7 @@ impl Context<'_> {
         (0..n)
             .filter(|&j| {
                 let i = at(j);
-                !self.rest[i] && self.rest_delayed(i, k)
+                !self.rest[i] && (self.rest_delayed(i, k) || self.rec.v[i].abs() < self.v_eps)
             })
             .collect()
     }
