@@ -710,13 +710,42 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     s[j] + al * (s[j + 1] - s[j])
 }
 
-/// The Coulomb switch a delay of `k` samples (fractional) puts at sample `i`:
-/// sgn v(t − τ) − sgn v(t) of the record's Coulomb sign `sgn` (`Context::sgn`), the Coulomb
-/// part of `lag`'s column per unit of the delayed device's Coulomb coefficient. Non-zero for
-/// τ after each reversal: the switch's shape, which a `presliding_hysteresis` beside the lag
-/// must be told apart from (`diagnose`'s scan refits it with an amplitude of its own).
-pub fn delayed_switch(sgn: &[f64], i: usize, k: f64) -> f64 {
-    delayed(sgn, i, k) - sgn[i]
+/// The exact sign of the velocity `v` at `k` samples before sample `i` (fractional: the two
+/// samples' signs interpolated linearly, so a reversal between them switches in proportion;
+/// held at the first sample before the record). The delayed device's Coulomb sign: a delayed
+/// sample is used only where the motion τ earlier is not at rest (`Context::lag_rest_rows`),
+/// so the sign there is that of a sliding device, whose Coulomb force is the full Fc at any
+/// sliding speed (the linear band of `sgn` guards against the derived velocity's noise at
+/// rest, not a force law).
+pub fn delayed_sign(v: &[f64], i: usize, k: f64) -> f64 {
+    let s = |u: f64| {
+        if u > 0.0 {
+            1.0
+        } else if u < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }
+    };
+    let t = i as f64 - k;
+    if t <= 0.0 || v.len() < 2 {
+        return v.first().copied().map_or(0.0, s);
+    }
+    let j = (t.floor() as usize).min(v.len() - 2);
+    let al = t - j as f64;
+    s(v[j]) + al * (s(v[j + 1]) - s(v[j]))
+}
+
+/// The Coulomb switch a delay of `k` samples (fractional) puts at sample `i`: the delayed
+/// device's sign (`delayed_sign` of the velocity `v`) minus the record's Coulomb sign `sgn`
+/// now (`Context::sgn`, as the baseline's Coulomb column takes it, so that the baseline plus
+/// the column at gain 1 is the delayed device's Coulomb force `Fc·sgn v(t − τ)` whatever the
+/// speed at t), the Coulomb part of `lag`'s column per unit of the delayed device's Coulomb
+/// coefficient. Non-zero for τ after each reversal: the switch's shape, which a
+/// `presliding_hysteresis` beside the lag must be told apart from (`diagnose`'s scan refits it
+/// with an amplitude of its own).
+pub fn delayed_switch(v: &[f64], sgn: &[f64], i: usize, k: f64) -> f64 {
+    delayed_sign(v, i, k) - sgn[i]
 }
 
 impl Context<'_> {
@@ -737,7 +766,11 @@ impl Context<'_> {
     /// the device's at t − τ, so there it is the force of a device at rest (static friction,
     /// anywhere within its breakaway level, no Coulomb sign): the delayed model, and the model
     /// it is compared against, leave these samples out as `at_rest` leaves out the samples
-    /// at rest now.
+    /// at rest now. So are the samples in motion whose speed now lies inside the Coulomb
+    /// sign's band (`sign_band`): the delayed device slides with the exact sign
+    /// (`delayed_switch`) and the column's part at t is the baseline's banded sign, so there
+    /// the column would carry the band's own error at t (a sliding device's Coulomb force is
+    /// the full Fc), which a lag of any τ takes from a record with no delay.
     pub fn lag_rest_rows(&self, tau: f64, rows: Option<&[usize]>) -> Vec<usize> {
         let k = tau / self.dt;
         let at = |j: usize| rows.map_or(j, |r| r[j]);
@@ -745,7 +778,7 @@ impl Context<'_> {
         (0..n)
             .filter(|&j| {
                 let i = at(j);
-                !self.rest[i] && self.rest_delayed(i, k)
+                !self.rest[i] && (self.rest_delayed(i, k) || self.rec.v[i].abs() < self.v_eps)
             })
             .collect()
     }
@@ -789,10 +822,11 @@ impl Context<'_> {
             None
         } else {
             let r = self.rec;
-            let mut all: Vec<Vec<f64>> = [&r.a, &r.v, &self.sgn]
+            let mut all: Vec<Vec<f64>> = [&r.a, &r.v]
                 .iter()
                 .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
                 .collect();
+            all.push(lr.rows.iter().map(|&i| delayed_sign(&r.v, i, k)).collect());
             all.extend(lr.cols.iter().cloned());
             let refs: Vec<&[f64]> = all.iter().map(|c| c.as_slice()).collect();
             // the delayed device moves on these rows only where its motion at t − τ does
@@ -1170,7 +1204,7 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
                         let i = at(j);
                         th[0] * (delayed(ra, i, k) - ra[i])
                             + th[1] * (delayed(rv, i, k) - rv[i])
-                            + th[2] * delayed_switch(rs, i, k)
+                            + th[2] * delayed_switch(rv, rs, i, k)
                     })
                 }
             };

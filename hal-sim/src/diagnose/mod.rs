@@ -1152,7 +1152,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 .chain([sub
                     .rows
                     .iter()
-                    .map(|&i| effects::delayed_switch(&ctx.sgn, i, k))
+                    .map(|&i| effects::delayed_switch(&rec.v, &ctx.sgn, i, k))
                     .collect()])
                 .collect();
             let all: Vec<&[f64]> = base_refs
@@ -1988,7 +1988,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     }
     if let (Some(tau), false) = (lag_of(&chosen), lag_rows_full.is_empty()) {
         verdicts.push(format!(
-            "{} samples in motion whose motion {tau:.4} s earlier (the lag) is at rest: left out of the fits with the lag and of those it is compared with (the delayed device is at rest there)",
+            "{} samples in motion whose motion {tau:.4} s earlier (the lag) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the lag and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
             lag_rows_full.len()
         ));
     }
@@ -2560,8 +2560,7 @@ mod tests {
             "delayed baseline {th:?}: {dev:?}; baseline {:?}",
             &ctx.base_th[..3]
         );
-        // measured: +0.17 %, −0.19 %, +0.14 % (the sign's linear band ±0.2 % of the peak speed
-        // and the noise); asserted 0.6 % (3× the largest)
+        // measured: +0.21 %, +0.05 %, −0.02 % (the noise); asserted 0.6 % (3× the largest)
         assert!(dev.iter().all(|d| d.abs() < 6e-3), "{dev:?}");
         // the bias it removes: the baseline fitted on the delayed record has an inertia 21 %
         // below M (measured 31.6 kg)
@@ -2574,8 +2573,8 @@ mod tests {
             100.0 * (lag / tau - 1.0)
         );
         assert_eq!(names, ["lag"], "{:?}", d.verdicts);
-        // measured: lag +1.57 % (refined on the screening subsample), gain −0.94 %; asserted
-        // 5 % and 3 % (3× the measured, rounded up)
+        // measured: lag −1.91 % (refined on the screening subsample), gain +0.19 %; asserted
+        // 5 % and 3 % (3× the largest measured, rounded up)
         assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
         assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
     }
@@ -2739,6 +2738,104 @@ mod tests {
         assert_eq!(names, ["lag"], "{:?}", d.verdicts);
         assert!((lag / tau - 1.0).abs() < 1.2e-3, "lag {lag}");
         assert!((gain - 1.0).abs() < 1.6e-2, "gain {gain}");
+    }
+
+    /// Point-to-point moves that settle as a servo does: each move a critically damped step
+    /// of ±`amp`, x = x₀ ± amp·(1 − (1 + t/T)·e^(−t/T)) (normalised to reach amp at its end),
+    /// T = 50 ms, stopped after 12·T and followed by a 0.6 s dwell; exact v and a, position
+    /// quantised to 1 µm. The speed falls through the Coulomb sign's ±0.2 % band of the peak
+    /// speed from t ≈ 9.5·T on (0.59 mm/s down to 0.06 mm/s over the move's last ≈ 120 ms,
+    /// moving by more than the quantum over `at_rest`'s window): a sliding device's Coulomb
+    /// force is Fc·sign(v) there as anywhere. The force is the device's at t − τ (the dwell's
+    /// static friction 0.6·Fc while it rests), white noise 0.3 N.
+    fn delayed_settling_moves(m: f64, fv: f64, fc: f64, tau: f64) -> Record {
+        let (fs, n, amp, tt, td) = (1000.0, 12_000, 0.04, 0.05f64, 0.6);
+        let tm = 12.0 * tt;
+        let p_end = 1.0 - (1.0 + tm / tt) * (-tm / tt).exp();
+        let motion = |t: f64| {
+            let t = t.max(0.0);
+            let k = (t / (tm + td)).floor();
+            let dir = if k as i64 % 2 == 0 { 1.0 } else { -1.0 };
+            let x0 = if k as i64 % 2 == 0 { 0.0 } else { amp };
+            let s = t - k * (tm + td);
+            let g = amp / p_end;
+            if s >= tm {
+                return (x0 + dir * amp, 0.0, 0.0, dir, false);
+            }
+            let e = (-s / tt).exp();
+            (
+                x0 + dir * g * (1.0 - (1.0 + s / tt) * e),
+                dir * g * s / (tt * tt) * e,
+                dir * g / (tt * tt) * (1.0 - s / tt) * e,
+                dir,
+                s > 0.0,
+            )
+        };
+        let mut noise = unit_noise(0x2545_F491_4F6C_DD1D);
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 / fs;
+            let (x, v, a, _, _) = motion(t);
+            let (_, vd, ad, dir, moving) = motion(t - tau);
+            let dev = if moving {
+                m * ad + fv * vd + fc * vd.signum()
+            } else {
+                0.6 * fc * dir
+            };
+            rec.t.push(t);
+            rec.x.push((x * 1e6).round() * 1e-6);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f.push(dev + 0.3 * noise());
+        }
+        rec
+    }
+
+    /// The delayed device's Coulomb sign is the exact sign of v(t − τ) (`effects::delayed_sign`):
+    /// on moves whose slow ends lie inside the Coulomb sign's linear band
+    /// (`delayed_settling_moves`, τ = 20 ms, Fc 80 N) the delayed device's coefficients
+    /// (`lag_coefs` at the true τ) are the device's.
+    #[test]
+    fn lag_slides_with_the_exact_sign_at_slow_speed() {
+        let (m, fv, fc, tau) = (40.0, 300.0, 80.0, 0.02);
+        let rec = delayed_settling_moves(m, fv, fc, tau);
+        let ctx = effects::Context::new(&rec);
+        let th = ctx.lag_coefs(tau).expect("a device's coefficients");
+        let dev = [th[0] / m - 1.0, th[1] / fv - 1.0, th[2] / fc - 1.0];
+        let d = diagnose(&rec, &Options::default());
+        let names = d.catalogue_names();
+        let (lag, gain) = first_lag(&d);
+        println!(
+            "delayed baseline {th:?}: {dev:?}; {names:?}: lag {lag} s ({:+.3} %), gain {gain}; held-out {:.3} % -> {:.3} %",
+            100.0 * (lag / tau - 1.0),
+            100.0 * d.baseline_holdout_rel_error,
+            100.0 * d.final_holdout_rel_error
+        );
+        // measured: −0.007 %, −0.006 %, +0.006 % (M, Fv, Fc); asserted 0.02 % (3× the
+        // largest). With the banded sign delayed instead the Coulomb coefficient takes the
+        // band's shortfall over the slow ends (the break below the docs' "Delay" states)
+        assert!(dev.iter().all(|d| d.abs() < 2e-4), "{dev:?}");
+        // the names are printed, not asserted: over these long slow ends (≈ 120 ms per move
+        // inside the band) the baseline's banded sign falls short of the device's Coulomb
+        // force, and with those samples left out of the lag's fits (`lag_rest_rows`) the
+        // diagnosis names `presliding_hysteresis` for that shortfall
+    }
+
+    /// The same settling moves with no delay (`delayed_settling_moves`, τ = 0): the baseline's
+    /// banded sign falls short of the sliding device's Coulomb force over the moves' slow ends,
+    /// which the lag's column (the exact sign at t − τ, the banded one at t) would carry at
+    /// any τ; the samples whose speed lies in the band are left out of the lag's fits
+    /// (`Context::lag_rest_rows`), and no `lag` is named.
+    #[test]
+    fn lag_is_not_the_sign_band_of_an_undelayed_record() {
+        let rec = delayed_settling_moves(40.0, 300.0, 80.0, 0.0);
+        let d = diagnose(&rec, &Options::default());
+        println!("{:?}: {:?}", d.catalogue_names(), d.verdicts);
+        assert!(
+            d.findings.iter().all(|f| f.effect != "lag"),
+            "{:?}",
+            d.verdicts
+        );
     }
 
     /// The delayed baseline must be a device's: a force channel delayed on a device whose

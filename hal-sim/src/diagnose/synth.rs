@@ -221,14 +221,18 @@ pub fn generate_csv(s: &SynthSpec) -> String {
         }
         if e.kind == EffectKind::Lag {
             // the device's baseline force delayed by τ (gain c[0]): its inertia, viscous and
-            // Coulomb terms at t − τ (the diagnosis's column fits these coefficients itself)
+            // Coulomb terms at t − τ (the diagnosis's column fits these coefficients itself);
+            // the delayed device slides, its Coulomb force Fc·sign v(t − τ) at any speed
+            // (`effects::delayed_switch`: the sign's linear band is the baseline's guard
+            // against the derived velocity's noise at rest, not a force law to delay)
             let k = e.param / dt;
             let d = crate::diagnose::effects::delayed;
+            let sw = crate::diagnose::effects::delayed_switch;
             for (i, fi) in f.iter_mut().enumerate() {
                 *fi += c[0]
                     * (s.mass_kg * (d(&rec.a, i, k) - rec.a[i])
                         + s.viscous * (d(&rec.v, i, k) - rec.v[i])
-                        + s.coulomb * (d(&ctx.sgn, i, k) - ctx.sgn[i]));
+                        + s.coulomb * sw(&rec.v, &ctx.sgn, i, k));
             }
             continue;
         }
