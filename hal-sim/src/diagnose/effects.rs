@@ -821,8 +821,8 @@ impl Context<'_> {
 
 /// The noise the record's derivation puts into the derived velocity and acceleration: the
 /// position's quantisation error (white, variance q²/12, q the position quantum) through the
-/// record's own zero-phase low-pass and central differences (`record::filtfilt`,
-/// `record::central_diff` at the record's `derivative_cutoff_hz`), as their responses to a
+/// record's own zero-phase low-passes and central differences (`record::derive_from_x` at the
+/// record's `derivative_cutoff_hz` and `velocity_cutoff_hz`), as their responses to a
 /// unit position sample. These are the errors in the variables of `lag`'s column, which
 /// differences a and v over τ (`Context::lag_noise`).
 #[derive(Debug, Clone)]
@@ -840,8 +840,9 @@ impl DerivNoise {
     const D: isize = 128;
 
     /// The noise of a record whose v and a are derived from a position of quantum `q` through
-    /// a low-pass at `fc` (Hz), sampled every `dt` s. None when there is no quantum.
-    pub fn new(q: f64, fc: f64, dt: f64) -> Option<DerivNoise> {
+    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s. None
+    /// when there is no quantum.
+    pub fn new(q: f64, fc: f64, fc_v: f64, dt: f64) -> Option<DerivNoise> {
         let fs = 1.0 / dt;
         if !(q > 0.0 && fc > 0.0 && fc < 0.5 * fs) {
             return None;
@@ -851,7 +852,7 @@ impl DerivNoise {
         let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
         let mut x = vec![0.0; 2 * half + 1];
         x[half] = 1.0;
-        let (v, a) = super::record::derive_from_x(&x, fc, dt);
+        let (v, a, _) = super::record::derive_from_x(&x, fc, Some(fc_v), dt);
         let mut nz = DerivNoise {
             s2: q * q / 12.0,
             h: [a, v],
@@ -899,8 +900,12 @@ impl Context<'_> {
     pub fn deriv_noise(&self) -> Option<&DerivNoise> {
         self.deriv_noise
             .get_or_init(|| {
-                let fc = *self.rec.meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
-                DerivNoise::new(self.x_quantum, fc, self.dt)
+                let meta = &self.rec.meta;
+                let fc = *meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
+                let fc_v = meta
+                    .get(super::record::VELOCITY_CUTOFF_KEY)
+                    .map_or(fc, |&f| f);
+                DerivNoise::new(self.x_quantum, fc, fc_v, self.dt)
             })
             .as_ref()
     }
