@@ -403,7 +403,7 @@ pub fn velocity_cutoff(x: &[f64], vmax: f64, fc: f64, dt: f64) -> f64 {
     let s2x = q2.max(w2);
     let target = VELOCITY_NOISE_PER_BAND * 2e-3 * vmax;
     let hi = 0.25 * fs;
-    if !(s2x > 0.0) {
+    if s2x <= 0.0 {
         return hi.max(fc);
     }
     // σ_v² = s2x·velocity_noise_gain(f), ∝ f³
