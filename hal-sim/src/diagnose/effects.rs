@@ -162,6 +162,8 @@ pub struct Context<'a> {
     pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
     /// The derived velocity's and acceleration's noise (`DerivNoise`, built once).
     pub deriv_noise: std::sync::OnceLock<Option<DerivNoise>>,
+    /// The velocity through the acceleration's band (`Context::v_with_a`, built once).
+    pub v_with_a: std::sync::OnceLock<Vec<f64>>,
     /// Samples from the start the candidates are screened on (`super::SCREEN_WINDOW`, at most
     /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
     /// lowest resonance) and the delayed baseline's rows are taken over them.
@@ -326,6 +328,7 @@ impl<'a> Context<'a> {
             lag_rows: Default::default(),
             lag_cache: Default::default(),
             deriv_noise: Default::default(),
+            v_with_a: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
         if c.x_quantum == f64::MAX {
@@ -895,6 +898,31 @@ impl DerivNoise {
 }
 
 impl Context<'_> {
+    /// The velocity through the same band as the acceleration (`record::derive_from_x` at
+    /// the record's `derivative_cutoff_hz`), for a model that integrates a motion from v and a
+    /// together (the play's device walk): the record's v when it came through that band or was
+    /// measured.
+    pub fn v_with_a(&self) -> &[f64] {
+        self.v_with_a.get_or_init(|| {
+            let meta = &self.rec.meta;
+            match (
+                meta.get(super::record::DERIVATIVE_CUTOFF_KEY),
+                meta.get(super::record::VELOCITY_CUTOFF_KEY),
+            ) {
+                (Some(&fc), Some(&fv)) if fv > fc && self.rec.len() >= 3 => {
+                    super::record::derive_from_x(&self.rec.x, fc, Some(fc), self.dt).0
+                }
+                _ => Vec::new(),
+            }
+        });
+        let v = self.v_with_a.get().map_or(&[][..], |v| v.as_slice());
+        if v.len() == self.rec.len() {
+            v
+        } else {
+            &self.rec.v
+        }
+    }
+
     /// The noise of the record's derived v and a (`DerivNoise`), when they are derived from a
     /// quantised position (the record states its derivative cutoff and a quantum shows).
     pub fn deriv_noise(&self) -> Option<&DerivNoise> {
@@ -1593,6 +1621,7 @@ impl PlayWalk {
 /// not of full rank.
 pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     let r = ctx.rec;
+    let va = ctx.v_with_a();
     // the samples walked (`dev` may end before the record)
     let n = dev.free.len().min(r.x.len());
     let mut skip = vec![false; n];
@@ -1607,7 +1636,7 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
         if dev.free[i] || skip[i] || ctx.rest.get(i).copied().unwrap_or(false) {
             continue;
         }
-        let c = [r.a[i], r.v[i], ctx.sgn[i], 1.0];
+        let c = [r.a[i], va[i], ctx.sgn[i], 1.0];
         for j in 0..4 {
             bv[j] += c[j] * r.f[i];
             for k in 0..4 {
@@ -1663,7 +1692,7 @@ fn play_device_on(ctx: &Context, end: usize, b: f64, c: (f64, f64, f64)) -> Play
     let end = end.min(r.x.len()).min(ctx.sgn.len());
     play_device(
         &r.x[..end],
-        &r.v[..end],
+        &ctx.v_with_a()[..end],
         &r.a[..end],
         &ctx.sgn[..end],
         ctx.dt,
@@ -1723,7 +1752,8 @@ pub fn play_columns_with(
     };
     let (mi, fv, fc) = device.unwrap_or_else(|| play_device_coefficients(ctx, end, b));
     let dev = play_device_on(ctx, end, b, (mi, fv, fc));
-    let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
+    let va = ctx.v_with_a();
+    let free_force = |i: usize| -(mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
         None => Some(i),
