@@ -691,10 +691,22 @@ impl Scenario {
             if let Motion::Record { path, cutoff_hz } = motion {
                 let r = crate::diagnose::read_csv(std::path::Path::new(path.as_str()), *cutoff_hz)
                     .map_err(|e| format!("drive.motion.path: {e}"))?;
+                // the imposed motion's kinematics one consistent pair: v through the
+                // acceleration's band (the reader's v may come through a wider one)
+                let meta = &r.meta;
+                let v = match (
+                    meta.get(crate::diagnose::record::DERIVATIVE_CUTOFF_KEY),
+                    meta.get(crate::diagnose::record::VELOCITY_CUTOFF_KEY),
+                ) {
+                    (Some(&fc), Some(&fv)) if fv > fc => {
+                        crate::diagnose::record::derive_from_x(&r.x, fc, Some(fc), r.dt()).0
+                    }
+                    _ => r.v,
+                };
                 *motion = Motion::Recorded {
                     t_s: r.t,
                     x_m: r.x,
-                    v_m_s: r.v,
+                    v_m_s: v,
                     a_m_s2: r.a,
                 };
             }

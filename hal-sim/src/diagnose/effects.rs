@@ -162,6 +162,8 @@ pub struct Context<'a> {
     pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
     /// The derived velocity's and acceleration's noise (`DerivNoise`, built once).
     pub deriv_noise: std::sync::OnceLock<Option<DerivNoise>>,
+    /// The velocity through the acceleration's band (`Context::v_with_a`, built once).
+    pub v_with_a: std::sync::OnceLock<Vec<f64>>,
     /// Samples from the start the candidates are screened on (`super::SCREEN_WINDOW`, at most
     /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
     /// lowest resonance) and the delayed baseline's rows are taken over them.
@@ -326,6 +328,7 @@ impl<'a> Context<'a> {
             lag_rows: Default::default(),
             lag_cache: Default::default(),
             deriv_noise: Default::default(),
+            v_with_a: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
         if c.x_quantum == f64::MAX {
@@ -855,8 +858,8 @@ impl Context<'_> {
 
 /// The noise the record's derivation puts into the derived velocity and acceleration: the
 /// position's quantisation error (white, variance q²/12, q the position quantum) through the
-/// record's own zero-phase low-pass and central differences (`record::filtfilt`,
-/// `record::central_diff` at the record's `derivative_cutoff_hz`), as their responses to a
+/// record's own zero-phase low-passes and central differences (`record::derive_from_x` at the
+/// record's `derivative_cutoff_hz` and `velocity_cutoff_hz`), as their responses to a
 /// unit position sample. These are the errors in the variables of `lag`'s column, which
 /// differences a and v over τ (`Context::lag_noise`).
 #[derive(Debug, Clone)]
@@ -874,8 +877,9 @@ impl DerivNoise {
     const D: isize = 128;
 
     /// The noise of a record whose v and a are derived from a position of quantum `q` through
-    /// a low-pass at `fc` (Hz), sampled every `dt` s. None when there is no quantum.
-    pub fn new(q: f64, fc: f64, dt: f64) -> Option<DerivNoise> {
+    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s. None
+    /// when there is no quantum.
+    pub fn new(q: f64, fc: f64, fc_v: f64, dt: f64) -> Option<DerivNoise> {
         let fs = 1.0 / dt;
         if !(q > 0.0 && fc > 0.0 && fc < 0.5 * fs) {
             return None;
@@ -885,7 +889,7 @@ impl DerivNoise {
         let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
         let mut x = vec![0.0; 2 * half + 1];
         x[half] = 1.0;
-        let (v, a) = super::record::derive_from_x(&x, fc, dt);
+        let (v, a, _) = super::record::derive_from_x(&x, fc, Some(fc_v), dt);
         let mut nz = DerivNoise {
             s2: q * q / 12.0,
             h: [a, v],
@@ -928,13 +932,42 @@ impl DerivNoise {
 }
 
 impl Context<'_> {
+    /// The velocity through the same band as the acceleration (`record::derive_from_x` at
+    /// the record's `derivative_cutoff_hz`), for a model that integrates a motion from v and a
+    /// together (the play's device walk): the record's v when it came through that band or was
+    /// measured.
+    pub fn v_with_a(&self) -> &[f64] {
+        self.v_with_a.get_or_init(|| {
+            let meta = &self.rec.meta;
+            match (
+                meta.get(super::record::DERIVATIVE_CUTOFF_KEY),
+                meta.get(super::record::VELOCITY_CUTOFF_KEY),
+            ) {
+                (Some(&fc), Some(&fv)) if fv > fc && self.rec.len() >= 3 => {
+                    super::record::derive_from_x(&self.rec.x, fc, Some(fc), self.dt).0
+                }
+                _ => Vec::new(),
+            }
+        });
+        let v = self.v_with_a.get().map_or(&[][..], |v| v.as_slice());
+        if v.len() == self.rec.len() {
+            v
+        } else {
+            &self.rec.v
+        }
+    }
+
     /// The noise of the record's derived v and a (`DerivNoise`), when they are derived from a
     /// quantised position (the record states its derivative cutoff and a quantum shows).
     pub fn deriv_noise(&self) -> Option<&DerivNoise> {
         self.deriv_noise
             .get_or_init(|| {
-                let fc = *self.rec.meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
-                DerivNoise::new(self.x_quantum, fc, self.dt)
+                let meta = &self.rec.meta;
+                let fc = *meta.get(super::record::DERIVATIVE_CUTOFF_KEY)?;
+                let fc_v = meta
+                    .get(super::record::VELOCITY_CUTOFF_KEY)
+                    .map_or(fc, |&f| f);
+                DerivNoise::new(self.x_quantum, fc, fc_v, self.dt)
             })
             .as_ref()
     }
@@ -1622,6 +1655,7 @@ impl PlayWalk {
 /// not of full rank.
 pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     let r = ctx.rec;
+    let va = ctx.v_with_a();
     // the samples walked (`dev` may end before the record)
     let n = dev.free.len().min(r.x.len());
     let mut skip = vec![false; n];
@@ -1636,7 +1670,7 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
         if dev.free[i] || skip[i] || ctx.rest.get(i).copied().unwrap_or(false) {
             continue;
         }
-        let c = [r.a[i], r.v[i], ctx.sgn[i], 1.0];
+        let c = [r.a[i], va[i], ctx.sgn[i], 1.0];
         for j in 0..4 {
             bv[j] += c[j] * r.f[i];
             for k in 0..4 {
@@ -1692,7 +1726,7 @@ fn play_device_on(ctx: &Context, end: usize, b: f64, c: (f64, f64, f64)) -> Play
     let end = end.min(r.x.len()).min(ctx.sgn.len());
     play_device(
         &r.x[..end],
-        &r.v[..end],
+        &ctx.v_with_a()[..end],
         &r.a[..end],
         &ctx.sgn[..end],
         ctx.dt,
@@ -1752,7 +1786,8 @@ pub fn play_columns_with(
     };
     let (mi, fv, fc) = device.unwrap_or_else(|| play_device_coefficients(ctx, end, b));
     let dev = play_device_on(ctx, end, b, (mi, fv, fc));
-    let free_force = |i: usize| -(mi * r.a[i] + fv * r.v[i] + fc * ctx.sgn[i]);
+    let va = ctx.v_with_a();
+    let free_force = |i: usize| -(mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i]);
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
         None => Some(i),
