@@ -1120,9 +1120,6 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         set_cols(set, cache).len() + set.iter().filter(|e| e.kind.scanned()).count()
     };
     // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
-    // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
-    // margin, on the screening rows without the lag's `rows`.
-    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
     // with `companions` beside them (their own coefficients) by the margin, on the screening
     // rows without `rows`.
     let carries_beyond =
@@ -1142,6 +1139,9 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             let with = nw.1.rss(&nw.0.solve());
             1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
         };
+    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
+    // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
+    // margin, on the screening rows without the lag's `rows`.
     let carries_beyond_switch =
         |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
             let k = tau / ctx.dt;
@@ -2845,11 +2845,11 @@ mod actuator_lag_tests {
 mod stribeck_band_tests {
     use super::*;
 
-    /// Point-to-point moves in closed form: a fast move of ±40 mm over 0.4 s (triangular
-    /// speed, peak 0.2 m/s), a 0.5 s dwell, a slow move of ±0.1 mm over 1.0 s (peak 0.2 mm/s:
-    /// inside the Coulomb sign's linear band, ±0.2 % of the peak speed = ±0.4 mm/s), a 0.5 s
-    /// dwell, and back; position quantised to 0.1 µm, exact v and a. The force while it slides
-    /// is M·a + Fv·v + Fc·sign(v) + offset plus a Stribeck bump
+    /// Point-to-point moves in closed form: eight moves of 0.76–92 mm over 0.55–1.0 s
+    /// (triangular speed, peaks 1.65 mm/s … 0.30 m/s), each followed by a 0.6 s dwell; the two
+    /// slow ones (peaks 1.65 and 6.0 mm/s) slide partly inside the Coulomb sign's linear band
+    /// (±0.2 % of the peak speed, ±0.59 mm/s); position quantised to 0.4 µm, exact v and a.
+    /// The force while it slides is M·a + Fv·v + Fc·sign(v) + offset plus a Stribeck bump
     /// `bump`·exp(−(v/v_s)²)·sign(v); at rest a static friction of 0.6·Fc in the direction of
     /// the last move; white noise 0.3 N.
     fn moves(bump: f64, vs: f64) -> Record {
@@ -2914,10 +2914,11 @@ mod stribeck_band_tests {
     /// A Stribeck bump of 20 N over v_s = 5 mm/s on moves of which two slide inside the
     /// Coulomb sign's linear band is named (first): against the baseline with the exact sign
     /// it carries the margin. The same moves without the bump are named nothing. Break: the
-    /// rule refusing every Stribeck (the margin asked of it doubled to 1) names nothing on the
-    /// first record. (The rule's own case, an effect-free record whose band deficit a Stribeck
-    /// takes, is the rig's point-to-point record 33: `diagnose_rig`,
-    /// `coulomb_band_is_not_stribeck`; this closed form does not draw it without the rule.)
+    /// rule refusing every Stribeck (`if true || !carries_beyond(..)`) fails on the first
+    /// record (measured: `presliding_hysteresis` named instead). The rule's own case, an
+    /// effect-free record whose band deficit a Stribeck takes, is the rig's point-to-point
+    /// record 33 (`diagnose_rig`'s `coulomb_band_is_not_stribeck`, which fails without the
+    /// rule); this closed form does not draw a `stribeck` without the rule.
     #[test]
     fn stribeck_beside_the_sign_band_is_named() {
         let d = diagnose(&moves(20.0, 5e-3), &Options::default());
