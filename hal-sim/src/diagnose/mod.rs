@@ -2521,6 +2521,20 @@ mod tests {
         }
     }
 
+    /// A unit move over `tm` at constant acceleration then deceleration (a triangular
+    /// speed): its position, velocity and acceleration at the move's fraction `s` ∈ [0, 1]
+    /// of `tm` (at rest at the end for s ≥ 1).
+    pub(super) fn triangular_speed(s: f64, tm: f64) -> (f64, f64, f64) {
+        if s >= 1.0 {
+            (1.0, 0.0, 0.0)
+        } else if s < 0.5 {
+            (2.0 * s * s, 4.0 * s / tm, 4.0 / (tm * tm))
+        } else {
+            let r = 1.0 - s;
+            (1.0 - 2.0 * r * r, 4.0 * r / tm, -4.0 / (tm * tm))
+        }
+    }
+
     /// Force noise of unit variance for the test records (xorshift64*, the sum of 12
     /// uniforms − 6), seeded: shares nothing with the diagnosis.
     pub(super) fn unit_noise(mut seed: u64) -> impl FnMut() -> f64 {
@@ -2695,14 +2709,7 @@ mod tests {
             let dir = if k as i64 % 2 == 0 { 1.0 } else { -1.0 };
             let x0 = if k as i64 % 2 == 0 { 0.0 } else { amp };
             let s = ((t - k * (tm + td)) / tm).min(1.0);
-            let (p, dp, ddp) = if s >= 1.0 {
-                (1.0, 0.0, 0.0)
-            } else if s < 0.5 {
-                (2.0 * s * s, 4.0 * s / tm, 4.0 / (tm * tm))
-            } else {
-                let r = 1.0 - s;
-                (1.0 - 2.0 * r * r, 4.0 * r / tm, -4.0 / (tm * tm))
-            };
+            let (p, dp, ddp) = triangular_speed(s, tm);
             let moving = s < 1.0 && s > 0.0;
             (
                 x0 + dir * amp * p,
@@ -2874,14 +2881,7 @@ mod stribeck_band_tests {
                 let amp: f64 = amp;
                 if tc < tm + td {
                     let s = (tc / tm).min(1.0);
-                    let (p, dp, ddp) = if s >= 1.0 {
-                        (1.0, 0.0, 0.0)
-                    } else if s < 0.5 {
-                        (2.0 * s * s, 4.0 * s / tm, 4.0 / (tm * tm))
-                    } else {
-                        let r = 1.0 - s;
-                        (1.0 - 2.0 * r * r, 4.0 * r / tm, -4.0 / (tm * tm))
-                    };
+                    let (p, dp, ddp) = super::tests::triangular_speed(s, tm);
                     let moving = s > 0.0 && s < 1.0;
                     return (x0 + amp * p, amp * dp, amp * ddp, amp.signum(), moving);
                 }
