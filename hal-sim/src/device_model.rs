@@ -457,6 +457,13 @@ impl ModelState {
 
     /// Device force at the next sample (position x, velocity v, acceleration a).
     pub fn step(&mut self, x: f64, v: f64, a: f64) -> f64 {
+        self.step_kin(x, v, v, a)
+    }
+
+    /// [`ModelState::step`] with the velocity `v_kin` the play's device walks with `a` (the
+    /// velocity through the acceleration's band, where `v` came through a wider one:
+    /// `Motion::Recorded`'s `v_kin_m_s`, the diagnosis's `Context::v_with_a`).
+    pub fn step_kin(&mut self, x: f64, v: f64, v_kin: f64, a: f64) -> f64 {
         let m = &self.m;
         let sg = (v / m.sign_band_m_s).clamp(-1.0, 1.0);
         let mut viscous = m.viscous_friction_Ns_per_m * v;
@@ -559,7 +566,7 @@ impl ModelState {
                     let Some(walk) = self.play[i].as_mut() else {
                         continue;
                     };
-                    let (free, impact) = walk.step(x, v, a, sg);
+                    let (free, impact) = walk.step(x, v_kin, a, sg);
                     if free {
                         f += gain * (m.force_offset_N - f);
                     }

@@ -136,6 +136,12 @@ pub enum Motion {
         v_m_s: Vec<f64>,
         #[serde(default, skip_serializing_if = "Vec::is_empty")]
         a_m_s2: Vec<f64>,
+        /// The velocity through the acceleration's band, where `v_m_s` came through a wider
+        /// one (a record read by the diagnosis's reader): the pair with `a_m_s2` that a model
+        /// integrating a motion from v and a together walks (the play's device,
+        /// [`Motion::v_kin_at`]); empty: `v_m_s`.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        v_kin_m_s: Vec<f64>,
     },
     /// The motion of a record in the `diagnose` schema (CSV `t_s, x_m, f_N`, docs/diagnose.md),
     /// replayed: read when the scenario is built, velocity and acceleration derived by the
@@ -167,6 +173,29 @@ impl Motion {
         }
     }
 
+    /// The velocity through the acceleration's band at time t (`Motion::Recorded`'s
+    /// `v_kin_m_s`, linearly interpolated), when the motion carries one; else `v`.
+    pub fn v_kin_at(&self, t: f64, v: f64) -> f64 {
+        match self {
+            Motion::Recorded { t_s, v_kin_m_s, .. }
+                if v_kin_m_s.len() >= 2 && v_kin_m_s.len() == t_s.len() =>
+            {
+                let n = t_s.len();
+                if t > t_s[n - 1] {
+                    return 0.0;
+                }
+                let k = match t_s.binary_search_by(|p| p.total_cmp(&t)) {
+                    Ok(k) => k.min(n - 2),
+                    Err(k) => k.saturating_sub(1).min(n - 2),
+                };
+                let dt = t_s[k + 1] - t_s[k];
+                let tt = (t - t_s[k]).clamp(0.0, dt);
+                v_kin_m_s[k] + (v_kin_m_s[k + 1] - v_kin_m_s[k]) * tt / dt
+            }
+            _ => v,
+        }
+    }
+
     /// (x, ẋ, ẍ) at time t.
     pub fn at(&self, t: f64) -> (f64, f64, f64) {
         match self {
@@ -195,6 +224,7 @@ impl Motion {
                 x_m,
                 v_m_s,
                 a_m_s2,
+                ..
             } => {
                 let n = t_s.len().min(x_m.len());
                 if n < 2 {

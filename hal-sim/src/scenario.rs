@@ -524,9 +524,14 @@ impl Scenario {
                         x_m,
                         v_m_s,
                         a_m_s2,
+                        v_kin_m_s,
                     } => {
                         series("drive.motion", t_s, "x_m", x_m, 10.0)?;
-                        for (key, c, bound) in [("v_m_s", v_m_s, 20.0), ("a_m_s2", a_m_s2, 1e4)] {
+                        for (key, c, bound) in [
+                            ("v_m_s", v_m_s, 20.0),
+                            ("a_m_s2", a_m_s2, 1e4),
+                            ("v_kin_m_s", v_kin_m_s, 20.0),
+                        ] {
                             if !c.is_empty() {
                                 series("drive.motion", t_s, key, c, bound)?;
                             }
@@ -691,23 +696,24 @@ impl Scenario {
             if let Motion::Record { path, cutoff_hz } = motion {
                 let r = crate::diagnose::read_csv(std::path::Path::new(path.as_str()), *cutoff_hz)
                     .map_err(|e| format!("drive.motion.path: {e}"))?;
-                // the imposed motion's kinematics one consistent pair: v through the
-                // acceleration's band (the reader's v may come through a wider one)
-                let meta = &r.meta;
-                let v = match (
-                    meta.get(crate::diagnose::record::DERIVATIVE_CUTOFF_KEY),
-                    meta.get(crate::diagnose::record::VELOCITY_CUTOFF_KEY),
+                // the velocity through the acceleration's band too, where the reader's came
+                // through a wider one (`record::derive_from_x`): the kinematic pair the play's
+                // device walks, as the diagnosis's (`Context::v_with_a`)
+                let v_kin_m_s = match (
+                    r.meta.get(crate::diagnose::record::DERIVATIVE_CUTOFF_KEY),
+                    r.meta.get(crate::diagnose::record::VELOCITY_CUTOFF_KEY),
                 ) {
-                    (Some(&fc), Some(&fv)) if fv > fc => {
+                    (Some(&fc), Some(&fv)) if fv > fc && r.len() >= 3 => {
                         crate::diagnose::record::derive_from_x(&r.x, fc, Some(fc), r.dt()).0
                     }
-                    _ => r.v,
+                    _ => Vec::new(),
                 };
                 *motion = Motion::Recorded {
                     t_s: r.t,
                     x_m: r.x,
-                    v_m_s: v,
+                    v_m_s: r.v,
                     a_m_s2: r.a,
+                    v_kin_m_s,
                 };
             }
         }

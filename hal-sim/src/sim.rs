@@ -1108,7 +1108,10 @@ impl Sim {
                 let vm = vm_est;
                 let (inner, fd) = match self.model.as_deref_mut() {
                     None => (f_e + jr * am_imposed + br * vm, fd),
-                    Some(m) => (f_e, m.step(xm, vm, am_imposed)),
+                    Some(m) => (
+                        f_e,
+                        m.step_kin(xm, vm, motion.v_kin_at(t0 + ts / 2.0, vm), am_imposed),
+                    ),
                 };
                 let out = ((inner + fd) * vm < 0.0) as usize;
                 let h = if out == 0 { p.h_in } else { p.h_out };
