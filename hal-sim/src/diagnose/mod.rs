@@ -1138,6 +1138,14 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
     // with `companions` beside them (their own coefficients) by the margin, on the screening
     // rows without `rows`.
+    // (the comparison itself, on normal equations `nw` whose first `nb` columns are the set's
+    // with its companions)
+    let carries_over = |nw: &(Normal, Normal), nb: usize| -> bool {
+        let idx: Vec<usize> = (0..nb).collect();
+        let (st, sh) = (nw.0.select(&idx), nw.1.select(&idx));
+        let with = nw.1.rss(&nw.0.solve());
+        1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
+    };
     let carries_beyond =
         |base_refs: &[&[f64]], companions: &[&[f64]], zr: &[&[f64]], rows: &[usize]| -> bool {
             let all: Vec<&[f64]> = base_refs
@@ -1150,10 +1158,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             if !rows.is_empty() {
                 nw = change_rows(&nw, &all, &sub_f, &sub_hold, rows, -1.0);
             }
-            let idx: Vec<usize> = (0..base_refs.len() + companions.len()).collect();
-            let (st, sh) = (nw.0.select(&idx), nw.1.select(&idx));
-            let with = nw.1.rss(&nw.0.solve());
-            1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
+            carries_over(&nw, base_refs.len() + companions.len())
         };
     // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
     // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
@@ -1201,6 +1206,18 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let base_refs: Vec<&[f64]> = base_cols.iter().map(|v| v.as_slice()).collect();
         let base_ids = set_ids(set, cache);
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
+        // the set's columns with the exact sign in the Coulomb column (the third), their
+        // identities and normal equations, once per set (the Stribeck band rule below extends
+        // them by each candidate's columns, the candidate's products with the other columns
+        // kept in its Gram cache)
+        let es_base = exact_sign.as_ref().map(|es| {
+            let mut b = base_refs.clone();
+            b[2] = es.as_slice();
+            let mut ids = base_ids.clone();
+            ids[2] = (u64::MAX - 1, 2);
+            let nw = normals(&b, &sub_f, &sub_hold, 1);
+            (b, ids, nw)
+        });
         let tau_s = lag_of(set);
         let rows_s = tau_s.map(lag_rest_sub).unwrap_or_default();
         let base_fit = if rows_s.is_empty() {
@@ -1319,10 +1336,13 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 // a friction above the baseline's column at the lowest speeds) is a bump too;
                 // the Stribeck must carry the margin against the baseline with the exact sign
                 // (its Coulomb column, the third, replaced)
-                if let (EffectKind::Stribeck, Some(es)) = (eff.kind, &exact_sign) {
-                    let mut b = base_refs.clone();
-                    b[2] = es.as_slice();
-                    if !carries_beyond(&b, &[], &zr, &rows_s) {
+                if let (EffectKind::Stribeck, Some((b, ids, nw))) = (eff.kind, &es_base) {
+                    let mut nw = extend_normals_cached(nw, b, ids, &zr, &sub_f, &sub_w, gc);
+                    if !rows_s.is_empty() {
+                        let all: Vec<&[f64]> = b.iter().chain(&zr).copied().collect();
+                        nw = change_rows(&nw, &all, &sub_f, &sub_hold, &rows_s, -1.0);
+                    }
+                    if !carries_over(&nw, b.len()) {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
                 }
