@@ -2728,6 +2728,38 @@ mod tests {
         assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
     }
 
+    /// The record of moves `motion(t)` = (x, v, a, direction of the last move, moving) sampled
+    /// at `fs` for `n` samples, position quantised to 1 µm, exact v and a; the force the
+    /// device's at t − τ: M·a + Fv·v + Fc·sign(v) while it slides, while it rests a static
+    /// friction of 0.6·Fc in the direction of its last move; white noise 0.3 N.
+    fn delayed_device_on(
+        motion: impl Fn(f64) -> (f64, f64, f64, f64, bool),
+        (fs, n): (f64, usize),
+        m: f64,
+        fv: f64,
+        fc: f64,
+        tau: f64,
+    ) -> Record {
+        let mut noise = unit_noise(0x2545_F491_4F6C_DD1D);
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 / fs;
+            let (x, v, a, _, _) = motion(t);
+            let (_, vd, ad, dir, moving) = motion(t - tau);
+            let dev = if moving {
+                m * ad + fv * vd + fc * vd.signum()
+            } else {
+                0.6 * fc * dir
+            };
+            rec.t.push(t);
+            rec.x.push((x * 1e6).round() * 1e-6);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f.push(dev + 0.3 * noise());
+        }
+        rec
+    }
+
     /// A point-to-point record in closed form: moves of ±`amp` over 0.5 s at constant
     /// acceleration then deceleration (a triangular speed, which passes through the Coulomb
     /// sign's ±0.2 % band within a sample), each followed by a 0.6 s dwell, position quantised
@@ -2754,24 +2786,7 @@ mod tests {
                 moving,
             )
         };
-        let mut noise = unit_noise(0x2545_F491_4F6C_DD1D);
-        let mut rec = Record::default();
-        for i in 0..n {
-            let t = i as f64 / fs;
-            let (x, v, a, _, _) = motion(t);
-            let (_, vd, ad, dir, moving) = motion(t - tau);
-            let dev = if moving {
-                m * ad + fv * vd + fc * vd.signum()
-            } else {
-                0.6 * fc * dir
-            };
-            rec.t.push(t);
-            rec.x.push((x * 1e6).round() * 1e-6);
-            rec.v.push(v);
-            rec.a.push(a);
-            rec.f.push(dev + 0.3 * noise());
-        }
-        rec
+        delayed_device_on(motion, (fs, n), m, fv, fc, tau)
     }
 
     /// A force channel delayed by τ = 25 ms on point-to-point moves (`delayed_moves`): during
@@ -2836,24 +2851,7 @@ mod tests {
                 s > 0.0,
             )
         };
-        let mut noise = unit_noise(0x2545_F491_4F6C_DD1D);
-        let mut rec = Record::default();
-        for i in 0..n {
-            let t = i as f64 / fs;
-            let (x, v, a, _, _) = motion(t);
-            let (_, vd, ad, dir, moving) = motion(t - tau);
-            let dev = if moving {
-                m * ad + fv * vd + fc * vd.signum()
-            } else {
-                0.6 * fc * dir
-            };
-            rec.t.push(t);
-            rec.x.push((x * 1e6).round() * 1e-6);
-            rec.v.push(v);
-            rec.a.push(a);
-            rec.f.push(dev + 0.3 * noise());
-        }
-        rec
+        delayed_device_on(motion, (fs, n), m, fv, fc, tau)
     }
 
     /// The delayed device's Coulomb sign is the exact sign of v(t − τ) (`effects::delayed_sign`):
