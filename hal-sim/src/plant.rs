@@ -180,16 +180,10 @@ impl Motion {
             Motion::Recorded { t_s, v_kin_m_s, .. }
                 if v_kin_m_s.len() >= 2 && v_kin_m_s.len() == t_s.len() =>
             {
-                let n = t_s.len();
-                if t > t_s[n - 1] {
+                if t > t_s[t_s.len() - 1] {
                     return 0.0;
                 }
-                let k = match t_s.binary_search_by(|p| p.total_cmp(&t)) {
-                    Ok(k) => k.min(n - 2),
-                    Err(k) => k.saturating_sub(1).min(n - 2),
-                };
-                let dt = t_s[k + 1] - t_s[k];
-                let tt = (t - t_s[k]).clamp(0.0, dt);
+                let (k, tt, dt) = recorded_segment(t_s, t);
                 v_kin_m_s[k] + (v_kin_m_s[k + 1] - v_kin_m_s[k]) * tt / dt
             }
             _ => v,
@@ -230,13 +224,8 @@ impl Motion {
                 if n < 2 {
                     return (x_m.first().copied().unwrap_or(0.0), 0.0, 0.0);
                 }
-                let k = match t_s[..n].binary_search_by(|p| p.total_cmp(&t)) {
-                    Ok(k) => k.min(n - 2),
-                    Err(k) => k.saturating_sub(1).min(n - 2),
-                };
-                let dt = t_s[k + 1] - t_s[k];
+                let (k, tt, dt) = recorded_segment(&t_s[..n], t);
                 let v = (x_m[k + 1] - x_m[k]) / dt;
-                let tt = (t - t_s[k]).clamp(0.0, dt);
                 let after = t > t_s[n - 1];
                 let lerp = |c: &[f64]| {
                     if after || c.len() < n {
@@ -262,6 +251,18 @@ impl Motion {
             Motion::Record { .. } => (0.0, 0.0, 0.0),
         }
     }
+}
+
+/// The segment of recorded times `t_s` (at least 2) that holds time t: its first sample k,
+/// the time into it (clamped to the segment) and its length.
+fn recorded_segment(t_s: &[f64], t: f64) -> (usize, f64, f64) {
+    let n = t_s.len();
+    let k = match t_s.binary_search_by(|p| p.total_cmp(&t)) {
+        Ok(k) => k.min(n - 2),
+        Err(k) => k.saturating_sub(1).min(n - 2),
+    };
+    let dt = t_s[k + 1] - t_s[k];
+    (k, (t - t_s[k]).clamp(0.0, dt), dt)
 }
 
 /// Base (ground) acceleration driving a structure.

@@ -699,15 +699,8 @@ impl Scenario {
                 // the velocity through the acceleration's band too, where the reader's came
                 // through a wider one (`record::derive_from_x`): the kinematic pair the play's
                 // device walks, as the diagnosis's (`Context::v_with_a`)
-                let v_kin_m_s = match (
-                    r.meta.get(crate::diagnose::record::DERIVATIVE_CUTOFF_KEY),
-                    r.meta.get(crate::diagnose::record::VELOCITY_CUTOFF_KEY),
-                ) {
-                    (Some(&fc), Some(&fv)) if fv > fc && r.len() >= 3 => {
-                        crate::diagnose::record::derive_from_x(&r.x, fc, Some(fc), r.dt()).0
-                    }
-                    _ => Vec::new(),
-                };
+                let v_kin_m_s =
+                    crate::diagnose::record::v_through_accel_band(&r).unwrap_or_default();
                 *motion = Motion::Recorded {
                     t_s: r.t,
                     x_m: r.x,

@@ -937,18 +937,8 @@ impl Context<'_> {
     /// together (the play's device walk): the record's v when it came through that band or was
     /// measured.
     pub fn v_with_a(&self) -> &[f64] {
-        self.v_with_a.get_or_init(|| {
-            let meta = &self.rec.meta;
-            match (
-                meta.get(super::record::DERIVATIVE_CUTOFF_KEY),
-                meta.get(super::record::VELOCITY_CUTOFF_KEY),
-            ) {
-                (Some(&fc), Some(&fv)) if fv > fc && self.rec.len() >= 3 => {
-                    super::record::derive_from_x(&self.rec.x, fc, Some(fc), self.dt).0
-                }
-                _ => Vec::new(),
-            }
-        });
+        self.v_with_a
+            .get_or_init(|| super::record::v_through_accel_band(self.rec).unwrap_or_default());
         let v = self.v_with_a.get().map_or(&[][..], |v| v.as_slice());
         if v.len() == self.rec.len() {
             v

@@ -414,6 +414,21 @@ pub fn velocity_cutoff(x: &[f64], vmax: f64, fc: f64, dt: f64) -> f64 {
 /// The velocity's noise σ_v allowed per Coulomb sign band (`velocity_cutoff`): one.
 pub const VELOCITY_NOISE_PER_BAND: f64 = 1.0;
 
+/// The record's velocity through the acceleration's band (`derive_from_x` at its
+/// `derivative_cutoff_hz`), where the reader's came through a wider one; None when the
+/// reader's velocity is already that one, or was measured.
+pub fn v_through_accel_band(r: &Record) -> Option<Vec<f64>> {
+    match (
+        r.meta.get(DERIVATIVE_CUTOFF_KEY),
+        r.meta.get(VELOCITY_CUTOFF_KEY),
+    ) {
+        (Some(&fc), Some(&fv)) if fv > fc && r.len() >= 3 => {
+            Some(derive_from_x(&r.x, fc, Some(fc), r.dt()).0)
+        }
+        _ => None,
+    }
+}
+
 /// Forward-backward (zero-phase) 2nd-order Butterworth low-pass, bilinear transform with
 /// prewarping; the state starts at the first (resp. last) sample so there is no start-up step.
 pub fn filtfilt(x: &[f64], fc: f64, fs: f64) -> Vec<f64> {
