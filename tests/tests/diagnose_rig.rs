@@ -1034,3 +1034,19 @@ fn coulomb_band_is_not_stribeck() {
     let d = diagnose(&rec, &Options::default());
     assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
 }
+
+/// An effect-free point-to-point record (none 38, 0.4 µm encoder, the velocity through its own
+/// band at 250 Hz, 6,535 of its 12,000 samples at rest) is named nothing: a Dahl state of a
+/// few µm has reached the direction of sliding within a few samples of each move's start, so
+/// where the motion slides inside the Coulomb sign's linear band its column z − sgn v is the
+/// force the band leaves out, sign v − v/v_eps; it must carry the margin against the baseline
+/// with the exact sign, as a Stribeck bump must (docs/diagnose.md, "One cause, one name").
+/// Break: without the rule for `presliding_hysteresis` it is named so (x_c 2.63 µm, 33.4 N,
+/// 49.9 % of the held-out rss, held on 4/5 segments).
+#[test]
+fn coulomb_band_is_not_presliding() {
+    let spec = long_run_spec(38, &emps_x());
+    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let d = diagnose(&rec, &Options::default());
+    assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
+}
