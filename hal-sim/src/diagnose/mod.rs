@@ -1325,8 +1325,15 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 // whose derived signals' noise biases it low) can leave part of that switch,
                 // a transition after each reversal that a Dahl state also draws; the
                 // presliding must carry the margin on top of the delayed switch given an
-                // amplitude of its own (`effects::delayed_switch`), on the lag's rows
-                if let (EffectKind::PreslidingHysteresis, Some(tau)) = (eff.kind, tau_s) {
+                // amplitude of its own (`effects::delayed_switch`), on the lag's rows.
+                // Likewise a resonance beside a lag: the mode's column (H − 1)·a, a
+                // frequency-dependent inertia, draws what the one gain leaves of the delayed
+                // inertial and viscous parts, M·(a(t − τ) − a(t)) and Fv·(v(t − τ) − v(t)),
+                // so it must carry the margin on top of the three parts given amplitudes of
+                // their own
+                if let (EffectKind::PreslidingHysteresis | EffectKind::Compliance, Some(tau)) =
+                    (eff.kind, tau_s)
+                {
                     if !carries_beyond_switch(&base_refs, &zr, tau, &rows_s) {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
