@@ -2768,9 +2768,12 @@ mod tests {
             ratio.push(nz.accel_var_through(col) / measured);
         }
         println!("predicted / measured at 3, 8, 15 Hz: {ratio:?}");
-        // measured: see docs/diagnose.md; asserted within 30 % (as `lag_noise_is_the_derivation_noise`)
+        // measured: 0.926, 0.936, 0.942 (the quantisation error of a motion crossing 1–4
+        // quanta per sample is not quite white, as for `lag_noise_is_the_derivation_noise`);
+        // asserted within 22 % (3× the largest deviation, 7.4 %). Break: the velocity's
+        // response in place of the acceleration's gives 3.2e-5.
         for r in &ratio {
-            assert!((r - 1.0).abs() < 0.3, "{ratio:?}");
+            assert!((r - 1.0).abs() < 0.22, "{ratio:?}");
         }
     }
 
