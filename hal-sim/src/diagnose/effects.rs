@@ -919,6 +919,13 @@ impl DerivNoise {
         }
     }
 
+    /// Variance of the acceleration's noise after the linear, time-invariant map `g` (a
+    /// filter applied to the whole acceleration, e.g. a column built from it): σ²·Σ (g h_a)²,
+    /// g applied to the acceleration's response to a unit position sample.
+    pub fn accel_var_through(&self, g: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
+        self.s2 * g(&self.h[0]).iter().map(|y| y * y).sum::<f64>()
+    }
+
     /// Covariance of two sums Σ c·s(t − m) of the derived signals ((signal, m, c) terms).
     pub fn cov_sum(&self, x: &[(usize, isize, f64)], y: &[(usize, isize, f64)]) -> f64 {
         let mut s = 0.0;
@@ -960,6 +967,23 @@ impl Context<'_> {
                 DerivNoise::new(self.x_quantum, fc, fc_v, self.dt)
             })
             .as_ref()
+    }
+
+    /// The noise variance, per row, of the `compliance` column at `f_hz` (its damping ratio
+    /// `compliance_zeta`): the derived acceleration's quantisation noise (`deriv_noise`)
+    /// through (H − 1), the column's own filter. That noise lies near the derivative filter's
+    /// cutoff, above the mode, where H − 1 ≈ −1: the column carries it almost in full, so a
+    /// column fitted with a coefficient near the inertia cancels the noise of the inertia's
+    /// column (the acceleration low-passed at the mode) whether or not there is a mode. None
+    /// when the acceleration has no derivation noise or the frequency identifies no mode.
+    pub fn compliance_noise(&self, f_hz: f64) -> Option<f64> {
+        let nz = self.deriv_noise()?;
+        let z = self.compliance_zeta(f_hz)?;
+        Some(nz.accel_var_through(|h| {
+            compliance_columns_at(h, &[(f_hz, z)], self.dt, None)
+                .pop()
+                .unwrap_or_default()
+        }))
     }
 
     /// The errors-in-variables covariance, per row, of the baseline's inertia and viscous

@@ -1304,6 +1304,17 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                         }
                     }
                 }
+                // `compliance`: a mode whose column is more than half the derived
+                // acceleration's noise on the training rows is not resolved (as a `lag` τ):
+                // its fit would low-pass the inertia's noisy column, not draw a mode
+                if eff.kind == EffectKind::Compliance {
+                    if let Some(s2) = ctx.compliance_noise(eff.param) {
+                        let z = nb * nn.0.m + nb;
+                        if nn.0.n as f64 * s2 > 0.5 * nn.0.g[z] {
+                            return (f64::INFINITY, 0.0, f64::INFINITY);
+                        }
+                    }
+                }
                 let tp = tc.as_deref().unwrap_or(&t);
                 if !effects::plausible(eff, &tp[nb..], &tp[..nb.min(4)])
                     || (eff.kind == EffectKind::CurrentLimit
@@ -2667,7 +2678,12 @@ mod tests {
     /// noise 0.3 N) delayed by `tau`, as a CSV whose position is quantised to `q` (exact when
     /// 0), read with the default derivation (v and a derived from x at fs/20).
     fn delayed_csv(tau: f64, q: f64) -> Record {
-        let r = delayed_record(40.0, 300.0, 20.0, tau);
+        quantised_csv(&delayed_record(40.0, 300.0, 20.0, tau), q)
+    }
+
+    /// The record `r`'s time and force with its position quantised to `q` (exact when 0), as
+    /// a CSV read with the default derivation (v and a derived from x at fs/20).
+    fn quantised_csv(r: &Record, q: f64) -> Record {
         let mut s = String::from("t_s,x_m,f_N\n");
         for i in 0..r.len() {
             let x = if q > 0.0 {
@@ -2738,6 +2754,39 @@ mod tests {
         // measured: lag +1.27 %, least-squares gain 0.63 (below the unit range: without the
         // correction nothing is named); asserted 5 % (as `lag_is_the_whole_force_delayed`)
         assert!((lag / tau - 1.0).abs() < 0.05, "lag {lag}");
+    }
+
+    /// The `compliance` column's noise (`Context::compliance_noise`, the derived
+    /// acceleration's quantisation noise through the column's filter H − 1) against the
+    /// noise the derivation gives: `delayed_record` (undelayed) read with its position
+    /// quantised to 6.4 µm and exact; the column built from the quantised minus the exact
+    /// derived a gives the measured variance, at modes across the grid's range.
+    #[test]
+    fn compliance_noise_is_the_derivation_noise() {
+        let (rq, r0) = (delayed_csv(0.0, 6.4e-6), delayed_csv(0.0, 0.0));
+        let ctx = effects::Context::new(&rq);
+        let nz = ctx.deriv_noise().expect("a derivation noise");
+        let ea: Vec<f64> = rq.a.iter().zip(&r0.a).map(|(a, b)| a - b).collect();
+        let mut ratio = Vec::new();
+        for (f, z) in [(3.0, 0.05), (8.0, 0.3), (15.0, 0.1)] {
+            let col = |s: &[f64]| {
+                effects::compliance_columns_at(s, &[(f, z)], ctx.dt, None)
+                    .pop()
+                    .unwrap_or_default()
+            };
+            let e = col(&ea);
+            let rows = 200..e.len() - 200;
+            let measured = e[rows.clone()].iter().map(|y| y * y).sum::<f64>() / rows.len() as f64;
+            ratio.push(nz.accel_var_through(col) / measured);
+        }
+        println!("predicted / measured at 3, 8, 15 Hz: {ratio:?}");
+        // measured: 0.926, 0.936, 0.942 (the quantisation error of a motion crossing 1–4
+        // quanta per sample is not quite white, as for `lag_noise_is_the_derivation_noise`);
+        // asserted within 22 % (3× the largest deviation, 7.4 %). Break: the velocity's
+        // response in place of the acceleration's gives 3.2e-5.
+        for r in &ratio {
+            assert!((r - 1.0).abs() < 0.22, "{ratio:?}");
+        }
     }
 
     /// The record of moves `motion(t)` = (x, v, a, direction of the last move, moving) sampled
