@@ -119,6 +119,9 @@ pub enum ModelEffect {
     /// v_m) (M·(v − v_m) without it) within one step.
     Backlash {
         width_m: f64,
+        /// The contact's restitution (0 when absent: the flank carries the device on).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        restitution: Option<f64>,
         gain: f64,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         impact_mass_kg: Option<f64>,
@@ -275,6 +278,7 @@ impl ModelEffect {
             }
             ModelEffect::Backlash {
                 width_m,
+                restitution,
                 gain,
                 impact_mass_kg,
                 device_inertia_kg,
@@ -284,6 +288,9 @@ impl ModelEffect {
                 impact_tap_s,
             } => {
                 range(&k("width_m"), width_m, 0.0, 1.0, "m")?;
+                if let Some(e) = restitution {
+                    range(&k("restitution"), e, 0.0, 0.999, "")?;
+                }
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
                 if let Some(mi) = impact_mass_kg {
                     range(&k("impact_mass_kg"), mi, 0.0, 1e7, "kg")?;
@@ -403,9 +410,9 @@ pub struct ModelState {
     /// Per effect: resonator (y, ẏ), the device behind a play, Dahl state, lag buffer.
     y: Vec<(f64, f64)>,
     play: Vec<Option<PlayWalk>>,
-    /// Per effect: the play's impact pulse in progress (time since the contact, relative
-    /// velocity; 0 when none).
-    pulse: Vec<(f64, f64)>,
+    /// Per effect: the play's impact pulses in progress (time since the contact, relative
+    /// velocity), added: a rebounding device is struck again before a pulse has ended.
+    pulse: Vec<Vec<(f64, f64)>>,
     dahl: Vec<(f64, f64)>,
     lag: Vec<(usize, VecDeque<f64>)>,
 }
@@ -425,21 +432,25 @@ impl ModelState {
                 .map(|e| match *e {
                     ModelEffect::Backlash {
                         width_m,
+                        restitution,
                         device_inertia_kg: mi,
                         device_viscous_Ns_per_m: fv,
                         device_coulomb_N: fc,
                         ..
-                    } => Some(PlayWalk::new(
-                        width_m,
-                        mi.unwrap_or(m.inertia_kg),
-                        fv.unwrap_or(m.viscous_friction_Ns_per_m),
-                        fc.unwrap_or(m.coulomb_friction_N),
-                        dt,
-                    )),
+                    } => Some(
+                        PlayWalk::new(
+                            width_m,
+                            mi.unwrap_or(m.inertia_kg),
+                            fv.unwrap_or(m.viscous_friction_Ns_per_m),
+                            fc.unwrap_or(m.coulomb_friction_N),
+                            dt,
+                        )
+                        .with_restitution(restitution.unwrap_or(0.0)),
+                    ),
                     _ => None,
                 })
                 .collect(),
-            pulse: vec![(0.0, 0.0); ne],
+            pulse: vec![Vec::new(); ne],
             dahl: vec![(0.0, x0); ne],
             lag: m
                 .effects
@@ -571,34 +582,35 @@ impl ModelState {
                         f += gain * (m.force_offset_N - f);
                     }
                     let dt = self.dt;
-                    let (t, vr) = &mut self.pulse[i];
+                    let pulses = &mut self.pulse[i];
                     if let Some((since, v_rel)) = impact {
-                        *t = since * dt;
-                        *vr = v_rel;
-                    }
-                    if *vr == 0.0 {
-                        continue;
+                        if v_rel != 0.0 {
+                            pulses.push((since * dt, v_rel));
+                        }
                     }
                     match (impact_pulse_kg, impact_tap_s) {
                         (Some(taps), Some(tap)) if tap > 0.0 => {
                             // the pulse the diagnosis fitted: tap k stands for the force
                             // k + ½ taps after the contact (held at tap 0 before it), linear
                             // between the taps' centres
-                            let u = (*t / tap - 0.5).max(0.0);
-                            let k0 = u.floor() as usize;
-                            let al = u - k0 as f64;
                             let c = |k: usize| taps.get(k).copied().unwrap_or(0.0);
-                            if k0 >= IMPACT_TAPS {
-                                *vr = 0.0;
-                            } else {
+                            pulses.retain_mut(|(t, vr)| {
+                                let u = (*t / tap - 0.5).max(0.0);
+                                let k0 = u.floor() as usize;
+                                let al = u - k0 as f64;
+                                if k0 >= IMPACT_TAPS {
+                                    return false;
+                                }
                                 f += *vr / tap * (c(k0) * (1.0 - al) + c(k0 + 1) * al);
                                 *t += dt;
-                            }
+                                true
+                            });
                         }
                         _ => {
                             // struck into the motion's velocity within this step
-                            f += impact_mass_kg.unwrap_or(gain * m.inertia_kg) * *vr / dt;
-                            *vr = 0.0;
+                            for (_, vr) in pulses.drain(..) {
+                                f += impact_mass_kg.unwrap_or(gain * m.inertia_kg) * vr / dt;
+                            }
                         }
                     }
                 }
@@ -743,6 +755,7 @@ mod tests {
         assert!((f[500] - 5.0).abs() < 1e-12 && (f[1500] + 5.0).abs() < 1e-12);
         m.effects = vec![ModelEffect::Backlash {
             width_m: 0.002,
+            restitution: None,
             gain: 1.0,
             impact_mass_kg: None,
             device_inertia_kg: None,

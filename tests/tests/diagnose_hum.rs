@@ -57,6 +57,7 @@ fn stribeck_columns(ctx: &Context) -> (Columns, (usize, usize)) {
     let e = Effect {
         kind: EffectKind::Stribeck,
         param: V_S,
+        param2: 0.0,
     };
     let base = build_columns(ctx, &[]).len();
     let cols = build_columns(ctx, std::slice::from_ref(&e));

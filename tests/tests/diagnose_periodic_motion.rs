@@ -131,6 +131,7 @@ fn ripple_locked_to_reversals_is_not_apart_from_them() {
         let e = Effect {
             kind: EffectKind::Cogging,
             param: lambda,
+            param2: 0.0,
         };
         let cols = build_columns(&ctx, std::slice::from_ref(&e));
         let wald = ripple_apart_from_reversals(&ctx, &cols, (cols.len() - 2, cols.len()), lambda);

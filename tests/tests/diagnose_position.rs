@@ -214,6 +214,7 @@ fn hide_ripple(spec: &mut SynthSpec, rng: &mut Rng, seed: u64, lambda: f64) -> (
         Effect {
             kind,
             param: lambda,
+            param2: 0.0,
         },
         vec![amp * ph.cos(), amp * ph.sin()],
     ));
@@ -320,6 +321,7 @@ fn ripple_differing_across_the_band_is_not_locked_to_position() {
         let e = Effect {
             kind: EffectKind::Cogging,
             param: lambda,
+            param2: 0.0,
         };
         let cols = build_columns(&ctx, std::slice::from_ref(&e));
         let mask = ripple_in_band(&ctx, lambda).expect("derived acceleration");

@@ -690,6 +690,7 @@ fn play_device_is_fitted_off_the_contact_transient() {
             ctx.base_th[0],
             ctx.base_th[1],
             ctx.base_th[2],
+            0.0,
         );
         let (m, fv, fc) = hal_sim::diagnose::effects::play_device_fit(&ctx, &dev)
             .unwrap_or_else(|| panic!("seed {seed}: no device fit"));
@@ -753,12 +754,17 @@ fn rig_play_width_profile() {
             spec.drive_damping + spec.viscous,
             spec.coulomb,
         );
-        let fitted = play_device_coefficients(&ctx, n, width_m);
+        // the contact's restitution walked (`RIG_E`, default 0: the plastic contact)
+        let e: f64 = std::env::var("RIG_E")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.0);
+        let fitted = play_device_coefficients(&ctx, n, width_m, e);
         // the device walked once more, from the one fitted (None: that fit fails)
         let refit = hal_sim::diagnose::effects::play_device_fit(
             &ctx,
             &hal_sim::diagnose::effects::play_device(
-                &rec.x, &rec.v, &rec.a, &ctx.sgn, ctx.dt, width_m, fitted.0, fitted.1, fitted.2,
+                &rec.x, &rec.v, &rec.a, &ctx.sgn, ctx.dt, width_m, fitted.0, fitted.1, fitted.2, e,
             ),
         );
         println!(
@@ -781,7 +787,7 @@ fn rig_play_width_profile() {
             let b = width_m * (1.0 + 0.02 * k as f64);
             let mut line = format!("  {:+3} %:", 2 * k);
             for dev in [None, Some(rig)].into_iter().chain(refit.map(Some)) {
-                let cols = play_columns_with(&ctx, None, b, dev);
+                let cols = play_columns_with(&ctx, None, b, e, dev);
                 let (rss, th) = fit(&cols);
                 line.push_str(&format!(
                     "  held-out rss {:6.2} %, gain {:+.2}, impact {:6.1} kg;",
@@ -1044,7 +1050,7 @@ fn play_device_is_fitted_from_its_own_walk() {
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
         let ctx = hal_sim::diagnose::effects::Context::new(&rec);
         let (m, fv, fc) =
-            hal_sim::diagnose::effects::play_device_coefficients(&ctx, rec.len(), width_m);
+            hal_sim::diagnose::effects::play_device_coefficients(&ctx, rec.len(), width_m, 0.0);
         assert_device_is_the_rigs(&spec, (m, fv, fc), PLAY_DEVICE_WALKED_BOUND);
     }
 }

@@ -103,6 +103,7 @@ fn velocity_strengthening_physical_range() {
     let e = Effect {
         kind: EffectKind::VelocityStrengthening,
         param: 0.01,
+        param2: 0.0,
     };
     // baseline inertia, viscous, Coulomb (low-speed level), offset
     let base = [95.0, 190.0, 10.3, -0.2];

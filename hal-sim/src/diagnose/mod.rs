@@ -1099,7 +1099,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let mut c = sub_cols.clone();
         for e in set {
             let z = cache
-                .entry((e.kind as usize, e.param.to_bits()))
+                .entry(e.key())
                 .or_insert_with(|| effects::columns_on(&ctx, &sig, e));
             c.extend(z.iter().map(|(_, v)| v.clone()));
         }
@@ -1124,10 +1124,10 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let mut ids: Vec<ColumnId> = (0..n_fixed as u64).map(|i| (u64::MAX, i)).collect();
         for e in set {
             let k = cache
-                .entry((e.kind as usize, e.param.to_bits()))
+                .entry(e.key())
                 .or_insert_with(|| effects::columns_on(&ctx, &sig, e))
                 .len();
-            ids.extend((0..k as u64).map(|j| (((e.kind as u64) << 32) | j, e.param.to_bits())));
+            ids.extend((0..k as u64).map(|j| (((e.kind as u64) << 32) | j, e.key().1)));
         }
         ids
     };
@@ -1248,13 +1248,11 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
                 let z = cache
-                    .entry((eff.kind as usize, eff.param.to_bits()))
+                    .entry(eff.key())
                     .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
                 let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
                 let mut grams = grams.borrow_mut();
-                let gc = grams
-                    .entry((eff.kind as usize, eff.param.to_bits()))
-                    .or_default();
+                let gc = grams.entry(eff.key()).or_default();
                 let mut nn =
                     extend_normals_cached(&base, &base_refs, &base_ids, &zr, &sub_f, &sub_w, gc);
                 let nb = base_refs.len();
@@ -1388,14 +1386,14 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 }
                 let missing: Vec<Effect> = effs
                     .iter()
-                    .filter(|e| !cache.contains_key(&(e.kind as usize, e.param.to_bits())))
+                    .filter(|e| !cache.contains_key(&e.key()))
                     .cloned()
                     .collect();
                 for (e, c) in missing
                     .iter()
                     .zip(effects::columns_batch(&ctx, &sig, &missing))
                 {
-                    cache.insert((e.kind as usize, e.param.to_bits()), c);
+                    cache.insert(e.key(), c);
                 }
             };
             let coarse = effects::grid(&ctx, cand);
@@ -1431,6 +1429,42 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                         if cb.is_none() || key < cb_key {
                             cb = Some((rh, db, eff));
                             cb_key = key;
+                        }
+                    }
+                }
+            }
+            if cand.kind == EffectKind::Backlash {
+                // the contact's restitution at the width found (`effects::PLAY_RESTITUTIONS`),
+                // ranked by the held-out key as the width is; the width refined once more at
+                // a restitution other than 0 (a rebounding device's contacts move with it)
+                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                    let alt: Vec<Effect> = effects::PLAY_RESTITUTIONS
+                        .iter()
+                        .filter(|&&e| e != centre.param2)
+                        .map(|&e| Effect {
+                            param2: e,
+                            ..centre.clone()
+                        })
+                        .collect();
+                    prefill(&alt, cache);
+                    for eff in alt {
+                        let (rh, db, key) = eval(&eff, cache);
+                        if key < cb_key {
+                            cb = Some((rh, db, eff));
+                            cb_key = key;
+                        }
+                    }
+                }
+                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                    if centre.param2 != 0.0 {
+                        let fine = effects::refine(&ctx, &centre, 0.03);
+                        prefill(&fine, cache);
+                        for eff in fine {
+                            let (rh, db, key) = eval(&eff, cache);
+                            if key < cb_key {
+                                cb = Some((rh, db, eff));
+                                cb_key = key;
+                            }
                         }
                     }
                 }
@@ -1572,7 +1606,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let mut spans = Vec::new();
     let mut at = n_fixed;
     for e in &chosen {
-        let k = match cache.get(&(e.kind as usize, e.param.to_bits())) {
+        let k = match cache.get(&e.key()) {
             Some(zs) => zs.len(),
             None => effects::columns_on(&ctx, &sig, e).len(),
         };
@@ -1699,6 +1733,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     let probe = Effect {
                         kind: e.kind,
                         param: p.wavelength_m,
+                        param2: 0.0,
                     };
                     effects::same_wavelength(&probe, std::slice::from_ref(e))
                 })
@@ -2021,6 +2056,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let probe = Effect {
             kind: EffectKind::Cogging,
             param: pk.wavelength_m,
+            param2: 0.0,
         };
         if let Some(k) = chosen.iter().position(|c| {
             matches!(
@@ -2207,9 +2243,7 @@ fn effect_spans(set: &[Effect], n_fixed: usize, cache: &ScreenColumns) -> Vec<(u
     let mut at = n_fixed;
     set.iter()
         .map(|e| {
-            let k = cache
-                .get(&(e.kind as usize, e.param.to_bits()))
-                .map_or(0, |z| z.len());
+            let k = cache.get(&e.key()).map_or(0, |z| z.len());
             at += k;
             (at - k, at)
         })
@@ -2265,10 +2299,12 @@ mod tests {
             Effect {
                 kind: EffectKind::CurrentLimit,
                 param: -0.08,
+                param2: 0.0,
             },
             Effect {
                 kind: EffectKind::Stribeck,
                 param: 0.004,
+                param2: 0.0,
             },
         ];
         let spans = [(4, 5), (5, 6)];

@@ -136,7 +136,7 @@ impl SynthSpec {
                 EffectKind::Lag => (rng.range(0.004, 0.02), vec![1.0]),
                 _ => unreachable!(),
             };
-            s.hidden.push((Effect { kind: k, param: e }, c));
+            s.hidden.push((Effect::new(k, e), c));
         }
         s
     }
@@ -156,6 +156,7 @@ impl SynthSpec {
             Effect {
                 kind: EffectKind::Compliance,
                 param: f_r,
+                param2: 0.0,
             },
             vec![m2, zeta],
         ));
