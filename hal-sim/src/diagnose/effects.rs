@@ -708,7 +708,8 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     if t <= 0.0 || s.len() < 2 {
         return s.first().copied().unwrap_or(0.0);
     }
-    let j = (t.floor() as usize).min(s.len() - 2);
+    // t > 0 (or NaN, 0 either way): the cast's truncation is t's floor
+    let j = (t as usize).min(s.len() - 2);
     let al = t - j as f64;
     s[j] + al * (s[j + 1] - s[j])
 }
@@ -734,7 +735,8 @@ pub fn delayed_sign(v: &[f64], i: usize, k: f64) -> f64 {
     if t <= 0.0 || v.len() < 2 {
         return v.first().copied().map_or(0.0, s);
     }
-    let j = (t.floor() as usize).min(v.len() - 2);
+    // t > 0 (or NaN, 0 either way): the cast's truncation is t's floor
+    let j = (t as usize).min(v.len() - 2);
     let al = t - j as f64;
     s(v[j]) + al * (s(v[j + 1]) - s(v[j]))
 }
@@ -759,8 +761,16 @@ impl Context<'_> {
         if t < 0.0 || !t.is_finite() {
             return true;
         }
-        let j = (t.floor() as usize).min(self.rest.len().saturating_sub(1));
-        let j1 = (t.ceil() as usize).min(self.rest.len().saturating_sub(1));
+        // t ≥ 0 and finite: the cast's truncation is t's floor, its ceiling one more unless t
+        // is whole (the casts cost less than the `floor` and `ceil` calls, the same indices)
+        let f = t as usize;
+        let c = if (f as f64) < t {
+            f.saturating_add(1)
+        } else {
+            f
+        };
+        let last = self.rest.len().saturating_sub(1);
+        let (j, j1) = (f.min(last), c.min(last));
         self.rest[j] || self.rest[j1]
     }
 
@@ -1032,22 +1042,32 @@ impl Context<'_> {
             // the joint fit of the baseline columns and the mode's column (what the selection
             // fits), per damping ratio
             let ff: f64 = f.iter().map(|v| v * v).sum();
+            let dot = |x: &[f64], y: &[f64]| -> f64 { x.iter().zip(y).map(|(x, y)| x * y).sum() };
+            // the baseline columns' products (the same for every damping ratio: once), then
+            // per damping ratio the mode column's row and column of the normal equations
+            let nb = base.len();
+            let m = nb + 1;
+            let mut g0 = vec![0.0; m * m];
+            let mut bb0 = vec![0.0; m];
+            for p in 0..nb {
+                for q in p..nb {
+                    let d = dot(&base[p], &base[q]);
+                    g0[p * m + q] = d;
+                    g0[q * m + p] = d;
+                }
+                bb0[p] = dot(&base[p], f);
+            }
             let rss: Vec<f64> = cols
                 .iter()
                 .map(|c| {
-                    let mut all: Vec<&[f64]> = base.iter().map(|v| v.as_slice()).collect();
-                    all.push(c.as_slice());
-                    let m = all.len();
-                    let mut g = vec![0.0; m * m];
-                    let mut bb = vec![0.0; m];
-                    for p in 0..m {
-                        for q in p..m {
-                            let d: f64 = all[p].iter().zip(all[q]).map(|(x, y)| x * y).sum();
-                            g[p * m + q] = d;
-                            g[q * m + p] = d;
-                        }
-                        bb[p] = all[p].iter().zip(f).map(|(x, y)| x * y).sum();
+                    let (mut g, mut bb) = (g0.clone(), bb0.clone());
+                    for p in 0..nb {
+                        let d = dot(&base[p], c);
+                        g[p * m + nb] = d;
+                        g[nb * m + p] = d;
                     }
+                    g[nb * m + nb] = dot(c, c);
+                    bb[nb] = dot(c, f);
                     let th = super::solve_sym(&g, &bb, m).th;
                     let mut r = ff;
                     for p in 0..m {
@@ -1808,7 +1828,7 @@ pub fn play_columns_with(
             // the sample lies (jj + delta) periods after the contact; tap k stands for the
             // pulse k + ½ periods after it
             let t = (jj as f64 + delta - 0.5).max(0.0);
-            let k0 = t.floor() as usize;
+            let k0 = t as usize; // t ≥ 0: its floor
             let al = t - k0 as f64;
             if k0 < IMPACT_TAPS {
                 cols[1 + k0].1[q] += vr * fs * (1.0 - al);
