@@ -634,24 +634,24 @@ pub fn resonator_batch(
     let u0 = u.first().copied().unwrap_or(0.0);
     let cap = rows.map_or(u.len(), |r| r.len());
     let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
-    // four filters per pass, their states held in registers (a pass per filter would walk
-    // the record m times; all m at once keeps their states in memory)
+    // four filters per pass, two per lane pair, their states held in registers (a pass per
+    // filter would walk the record m times; all m at once keeps their states in memory)
     let mut out = Vec::with_capacity(m);
     for c in ca.chunks(4) {
         match c.len() {
-            4 => resonator_walk::<4>(u, c, u0, rows, last, cap, &mut out),
-            3 => resonator_walk::<3>(u, c, u0, rows, last, cap, &mut out),
-            2 => resonator_walk::<2>(u, c, u0, rows, last, cap, &mut out),
+            3 | 4 => resonator_walk::<2>(u, c, u0, rows, last, cap, &mut out),
             _ => resonator_walk::<1>(u, c, u0, rows, last, cap, &mut out),
         }
     }
     out
 }
 
-/// `resonator_batch`'s pass for `K` filters of coefficients `ca` (each started at rest on
-/// `u0`), their outputs at `rows` appended to `out`.
+/// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
+/// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
+/// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
+/// last pair runs the last filter twice), their outputs at `rows` appended to `out`.
 #[inline(always)]
-fn resonator_walk<const K: usize>(
+fn resonator_walk<const P: usize>(
     u: &[f64],
     ca: &[[f64; 3]],
     u0: f64,
@@ -660,30 +660,44 @@ fn resonator_walk<const K: usize>(
     cap: usize,
     out: &mut Vec<(Vec<f64>, Vec<f64>)>,
 ) {
-    let ca: [[f64; 3]; K] = std::array::from_fn(|k| ca[k]);
-    let mut st = [[0.0, u0]; K]; // ic1, ic2
-    let mut o: [(Vec<f64>, Vec<f64>); K] =
-        std::array::from_fn(|_| (Vec::with_capacity(cap), Vec::with_capacity(cap)));
+    let nf = ca.len().min(2 * P);
+    if nf == 0 {
+        return;
+    }
+    let coef =
+        |p: usize, c: usize| F64x2::new(ca[(2 * p).min(nf - 1)][c], ca[(2 * p + 1).min(nf - 1)][c]);
+    let a1: [F64x2; P] = std::array::from_fn(|p| coef(p, 0));
+    let a2: [F64x2; P] = std::array::from_fn(|p| coef(p, 1));
+    let a3: [F64x2; P] = std::array::from_fn(|p| coef(p, 2));
+    let two = F64x2::splat(2.0);
+    let mut ic1 = [F64x2::splat(0.0); P];
+    let mut ic2 = [F64x2::splat(u0); P];
+    let mut o: Vec<(Vec<f64>, Vec<f64>)> = (0..nf)
+        .map(|_| (Vec::with_capacity(cap), Vec::with_capacity(cap)))
+        .collect();
     let mut next = 0usize;
     for (i, &xin) in u[..last].iter().enumerate() {
-        let mut tmp = [[0.0f64; 2]; K];
-        for k in 0..K {
-            let [ic1, ic2] = st[k];
-            let [a1, a2, a3] = ca[k];
-            let v3 = xin - ic2;
-            let v1 = a1 * ic1 + a2 * v3;
-            let v2 = ic2 + a2 * ic1 + a3 * v3;
-            st[k] = [2.0 * v1 - ic1, 2.0 * v2 - ic2];
-            tmp[k] = [v2, v1];
+        let x = F64x2::splat(xin);
+        let mut lp = [F64x2::splat(0.0); P];
+        let mut bp = [F64x2::splat(0.0); P];
+        for p in 0..P {
+            let v3 = x - ic2[p];
+            let v1 = a1[p] * ic1[p] + a2[p] * v3;
+            let v2 = ic2[p] + a2[p] * ic1[p] + a3[p] * v3;
+            ic1[p] = two * v1 - ic1[p];
+            ic2[p] = two * v2 - ic2[p];
+            lp[p] = v2;
+            bp[p] = v1;
         }
         let keep = match rows {
             None => true,
             Some(r) => r[next] == i,
         };
         if keep {
-            for k in 0..K {
-                o[k].0.push(tmp[k][0]);
-                o[k].1.push(tmp[k][1]);
+            for (k, ok) in o.iter_mut().enumerate() {
+                let (l, b) = (lp[k / 2].lanes(), bp[k / 2].lanes());
+                ok.0.push(l[k % 2]);
+                ok.1.push(b[k % 2]);
             }
             if let Some(r) = rows {
                 next += 1;
@@ -695,6 +709,92 @@ fn resonator_walk<const K: usize>(
     }
     out.extend(o);
 }
+
+/// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
+/// time): SSE2's packed doubles on x86-64 (each lane rounded as the scalar operation, IEEE 754
+/// round-to-nearest, no fused multiply-add), two plain f64 elsewhere. Each lane's result is
+/// the scalar operation's bit for bit (`tests::lane_pairs_are_scalar_arithmetic`).
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+#[derive(Clone, Copy)]
+struct F64x2(std::arch::x86_64::__m128d);
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+impl F64x2 {
+    #[inline(always)]
+    fn new(lo: f64, hi: f64) -> Self {
+        // SAFETY: SSE2 is enabled (the cfg above); no memory is accessed
+        F64x2(unsafe { std::arch::x86_64::_mm_set_pd(hi, lo) })
+    }
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        // SAFETY: as in `new`
+        F64x2(unsafe { std::arch::x86_64::_mm_set1_pd(v) })
+    }
+    /// The two lanes (low, high).
+    #[inline(always)]
+    fn lanes(self) -> [f64; 2] {
+        use std::arch::x86_64::{_mm_cvtsd_f64, _mm_unpackhi_pd};
+        // SAFETY: as in `new`
+        unsafe {
+            [
+                _mm_cvtsd_f64(self.0),
+                _mm_cvtsd_f64(_mm_unpackhi_pd(self.0, self.0)),
+            ]
+        }
+    }
+}
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+macro_rules! f64x2_op {
+    ($tr:ident, $f:ident, $intr:ident) => {
+        impl std::ops::$tr for F64x2 {
+            type Output = F64x2;
+            #[inline(always)]
+            fn $f(self, o: F64x2) -> F64x2 {
+                // SAFETY: as in `F64x2::new`
+                F64x2(unsafe { std::arch::x86_64::$intr(self.0, o.0) })
+            }
+        }
+    };
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+#[derive(Clone, Copy)]
+struct F64x2([f64; 2]);
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+impl F64x2 {
+    #[inline(always)]
+    fn new(lo: f64, hi: f64) -> Self {
+        F64x2([lo, hi])
+    }
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        F64x2([v, v])
+    }
+    #[inline(always)]
+    fn lanes(self) -> [f64; 2] {
+        self.0
+    }
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+macro_rules! f64x2_op {
+    ($tr:ident, $f:ident, $intr:ident) => {
+        impl std::ops::$tr for F64x2 {
+            type Output = F64x2;
+            #[inline(always)]
+            fn $f(self, o: F64x2) -> F64x2 {
+                let (a, b) = (self.0, o.0);
+                F64x2([std::ops::$tr::$f(a[0], b[0]), std::ops::$tr::$f(a[1], b[1])])
+            }
+        }
+    };
+}
+
+f64x2_op!(Add, add, _mm_add_pd);
+f64x2_op!(Sub, sub, _mm_sub_pd);
+f64x2_op!(Mul, mul, _mm_mul_pd);
 
 /// The force a modal mass of 1 kg hung on the device through a spring-damper (resonance
 /// `f_hz`, damping ratio `zeta`) adds beyond its rigid-body inertia (which the baseline carries):
@@ -731,7 +831,8 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     if t <= 0.0 || s.len() < 2 {
         return s.first().copied().unwrap_or(0.0);
     }
-    let j = (t.floor() as usize).min(s.len() - 2);
+    // t > 0 (or NaN, 0 either way): the cast's truncation is t's floor
+    let j = (t as usize).min(s.len() - 2);
     let al = t - j as f64;
     s[j] + al * (s[j + 1] - s[j])
 }
@@ -757,7 +858,8 @@ pub fn delayed_sign(v: &[f64], i: usize, k: f64) -> f64 {
     if t <= 0.0 || v.len() < 2 {
         return v.first().copied().map_or(0.0, s);
     }
-    let j = (t.floor() as usize).min(v.len() - 2);
+    // t > 0 (or NaN, 0 either way): the cast's truncation is t's floor
+    let j = (t as usize).min(v.len() - 2);
     let al = t - j as f64;
     s(v[j]) + al * (s(v[j + 1]) - s(v[j]))
 }
@@ -782,8 +884,16 @@ impl Context<'_> {
         if t < 0.0 || !t.is_finite() {
             return true;
         }
-        let j = (t.floor() as usize).min(self.rest.len().saturating_sub(1));
-        let j1 = (t.ceil() as usize).min(self.rest.len().saturating_sub(1));
+        // t ≥ 0 and finite: the cast's truncation is t's floor, its ceiling one more unless t
+        // is whole (the casts cost less than the `floor` and `ceil` calls, the same indices)
+        let f = t as usize;
+        let c = if (f as f64) < t {
+            f.saturating_add(1)
+        } else {
+            f
+        };
+        let last = self.rest.len().saturating_sub(1);
+        let (j, j1) = (f.min(last), c.min(last));
         self.rest[j] || self.rest[j1]
     }
 
@@ -1079,22 +1189,32 @@ impl Context<'_> {
             // the joint fit of the baseline columns and the mode's column (what the selection
             // fits), per damping ratio
             let ff: f64 = f.iter().map(|v| v * v).sum();
+            let dot = |x: &[f64], y: &[f64]| -> f64 { x.iter().zip(y).map(|(x, y)| x * y).sum() };
+            // the baseline columns' products (the same for every damping ratio: once), then
+            // per damping ratio the mode column's row and column of the normal equations
+            let nb = base.len();
+            let m = nb + 1;
+            let mut g0 = vec![0.0; m * m];
+            let mut bb0 = vec![0.0; m];
+            for p in 0..nb {
+                for q in p..nb {
+                    let d = dot(&base[p], &base[q]);
+                    g0[p * m + q] = d;
+                    g0[q * m + p] = d;
+                }
+                bb0[p] = dot(&base[p], f);
+            }
             let rss: Vec<f64> = cols
                 .iter()
                 .map(|c| {
-                    let mut all: Vec<&[f64]> = base.iter().map(|v| v.as_slice()).collect();
-                    all.push(c.as_slice());
-                    let m = all.len();
-                    let mut g = vec![0.0; m * m];
-                    let mut bb = vec![0.0; m];
-                    for p in 0..m {
-                        for q in p..m {
-                            let d: f64 = all[p].iter().zip(all[q]).map(|(x, y)| x * y).sum();
-                            g[p * m + q] = d;
-                            g[q * m + p] = d;
-                        }
-                        bb[p] = all[p].iter().zip(f).map(|(x, y)| x * y).sum();
+                    let (mut g, mut bb) = (g0.clone(), bb0.clone());
+                    for p in 0..nb {
+                        let d = dot(&base[p], c);
+                        g[p * m + nb] = d;
+                        g[nb * m + p] = d;
                     }
+                    g[nb * m + nb] = dot(c, c);
+                    bb[nb] = dot(c, f);
                     let th = super::solve_sym(&g, &bb, m).th;
                     let mut r = ff;
                     for p in 0..m {
@@ -1910,7 +2030,7 @@ pub fn play_columns_with(
             // the sample lies (jj + delta) periods after the contact; tap k stands for the
             // pulse k + ½ periods after it
             let t = (jj as f64 + delta - 0.5).max(0.0);
-            let k0 = t.floor() as usize;
+            let k0 = t as usize; // t ≥ 0: its floor
             let al = t - k0 as f64;
             if k0 < IMPACT_TAPS {
                 cols[1 + k0].1[q] += vr * fs * (1.0 - al);
@@ -2962,6 +3082,74 @@ mod tests {
             for (k, &m) in modes.iter().enumerate() {
                 let one = resonator_batch(&u, &[m], 1e-3, r).pop();
                 assert_eq!(Some(&b[k]), one.as_ref(), "mode {m:?}");
+            }
+        }
+    }
+
+    /// `resonator_batch` (its filters two to a lane pair, `F64x2`) gives each filter's outputs
+    /// bit for bit as the scalar recurrence written out here, for every count of filters per
+    /// pass (1 to 9: a lone filter, an odd pair, several passes); and the lane pair's +, −, ×
+    /// are the scalar operations lane by lane (operands whose sums and products round).
+    #[test]
+    fn lane_pairs_are_scalar_arithmetic() {
+        let xs = [0.1, -3.7e-5, 1.0 / 3.0, 2.5e12, -7.25, 1e-300];
+        for &a in &xs {
+            for &b in &xs {
+                let (p, q) = (F64x2::new(a, b), F64x2::new(b, a));
+                assert_eq!(
+                    (p + q).lanes().map(f64::to_bits),
+                    [a + b, b + a].map(f64::to_bits)
+                );
+                assert_eq!(
+                    (p - q).lanes().map(f64::to_bits),
+                    [a - b, b - a].map(f64::to_bits)
+                );
+                assert_eq!(
+                    (p * q).lanes().map(f64::to_bits),
+                    [a * b, b * a].map(f64::to_bits)
+                );
+            }
+        }
+        let u: Vec<f64> = (0..3000)
+            .map(|i| (0.017 * i as f64).sin() + 0.4 * (0.23 * i as f64).cos())
+            .collect();
+        let all = [
+            (0.5, 0.01),
+            (1.1, 0.1),
+            (2.3, 0.4),
+            (4.7, 0.05),
+            (9.1, 0.2),
+            (17.0, 0.02),
+            (33.0, 0.0159),
+            (61.0, 0.2533),
+            (120.0, 0.04),
+        ];
+        let dt = 1e-3;
+        let scalar = |f: f64, z: f64| -> (Vec<f64>, Vec<f64>) {
+            let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+            let a1 = 1.0 / (1.0 + g * (g + 2.0 * z));
+            let (a2, a3) = (g * a1, g * g * a1);
+            let (mut ic1, mut ic2) = (0.0, u[0]);
+            let (mut lp, mut bp) = (Vec::new(), Vec::new());
+            for &x in &u {
+                let v3 = x - ic2;
+                let v1 = a1 * ic1 + a2 * v3;
+                let v2 = ic2 + a2 * ic1 + a3 * v3;
+                ic1 = 2.0 * v1 - ic1;
+                ic2 = 2.0 * v2 - ic2;
+                lp.push(v2);
+                bp.push(v1);
+            }
+            (lp, bp)
+        };
+        let want: Vec<(Vec<f64>, Vec<f64>)> = all.iter().map(|&(f, z)| scalar(f, z)).collect();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        for m in 1..=all.len() {
+            let got = resonator_batch(&u, &all[..m], dt, None);
+            assert_eq!(got.len(), m);
+            for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(bits(&g.0), bits(&w.0), "low-pass of filter {k} of {m}");
+                assert_eq!(bits(&g.1), bits(&w.1), "band-pass of filter {k} of {m}");
             }
         }
     }
