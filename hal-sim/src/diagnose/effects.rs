@@ -711,90 +711,43 @@ fn resonator_walk<const P: usize>(
 }
 
 /// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
-/// time): SSE2's packed doubles on x86-64 (each lane rounded as the scalar operation, IEEE 754
-/// round-to-nearest, no fused multiply-add), two plain f64 elsewhere. Each lane's result is
-/// the scalar operation's bit for bit (`tests::lane_pairs_are_scalar_arithmetic`).
-#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+/// time): the `wide` crate's `f64x2` (SSE2's packed doubles on x86-64, each lane rounded as the
+/// scalar operation, no fused multiply-add; plain lanes elsewhere). Each lane's result is the
+/// scalar operation's bit for bit (`tests::lane_pairs_are_scalar_arithmetic`).
 #[derive(Clone, Copy)]
-struct F64x2(std::arch::x86_64::__m128d);
+struct F64x2(wide::f64x2);
 
-#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 impl F64x2 {
     #[inline(always)]
     fn new(lo: f64, hi: f64) -> Self {
-        // SAFETY: SSE2 is enabled (the cfg above); no memory is accessed
-        F64x2(unsafe { std::arch::x86_64::_mm_set_pd(hi, lo) })
+        F64x2(wide::f64x2::new([lo, hi]))
     }
     #[inline(always)]
     fn splat(v: f64) -> Self {
-        // SAFETY: as in `new`
-        F64x2(unsafe { std::arch::x86_64::_mm_set1_pd(v) })
+        F64x2(wide::f64x2::splat(v))
     }
     /// The two lanes (low, high).
     #[inline(always)]
     fn lanes(self) -> [f64; 2] {
-        use std::arch::x86_64::{_mm_cvtsd_f64, _mm_unpackhi_pd};
-        // SAFETY: as in `new`
-        unsafe {
-            [
-                _mm_cvtsd_f64(self.0),
-                _mm_cvtsd_f64(_mm_unpackhi_pd(self.0, self.0)),
-            ]
-        }
+        self.0.to_array()
     }
 }
 
-#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 macro_rules! f64x2_op {
-    ($tr:ident, $f:ident, $intr:ident) => {
+    ($tr:ident, $f:ident) => {
         impl std::ops::$tr for F64x2 {
             type Output = F64x2;
             #[inline(always)]
             fn $f(self, o: F64x2) -> F64x2 {
-                // SAFETY: as in `F64x2::new`
-                F64x2(unsafe { std::arch::x86_64::$intr(self.0, o.0) })
+                F64x2(std::ops::$tr::$f(self.0, o.0))
             }
         }
     };
 }
 
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-#[derive(Clone, Copy)]
-struct F64x2([f64; 2]);
-
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-impl F64x2 {
-    #[inline(always)]
-    fn new(lo: f64, hi: f64) -> Self {
-        F64x2([lo, hi])
-    }
-    #[inline(always)]
-    fn splat(v: f64) -> Self {
-        F64x2([v, v])
-    }
-    #[inline(always)]
-    fn lanes(self) -> [f64; 2] {
-        self.0
-    }
-}
-
-#[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-macro_rules! f64x2_op {
-    ($tr:ident, $f:ident, $intr:ident) => {
-        impl std::ops::$tr for F64x2 {
-            type Output = F64x2;
-            #[inline(always)]
-            fn $f(self, o: F64x2) -> F64x2 {
-                let (a, b) = (self.0, o.0);
-                F64x2([std::ops::$tr::$f(a[0], b[0]), std::ops::$tr::$f(a[1], b[1])])
-            }
-        }
-    };
-}
-
-f64x2_op!(Add, add, _mm_add_pd);
-f64x2_op!(Sub, sub, _mm_sub_pd);
-f64x2_op!(Mul, mul, _mm_mul_pd);
+f64x2_op!(Add, add);
+f64x2_op!(Sub, sub);
+f64x2_op!(Mul, mul);
 
 /// The force a modal mass of 1 kg hung on the device through a spring-damper (resonance
 /// `f_hz`, damping ratio `zeta`) adds beyond its rigid-body inertia (which the baseline carries):
