@@ -790,6 +790,9 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     s[j] + al * (s[j + 1] - s[j])
 }
 
+/// The longest delay `lag` scans, in samples (its grid's last value).
+pub const LAG_MAX_SAMPLES: f64 = 64.0;
+
 /// The exact sign of the velocity `v` at `k` samples before sample `i` (fractional: the two
 /// samples' signs interpolated linearly, so a reversal between them switches in proportion;
 /// held at the first sample before the record). The delayed device's Coulomb sign: a delayed
@@ -2213,7 +2216,7 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
         // 15 % apart: the ±15 % refinement reaches the neighbours, so the optimum is found
         // whatever coarse value is nearest (a delay and its gain trade against each other on a
         // narrowband motion, a coarser grid's nearest value took the gain out of its range)
-        EffectKind::Lag => logspace(ctx.dt, 64.0 * ctx.dt, 30)
+        EffectKind::Lag => logspace(ctx.dt, LAG_MAX_SAMPLES * ctx.dt, 30)
             .into_iter()
             .map(mk)
             .collect(),

@@ -1231,6 +1231,8 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         let k0 = base_refs.len() + set.iter().filter(|e| e.kind.scanned()).count();
         // where each effect of the set sits among the base columns (after the fixed terms)
         let set_spans = effect_spans(set, n_fixed, &*cache);
+        // the rows the longest delay scanned leaves out (`lag`'s τ are ranked on common rows)
+        let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
             if set.iter().any(|c| c.kind == cand.kind)
@@ -1264,16 +1266,42 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     (None, EffectKind::Lag) => lag_rest_sub(eff.param),
                     _ => Vec::new(),
                 };
+                let lag_cand = tau_s.is_none() && eff.kind == EffectKind::Lag;
+                let all: Vec<&[f64]> = if rows_c.is_empty() && !lag_cand {
+                    Vec::new()
+                } else {
+                    base_refs.iter().chain(&zr).copied().collect()
+                };
+                // the held-out rss of the fit with the candidate over the baseline's on the
+                // same rows, carried to the set's rows
+                let ratio = |nn: &(Normal, Normal)| {
+                    let idx: Vec<usize> = (0..nb).collect();
+                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    let th0 = bt.solve();
+                    (rss_h0 / bh.rss(&th0).max(1e-300), bt.rss(&th0))
+                };
                 if !rows_c.is_empty() {
-                    let all: Vec<&[f64]> = base_refs.iter().chain(&zr).copied().collect();
                     nn = change_rows(&nn, &all, &sub_f, &sub_hold, &rows_c, -1.0);
                     if tau_s.is_none() {
-                        let idx: Vec<usize> = (0..nb).collect();
-                        let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
-                        let th0 = bt.solve();
-                        scale = rss_h0 / bh.rss(&th0).max(1e-300);
-                        t0 = bt.rss(&th0);
+                        (scale, t0) = ratio(&nn);
                     }
+                }
+                // `lag`'s τ are ranked against each other on the same rows: those every τ
+                // scanned can fit (the rows the longest τ leaves out as well). Each τ leaves
+                // out the samples whose motion τ earlier is at rest, the first τ of each move,
+                // where the force is the dwell's and an undelayed baseline is furthest from
+                // it: on each τ's own rows a longer τ would be compared with a baseline
+                // relieved of more of its worst rows, and rank behind a shorter one that fits
+                // no better.
+                let mut lag_key = None;
+                if lag_cand {
+                    let extra: Vec<usize> = lag_common
+                        .iter()
+                        .filter(|j| rows_c.binary_search(j).is_err())
+                        .copied()
+                        .collect();
+                    let nc = change_rows(&nn, &all, &sub_f, &sub_hold, &extra, -1.0);
+                    lag_key = Some(nc.1.rss(&nc.0.solve()) * ratio(&nc).0);
                 }
                 let t = nn.0.solve();
                 // a set is a device's only when every effect in it stays physical with the
@@ -1371,6 +1399,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 let k_extra = z.len() + eff.kind.scanned() as usize;
                 let dbic = bic(rt, nn.0.n, k0 + k_extra) - bic(t0, nn.0.n, k0);
                 let rh = nn.1.rss(&t) * scale;
+                let key = key.or(lag_key);
                 (rh, dbic, key.unwrap_or(rh))
             };
             // fill the cache for a list of values in one pass over the record (the effects
