@@ -650,11 +650,16 @@ pub fn change_rows(
             HELD_OUT => &mut out.1,
             _ => continue,
         };
+        // each product once for both of its entries: (s·c_p)·c_q is s·(c_p·c_q) exactly for
+        // s = ±1, so g[q][p] gets the bits it would get from its own product
         for p in 0..m {
             let rp = sign * cols[p][i];
             nm.b[p] += rp * f[i];
-            for q in 0..m {
-                nm.g[p * m + q] += rp * cols[q][i];
+            nm.g[p * m + p] += rp * cols[p][i];
+            for q in p + 1..m {
+                let t = rp * cols[q][i];
+                nm.g[p * m + q] += t;
+                nm.g[q * m + p] += t;
             }
         }
         nm.ff += sign * f[i] * f[i];
@@ -2314,6 +2319,53 @@ mod tests {
                 .map(|p| p.1)
         };
         (p("lag_s").unwrap_or(0.0), p("gain").unwrap_or(0.0))
+    }
+
+    /// `change_rows` forms each product of a row once for its two entries of the Gram matrix:
+    /// the result is, bit for bit, each entry's own products written out here (every entry
+    /// p, q accumulating sign·c_p·c_q over the rows, in the rows' order), for removal and
+    /// addition, starting from a Gram matrix that is not symmetric in its last bits. Break:
+    /// the lower triangle's update left out fails.
+    #[test]
+    fn change_rows_is_each_entrys_own_sum() {
+        let n = 40;
+        let cols: Vec<Vec<f64>> = (0..5)
+            .map(|c| {
+                (0..n)
+                    .map(|i| ((i * 7 + c * 13) as f64 * 0.37).sin() * (1.0 + c as f64) / 3.0)
+                    .collect()
+            })
+            .collect();
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        let f: Vec<f64> = (0..n).map(|i| (i as f64 * 0.11).cos() * 7.3).collect();
+        let part: Vec<u8> = (0..n)
+            .map(|i| if i % 4 == 3 { HELD_OUT } else { TRAIN })
+            .collect();
+        let mut nn = normals(&refs, &f, &part, 1);
+        nn.0.g[1] += 1e-13; // g[0][1] and g[1][0] no longer equal
+        let rows: Vec<usize> = (0..n).filter(|i| i % 3 != 1).collect();
+        for sign in [-1.0, 1.0] {
+            let got = change_rows(&nn, &refs, &f, &part, &rows, sign);
+            let mut want = nn.clone();
+            let m = refs.len();
+            for &i in &rows {
+                let nm = if part[i] == TRAIN {
+                    &mut want.0
+                } else {
+                    &mut want.1
+                };
+                for p in 0..m {
+                    for q in 0..m {
+                        nm.g[p * m + q] += sign * refs[p][i] * refs[q][i];
+                    }
+                }
+            }
+            for (g, w) in [(&got.0.g, &want.0.g), (&got.1.g, &want.1.g)] {
+                let gb: Vec<u64> = g.iter().map(|x| x.to_bits()).collect();
+                let wb: Vec<u64> = w.iter().map(|x| x.to_bits()).collect();
+                assert_eq!(gb, wb, "sign {sign}");
+            }
+        }
     }
 
     /// `set_physical` checks every effect of a set in its own span: baseline M 40 kg, Fv 300,
