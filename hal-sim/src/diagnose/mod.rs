@@ -1297,17 +1297,17 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 // where the force is the dwell's and an undelayed baseline is furthest from
                 // it: on each τ's own rows a longer τ would be compared with a baseline
                 // relieved of more of its worst rows, and rank behind a shorter one that fits
-                // no better.
-                let mut lag_key = None;
-                if lag_cand {
+                // no better. Computed last (`common_key`), for a τ that is still a candidate
+                // and whose rank the noise-corrected fit does not set.
+                let common_key = || {
                     let extra: Vec<usize> = lag_common
                         .iter()
                         .filter(|j| rows_c.binary_search(j).is_err())
                         .copied()
                         .collect();
                     let nc = change_rows(&nn, &all, &sub_f, &sub_hold, &extra, -1.0);
-                    lag_key = Some(nc.1.rss(&nc.0.solve()) * ratio(&nc).0);
-                }
+                    nc.1.rss(&nc.0.solve()) * ratio(&nc).0
+                };
                 let t = nn.0.solve();
                 // a set is a device's only when every effect in it stays physical with the
                 // candidate beside it (the stability check asks the same of the whole set)
@@ -1404,7 +1404,10 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 let k_extra = z.len() + eff.kind.scanned() as usize;
                 let dbic = bic(rt, nn.0.n, k0 + k_extra) - bic(t0, nn.0.n, k0);
                 let rh = nn.1.rss(&t) * scale;
-                let key = key.or(lag_key);
+                let key = match key {
+                    None if lag_cand => Some(common_key()),
+                    k => k,
+                };
                 (rh, dbic, key.unwrap_or(rh))
             };
             // fill the cache for a list of values in one pass over the record (the effects
