@@ -3,7 +3,7 @@
 //! exactly right (catalogue names = the hidden one, or none), detection rate, false names.
 
 use hal_sim::bench_rig::{Hidden, RigSpec, Trajectory};
-use hal_sim::diagnose::{diagnose, parse_csv, Options};
+use hal_sim::diagnose::{diagnose, parse_csv, Diagnosis, Options};
 use std::collections::BTreeMap;
 
 fn emps_x() -> Option<Vec<f64>> {
@@ -33,6 +33,36 @@ fn long_run_spec(seed: u64, emps: &Option<Vec<f64>>) -> RigSpec {
     let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
     let j = ((seed - 1) % 100_000) as usize;
     RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000)
+}
+
+/// The long run's record of `seed` (`long_run_spec`) diagnosed with the default options.
+fn diagnosed_long_run_record(seed: u64) -> (RigSpec, Diagnosis) {
+    let spec = long_run_spec(seed, &emps_x());
+    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let d = diagnose(&rec, &Options::default());
+    (spec, d)
+}
+
+/// The first parameter of the finding named `effect` (0 when there is none).
+fn first_parameter(d: &Diagnosis, effect: &str) -> f64 {
+    d.findings
+        .iter()
+        .find(|f| f.effect == effect)
+        .map_or(0.0, |f| f.parameters[0].1)
+}
+
+/// The delay record `seed` is named `lag` alone, its delay within `bound` (relative) of the
+/// rig's.
+fn lag_alone(seed: u64, bound: f64) {
+    let (spec, d) = diagnosed_long_run_record(seed);
+    let Hidden::Delay { delay_s } = spec.hidden else {
+        panic!("{seed} is a delay record");
+    };
+    let names = d.catalogue_names();
+    let lag = first_parameter(&d, "lag");
+    println!("{names:?}: lag {lag} s for {delay_s} s");
+    assert_eq!(names, ["lag"], "{:?}", d.verdicts);
+    assert!((lag / delay_s - 1.0).abs() < bound, "lag {lag}");
 }
 
 /// The seeds listed in `RIG_SEEDS` (comma-separated).
@@ -911,23 +941,8 @@ fn rig_effect_at_rest() {
 /// x_c 0.18 mm and 4.7 N beside the lag.
 #[test]
 fn delayed_switch_is_not_presliding() {
-    let emps = emps_x();
-    let spec = long_run_spec(200_021, &emps);
-    let Hidden::Delay { delay_s } = spec.hidden else {
-        panic!("200021 is a delay record");
-    };
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    let names = d.catalogue_names();
-    let lag = d
-        .findings
-        .iter()
-        .find(|f| f.effect == "lag")
-        .map_or(0.0, |f| f.parameters[0].1);
-    println!("{names:?}: lag {lag} s for {delay_s} s");
-    assert_eq!(names, ["lag"], "{:?}", d.verdicts);
     // measured +1.7 % (20.08 ms for 19.74); 5 % is the bound of the other lag tests
-    assert!((lag / delay_s - 1.0).abs() < 0.05, "lag {lag}");
+    lag_alone(200_021, 0.05);
 }
 
 /// A resonance beside a lag must carry the margin on top of the lag's three parts (delayed
@@ -938,23 +953,8 @@ fn delayed_switch_is_not_presliding() {
 /// held-out rss) beside the lag.
 #[test]
 fn delay_remainder_is_not_a_resonance() {
-    let emps = emps_x();
-    let spec = long_run_spec(200_035, &emps);
-    let Hidden::Delay { delay_s } = spec.hidden else {
-        panic!("200035 is a delay record");
-    };
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    let names = d.catalogue_names();
-    let lag = d
-        .findings
-        .iter()
-        .find(|f| f.effect == "lag")
-        .map_or(0.0, |f| f.parameters[0].1);
-    println!("{names:?}: lag {lag} s for {delay_s} s");
-    assert_eq!(names, ["lag"], "{:?}", d.verdicts);
     // measured −0.66 % (37.57 ms for 37.82): 2 % is 3× that
-    assert!((lag / delay_s - 1.0).abs() < 0.02, "lag {lag}");
+    lag_alone(200_035, 0.02);
 }
 
 /// The derived acceleration's quantisation noise is no mode (the scan's rule on `compliance`,
@@ -965,20 +965,13 @@ fn delay_remainder_is_not_a_resonance() {
 /// mass 36 and 25 kg) beside it on both.
 #[test]
 fn derived_acceleration_noise_is_no_compliance() {
-    let emps = emps_x();
     for seed in [500_002, 500_052] {
-        let spec = long_run_spec(seed, &emps);
+        let (spec, d) = diagnosed_long_run_record(seed);
         let Hidden::Presliding { x_char_m } = spec.hidden else {
             panic!("{seed} is a presliding record");
         };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
         let names = d.catalogue_names();
-        let xc = d
-            .findings
-            .iter()
-            .find(|f| f.effect == "presliding_hysteresis")
-            .map_or(0.0, |f| f.parameters[0].1);
+        let xc = first_parameter(&d, "presliding_hysteresis");
         println!("{seed}: {names:?}: x_c {xc} m for {x_char_m} m");
         assert_eq!(names, ["presliding_hysteresis"], "{:?}", d.verdicts);
         // measured −26.6 % and −8.9 % (the Dahl column fitted through the derived signals;
@@ -998,23 +991,8 @@ fn derived_acceleration_noise_is_no_compliance() {
 /// nothing is named.
 #[test]
 fn delay_is_ranked_on_common_rows() {
-    let emps = emps_x();
-    let spec = long_run_spec(200_023, &emps);
-    let Hidden::Delay { delay_s } = spec.hidden else {
-        panic!("200023 is a delay record");
-    };
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    let names = d.catalogue_names();
-    let lag = d
-        .findings
-        .iter()
-        .find(|f| f.effect == "lag")
-        .map_or(0.0, |f| f.parameters[0].1);
-    println!("{names:?}: lag {lag} s for {delay_s} s");
-    assert_eq!(names, ["lag"], "{:?}", d.verdicts);
     // measured +11.4 % (37.26 ms for 33.43; the least-squares gain 0.82); bound 3× that
-    assert!((lag / delay_s - 1.0).abs() < 0.34, "lag {lag}");
+    lag_alone(200_023, 0.34);
 }
 
 /// The long run's records as the rig draws them, without the diagnosis (`RIG_N=56 cargo test
@@ -1122,9 +1100,7 @@ fn assert_device_is_the_rigs(spec: &RigSpec, (m, fv, fc): (f64, f64, f64), bound
 /// `stribeck` (v_s 1.5 mm/s, 6.1 N, 94 % of the held-out rss).
 #[test]
 fn coulomb_band_is_not_stribeck() {
-    let spec = long_run_spec(33, &emps_x());
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
+    let (_, d) = diagnosed_long_run_record(33);
     assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
 }
 
@@ -1138,8 +1114,6 @@ fn coulomb_band_is_not_stribeck() {
 /// 49.9 % of the held-out rss, held on 4/5 segments).
 #[test]
 fn coulomb_band_is_not_presliding() {
-    let spec = long_run_spec(38, &emps_x());
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
+    let (_, d) = diagnosed_long_run_record(38);
     assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
 }
