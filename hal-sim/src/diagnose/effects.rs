@@ -3017,6 +3017,19 @@ mod tests {
         }
     }
 
+    /// Resonance frequencies (Hz at a 1 ms step) and damping ratios of the resonator tests.
+    const RESONATOR_MODES: [(f64, f64); 9] = [
+        (0.5, 0.01),
+        (1.1, 0.1),
+        (2.3, 0.4),
+        (4.7, 0.05),
+        (9.1, 0.2),
+        (17.0, 0.02),
+        (33.0, 0.0159),
+        (61.0, 0.2533),
+        (120.0, 0.04),
+    ];
+
     /// The resonators interleaved in a pass (six: a pass of four and one of two) give, mode by
     /// mode, exactly the resonator run alone, on every sample and at chosen rows.
     #[test]
@@ -3024,17 +3037,10 @@ mod tests {
         let u: Vec<f64> = (0..5000)
             .map(|i| (0.013 * i as f64).sin() + 0.3 * (0.21 * i as f64).cos())
             .collect();
-        let modes = [
-            (0.5, 0.01),
-            (1.1, 0.1),
-            (2.3, 0.4),
-            (4.7, 0.05),
-            (9.1, 0.2),
-            (17.0, 0.02),
-        ];
+        let modes = &RESONATOR_MODES[..6];
         let rows: Vec<usize> = (3..u.len()).step_by(29).collect();
         for r in [None, Some(rows.as_slice())] {
-            let b = resonator_batch(&u, &modes, 1e-3, r);
+            let b = resonator_batch(&u, modes, 1e-3, r);
             for (k, &m) in modes.iter().enumerate() {
                 let one = resonator_batch(&u, &[m], 1e-3, r).pop();
                 assert_eq!(Some(&b[k]), one.as_ref(), "mode {m:?}");
@@ -3069,17 +3075,7 @@ mod tests {
         let u: Vec<f64> = (0..3000)
             .map(|i| (0.017 * i as f64).sin() + 0.4 * (0.23 * i as f64).cos())
             .collect();
-        let all = [
-            (0.5, 0.01),
-            (1.1, 0.1),
-            (2.3, 0.4),
-            (4.7, 0.05),
-            (9.1, 0.2),
-            (17.0, 0.02),
-            (33.0, 0.0159),
-            (61.0, 0.2533),
-            (120.0, 0.04),
-        ];
+        let all = RESONATOR_MODES;
         let dt = 1e-3;
         let scalar = |f: f64, z: f64| -> (Vec<f64>, Vec<f64>) {
             let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
