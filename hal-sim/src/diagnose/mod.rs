@@ -1437,17 +1437,25 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             // the scanned range: an optimum on its edge is not bracketed (the profile of the
             // fit over the parameter still falls beyond the range the record resolves), so the
             // parameter is not identified and the effect is not named
-            prefill(&coarse, cache);
-            // (ranked by each value's key: its held-out rss, for `lag` the corrected fit's)
+            // the values `effs` evaluated (their columns filled in one pass) and the best so
+            // far kept, ranked by each value's key: its held-out rss, for `lag` the corrected
+            // fit's
+            let scan = |effs: &[Effect],
+                        cache: &mut Cache,
+                        cb: &mut Option<(f64, f64, Effect)>,
+                        cb_key: &mut f64| {
+                prefill(effs, cache);
+                for eff in effs {
+                    let (rh, db, key) = eval(eff, cache);
+                    if cb.is_none() || key < *cb_key {
+                        *cb = Some((rh, db, eff.clone()));
+                        *cb_key = key;
+                    }
+                }
+            };
             let mut cb: Option<(f64, f64, Effect)> = None;
             let mut cb_key = f64::INFINITY;
-            for eff in coarse.iter().cloned() {
-                let (rh, db, key) = eval(&eff, cache);
-                if cb.is_none() || key < cb_key {
-                    cb = Some((rh, db, eff));
-                    cb_key = key;
-                }
-            }
+            scan(&coarse, cache, &mut cb, &mut cb_key);
             if cand.kind.scanned() {
                 // a resonance's residual is sharp in frequency: one more level for it
                 let widths: &[f64] = if cand.kind == EffectKind::Compliance {
@@ -1460,14 +1468,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                         break;
                     };
                     let fine = effects::refine(&ctx, &centre, width);
-                    prefill(&fine, cache);
-                    for eff in fine {
-                        let (rh, db, key) = eval(&eff, cache);
-                        if cb.is_none() || key < cb_key {
-                            cb = Some((rh, db, eff));
-                            cb_key = key;
-                        }
-                    }
+                    scan(&fine, cache, &mut cb, &mut cb_key);
                 }
             }
             if cand.kind == EffectKind::Backlash {
@@ -1483,26 +1484,12 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                             ..centre.clone()
                         })
                         .collect();
-                    prefill(&alt, cache);
-                    for eff in alt {
-                        let (rh, db, key) = eval(&eff, cache);
-                        if key < cb_key {
-                            cb = Some((rh, db, eff));
-                            cb_key = key;
-                        }
-                    }
+                    scan(&alt, cache, &mut cb, &mut cb_key);
                 }
                 if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
                     if centre.param2 != 0.0 {
                         let fine = effects::refine(&ctx, &centre, 0.03);
-                        prefill(&fine, cache);
-                        for eff in fine {
-                            let (rh, db, key) = eval(&eff, cache);
-                            if key < cb_key {
-                                cb = Some((rh, db, eff));
-                                cb_key = key;
-                            }
-                        }
+                        scan(&fine, cache, &mut cb, &mut cb_key);
                     }
                 }
             }
