@@ -995,6 +995,29 @@ fn delay_is_ranked_on_common_rows() {
     lag_alone(200_023, 0.34);
 }
 
+/// A play is tested on its contacts: a `lag` chosen beside it leaves out of its own test the
+/// rows whose delayed motion is at rest or inside the Coulomb sign's band (right after each
+/// reversal), which are where the play's contacts lie, so the stability segments test the play
+/// and a lag beside it on every row in motion. Backlash 600012 (rounded triangle, 0.70 mm) is
+/// named `backlash` alone, its width within the bound below of the rig's. Breaks: the play
+/// tested on the lag's rows (the segment fits see no contact, the impact taps fit to zero
+/// and fail the momentum rule on 5/5 segments) names nothing (and `lag` alone when the lag
+/// too is tested on its own rows, as before the rule); the play on every row but the lag
+/// beside it still on its own rows names `backlash` and `lag`.
+#[test]
+fn play_is_tested_on_its_contacts() {
+    let (spec, d) = diagnosed_long_run_record(600_012);
+    let Hidden::Backlash { width_m } = spec.hidden else {
+        panic!("600012 is a backlash record");
+    };
+    let names = d.catalogue_names();
+    let w = first_parameter(&d, "backlash");
+    println!("{names:?}: width {w} m for {width_m} m");
+    assert_eq!(names, ["backlash"], "{:?}", d.verdicts);
+    // measured +1.0 % (0.7095 mm for 0.7024); bound 3× that
+    assert!((w / width_m - 1.0).abs() < 0.03, "width {w}");
+}
+
 /// The long run's records as the rig draws them, without the diagnosis (`RIG_N=56 cargo test
 /// -p regen-tests --test diagnose_rig rig_specs -- --ignored --nocapture`; `RIG_KINDS` and
 /// `RIG_SEEDS` as in the long run): family (and the one asked for), motion draw, hidden

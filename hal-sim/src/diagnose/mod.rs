@@ -1643,17 +1643,27 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let mut signs = vec![(0usize, 0usize); chosen.len()];
     let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
     let mut seg_held: Vec<Vec<bool>> = vec![Vec::new(); chosen.len()];
-    let mut stab_hold = spread_hold.clone();
-    for j in lag_of(&chosen)
+    // A lag's rows whose delayed motion is at rest (or inside the Coulomb sign's band) are left
+    // out of the segments' fits, as of its other fits, except where a play is chosen: those
+    // rows, right after the reversals, are where its contacts lie, and a play tested without
+    // them holds nowhere (its impact taps fit to zero). A play, and a lag beside it, are
+    // tested on every row in motion; every other finding beside a lag on the lag's rows (a
+    // presliding's build-up there would take the delayed device's).
+    let lag_rest: Vec<usize> = lag_of(&chosen)
         .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
-        .unwrap_or_default()
-    {
-        stab_hold[j] = AT_REST;
+        .unwrap_or_default();
+    let mut lag_hold = spread_hold.clone();
+    for &j in &lag_rest {
+        lag_hold[j] = AT_REST;
     }
-    for sgi in 0..STABILITY_SEGMENTS {
+    let with_play = chosen.iter().any(|e| e.kind == EffectKind::Backlash);
+    let on_every_row = |k: EffectKind| {
+        with_play && !lag_rest.is_empty() && matches!(k, EffectKind::Backlash | EffectKind::Lag)
+    };
+    let segment_fit = |hold: &[u8], sgi: usize| {
         let part: Vec<u8> = (0..n_sub)
             .map(|j| {
-                if stab_hold[j] == AT_REST {
+                if hold[j] == AT_REST {
                     AT_REST
                 } else if j * STABILITY_SEGMENTS / n_sub == sgi {
                     HELD_OUT
@@ -1663,12 +1673,24 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             })
             .collect();
         let (tr, ho) = normals(&sub_refs, &spread_f, &part, 1);
-        if ho.n < 10 {
-            continue;
-        }
         let th = tr.solve();
-        let rss_with = ho.rss(&th);
+        (tr, ho, th)
+    };
+    for sgi in 0..STABILITY_SEGMENTS {
+        let on_lag_rows = segment_fit(&lag_hold, sgi);
+        let on_all_rows = chosen
+            .iter()
+            .any(|e| on_every_row(e.kind))
+            .then(|| segment_fit(&spread_hold, sgi));
         for (k, &(a, b)) in spans.iter().enumerate() {
+            let (tr, ho, th) = match &on_all_rows {
+                Some(f) if on_every_row(chosen[k].kind) => f,
+                _ => &on_lag_rows,
+            };
+            if ho.n < 10 {
+                continue;
+            }
+            let rss_with = ho.rss(th);
             let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
             let (t2, h2) = (tr.select(&keep), ho.select(&keep));
             let rss_without = h2.rss(&t2.solve());
@@ -1677,7 +1699,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             let corrected = match chosen[k].kind {
                 EffectKind::Lag => ctx
                     .lag_noise(chosen[k].param)
-                    .map(|sn| lag_corrected(&tr, &ho, [0, 1, a], &sn).map(|c| c.0)),
+                    .map(|sn| lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0)),
                 _ => None,
             };
             let phys = match &corrected {
