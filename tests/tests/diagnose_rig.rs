@@ -990,7 +990,8 @@ fn derived_acceleration_noise_is_no_compliance() {
 /// Stribeck 400002 (point-to-point), presliding 500015 and backlash 600020 (recorded motion)
 /// are named their own effect alone, its first parameter within the bound below of the
 /// rig's. Break: the rule removed (the long run's base) names a `compliance` beside each
-/// (2.39 Hz, 6.4 kg; 4.29 Hz, 4.0 kg; 7.66 Hz, 5.0 kg).
+/// (2.39 Hz, 6.4 kg; 4.29 Hz, 4.0 kg; 7.66 Hz, 5.0 kg); S × 0.5, or S without the mode's
+/// covariances with the inertia and viscous columns, names it beside `stribeck` on 400002.
 #[test]
 fn derived_acceleration_noise_carries_no_margin() {
     for seed in [400_002, 500_015, 600_020] {
