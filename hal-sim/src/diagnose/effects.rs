@@ -1008,11 +1008,20 @@ impl DerivNoise {
         }
     }
 
-    /// Variance of the acceleration's noise after the linear, time-invariant map `g` (a
-    /// filter applied to the whole acceleration, e.g. a column built from it): σ²·Σ (g h_a)²,
-    /// g applied to the acceleration's response to a unit position sample.
-    pub fn accel_var_through(&self, g: impl Fn(&[f64]) -> Vec<f64>) -> f64 {
-        self.s2 * g(&self.h[0]).iter().map(|y| y * y).sum::<f64>()
+    /// The acceleration's noise after the linear, time-invariant map `g` (a filter applied to
+    /// the whole acceleration, e.g. a column built from it), with the acceleration's and the
+    /// velocity's own noise at the same sample: the per-row covariance S of (a, v, g·a),
+    /// σ²·Σ h_p·h_q over the responses to a unit position sample (g applied to h_a).
+    pub fn accel_cov_through(&self, g: impl Fn(&[f64]) -> Vec<f64>) -> [[f64; 3]; 3] {
+        let y = g(&self.h[0]);
+        let r = [&self.h[0][..], &self.h[1][..], &y[..]];
+        let mut s = [[0.0; 3]; 3];
+        for p in 0..3 {
+            for q in 0..3 {
+                s[p][q] = self.s2 * r[p].iter().zip(r[q]).map(|(x, y)| x * y).sum::<f64>();
+            }
+        }
+        s
     }
 
     /// Covariance of two sums Σ c·s(t − m) of the derived signals ((signal, m, c) terms).
@@ -1058,17 +1067,18 @@ impl Context<'_> {
             .as_ref()
     }
 
-    /// The noise variance, per row, of the `compliance` column at `f_hz` (its damping ratio
-    /// `compliance_zeta`): the derived acceleration's quantisation noise (`deriv_noise`)
-    /// through (H − 1), the column's own filter. That noise lies near the derivative filter's
+    /// The errors-in-variables covariance, per row, of the baseline's inertia and viscous
+    /// columns (a, v) and the `compliance` column at `f_hz` (its damping ratio
+    /// `compliance_zeta`; `DerivNoise::accel_cov_through`): the derived acceleration's
+    /// quantisation noise (`deriv_noise`) through (H − 1), the column's own filter. That noise lies near the derivative filter's
     /// cutoff, above the mode, where H − 1 ≈ −1: the column carries it almost in full, so a
     /// column fitted with a coefficient near the inertia cancels the noise of the inertia's
     /// column (the acceleration low-passed at the mode) whether or not there is a mode. None
     /// when the acceleration has no derivation noise or the frequency identifies no mode.
-    pub fn compliance_noise(&self, f_hz: f64) -> Option<f64> {
+    pub fn compliance_noise(&self, f_hz: f64) -> Option<[[f64; 3]; 3]> {
         let nz = self.deriv_noise()?;
         let z = self.compliance_zeta(f_hz)?;
-        Some(nz.accel_var_through(|h| {
+        Some(nz.accel_cov_through(|h| {
             compliance_columns_at(h, &[(f_hz, z)], self.dt, None)
                 .pop()
                 .unwrap_or_default()
