@@ -633,14 +633,13 @@ pub fn resonator_batch(
         .collect();
     let u0 = u.first().copied().unwrap_or(0.0);
     let cap = rows.map_or(u.len(), |r| r.len());
-    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
     // four filters per pass, two per lane pair, their states held in registers (a pass per
     // filter would walk the record m times; all m at once keeps their states in memory)
     let mut out = Vec::with_capacity(m);
     for c in ca.chunks(4) {
         match c.len() {
-            3 | 4 => resonator_walk::<2>(u, c, u0, rows, last, cap, &mut out),
-            _ => resonator_walk::<1>(u, c, u0, rows, last, cap, &mut out),
+            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap, &mut out),
+            _ => resonator_walk::<1>(u, c, u0, rows, cap, &mut out),
         }
     }
     out
@@ -649,14 +648,16 @@ pub fn resonator_batch(
 /// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
 /// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
 /// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
-/// last pair runs the last filter twice), their outputs at `rows` appended to `out`.
+/// last pair runs the last filter twice), their outputs at `rows` appended to `out`. The
+/// samples between two rows are stepped without a test per sample; each row's lane pairs are
+/// kept as computed (one store per row) and split per filter after the pass. The rows are
+/// taken while they ascend within the input (the outputs end at the first that does not).
 #[inline(always)]
 fn resonator_walk<const P: usize>(
     u: &[f64],
     ca: &[[f64; 3]],
     u0: f64,
     rows: Option<&[usize]>,
-    last: usize,
     cap: usize,
     out: &mut Vec<(Vec<f64>, Vec<f64>)>,
 ) {
@@ -672,11 +673,8 @@ fn resonator_walk<const P: usize>(
     let two = F64x2::splat(2.0);
     let mut ic1 = [F64x2::splat(0.0); P];
     let mut ic2 = [F64x2::splat(u0); P];
-    let mut o: Vec<(Vec<f64>, Vec<f64>)> = (0..nf)
-        .map(|_| (Vec::with_capacity(cap), Vec::with_capacity(cap)))
-        .collect();
-    let mut next = 0usize;
-    for (i, &xin) in u[..last].iter().enumerate() {
+    // one sample of every filter: (low-pass, band-pass) lane pairs
+    let mut step = |xin: f64| -> ([F64x2; P], [F64x2; P]) {
         let x = F64x2::splat(xin);
         let mut lp = [F64x2::splat(0.0); P];
         let mut bp = [F64x2::splat(0.0); P];
@@ -689,25 +687,37 @@ fn resonator_walk<const P: usize>(
             lp[p] = v2;
             bp[p] = v1;
         }
-        let keep = match rows {
-            None => true,
-            Some(r) => r[next] == i,
-        };
-        if keep {
-            for (k, ok) in o.iter_mut().enumerate() {
-                let (l, b) = (lp[k / 2].lanes(), bp[k / 2].lanes());
-                ok.0.push(l[k % 2]);
-                ok.1.push(b[k % 2]);
-            }
-            if let Some(r) = rows {
-                next += 1;
-                if next == r.len() {
+        (lp, bp)
+    };
+    let mut kept: Vec<([F64x2; P], [F64x2; P])> = Vec::with_capacity(cap);
+    match rows {
+        None => kept.extend(u.iter().map(|&xin| step(xin))),
+        Some(r) => {
+            // the next sample to step
+            let mut i = 0;
+            for &row in r {
+                let Some(seg) = u.get(i..=row) else {
                     break;
+                };
+                let mut last = None;
+                for &xin in seg {
+                    last = Some(step(xin));
                 }
+                match last {
+                    Some(o) => kept.push(o),
+                    None => break,
+                }
+                i = row + 1;
             }
         }
     }
-    out.extend(o);
+    for k in 0..nf {
+        let lane = |v: &[F64x2; P]| v[k / 2].lanes()[k % 2];
+        out.push((
+            kept.iter().map(|(l, _)| lane(l)).collect(),
+            kept.iter().map(|(_, b)| lane(b)).collect(),
+        ));
+    }
 }
 
 /// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
@@ -3096,12 +3106,34 @@ mod tests {
         };
         let want: Vec<(Vec<f64>, Vec<f64>)> = all.iter().map(|&(f, z)| scalar(f, z)).collect();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        // at chosen rows (the first sample, a stride, neighbours, the last sample): the same
+        // outputs at those samples
+        let rows: Vec<usize> = [0, 1, 2]
+            .into_iter()
+            .chain((17..u.len() - 1).step_by(37))
+            .chain([u.len() - 1])
+            .collect();
+        let at = |v: &[f64]| rows.iter().map(|&i| v[i].to_bits()).collect::<Vec<u64>>();
         for m in 1..=all.len() {
             let got = resonator_batch(&u, &all[..m], dt, None);
             assert_eq!(got.len(), m);
             for (k, (g, w)) in got.iter().zip(&want).enumerate() {
                 assert_eq!(bits(&g.0), bits(&w.0), "low-pass of filter {k} of {m}");
                 assert_eq!(bits(&g.1), bits(&w.1), "band-pass of filter {k} of {m}");
+            }
+            let got = resonator_batch(&u, &all[..m], dt, Some(&rows));
+            assert_eq!(got.len(), m);
+            for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(
+                    bits(&g.0),
+                    at(&w.0),
+                    "low-pass of filter {k} of {m} at rows"
+                );
+                assert_eq!(
+                    bits(&g.1),
+                    at(&w.1),
+                    "band-pass of filter {k} of {m} at rows"
+                );
             }
         }
     }
