@@ -1844,9 +1844,15 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
         let c = [r.a[i], va[i], ctx.sgn[i], 1.0];
         for j in 0..4 {
             bv[j] += c[j] * r.f[i];
-            for k in 0..4 {
+            for k in j..4 {
                 g[j * 4 + k] += c[j] * c[k];
             }
+        }
+    }
+    // the lower triangle: c_k·c_j = c_j·c_k exactly, summed in the same order
+    for j in 1..4 {
+        for k in 0..j {
+            g[j * 4 + k] = g[k * 4 + j];
         }
     }
     let sol = super::solve_sym(&g, &bv, 4);
