@@ -622,7 +622,26 @@ pub fn resonator_batch(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<(Vec<f64>, Vec<f64>)> {
-    let m = modes.len();
+    let mut out = Vec::with_capacity(modes.len());
+    for (nf, kept) in resonator_passes(u, modes, dt, rows) {
+        for k in 0..nf {
+            out.push((
+                kept.iter().map(|o| o[k]).collect(),
+                kept.iter().map(|o| o[4 + k]).collect(),
+            ));
+        }
+    }
+    out
+}
+
+/// `resonator_batch`'s passes: per pass of up to four filters (the modes in order), their
+/// count and per row kept the low-pass outputs (indices 0..4) and band-pass outputs (4..8).
+fn resonator_passes(
+    u: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(usize, Vec<[f64; 8]>)> {
     let ca: Vec<[f64; 3]> = modes
         .iter()
         .map(|&(f, z)| {
@@ -635,22 +654,20 @@ pub fn resonator_batch(
     let cap = rows.map_or(u.len(), |r| r.len());
     // four filters per pass, two per lane pair, their states held in registers (a pass per
     // filter would walk the record m times; all m at once keeps their states in memory)
-    let mut out = Vec::with_capacity(m);
-    for c in ca.chunks(4) {
-        match c.len() {
-            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap, &mut out),
-            _ => resonator_walk::<1>(u, c, u0, rows, cap, &mut out),
-        }
-    }
-    out
+    ca.chunks(4)
+        .map(|c| match c.len() {
+            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap),
+            _ => resonator_walk::<1>(u, c, u0, rows, cap),
+        })
+        .collect()
 }
 
 /// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
 /// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
 /// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
-/// last pair runs the last filter twice), their outputs at `rows` appended to `out`. The
-/// samples between two rows are stepped without a test per sample; each row's lane pairs are
-/// kept as computed (one store per row) and split per filter after the pass. The rows are
+/// last pair runs the last filter twice): the filters' count and their outputs at `rows`, per
+/// row the low-passes then the band-passes (`resonator_passes`). The samples between two rows
+/// are stepped without a test per sample, each row's outputs kept in one store. The rows are
 /// taken while they ascend within the input (the outputs end at the first that does not).
 #[inline(always)]
 fn resonator_walk<const P: usize>(
@@ -659,11 +676,10 @@ fn resonator_walk<const P: usize>(
     u0: f64,
     rows: Option<&[usize]>,
     cap: usize,
-    out: &mut Vec<(Vec<f64>, Vec<f64>)>,
-) {
+) -> (usize, Vec<[f64; 8]>) {
     let nf = ca.len().min(2 * P);
     if nf == 0 {
-        return;
+        return (0, Vec::new());
     }
     let coef =
         |p: usize, c: usize| F64x2::new(ca[(2 * p).min(nf - 1)][c], ca[(2 * p + 1).min(nf - 1)][c]);
@@ -689,9 +705,21 @@ fn resonator_walk<const P: usize>(
         }
         (lp, bp)
     };
-    let mut kept: Vec<([F64x2; P], [F64x2; P])> = Vec::with_capacity(cap);
+    // a row's outputs: low-pass k at k, band-pass k at 4 + k
+    let flat = |(lp, bp): ([F64x2; P], [F64x2; P])| -> [f64; 8] {
+        let mut o = [0.0; 8];
+        for p in 0..P {
+            let (l, b) = (lp[p].lanes(), bp[p].lanes());
+            o[2 * p] = l[0];
+            o[2 * p + 1] = l[1];
+            o[4 + 2 * p] = b[0];
+            o[4 + 2 * p + 1] = b[1];
+        }
+        o
+    };
+    let mut kept: Vec<[f64; 8]> = Vec::with_capacity(cap);
     match rows {
-        None => kept.extend(u.iter().map(|&xin| step(xin))),
+        None => kept.extend(u.iter().map(|&xin| flat(step(xin)))),
         Some(r) => {
             // the next sample to step
             let mut i = 0;
@@ -704,20 +732,14 @@ fn resonator_walk<const P: usize>(
                     last = Some(step(xin));
                 }
                 match last {
-                    Some(o) => kept.push(o),
+                    Some(o) => kept.push(flat(o)),
                     None => break,
                 }
                 i = row + 1;
             }
         }
     }
-    for k in 0..nf {
-        let lane = |v: &[F64x2; P]| v[k / 2].lanes()[k % 2];
-        out.push((
-            kept.iter().map(|(l, _)| lane(l)).collect(),
-            kept.iter().map(|(_, b)| lane(b)).collect(),
-        ));
-    }
+    (nf, kept)
 }
 
 /// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
@@ -770,21 +792,27 @@ pub fn compliance_columns_at(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<Vec<f64>> {
-    resonator_batch(a, modes, dt, rows)
-        .into_iter()
-        .zip(modes)
-        .map(|((lp, bp), &(_, z))| {
-            (0..lp.len())
-                .map(|j| {
-                    let aj = match rows {
-                        None => a[j],
-                        Some(r) => a[r[j]],
-                    };
-                    lp[j] + 2.0 * z * bp[j] - aj
-                })
-                .collect()
-        })
-        .collect()
+    // each filter's column formed from the pass's kept outputs (resonator_batch's lp, bp)
+    let mut out = Vec::with_capacity(modes.len());
+    let mut zs = modes.iter().map(|&(_, z)| z);
+    for (nf, kept) in resonator_passes(a, modes, dt, rows) {
+        for k in 0..nf {
+            let z = zs.next().unwrap_or(0.0);
+            out.push(
+                kept.iter()
+                    .enumerate()
+                    .map(|(j, o)| {
+                        let aj = match rows {
+                            None => a[j],
+                            Some(r) => a[r[j]],
+                        };
+                        o[k] + 2.0 * z * o[4 + k] - aj
+                    })
+                    .collect(),
+            );
+        }
+    }
+    out
 }
 
 /// `s` at `k` samples before sample `i` (k ≥ 0, fractional: linear interpolation between the
@@ -3184,6 +3212,35 @@ mod tests {
                     at(&w.1),
                     "band-pass of filter {k} of {m} at rows"
                 );
+            }
+        }
+    }
+
+    /// `compliance_columns_at` (each column formed from its pass's kept outputs) gives, mode
+    /// by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for bit,
+    /// on every sample and at chosen rows, for the nine modes (passes of four, four and one).
+    /// Breaks: the band-pass taken at the low-pass's index, or each mode given the next
+    /// mode's ζ, fail it.
+    #[test]
+    fn compliance_columns_are_the_resonators_outputs() {
+        let u: Vec<f64> = (0..4000)
+            .map(|i| (0.011 * i as f64).sin() + 0.5 * (0.19 * i as f64).cos())
+            .collect();
+        let modes = RESONATOR_MODES;
+        let rows: Vec<usize> = (0..u.len()).step_by(13).collect();
+        for r in [None, Some(rows.as_slice())] {
+            let cols = compliance_columns_at(&u, &modes, 1e-3, r);
+            let res = resonator_batch(&u, &modes, 1e-3, r);
+            assert_eq!(cols.len(), modes.len());
+            for (k, ((c, (lp, bp)), &(_, z))) in cols.iter().zip(&res).zip(&modes).enumerate() {
+                let want: Vec<u64> = (0..lp.len())
+                    .map(|j| {
+                        let aj = r.map_or(u[j], |rw| u[rw[j]]);
+                        (lp[j] + 2.0 * z * bp[j] - aj).to_bits()
+                    })
+                    .collect();
+                let got: Vec<u64> = c.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(got, want, "mode {k}");
             }
         }
     }
