@@ -622,7 +622,26 @@ pub fn resonator_batch(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<(Vec<f64>, Vec<f64>)> {
-    let m = modes.len();
+    let mut out = Vec::with_capacity(modes.len());
+    for (nf, kept) in resonator_passes(u, modes, dt, rows) {
+        for k in 0..nf {
+            out.push((
+                kept.iter().map(|o| o[k]).collect(),
+                kept.iter().map(|o| o[4 + k]).collect(),
+            ));
+        }
+    }
+    out
+}
+
+/// `resonator_batch`'s passes: per pass of up to four filters (the modes in order), their
+/// count and per row kept the low-pass outputs (indices 0..4) and band-pass outputs (4..8).
+fn resonator_passes(
+    u: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(usize, Vec<[f64; 8]>)> {
     let ca: Vec<[f64; 3]> = modes
         .iter()
         .map(|&(f, z)| {
@@ -633,36 +652,34 @@ pub fn resonator_batch(
         .collect();
     let u0 = u.first().copied().unwrap_or(0.0);
     let cap = rows.map_or(u.len(), |r| r.len());
-    let last = rows.map_or(u.len(), |r| r.last().map_or(0, |&l| l + 1));
     // four filters per pass, two per lane pair, their states held in registers (a pass per
     // filter would walk the record m times; all m at once keeps their states in memory)
-    let mut out = Vec::with_capacity(m);
-    for c in ca.chunks(4) {
-        match c.len() {
-            3 | 4 => resonator_walk::<2>(u, c, u0, rows, last, cap, &mut out),
-            _ => resonator_walk::<1>(u, c, u0, rows, last, cap, &mut out),
-        }
-    }
-    out
+    ca.chunks(4)
+        .map(|c| match c.len() {
+            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap),
+            _ => resonator_walk::<1>(u, c, u0, rows, cap),
+        })
+        .collect()
 }
 
 /// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
 /// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
 /// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
-/// last pair runs the last filter twice), their outputs at `rows` appended to `out`.
+/// last pair runs the last filter twice): the filters' count and their outputs at `rows`, per
+/// row the low-passes then the band-passes (`resonator_passes`). The samples between two rows
+/// are stepped without a test per sample, each row's outputs kept in one store. The rows are
+/// taken while they ascend within the input (the outputs end at the first that does not).
 #[inline(always)]
 fn resonator_walk<const P: usize>(
     u: &[f64],
     ca: &[[f64; 3]],
     u0: f64,
     rows: Option<&[usize]>,
-    last: usize,
     cap: usize,
-    out: &mut Vec<(Vec<f64>, Vec<f64>)>,
-) {
+) -> (usize, Vec<[f64; 8]>) {
     let nf = ca.len().min(2 * P);
     if nf == 0 {
-        return;
+        return (0, Vec::new());
     }
     let coef =
         |p: usize, c: usize| F64x2::new(ca[(2 * p).min(nf - 1)][c], ca[(2 * p + 1).min(nf - 1)][c]);
@@ -672,11 +689,8 @@ fn resonator_walk<const P: usize>(
     let two = F64x2::splat(2.0);
     let mut ic1 = [F64x2::splat(0.0); P];
     let mut ic2 = [F64x2::splat(u0); P];
-    let mut o: Vec<(Vec<f64>, Vec<f64>)> = (0..nf)
-        .map(|_| (Vec::with_capacity(cap), Vec::with_capacity(cap)))
-        .collect();
-    let mut next = 0usize;
-    for (i, &xin) in u[..last].iter().enumerate() {
+    // one sample of every filter: (low-pass, band-pass) lane pairs
+    let mut step = |xin: f64| -> ([F64x2; P], [F64x2; P]) {
         let x = F64x2::splat(xin);
         let mut lp = [F64x2::splat(0.0); P];
         let mut bp = [F64x2::splat(0.0); P];
@@ -689,25 +703,43 @@ fn resonator_walk<const P: usize>(
             lp[p] = v2;
             bp[p] = v1;
         }
-        let keep = match rows {
-            None => true,
-            Some(r) => r[next] == i,
-        };
-        if keep {
-            for (k, ok) in o.iter_mut().enumerate() {
-                let (l, b) = (lp[k / 2].lanes(), bp[k / 2].lanes());
-                ok.0.push(l[k % 2]);
-                ok.1.push(b[k % 2]);
-            }
-            if let Some(r) = rows {
-                next += 1;
-                if next == r.len() {
+        (lp, bp)
+    };
+    // a row's outputs: low-pass k at k, band-pass k at 4 + k
+    let flat = |(lp, bp): ([F64x2; P], [F64x2; P])| -> [f64; 8] {
+        let mut o = [0.0; 8];
+        for p in 0..P {
+            let (l, b) = (lp[p].lanes(), bp[p].lanes());
+            o[2 * p] = l[0];
+            o[2 * p + 1] = l[1];
+            o[4 + 2 * p] = b[0];
+            o[4 + 2 * p + 1] = b[1];
+        }
+        o
+    };
+    let mut kept: Vec<[f64; 8]> = Vec::with_capacity(cap);
+    match rows {
+        None => kept.extend(u.iter().map(|&xin| flat(step(xin)))),
+        Some(r) => {
+            // the next sample to step
+            let mut i = 0;
+            for &row in r {
+                let Some(seg) = u.get(i..=row) else {
                     break;
+                };
+                let mut last = None;
+                for &xin in seg {
+                    last = Some(step(xin));
                 }
+                match last {
+                    Some(o) => kept.push(flat(o)),
+                    None => break,
+                }
+                i = row + 1;
             }
         }
     }
-    out.extend(o);
+    (nf, kept)
 }
 
 /// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
@@ -760,21 +792,27 @@ pub fn compliance_columns_at(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<Vec<f64>> {
-    resonator_batch(a, modes, dt, rows)
-        .into_iter()
-        .zip(modes)
-        .map(|((lp, bp), &(_, z))| {
-            (0..lp.len())
-                .map(|j| {
-                    let aj = match rows {
-                        None => a[j],
-                        Some(r) => a[r[j]],
-                    };
-                    lp[j] + 2.0 * z * bp[j] - aj
-                })
-                .collect()
-        })
-        .collect()
+    // each filter's column formed from the pass's kept outputs (resonator_batch's lp, bp)
+    let mut out = Vec::with_capacity(modes.len());
+    let mut zs = modes.iter().map(|&(_, z)| z);
+    for (nf, kept) in resonator_passes(a, modes, dt, rows) {
+        for k in 0..nf {
+            let z = zs.next().unwrap_or(0.0);
+            out.push(
+                kept.iter()
+                    .enumerate()
+                    .map(|(j, o)| {
+                        let aj = match rows {
+                            None => a[j],
+                            Some(r) => a[r[j]],
+                        };
+                        o[k] + 2.0 * z * o[4 + k] - aj
+                    })
+                    .collect(),
+            );
+        }
+    }
+    out
 }
 
 /// `s` at `k` samples before sample `i` (k ≥ 0, fractional: linear interpolation between the
@@ -1132,6 +1170,35 @@ impl Context<'_> {
                 return *z;
             }
         }
+        self.compliance_zetas_profiled(&[f_hz])
+            .first()
+            .copied()
+            .unwrap_or(COMPLIANCE_ZETAS[4])
+    }
+
+    /// `compliance_zeta` of each frequency of `fs` (None as it gives), those not cached yet
+    /// profiled together: the filters of all their damping ratios in one resonator pass (each
+    /// filter's outputs are those of the filter run alone, `resonator_batch`), so the values
+    /// are each frequency's own profile's.
+    pub fn compliance_zetas(&self, fs: &[f64]) -> Vec<Option<f64>> {
+        let mut todo: Vec<f64> = Vec::new();
+        if let Ok(c) = self.zeta_cache.lock() {
+            for &f in fs {
+                if !c.contains_key(&f.to_bits()) && !todo.iter().any(|t| t.to_bits() == f.to_bits())
+                {
+                    todo.push(f);
+                }
+            }
+        }
+        if !todo.is_empty() {
+            self.compliance_zetas_profiled(&todo);
+        }
+        fs.iter().map(|&f| self.compliance_zeta(f)).collect()
+    }
+
+    /// The damping-ratio profile (`compliance_zeta`) of each frequency of `fs`, its filters
+    /// over `COMPLIANCE_ZETAS` for every frequency in one resonator pass; each value cached.
+    fn compliance_zetas_profiled(&self, fs: &[f64]) -> Vec<f64> {
         let n = self.rec.len();
         let pr = self.profile_rows.get_or_init(|| {
             let rows = self.training_rows(self.window.min(PROFILE_WINDOW), PROFILE_ROWS);
@@ -1147,73 +1214,87 @@ impl Context<'_> {
             FitRows { rows, cols, f }
         });
         let (rows, base, f) = (&pr.rows, &pr.cols, &pr.f);
-        let z = if rows.len() < 10 || self.base_pred.len() != n {
-            COMPLIANCE_ZETAS[4]
+        let zs: Vec<f64> = if rows.len() < 10 || self.base_pred.len() != n {
+            vec![COMPLIANCE_ZETAS[4]; fs.len()]
         } else {
-            let modes: Vec<(f64, f64)> = COMPLIANCE_ZETAS.iter().map(|&z| (f_hz, z)).collect();
-            let cols = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(rows));
-            // the joint fit of the baseline columns and the mode's column (what the selection
-            // fits), per damping ratio
-            let ff: f64 = f.iter().map(|v| v * v).sum();
-            let dot = |x: &[f64], y: &[f64]| -> f64 { x.iter().zip(y).map(|(x, y)| x * y).sum() };
-            // the baseline columns' products (the same for every damping ratio: once), then
-            // per damping ratio the mode column's row and column of the normal equations
-            let nb = base.len();
-            let m = nb + 1;
-            let mut g0 = vec![0.0; m * m];
-            let mut bb0 = vec![0.0; m];
-            for p in 0..nb {
-                for q in p..nb {
-                    let d = dot(&base[p], &base[q]);
-                    g0[p * m + q] = d;
-                    g0[q * m + p] = d;
-                }
-                bb0[p] = dot(&base[p], f);
-            }
-            let rss: Vec<f64> = cols
+            let modes: Vec<(f64, f64)> = fs
                 .iter()
-                .map(|c| {
-                    let (mut g, mut bb) = (g0.clone(), bb0.clone());
-                    for p in 0..nb {
-                        let d = dot(&base[p], c);
-                        g[p * m + nb] = d;
-                        g[nb * m + p] = d;
-                    }
-                    g[nb * m + nb] = dot(c, c);
-                    bb[nb] = dot(c, f);
-                    let th = super::solve_sym(&g, &bb, m).th;
-                    let mut r = ff;
-                    for p in 0..m {
-                        r -= 2.0 * th[p] * bb[p];
-                        for q in 0..m {
-                            r += th[p] * g[p * m + q] * th[q];
-                        }
-                    }
-                    r
-                })
+                .flat_map(|&f_hz| COMPLIANCE_ZETAS.iter().map(move |&z| (f_hz, z)))
                 .collect();
-            let k = (0..rss.len())
-                .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
-                .unwrap_or(4);
-            if k == 0 || k + 1 == rss.len() {
-                COMPLIANCE_ZETAS[k]
-            } else {
-                // vertex of the parabola through (ln ζ, rss) at k−1, k, k+1 (equal spacing h)
-                let (y0, y1, y2) = (rss[k - 1], rss[k], rss[k + 1]);
-                let den = y0 - 2.0 * y1 + y2;
-                let h = (COMPLIANCE_ZETAS[k + 1] / COMPLIANCE_ZETAS[k]).ln();
-                let d = if den > 0.0 {
-                    0.5 * (y0 - y2) / den
-                } else {
-                    0.0
-                };
-                (COMPLIANCE_ZETAS[k].ln() + d.clamp(-1.0, 1.0) * h).exp()
-            }
+            let all = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(rows));
+            all.chunks(COMPLIANCE_ZETAS.len())
+                .map(|cols| zeta_of_profile(base, f, cols))
+                .collect()
         };
         if let Ok(mut c) = self.zeta_cache.lock() {
-            c.insert(f_hz.to_bits(), z);
+            for (f_hz, z) in fs.iter().zip(&zs) {
+                c.insert(f_hz.to_bits(), *z);
+            }
         }
-        z
+        zs
+    }
+}
+
+/// The damping ratio of `compliance_zeta`'s profile from the mode's columns `cols` (one per
+/// value of `COMPLIANCE_ZETAS`, at the profile's rows) beside the baseline columns `base`,
+/// the force `f` at those rows.
+fn zeta_of_profile(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -> f64 {
+    // the joint fit of the baseline columns and the mode's column (what the selection fits),
+    // per damping ratio
+    let ff: f64 = f.iter().map(|v| v * v).sum();
+    let dot = |x: &[f64], y: &[f64]| -> f64 { x.iter().zip(y).map(|(x, y)| x * y).sum() };
+    // the baseline columns' products (the same for every damping ratio: once), then per
+    // damping ratio the mode column's row and column of the normal equations
+    let nb = base.len();
+    let m = nb + 1;
+    let mut g0 = vec![0.0; m * m];
+    let mut bb0 = vec![0.0; m];
+    for p in 0..nb {
+        for q in p..nb {
+            let d = dot(&base[p], &base[q]);
+            g0[p * m + q] = d;
+            g0[q * m + p] = d;
+        }
+        bb0[p] = dot(&base[p], f);
+    }
+    let rss: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let (mut g, mut bb) = (g0.clone(), bb0.clone());
+            for p in 0..nb {
+                let d = dot(&base[p], c);
+                g[p * m + nb] = d;
+                g[nb * m + p] = d;
+            }
+            g[nb * m + nb] = dot(c, c);
+            bb[nb] = dot(c, f);
+            let th = super::solve_sym(&g, &bb, m).th;
+            let mut r = ff;
+            for p in 0..m {
+                r -= 2.0 * th[p] * bb[p];
+                for q in 0..m {
+                    r += th[p] * g[p * m + q] * th[q];
+                }
+            }
+            r
+        })
+        .collect();
+    let k = (0..rss.len())
+        .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
+        .unwrap_or(4);
+    if k == 0 || k + 1 == rss.len() {
+        COMPLIANCE_ZETAS[k]
+    } else {
+        // vertex of the parabola through (ln ζ, rss) at k−1, k, k+1 (equal spacing h)
+        let (y0, y1, y2) = (rss[k - 1], rss[k], rss[k + 1]);
+        let den = y0 - 2.0 * y1 + y2;
+        let h = (COMPLIANCE_ZETAS[k + 1] / COMPLIANCE_ZETAS[k]).ln();
+        let d = if den > 0.0 {
+            0.5 * (y0 - y2) / den
+        } else {
+            0.0
+        };
+        (COMPLIANCE_ZETAS[k].ln() + d.clamp(-1.0, 1.0) * h).exp()
     }
 }
 
@@ -1249,7 +1330,8 @@ fn dahl_columns(z: &[f64], sg: &[f64]) -> Vec<(String, Vec<f64>)> {
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
 /// pass (a frequency whose profile identifies no mode has a zero column).
 fn compliance_batch(ctx: &Context, s: &Sig, effs: &[Effect]) -> Vec<Vec<(String, Vec<f64>)>> {
-    let zetas: Vec<Option<f64>> = effs.iter().map(|e| ctx.compliance_zeta(e.param)).collect();
+    let fs: Vec<f64> = effs.iter().map(|e| e.param).collect();
+    let zetas = ctx.compliance_zetas(&fs);
     let modes: Vec<(f64, f64)> = effs
         .iter()
         .zip(&zetas)
@@ -1844,9 +1926,15 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
         let c = [r.a[i], va[i], ctx.sgn[i], 1.0];
         for j in 0..4 {
             bv[j] += c[j] * r.f[i];
-            for k in 0..4 {
+            for k in j..4 {
                 g[j * 4 + k] += c[j] * c[k];
             }
+        }
+    }
+    // the lower triangle: c_k·c_j = c_j·c_k exactly, summed in the same order
+    for j in 1..4 {
+        for k in 0..j {
+            g[j * 4 + k] = g[k * 4 + j];
         }
     }
     let sol = super::solve_sym(&g, &bv, 4);
@@ -3106,12 +3194,63 @@ mod tests {
         };
         let want: Vec<(Vec<f64>, Vec<f64>)> = all.iter().map(|&(f, z)| scalar(f, z)).collect();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        // at chosen rows (the first sample, a stride, neighbours, the last sample): the same
+        // outputs at those samples
+        let rows: Vec<usize> = [0, 1, 2]
+            .into_iter()
+            .chain((17..u.len() - 1).step_by(37))
+            .chain([u.len() - 1])
+            .collect();
+        let at = |v: &[f64]| rows.iter().map(|&i| v[i].to_bits()).collect::<Vec<u64>>();
         for m in 1..=all.len() {
             let got = resonator_batch(&u, &all[..m], dt, None);
             assert_eq!(got.len(), m);
             for (k, (g, w)) in got.iter().zip(&want).enumerate() {
                 assert_eq!(bits(&g.0), bits(&w.0), "low-pass of filter {k} of {m}");
                 assert_eq!(bits(&g.1), bits(&w.1), "band-pass of filter {k} of {m}");
+            }
+            let got = resonator_batch(&u, &all[..m], dt, Some(&rows));
+            assert_eq!(got.len(), m);
+            for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+                assert_eq!(
+                    bits(&g.0),
+                    at(&w.0),
+                    "low-pass of filter {k} of {m} at rows"
+                );
+                assert_eq!(
+                    bits(&g.1),
+                    at(&w.1),
+                    "band-pass of filter {k} of {m} at rows"
+                );
+            }
+        }
+    }
+
+    /// `compliance_columns_at` (each column formed from its pass's kept outputs) gives, mode
+    /// by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for bit,
+    /// on every sample and at chosen rows, for the nine modes (passes of four, four and one).
+    /// Breaks: the band-pass taken at the low-pass's index, or each mode given the next
+    /// mode's ζ, fail it.
+    #[test]
+    fn compliance_columns_are_the_resonators_outputs() {
+        let u: Vec<f64> = (0..4000)
+            .map(|i| (0.011 * i as f64).sin() + 0.5 * (0.19 * i as f64).cos())
+            .collect();
+        let modes = RESONATOR_MODES;
+        let rows: Vec<usize> = (0..u.len()).step_by(13).collect();
+        for r in [None, Some(rows.as_slice())] {
+            let cols = compliance_columns_at(&u, &modes, 1e-3, r);
+            let res = resonator_batch(&u, &modes, 1e-3, r);
+            assert_eq!(cols.len(), modes.len());
+            for (k, ((c, (lp, bp)), &(_, z))) in cols.iter().zip(&res).zip(&modes).enumerate() {
+                let want: Vec<u64> = (0..lp.len())
+                    .map(|j| {
+                        let aj = r.map_or(u[j], |rw| u[rw[j]]);
+                        (lp[j] + 2.0 * z * bp[j] - aj).to_bits()
+                    })
+                    .collect();
+                let got: Vec<u64> = c.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(got, want, "mode {k}");
             }
         }
     }
@@ -3323,6 +3462,52 @@ mod tests {
         assert!(!same_channel_timing(lag, &[e(lag)]));
         assert!(!same_channel_timing(lag, &[e(EffectKind::Cogging)]));
         assert!(!same_channel_timing(EffectKind::Cogging, &[e(lag), e(act)]));
+    }
+
+    /// `compliance_zetas` (the profiles of several frequencies in one resonator pass) gives
+    /// each frequency's `compliance_zeta` profiled alone on a fresh context, bit for bit, a
+    /// repeated frequency included. The record: a chirp (0.5 to 40 Hz over 20 s, 1 kHz) with a
+    /// 2 kg modal mass on a 12 Hz, ζ 0.05 spring-damper integrated by its own semi-implicit
+    /// Euler steps (not the resonator of the profile), beside inertia, viscous and Coulomb
+    /// friction. Breaks: the columns split per frequency one short (chunks of 8) or the
+    /// frequencies' values cached in reverse order fail it.
+    #[test]
+    fn batched_zeta_profiles_match_single_ones() {
+        let (fs_hz, n) = (1000.0, 20_000);
+        let dt = 1.0 / fs_hz;
+        let (w0, z0, m2) = (std::f64::consts::TAU * 12.0, 0.05, 2.0);
+        let (mut y, mut yd) = (0.0, 0.0);
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 * dt;
+            // phase of a linear chirp 0.5 → 40 Hz over 20 s
+            let ph = std::f64::consts::TAU * (0.5 * t + 0.25 * 39.5 / 20.0 * t * t);
+            let fr = 0.5 + 39.5 / 20.0 * t;
+            let amp = 2e-3 / (1.0 + 0.1 * fr);
+            let x = amp * ph.sin();
+            let v = amp * std::f64::consts::TAU * fr * ph.cos();
+            let a = -amp * (std::f64::consts::TAU * fr).powi(2) * ph.sin();
+            let ydd = -2.0 * z0 * w0 * (yd - v) - w0 * w0 * (y - x);
+            yd += ydd * dt;
+            y += yd * dt;
+            rec.t.push(t);
+            rec.x.push(x);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f
+                .push(3.0 * a + 50.0 * v + 4.0 * v.signum() + m2 * (ydd - a));
+        }
+        let freqs = [12.0, 5.0, 30.0, 12.0, 2.0, 80.0];
+        let batched = Context::new(&rec).compliance_zetas(&freqs);
+        let single: Vec<Option<f64>> = freqs
+            .iter()
+            .map(|&f| Context::new(&rec).compliance_zeta(f))
+            .collect();
+        let bits = |v: &[Option<f64>]| v.iter().map(|z| z.map(f64::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(&batched), bits(&single));
+        // profiled, not the fallback: distinct values, a mode identified at 12 Hz
+        assert!(single[0].is_some(), "{single:?}");
+        assert_ne!(single[0], single[1], "{single:?}");
     }
 
     /// `stribeck_within_presliding` on a closed-form sinusoid, x = A·cos(ωt), A 20 mm, period
