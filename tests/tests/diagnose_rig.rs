@@ -51,18 +51,26 @@ fn first_parameter(d: &Diagnosis, effect: &str) -> f64 {
         .map_or(0.0, |f| f.parameters[0].1)
 }
 
-/// The delay record `seed` is named `lag` alone, its delay within `bound` (relative) of the
-/// rig's.
-fn lag_alone(seed: u64, bound: f64) {
+/// The record `seed` of the long run is named its hidden effect alone (`lag`, `stribeck`,
+/// `presliding_hysteresis` or `backlash`), the finding's first parameter (delay, v_s, x_c,
+/// width) within `bound` (relative) of the rig's.
+fn named_alone(seed: u64, bound: f64) {
     let (spec, d) = diagnosed_long_run_record(seed);
-    let Hidden::Delay { delay_s } = spec.hidden else {
-        panic!("{seed} is a delay record");
+    let (name, truth) = match spec.hidden {
+        Hidden::Delay { delay_s } => ("lag", delay_s),
+        Hidden::Stribeck { vs_m_s, .. } => ("stribeck", vs_m_s),
+        Hidden::Presliding { x_char_m } => ("presliding_hysteresis", x_char_m),
+        Hidden::Backlash { width_m } => ("backlash", width_m),
+        _ => panic!("{seed} is a delay, Stribeck, presliding or backlash record"),
     };
     let names = d.catalogue_names();
-    let lag = first_parameter(&d, "lag");
-    println!("{names:?}: lag {lag} s for {delay_s} s");
-    assert_eq!(names, ["lag"], "{:?}", d.verdicts);
-    assert!((lag / delay_s - 1.0).abs() < bound, "lag {lag}");
+    let p = first_parameter(&d, name);
+    println!("{seed}: {names:?}: {name} {p} for {truth}");
+    assert_eq!(names, [name], "{:?}", d.verdicts);
+    assert!(
+        (p / truth - 1.0).abs() < bound,
+        "{seed}: {name} {p} for {truth}"
+    );
 }
 
 /// The seeds listed in `RIG_SEEDS` (comma-separated).
@@ -942,7 +950,7 @@ fn rig_effect_at_rest() {
 #[test]
 fn delayed_switch_is_not_presliding() {
     // measured +1.7 % (20.08 ms for 19.74); 5 % is the bound of the other lag tests
-    lag_alone(200_021, 0.05);
+    named_alone(200_021, 0.05);
 }
 
 /// A resonance beside a lag must carry the margin on top of the lag's three parts (delayed
@@ -954,7 +962,7 @@ fn delayed_switch_is_not_presliding() {
 #[test]
 fn delay_remainder_is_not_a_resonance() {
     // measured −0.66 % (37.57 ms for 37.82): 2 % is 3× that
-    lag_alone(200_035, 0.02);
+    named_alone(200_035, 0.02);
 }
 
 /// The derived acceleration's quantisation noise is no mode (the scan's rule on `compliance`,
@@ -965,19 +973,11 @@ fn delay_remainder_is_not_a_resonance() {
 /// mass 36 and 25 kg) beside it on both.
 #[test]
 fn derived_acceleration_noise_is_no_compliance() {
+    // measured −26.6 % and −8.9 % (the Dahl column fitted through the derived signals;
+    // with the `compliance` beside it 500002 gave −12.7 %); bound 40 % (1.5× the larger):
+    // a displacement of the build-up's order, not its precision, is what the name asserts
     for seed in [500_002, 500_052] {
-        let (spec, d) = diagnosed_long_run_record(seed);
-        let Hidden::Presliding { x_char_m } = spec.hidden else {
-            panic!("{seed} is a presliding record");
-        };
-        let names = d.catalogue_names();
-        let xc = first_parameter(&d, "presliding_hysteresis");
-        println!("{seed}: {names:?}: x_c {xc} m for {x_char_m} m");
-        assert_eq!(names, ["presliding_hysteresis"], "{:?}", d.verdicts);
-        // measured −26.6 % and −8.9 % (the Dahl column fitted through the derived signals;
-        // with the `compliance` beside it 500002 gave −12.7 %); bound 40 % (1.5× the larger):
-        // a displacement of the build-up's order, not its precision, is what the name asserts
-        assert!((xc / x_char_m - 1.0).abs() < 0.4, "x_c {xc}");
+        named_alone(seed, 0.4);
     }
 }
 
@@ -994,20 +994,9 @@ fn derived_acceleration_noise_is_no_compliance() {
 /// covariances with the inertia and viscous columns, names it beside `stribeck` on 400002.
 #[test]
 fn derived_acceleration_noise_carries_no_margin() {
+    // measured −1.04 % (v_s), +1.33 % (x_c), −0.64 % (width); bound 4 %, 3× the largest
     for seed in [400_002, 500_015, 600_020] {
-        let (spec, d) = diagnosed_long_run_record(seed);
-        let (name, truth) = match spec.hidden {
-            Hidden::Stribeck { vs_m_s, .. } => ("stribeck", vs_m_s),
-            Hidden::Presliding { x_char_m } => ("presliding_hysteresis", x_char_m),
-            Hidden::Backlash { width_m } => ("backlash", width_m),
-            _ => panic!("{seed} is a Stribeck, presliding or backlash record"),
-        };
-        let names = d.catalogue_names();
-        let p = first_parameter(&d, name);
-        println!("{seed}: {names:?}: {name} {p} for {truth}");
-        assert_eq!(names, [name], "{:?}", d.verdicts);
-        // measured −1.04 % (v_s), +1.33 % (x_c), −0.64 % (width); bound 4 %, 3× the largest
-        assert!((p / truth - 1.0).abs() < 0.04, "{seed}: {p} for {truth}");
+        named_alone(seed, 0.04);
     }
 }
 
@@ -1022,7 +1011,7 @@ fn derived_acceleration_noise_carries_no_margin() {
 #[test]
 fn delay_is_ranked_on_common_rows() {
     // measured +11.4 % (37.26 ms for 33.43; the least-squares gain 0.82); bound 3× that
-    lag_alone(200_023, 0.34);
+    named_alone(200_023, 0.34);
 }
 
 /// A play is tested on its contacts: a `lag` chosen beside it leaves out of its own test the
@@ -1036,16 +1025,8 @@ fn delay_is_ranked_on_common_rows() {
 /// beside it still on its own rows names `backlash` and `lag`.
 #[test]
 fn play_is_tested_on_its_contacts() {
-    let (spec, d) = diagnosed_long_run_record(600_012);
-    let Hidden::Backlash { width_m } = spec.hidden else {
-        panic!("600012 is a backlash record");
-    };
-    let names = d.catalogue_names();
-    let w = first_parameter(&d, "backlash");
-    println!("{names:?}: width {w} m for {width_m} m");
-    assert_eq!(names, ["backlash"], "{:?}", d.verdicts);
     // measured +1.0 % (0.7095 mm for 0.7024); bound 3× that
-    assert!((w / width_m - 1.0).abs() < 0.03, "width {w}");
+    named_alone(600_012, 0.03);
 }
 
 /// The long run's records as the rig draws them, without the diagnosis (`RIG_N=56 cargo test
