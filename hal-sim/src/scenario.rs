@@ -791,21 +791,34 @@ fn in_range(key: &str, v: f64, lo: Lo, hi: f64, unit: &str) -> Result<(), String
         format!(" {unit}")
     };
     Err(format!(
-        "{key} = {v}: must be a finite number in {bracket}{l}, {hi}]{unit}"
+        "{key} = {}: must be a finite number in {bracket}{l}, {hi}]{unit}",
+        shown(v)
     ))
+}
+
+/// A value as a message shows it: as written for the usual magnitudes, in exponent form
+/// beyond them (`1e300`, not its 301 digits).
+fn shown(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e16).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
 }
 
 /// A value the firmware takes as `f32`: refused when it underflows to 0 (as overflow is).
 fn f32_value(key: &str, v: f64) -> Result<(), String> {
     if v != 0.0 && v.is_finite() && (v.abs() as f32) < f32::MIN_POSITIVE {
         return Err(format!(
-            "{key} = {v}: too small for the firmware's f32 (|value| ≥ {:e} or 0)",
+            "{key} = {}: too small for the firmware's f32 (|value| ≥ {:e} or 0)",
+            shown(v),
             f32::MIN_POSITIVE
         ));
     }
     if v.is_finite() && (v.abs() as f32).is_infinite() {
         return Err(format!(
-            "{key} = {v}: too large for the firmware's f32 (|value| ≤ {:e})",
+            "{key} = {}: too large for the firmware's f32 (|value| ≤ {:e})",
+            shown(v),
             f32::MAX
         ));
     }
@@ -877,6 +890,21 @@ mod tests {
             .and_then(|s| s.config())
             .unwrap_err()
             .contains("law.opt.a"));
+    }
+
+    #[test]
+    fn out_of_range_values_are_shown_short() {
+        let e = in_range("duration_s", 1e300, Lo::Open(0.0), 1e5, "s").unwrap_err();
+        assert_eq!(
+            e,
+            "duration_s = 1e300: must be a finite number in (0, 100000] s"
+        );
+        let e = in_range("a", -2.5, Lo::Closed(0.0), 1.0, "").unwrap_err();
+        assert_eq!(e, "a = -2.5: must be a finite number in [0, 1]");
+        let e = in_range("a", 3e-9, Lo::Open(1e-6), 1.0, "").unwrap_err();
+        assert!(e.starts_with("a = 3e-9: "), "{e}");
+        let e = in_range("a", f64::NAN, Lo::Open(0.0), 1.0, "").unwrap_err();
+        assert!(e.starts_with("a = NaN: "), "{e}");
     }
 
     #[test]
