@@ -218,12 +218,19 @@ pub fn echo_of(bytes: &[u8]) -> String {
     e.split("\r\n").next().unwrap_or("").to_string()
 }
 
+/// Whether a script line or a command argument is a command: blank ones and `#` comments are
+/// skipped (the console answers a blank line with nothing, so waiting for its reply would
+/// only time out).
+fn is_command(line: &str) -> bool {
+    let l = line.trim();
+    !l.is_empty() && !l.starts_with('#')
+}
+
 /// The command list of a script: one per line, blank lines and `#` comments skipped.
 pub fn script_commands(text: &str) -> Vec<String> {
     text.lines()
-        .map(|l| l.trim())
-        .filter(|l| !l.is_empty() && !l.starts_with('#'))
-        .map(str::to_string)
+        .filter(|l| is_command(l))
+        .map(|l| l.trim().to_string())
         .collect()
 }
 
@@ -244,7 +251,12 @@ fn check_args(a: &ClientArgs) -> Result<(), String> {
 
 pub fn run(a: &ClientArgs) -> Result<(), String> {
     check_args(a)?;
-    let mut cmds = a.commands.clone();
+    let mut cmds: Vec<String> = a
+        .commands
+        .iter()
+        .filter(|c| is_command(c))
+        .cloned()
+        .collect();
     if let Some(p) = &a.script {
         let text =
             std::fs::read_to_string(p).map_err(|e| format!("--script {}: {e}", p.display()))?;
