@@ -1186,7 +1186,8 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let carries_beyond_switch =
         |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
             let k = tau / ctx.dt;
-            let parts: Vec<Vec<f64>> = [&rec.a, &rec.v]
+            let parts: Vec<Vec<f64>> = ctx
+                .lag_signals_at(tau)
                 .iter()
                 .map(|s| {
                     sub.rows
