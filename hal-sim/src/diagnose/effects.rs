@@ -182,23 +182,16 @@ pub struct Context<'a> {
     /// The training rows the delayed baseline of `lag` is fitted on (built once).
     pub lag_rows: std::sync::OnceLock<FitRows>,
     /// `lag_coefs` per delay (bits of τ).
-    pub lag_cache: std::sync::Mutex<LagCoefCache>,
-    /// `lag_in_band` per delay (bits of τ).
-    pub lag_band_cache: std::sync::Mutex<std::collections::HashMap<u64, bool>>,
+    pub lag_cache: std::sync::Mutex<std::collections::HashMap<u64, Option<[f64; 3]>>>,
     /// The derived velocity's and acceleration's noise (`DerivNoise`, built once).
     pub deriv_noise: std::sync::OnceLock<Option<DerivNoise>>,
     /// The velocity through the acceleration's band (`Context::v_with_a`, built once).
     pub v_with_a: std::sync::OnceLock<Vec<f64>>,
-    /// a and v through `lag`'s band (`Context::lag_signals`, built once).
-    pub lag_signals: std::sync::OnceLock<[Vec<f64>; 2]>,
     /// Samples from the start the candidates are screened on (`super::SCREEN_WINDOW`, at most
     /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
     /// lowest resonance) and the delayed baseline's rows are taken over them.
     pub window: usize,
 }
-
-/// `lag_coefs` per (bits of τ, built through `lag_band`).
-pub type LagCoefCache = std::collections::HashMap<(u64, bool), Option<[f64; 3]>>;
 
 /// Rows of a fit on a strided subset of the training samples in motion
 /// (`Context::training_rows`), with the columns and the force there: for the delayed
@@ -357,10 +350,8 @@ impl<'a> Context<'a> {
             profile_rows: Default::default(),
             lag_rows: Default::default(),
             lag_cache: Default::default(),
-            lag_band_cache: Default::default(),
             deriv_noise: Default::default(),
             v_with_a: Default::default(),
-            lag_signals: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
         if c.x_quantum == f64::MAX {
@@ -837,11 +828,6 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     s[j] + al * (s[j + 1] - s[j])
 }
 
-/// `lag`'s band (`Context::lag_band`) in multiples of the motion bandwidth: the zero-phase
-/// low-pass (Butterworth-2 forward-backward, |H| = 1/(1 + (f/f_l)⁴)) passes the motion's
-/// band within 1 % (f ≤ f_l/3).
-pub const LAG_BAND: f64 = 10.0;
-
 /// The longest delay `lag` scans, in samples (its grid's last value).
 pub const LAG_MAX_SAMPLES: f64 = 64.0;
 
@@ -947,63 +933,8 @@ impl Context<'_> {
     /// (an inertia, viscous or Coulomb coefficient below 0, or fewer than 10 rows): the lag
     /// column is then zero and `lag` is not named at this τ. Cached per τ.
     pub fn lag_coefs(&self, tau: f64) -> Option<[f64; 3]> {
-        self.lag_coefs_with(tau, self.lag_in_band(tau))
-    }
-
-    /// The signals (a, v) `lag`'s column at `tau` is built from: through `lag_band` when
-    /// `lag_in_band`, else the record's.
-    pub fn lag_signals_at(&self, tau: f64) -> [&[f64]; 2] {
-        if self.lag_in_band(tau) {
-            let [a, v] = self.lag_signals();
-            [a, v]
-        } else {
-            [&self.rec.a, &self.rec.v]
-        }
-    }
-
-    /// True when `lag`'s column at `tau` is built in `lag_band`: the record has a band, and
-    /// on the delayed device's rows (`lag_coefs`'s) the column built from the record's a and
-    /// v is more than half the derived signals' noise (`lag_noise`), the bound above which
-    /// the scan does not resolve τ (`lag_corrected`). Where the whole band resolves the delay
-    /// the column is the record's own; where its noise hides it, the delay is looked for in
-    /// the band where the motion has content. Cached per τ.
-    pub fn lag_in_band(&self, tau: f64) -> bool {
-        if let Ok(c) = self.lag_band_cache.lock() {
-            if let Some(b) = c.get(&tau.to_bits()) {
-                return *b;
-            }
-        }
-        let b = self.lag_band().is_some() && {
-            let k = tau / self.dt;
-            match (
-                self.lag_coefs_with(tau, false),
-                self.lag_noise_with(tau, false),
-                self.lag_rows.get(),
-            ) {
-                (Some(th), Some(sn), Some(lr)) => {
-                    let (a, v) = (&self.rec.a, &self.rec.v);
-                    let (mut e, mut n) = (0.0, 0.0);
-                    for &i in lr.rows.iter().filter(|&&i| !self.rest_delayed(i, k)) {
-                        let z =
-                            th[0] * (delayed(a, i, k) - a[i]) + th[1] * (delayed(v, i, k) - v[i]);
-                        e += z * z;
-                        n += 1.0;
-                    }
-                    n * sn[2][2] > 0.5 * e
-                }
-                _ => false,
-            }
-        };
-        if let Ok(mut c) = self.lag_band_cache.lock() {
-            c.insert(tau.to_bits(), b);
-        }
-        b
-    }
-
-    /// `lag_coefs` with the signals through `lag_band` (`in_band`) or the record's.
-    pub fn lag_coefs_with(&self, tau: f64, in_band: bool) -> Option<[f64; 3]> {
         if let Ok(c) = self.lag_cache.lock() {
-            if let Some(th) = c.get(&(tau.to_bits(), in_band)) {
+            if let Some(th) = c.get(&tau.to_bits()) {
                 return *th;
             }
         }
@@ -1021,13 +952,7 @@ impl Context<'_> {
             None
         } else {
             let r = self.rec;
-            let sig: [&[f64]; 2] = if in_band {
-                let [a, v] = self.lag_signals();
-                [a, v]
-            } else {
-                [&r.a, &r.v]
-            };
-            let mut all: Vec<Vec<f64>> = sig
+            let mut all: Vec<Vec<f64>> = [&r.a, &r.v]
                 .iter()
                 .map(|s| lr.rows.iter().map(|&i| delayed(s, i, k)).collect())
                 .collect();
@@ -1052,7 +977,7 @@ impl Context<'_> {
             (nt.n >= 10 && c.iter().all(|v| v.is_finite() && *v >= 0.0) && c[0] > 0.0).then_some(c)
         };
         if let Ok(mut c) = self.lag_cache.lock() {
-            c.insert((tau.to_bits(), in_band), th);
+            c.insert(tau.to_bits(), th);
         }
         th
     }
@@ -1062,18 +987,16 @@ impl Context<'_> {
 /// position's quantisation error (white, variance q²/12, q the position quantum) through the
 /// record's own zero-phase low-passes and central differences (`record::derive_from_x` at the
 /// record's `derivative_cutoff_hz` and `velocity_cutoff_hz`), as their responses to a
-/// unit position sample; with `lag`'s band (`Context::lag_band`), also a and v through that
-/// band's low-pass (`Context::lag_signals`). These are the errors in the variables of `lag`'s
-/// column, which differences a and v over τ (`Context::lag_noise`).
+/// unit position sample. These are the errors in the variables of `lag`'s column, which
+/// differences a and v over τ (`Context::lag_noise`).
 #[derive(Debug, Clone)]
 pub struct DerivNoise {
     /// Variance of the position's error (m²).
     s2: f64,
-    /// Responses to a unit position sample, each with the index of the impulse's sample: a
-    /// (index 0), v (1), and with a lag band a (2) and v (3) through it.
-    h: Vec<(Vec<f64>, usize)>,
-    /// σ²·Σ h_p[i]·h_q[i + d] for |d| ≤ `DerivNoise::D`: pair (p, q) at p·h.len() + q.
-    k: Vec<Vec<f64>>,
+    /// Responses of a (index 0) and v (index 1) to a unit position sample.
+    h: [Vec<f64>; 2],
+    /// σ²·Σ h_p[i]·h_q[i + d] for |d| ≤ `DerivNoise::D`: [aa, av, va, vv][d + D].
+    k: [Vec<f64>; 4],
 }
 
 impl DerivNoise {
@@ -1081,75 +1004,45 @@ impl DerivNoise {
     const D: isize = 128;
 
     /// The noise of a record whose v and a are derived from a position of quantum `q` through
-    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s, and,
-    /// with `lag_band` (Hz), of a and v through that band's low-pass (`record::filtfilt`).
-    /// None when there is no quantum.
-    pub fn new(q: f64, fc: f64, fc_v: f64, lag_band: Option<f64>, dt: f64) -> Option<DerivNoise> {
+    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s. None
+    /// when there is no quantum.
+    pub fn new(q: f64, fc: f64, fc_v: f64, dt: f64) -> Option<DerivNoise> {
         let fs = 1.0 / dt;
         if !(q > 0.0 && fc > 0.0 && fc < 0.5 * fs) {
             return None;
         }
         // the filter's impulse response has decayed to rounding well within 12 periods of its
         // cutoff each way; the tabulated shifts beside it
-        let response = |f: f64| {
-            let half = (12.0 * fs / f).ceil() as usize + Self::D as usize;
-            let mut x = vec![0.0; 2 * half + 1];
-            x[half] = 1.0;
-            let (v, a, _) = super::record::derive_from_x(&x, fc, Some(fc_v), dt);
-            (a, v, half)
-        };
-        let (a, v, half) = response(fc);
-        let mut h = vec![(a, half), (v, half)];
-        if let Some(fl) = lag_band.filter(|f| *f > 0.0 && *f < 0.45 * fs) {
-            let (a, v, half) = response(fl.min(fc));
-            h.push((super::record::filtfilt(&a, fl, fs), half));
-            h.push((super::record::filtfilt(&v, fl, fs), half));
-        }
+        let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
+        let mut x = vec![0.0; 2 * half + 1];
+        x[half] = 1.0;
+        let (v, a, _) = super::record::derive_from_x(&x, fc, Some(fc_v), dt);
         let mut nz = DerivNoise {
             s2: q * q / 12.0,
-            h,
-            k: Vec::new(),
+            h: [a, v],
+            k: Default::default(),
         };
-        let m = nz.h.len();
-        nz.k = (0..m * m)
-            .map(|pq| {
-                (-Self::D..=Self::D)
-                    .map(|d| nz.sum(pq / m, pq % m, d))
-                    .collect()
-            })
-            .collect();
+        let pairs = [(0, 0), (0, 1), (1, 0), (1, 1)];
+        nz.k = pairs.map(|(p, q)| (-Self::D..=Self::D).map(|d| nz.sum(p, q, d)).collect());
         Some(nz)
     }
 
     fn sum(&self, p: usize, q: usize, d: isize) -> f64 {
-        let ((hp, cp), (hq, cq)) = (&self.h[p], &self.h[q]);
-        let (cp, cq) = (*cp as isize, *cq as isize);
-        // Σ_t h_p(t)·h_q(t + d), t counted from each response's impulse sample
-        let lo = (-cp).max(-cq - d);
-        let hi = (hp.len() as isize - cp).min(hq.len() as isize - cq - d);
+        let (hp, hq) = (&self.h[p], &self.h[q]);
+        let n = hp.len() as isize;
+        let (lo, hi) = ((-d).max(0), (n - d).min(n));
         self.s2
             * (lo..hi)
-                .map(|t| hp[(t + cp) as usize] * hq[(t + d + cq) as usize])
+                .map(|i| hp[i as usize] * hq[(i + d) as usize])
                 .sum::<f64>()
     }
 
-    /// E[p(t − m)·q(t − l)] with d = m − l (p, q: 0 the acceleration, 1 the velocity, 2 and 3
-    /// the same through `lag`'s band when the noise has it, `DerivNoise::lag_signal`).
+    /// E[p(t − m)·q(t − l)] with d = m − l (p, q: 0 the acceleration, 1 the velocity).
     pub fn cov(&self, p: usize, q: usize, d: isize) -> f64 {
         if d.abs() <= Self::D {
-            self.k[self.h.len() * p + q][(d + Self::D) as usize]
+            self.k[2 * p + q][(d + Self::D) as usize]
         } else {
             self.sum(p, q, d)
-        }
-    }
-
-    /// The index (`DerivNoise::cov`) of the signal `p` (0 a, 1 v) as `lag`'s column takes it:
-    /// through its band when the noise has one.
-    pub fn lag_signal(&self, p: usize) -> usize {
-        if self.h.len() == 4 {
-            p + 2
-        } else {
-            p
         }
     }
 
@@ -1158,8 +1051,8 @@ impl DerivNoise {
     /// velocity's own noise at the same sample: the per-row covariance S of (a, v, g·a),
     /// σ²·Σ h_p·h_q over the responses to a unit position sample (g applied to h_a).
     pub fn accel_cov_through(&self, g: impl Fn(&[f64]) -> Vec<f64>) -> [[f64; 3]; 3] {
-        let y = g(&self.h[0].0);
-        let r = [&self.h[0].0[..], &self.h[1].0[..], &y[..]];
+        let y = g(&self.h[0]);
+        let r = [&self.h[0][..], &self.h[1][..], &y[..]];
         let mut s = [[0.0; 3]; 3];
         for p in 0..3 {
             for q in 0..3 {
@@ -1197,32 +1090,6 @@ impl Context<'_> {
         }
     }
 
-    /// The band of `lag`'s column (Hz): `LAG_BAND` times the motion bandwidth (`f_motion`),
-    /// None when the motion shows no bandwidth or the band reaches fs·0.45. A delay changes
-    /// the device's force only where the motion has content: above the motion's band the
-    /// column's difference a(t − τ) − a(t) (and v's) carries only the derived signals' noise,
-    /// which the derivation's double difference puts near its cutoff, far above a slow
-    /// motion's band, and which biases the lag's gain low and hides the delay.
-    pub fn lag_band(&self) -> Option<f64> {
-        let fl = LAG_BAND * self.f_motion;
-        (fl > 0.0 && fl < 0.45 / self.dt).then_some(fl)
-    }
-
-    /// The acceleration and the velocity as `lag` takes them (its delayed device's fit
-    /// `lag_coefs` and its column): through the zero-phase low-pass at `lag_band`
-    /// (`record::filtfilt`), the record's a and v when there is no band.
-    pub fn lag_signals(&self) -> &[Vec<f64>; 2] {
-        self.lag_signals.get_or_init(|| {
-            let (a, v) = (&self.rec.a, &self.rec.v);
-            match self.lag_band() {
-                Some(fl) if a.len() >= 2 => {
-                    [a, v].map(|s| super::record::filtfilt(s, fl, 1.0 / self.dt))
-                }
-                _ => [a.clone(), v.clone()],
-            }
-        })
-    }
-
     /// The noise of the record's derived v and a (`DerivNoise`), when they are derived from a
     /// quantised position (the record states its derivative cutoff and a quantum shows).
     pub fn deriv_noise(&self) -> Option<&DerivNoise> {
@@ -1233,7 +1100,7 @@ impl Context<'_> {
                 let fc_v = meta
                     .get(super::record::VELOCITY_CUTOFF_KEY)
                     .map_or(fc, |&f| f);
-                DerivNoise::new(self.x_quantum, fc, fc_v, self.lag_band(), self.dt)
+                DerivNoise::new(self.x_quantum, fc, fc_v, self.dt)
             })
             .as_ref()
     }
@@ -1263,21 +1130,14 @@ impl Context<'_> {
     /// sign's noise is not in it (a sign flips only within its band, near rest). None when
     /// the record has no derivation noise (`deriv_noise`) or no delayed device at τ.
     pub fn lag_noise(&self, tau: f64) -> Option<[[f64; 3]; 3]> {
-        self.lag_noise_with(tau, self.lag_in_band(tau))
-    }
-
-    /// `lag_noise` of the column built through `lag_band` (`in_band`) or from the record's
-    /// signals.
-    pub fn lag_noise_with(&self, tau: f64, in_band: bool) -> Option<[[f64; 3]; 3]> {
         let nz = self.deriv_noise()?;
-        let th = self.lag_coefs_with(tau, in_band)?;
+        let th = self.lag_coefs(tau)?;
         let k = tau / self.dt;
         let j = k.floor();
         let al = k - j;
         let j = j as isize;
         let z: Vec<(usize, isize, f64)> = [(0, th[0]), (1, th[1])]
             .into_iter()
-            .map(|(p, c)| (if in_band { nz.lag_signal(p) } else { p }, c))
             .flat_map(|(p, c)| [(p, j, c * (1.0 - al)), (p, j + 1, c * al), (p, 0, -c)])
             .collect();
         let cols = [vec![(0, 0, 1.0)], vec![(1, 0, 1.0)], z];
@@ -1576,13 +1436,12 @@ pub fn columns_on(ctx: &Context, s: &Sig, e: &Effect) -> Vec<(String, Vec<f64>)>
                 None => vec![0.0; n],
                 Some(th) => {
                     let k = e.param / ctx.dt;
-                    let [la, lv] = ctx.lag_signals_at(e.param);
-                    let (rv, rs) = (&ctx.rec.v, &ctx.sgn);
+                    let (ra, rv, rs) = (&ctx.rec.a, &ctx.rec.v, &ctx.sgn);
                     let at = |j: usize| s.rows.map_or(j, |r| r[j]);
                     map(&|j| {
                         let i = at(j);
-                        th[0] * (delayed(la, i, k) - la[i])
-                            + th[1] * (delayed(lv, i, k) - lv[i])
+                        th[0] * (delayed(ra, i, k) - ra[i])
+                            + th[1] * (delayed(rv, i, k) - rv[i])
                             + th[2] * delayed_switch(rv, rs, i, k)
                     })
                 }

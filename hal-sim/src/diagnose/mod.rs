@@ -1186,8 +1186,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
     let carries_beyond_switch =
         |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
             let k = tau / ctx.dt;
-            let parts: Vec<Vec<f64>> = ctx
-                .lag_signals_at(tau)
+            let parts: Vec<Vec<f64>> = [&rec.a, &rec.v]
                 .iter()
                 .map(|s| {
                     sub.rows
