@@ -1263,12 +1263,9 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64, f64) {
                 // one cause, one name: a wavelength already named (cogging or periodic
                 // friction, within 3 %) is not named again under the other periodic name; a
-                // Stribeck bump inside the presliding build-up is the build-up's shape; a
-                // ripple whose time frequency on the motion lies in a named mode's band is
-                // the mode's (and the converse)
+                // Stribeck bump inside the presliding build-up is the build-up's shape
                 if effects::same_wavelength(eff, set)
                     || effects::stribeck_within_presliding(eff, set, &ctx)
-                    || effects::ripple_at_mode(eff, set, &ctx)
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
