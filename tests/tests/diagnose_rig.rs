@@ -1033,6 +1033,27 @@ fn delayed_switch_is_not_presliding() {
     named_alone(200_021, 0.05);
 }
 
+/// A position ripple whose time frequency on the motion lies in the band of a mode kept is
+/// the mode's (`effects::ripple_at_mode`, among the verdicts): resonance 300017 (rounded
+/// triangle cruising at 72.4 mm/s on 89 % of its samples, a 2.686 Hz mode, ζ 0.107, 38.6 kg),
+/// where a `cogging` of 26.92 mm (72.4 mm/s / 26.92 mm = 2.689 Hz) took 13.8 % of the
+/// held-out rss beside the `compliance`, is named `compliance` alone. Break: the rule's
+/// condition flipped (a ripple dropped when most of the motion lies outside the mode's band)
+/// names the `cogging` beside it.
+#[test]
+fn ripple_at_the_mode_frequency_is_the_mode() {
+    let (spec, d) = diagnosed_long_run_record(300_017);
+    let Hidden::Resonance { freq_hz, .. } = spec.hidden else {
+        panic!("300017 is a resonance record");
+    };
+    let names = d.catalogue_names();
+    let f = first_parameter(&d, "compliance");
+    println!("300017: {names:?}: compliance {f} Hz for {freq_hz}");
+    assert_eq!(names, ["compliance"], "{:?}", d.verdicts);
+    // measured +0.06 % (2.6875 Hz for 2.6858): 0.2 % is 3× that
+    assert!((f / freq_hz - 1.0).abs() < 0.002, "{f} Hz for {freq_hz}");
+}
+
 /// A resonance beside a lag must carry the margin on top of the lag's three parts (delayed
 /// inertial, viscous and Coulomb) given amplitudes of their own (the scan's
 /// `carries_beyond_switch`): delay 200035 (recorded EMPS motion, 37.8 ms, 1.01 N noise),

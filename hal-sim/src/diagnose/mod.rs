@@ -1939,6 +1939,18 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 && hum_apart[k]
         })
         .collect();
+    // one cause, one name: a position ripple whose time frequency on the motion lies in the
+    // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
+    let modes: Vec<Effect> = kept
+        .iter()
+        .filter(|&&k| chosen[k].kind == EffectKind::Compliance)
+        .map(|&k| chosen[k].clone())
+        .collect();
+    let at_mode: Vec<bool> = chosen
+        .iter()
+        .map(|e| e.kind != EffectKind::Compliance && effects::ripple_at_mode(e, &modes, &ctx))
+        .collect();
+    let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
@@ -1970,6 +1982,14 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                     r.wald_diff,
                     100.0 / AGREEMENT_T,
                     AGREEMENT_T * AGREEMENT_T,
+                ));
+                continue;
+            }
+            if at_mode[k] {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but on most of the motion its time frequency lies in the band of the resonance named (a ripple at the speed the motion keeps and the mode's ringing after each turn, locked to the turn's position, are the same force): not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(&ctx, &chosen[k]),
                 ));
                 continue;
             }
