@@ -1545,7 +1545,10 @@ pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
         EffectKind::Lag | EffectKind::CurrentLimit => unit(coef[0]),
         EffectKind::Backlash => {
-            (0.0..1.0).contains(&e.param2) && unit(coef[0]) && impact_consistent(&coef[1..], m)
+            e.param2.is_finite()
+                && e.param2 < 1.0
+                && unit(coef[0])
+                && impact_consistent(&coef[1..], m)
         }
         EffectKind::Compliance => coef[0] > 0.0,
         EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
@@ -1703,6 +1706,27 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
 /// separate at exp(−πζ/√(1 − ζ²)) = 0.16); a plastic contact at 0.
 pub const PLAY_RESTITUTIONS: [f64; 4] = [0.0, 0.15, 0.3, 0.5];
 
+/// Contact frequencies of a compliant flank scanned at the width found, as fractions of the
+/// sample rate (fs/8, fs/16, fs/32: 125, 62.5, 31 Hz at 1 kHz), when the rigid, plastic
+/// contact (e = 0) is the best restitution; coded as `backlash`'s second parameter −f_c
+/// (`play_contact`). A gear's or a ballscrew's flank is a spring: the force it carried at a
+/// reversal unloads over f/k of the motion's travel (k = M·(2π·f_c)²), where a rigid flank
+/// drops it at once. Above ≈ fs/8 the spring unloads within a sample or two at the
+/// reversals' accelerations and is the rigid flank; below fs/32 the contact's mode lies
+/// within the derived acceleration's band.
+pub const PLAY_CONTACT_FRACTIONS: [f64; 2] = [0.125, 0.0625];
+
+/// `backlash`'s second parameter c as its contact: (restitution, contact frequency in Hz; 0:
+/// rigid). c ≥ 0 is a rigid flank's restitution; c < 0 a compliant, plastic flank of contact
+/// frequency −c.
+pub fn play_contact(c: f64) -> (f64, f64) {
+    if c < 0.0 {
+        (0.0, -c)
+    } else {
+        (c, 0.0)
+    }
+}
+
 /// Samples over which the `backlash` impact's force pulse is resolved (free shape, one
 /// coefficient per sample after the contact): a contact that brings the device to the
 /// motion's velocity within 12 sample periods (12 ms at 1 kHz; a contact mode above
@@ -1724,6 +1748,9 @@ pub struct PlayDevice {
     pub xm: Vec<f64>,
     pub free: Vec<bool>,
     pub impacts: Vec<(usize, f64, f64)>,
+    /// The force a compliant contact's spring carries while the device is held off its
+    /// sliding contact (`PlayWalk::spring`), per sample; empty for a rigid contact.
+    pub spring: Vec<f64>,
 }
 
 /// The device (inertia `m`, viscous `fv` and Coulomb `fc` friction) behind a play of total
@@ -1756,8 +1783,10 @@ pub fn play_device(
         xm: Vec::with_capacity(n),
         free: Vec::with_capacity(n),
         impacts: Vec::new(),
+        spring: Vec::new(),
     };
-    let mut walk = PlayWalk::new(b, m, fv, fc, dt).with_restitution(e);
+    let mut walk = PlayWalk::new(b, m, fv, fc, dt).with_contact(e);
+    let compliant = walk.stiffness().is_finite();
     for i in 0..n {
         let (free, impact) = walk.step(x[i], v[i], a[i], sg[i]);
         if let Some((since, vr)) = impact {
@@ -1765,6 +1794,9 @@ pub fn play_device(
         }
         out.xm.push(walk.xm);
         out.free.push(free);
+        if compliant {
+            out.spring.push(walk.spring);
+        }
     }
     out
 }
@@ -1790,6 +1822,13 @@ pub struct PlayWalk {
     vm: f64,
     /// The motion's position at the last step (None before the first).
     x_last: Option<f64>,
+    /// The contact's stiffness over the device's inertia, ω_c² (1/s²): a flank that is a
+    /// spring of stiffness M·ω_c², its contact mode at ω_c; infinite (`new`): a rigid flank.
+    wc2: f64,
+    /// The force the contact's spring carries while the device is held off its sliding
+    /// contact (signed: + pushes the device towards +): unloading after the motion reverses
+    /// on a flank, loading before the device breaks away; 0 otherwise and on a rigid flank.
+    pub spring: f64,
 }
 
 impl PlayWalk {
@@ -1811,7 +1850,43 @@ impl PlayWalk {
             xm: 0.0,
             vm: 0.0,
             x_last: None,
+            wc2: f64::INFINITY,
+            spring: 0.0,
         }
+    }
+
+    /// The same device behind a contact of finite stiffness k = M·(2π·`hz`)² (a gear's or a
+    /// ballscrew's flank is a spring, not a wall; `hz` its contact mode with the device's
+    /// inertia; `hz` ≤ 0 or not finite: rigid, `new`'s walk). On a flank the spring carries the
+    /// device's force f = M·a + Fv·v + Fc·sgn v and the device lags the flank by f/k. When the
+    /// motion reverses on a flank, the device's friction stops it (static friction, anywhere
+    /// within Fc, holds it) with the spring loaded by the force it carried, M·a + Fv·v +
+    /// Fc·sign (sliding friction in the flank's direction, as it stops): the spring then
+    /// unloads linearly with the motion's retreat, k·pen, and the device is free only once it
+    /// has unloaded (over f/k of travel, where a rigid flank releases it at once). A flank
+    /// that reaches a device at rest loads its spring likewise until k·pen reaches the force
+    /// the device needs to move with it. A device that coasts off the flank mid-motion (the
+    /// motion decelerating faster than its friction) leaves it unloaded, as on a rigid flank.
+    pub fn with_contact_hz(mut self, hz: f64) -> Self {
+        self.wc2 = f64::INFINITY;
+        if hz.is_finite() && hz > 0.0 {
+            let w = 2.0 * std::f64::consts::PI * hz;
+            self.wc2 = w * w;
+        }
+        self
+    }
+
+    /// The contact of `backlash`'s second parameter `c` (`play_contact`): a rigid flank of
+    /// restitution c ≥ 0 (`with_restitution`), or a compliant, plastic one of contact
+    /// frequency −c > 0 (`with_contact_hz`).
+    pub fn with_contact(self, c: f64) -> Self {
+        let (e, hz) = play_contact(c);
+        self.with_restitution(e).with_contact_hz(hz)
+    }
+
+    /// The contact's stiffness (N/m; infinite for a rigid flank).
+    pub fn stiffness(&self) -> f64 {
+        self.m * self.wc2
     }
 
     /// The same device behind a contact of restitution `e` (0 ≤ e < 1; values outside are
@@ -1840,14 +1915,31 @@ impl PlayWalk {
             return (true, None);
         };
         let mut impact = None;
+        let k = self.stiffness();
+        let compliant = k.is_finite() && k > 0.0;
+        self.spring = 0.0;
         if self.flank != 0.0 {
             // on the flank while it pushes; otherwise the device left it after the last step
+            let s = self.flank;
             let f = self.m * a + self.fv * v + self.fc * sg;
-            if self.flank * f >= 0.0 {
-                self.xm = x - self.flank * h;
+            // a compliant flank: the force its spring carries while the device slides in the
+            // flank's direction (its friction the sliding one, Fc·s, at any speed)
+            let hold = self.m * a + self.fv * v + self.fc * s;
+            if !compliant && s * f >= 0.0 {
+                self.xm = x - s * h;
+                self.vm = v;
+            } else if compliant && s * v > 0.0 && s * hold >= 0.0 {
+                // the spring carries `hold`, the device hold/k behind the flank
+                self.xm = x - s * h - hold / k;
                 self.vm = v;
             } else {
                 self.flank = 0.0;
+                if compliant && s * hold > 0.0 {
+                    // the motion stops or reverses on the flank: static friction holds the
+                    // device where it stopped, the spring loaded by `hold`
+                    self.xm = x_prev - s * h - hold / k;
+                    self.vm = 0.0;
+                }
             }
         }
         if self.flank == 0.0 {
@@ -1866,6 +1958,39 @@ impl PlayWalk {
             self.vm = vn;
             let d = x - self.xm;
             for s in [1.0, -1.0] {
+                if compliant && s * d > h {
+                    let pen = s * d - h;
+                    let vr = v - self.vm;
+                    // the spring was compressed at the last sample: no new contact
+                    let was_in = s * dp > h;
+                    let need = s * (self.m * a + self.fv * v + self.fc * sg);
+                    // a moving device is struck at the contact; one at rest when the spring
+                    // carries what it needs to move (it breaks away): the impact then, at
+                    // the penetration need/k (interpolated within the step)
+                    let at = if self.vm != 0.0 {
+                        (!was_in).then_some(0.0)
+                    } else {
+                        Some(need.max(0.0) / k)
+                    };
+                    if let Some(p_at) = at.filter(|&p| s * vr > 0.0 && pen >= p) {
+                        let p_prev = s * dp - h;
+                        let phi = ((p_at - p_prev) / (pen - p_prev)).clamp(0.0, 1.0);
+                        impact = Some((1.0 - phi, vr));
+                        self.flank = s;
+                        self.vm = v;
+                        self.xm = x - s * h - s * need.max(0.0) / k;
+                    } else if s * vr > 0.0 && self.vm != 0.0 {
+                        // a moving device the compressed spring catches up: on the flank
+                        self.flank = s;
+                        self.vm = v;
+                        self.xm = x - s * h - s * need.max(0.0) / k;
+                    } else {
+                        // unloading after a reversal, or loading against a device at rest:
+                        // the device held, the spring carrying k·pen
+                        self.spring = s * k * pen;
+                    }
+                    continue;
+                }
                 if s * d >= h {
                     let vr = v - self.vm;
                     self.xm = x - s * h;
@@ -2053,7 +2178,11 @@ pub fn play_columns_with(
     let (mi, fv, fc) = device.unwrap_or_else(|| play_device_coefficients(ctx, end, b, e));
     let dev = play_device_on(ctx, end, b, e, (mi, fv, fc));
     let va = ctx.v_with_a();
-    let free_force = |i: usize| -(mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i]);
+    // off the flank's sliding contact: the force the contact's spring still carries (0 on a
+    // rigid flank) in place of the device's
+    let free_force = |i: usize| {
+        dev.spring.get(i).copied().unwrap_or(0.0) - (mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i])
+    };
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
         None => Some(i),
@@ -2945,9 +3074,10 @@ pub fn parameters(
         ],
         EffectKind::Backlash => {
             let (mi, fvd, fcd) = play_device_coefficients(ctx, ctx.rec.x.len(), e.param, e.param2);
-            vec![
+            let (rest, hz) = play_contact(e.param2);
+            let mut p = vec![
                 ("width_m".into(), e.param),
-                ("restitution".into(), e.param2),
+                ("restitution".into(), rest),
                 ("gain".into(), get("free")),
                 (
                     "impact_mass_kg".into(),
@@ -2956,7 +3086,12 @@ pub fn parameters(
                 ("device_inertia_kg".into(), mi),
                 ("device_viscous_Ns_per_m".into(), fvd),
                 ("device_coulomb_N".into(), fcd),
-            ]
+            ];
+            if hz > 0.0 {
+                // a compliant flank: its contact mode with the device's inertia
+                p.push(("contact_Hz".into(), hz));
+            }
+            p
         }
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
@@ -3010,6 +3145,10 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         ),
         EffectKind::CurrentLimit => format!("force clipped near {:.1} N", e.param),
         EffectKind::Compliance => format!("resonance near {:.3} Hz", e.param),
+        EffectKind::Backlash if e.param2 < 0.0 => format!(
+            "play of {:.3e} m after reversals, its flank a spring (contact mode {:.1} Hz)",
+            e.param, -e.param2
+        ),
         EffectKind::Backlash if e.param2 > 0.0 => format!(
             "play of {:.3e} m after reversals, its contact rebounding (restitution {:.2})",
             e.param, e.param2
