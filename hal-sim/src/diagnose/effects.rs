@@ -1708,7 +1708,7 @@ pub const PLAY_RESTITUTIONS: [f64; 4] = [0.0, 0.15, 0.3, 0.5];
 
 /// Contact frequencies of a compliant flank scanned at the width found, as fractions of the
 /// sample rate (fs/8, fs/16: 125, 62.5 Hz at 1 kHz), when the rigid, plastic contact (e = 0)
-/// is the best restitution; coded as `backlash`'s second parameter −f_c (`play_contact`),
+/// is the best restitution and passes the selection itself; coded as `backlash`'s second parameter −f_c (`play_contact`),
 /// and kept only when it cuts the rigid flank's held-out rss by the selection's margin. A
 /// gear's or a ballscrew's flank is a spring: the force it carried at a reversal unloads over
 /// f/k of the motion's travel (k = M·(2π·f_c)²), where a rigid flank drops it at once. At
