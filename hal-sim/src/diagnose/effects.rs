@@ -1922,24 +1922,30 @@ impl PlayWalk {
         if self.flank != 0.0 {
             // on the flank while it pushes; otherwise the device left it after the last step
             let s = self.flank;
-            let f = self.m * a + self.fv * v + self.fc * sg;
-            // a compliant flank: the force its spring carries while the device slides in the
-            // flank's direction (its friction the sliding one, Fc·s, at any speed)
-            let hold = self.m * a + self.fv * v + self.fc * s;
-            if !compliant && s * f >= 0.0 {
-                self.xm = x - s * h;
-                self.vm = v;
-            } else if compliant && s * v > 0.0 && s * hold >= 0.0 {
-                // the spring carries `hold`, the device hold/k behind the flank
-                self.xm = x - s * h - hold / k;
-                self.vm = v;
+            if !compliant {
+                let f = self.m * a + self.fv * v + self.fc * sg;
+                if s * f >= 0.0 {
+                    self.xm = x - s * h;
+                    self.vm = v;
+                } else {
+                    self.flank = 0.0;
+                }
             } else {
-                self.flank = 0.0;
-                if compliant && s * hold > 0.0 {
-                    // the motion stops or reverses on the flank: static friction holds the
-                    // device where it stopped, the spring loaded by `hold`
-                    self.xm = x_prev - s * h - hold / k;
-                    self.vm = 0.0;
+                // a compliant flank: the force its spring carries while the device slides in
+                // the flank's direction (its friction the sliding one, Fc·s, at any speed)
+                let hold = self.m * a + self.fv * v + self.fc * s;
+                if s * v > 0.0 && s * hold >= 0.0 {
+                    // the spring carries `hold`, the device hold/k behind the flank
+                    self.xm = x - s * h - hold / k;
+                    self.vm = v;
+                } else {
+                    self.flank = 0.0;
+                    if s * hold > 0.0 {
+                        // the motion stops or reverses on the flank: static friction holds
+                        // the device where it stopped, the spring loaded by `hold`
+                        self.xm = x_prev - s * h - hold / k;
+                        self.vm = 0.0;
+                    }
                 }
             }
         }
