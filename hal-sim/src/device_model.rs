@@ -122,6 +122,11 @@ pub enum ModelEffect {
         /// The contact's restitution (0 when absent: the flank carries the device on).
         #[serde(default, skip_serializing_if = "Option::is_none")]
         restitution: Option<f64>,
+        /// A compliant flank's contact mode with the device's inertia, Hz (absent: a rigid
+        /// flank; `PlayWalk::with_contact_hz`): the force it carries at a reversal unloads
+        /// through its spring.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        contact_Hz: Option<f64>,
         gain: f64,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         impact_mass_kg: Option<f64>,
@@ -279,6 +284,7 @@ impl ModelEffect {
             ModelEffect::Backlash {
                 width_m,
                 restitution,
+                contact_Hz,
                 gain,
                 impact_mass_kg,
                 device_inertia_kg,
@@ -290,6 +296,9 @@ impl ModelEffect {
                 range(&k("width_m"), width_m, 0.0, 1.0, "m")?;
                 if let Some(e) = restitution {
                     range(&k("restitution"), e, 0.0, 0.999, "")?;
+                }
+                if let Some(hz) = contact_Hz {
+                    range(&k("contact_Hz"), hz, 1e-3, 1e7, "Hz")?;
                 }
                 range(&k("gain"), gain, 0.0, 2.0, "")?;
                 if let Some(mi) = impact_mass_kg {
@@ -433,6 +442,7 @@ impl ModelState {
                     ModelEffect::Backlash {
                         width_m,
                         restitution,
+                        contact_Hz,
                         device_inertia_kg: mi,
                         device_viscous_Ns_per_m: fv,
                         device_coulomb_N: fc,
@@ -445,7 +455,8 @@ impl ModelState {
                             fc.unwrap_or(m.coulomb_friction_N),
                             dt,
                         )
-                        .with_restitution(restitution.unwrap_or(0.0)),
+                        .with_restitution(restitution.unwrap_or(0.0))
+                        .with_contact_hz(contact_Hz.unwrap_or(0.0)),
                     ),
                     _ => None,
                 })
@@ -579,7 +590,8 @@ impl ModelState {
                     };
                     let (free, impact) = walk.step(x, v_kin, a, sg);
                     if free {
-                        f += gain * (m.force_offset_N - f);
+                        // the force a compliant flank's spring still carries in its place
+                        f += gain * (m.force_offset_N - f + walk.spring);
                     }
                     let dt = self.dt;
                     let pulses = &mut self.pulse[i];
@@ -756,6 +768,7 @@ mod tests {
         m.effects = vec![ModelEffect::Backlash {
             width_m: 0.002,
             restitution: None,
+            contact_Hz: None,
             gain: 1.0,
             impact_mass_kg: None,
             device_inertia_kg: None,

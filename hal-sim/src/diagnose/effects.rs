@@ -1545,7 +1545,10 @@ pub fn plausible(e: &Effect, coef: &[f64], base: &[f64]) -> bool {
         EffectKind::ReflectedInertia => coef[0] > 0.0 && coef[0] <= m,
         EffectKind::Lag | EffectKind::CurrentLimit => unit(coef[0]),
         EffectKind::Backlash => {
-            (0.0..1.0).contains(&e.param2) && unit(coef[0]) && impact_consistent(&coef[1..], m)
+            e.param2.is_finite()
+                && e.param2 < 1.0
+                && unit(coef[0])
+                && impact_consistent(&coef[1..], m)
         }
         EffectKind::Compliance => coef[0] > 0.0,
         EffectKind::PreslidingHysteresis => coef[0] > 0.0 && coef[0] <= 1.5 * fc.max(0.0),
@@ -1703,6 +1706,28 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
 /// separate at exp(−πζ/√(1 − ζ²)) = 0.16); a plastic contact at 0.
 pub const PLAY_RESTITUTIONS: [f64; 4] = [0.0, 0.15, 0.3, 0.5];
 
+/// Contact frequencies of a compliant flank scanned at the width found, as fractions of the
+/// sample rate (fs/8, fs/16: 125, 62.5 Hz at 1 kHz), when the rigid, plastic contact (e = 0)
+/// is the best restitution and passes the selection itself; coded as `backlash`'s second parameter −f_c (`play_contact`),
+/// and kept only when it cuts the rigid flank's held-out rss by the selection's margin. A
+/// gear's or a ballscrew's flank is a spring: the force it carried at a reversal unloads over
+/// f/k of the motion's travel (k = M·(2π·f_c)²), where a rigid flank drops it at once. At
+/// fs/32 (31 Hz, inside the derived acceleration's band; measured on an earlier version of
+/// the walk) the rig's point-to-point 600038 took it at a width 8 % short, its held-out
+/// error 6.4 → 15.2 %.
+pub const PLAY_CONTACT_FRACTIONS: [f64; 2] = [0.125, 0.0625];
+
+/// `backlash`'s second parameter c as its contact: (restitution, contact frequency in Hz; 0:
+/// rigid). c ≥ 0 is a rigid flank's restitution; c < 0 a compliant, plastic flank of contact
+/// frequency −c.
+pub fn play_contact(c: f64) -> (f64, f64) {
+    if c < 0.0 {
+        (0.0, -c)
+    } else {
+        (c, 0.0)
+    }
+}
+
 /// Samples over which the `backlash` impact's force pulse is resolved (free shape, one
 /// coefficient per sample after the contact): a contact that brings the device to the
 /// motion's velocity within 12 sample periods (12 ms at 1 kHz; a contact mode above
@@ -1724,6 +1749,9 @@ pub struct PlayDevice {
     pub xm: Vec<f64>,
     pub free: Vec<bool>,
     pub impacts: Vec<(usize, f64, f64)>,
+    /// The force a compliant contact's spring carries while the device is held off its
+    /// sliding contact (`PlayWalk::spring`), per sample; empty for a rigid contact.
+    pub spring: Vec<f64>,
 }
 
 /// The device (inertia `m`, viscous `fv` and Coulomb `fc` friction) behind a play of total
@@ -1756,8 +1784,10 @@ pub fn play_device(
         xm: Vec::with_capacity(n),
         free: Vec::with_capacity(n),
         impacts: Vec::new(),
+        spring: Vec::new(),
     };
-    let mut walk = PlayWalk::new(b, m, fv, fc, dt).with_restitution(e);
+    let mut walk = PlayWalk::new(b, m, fv, fc, dt).with_contact(e);
+    let compliant = walk.stiffness().is_finite();
     for i in 0..n {
         let (free, impact) = walk.step(x[i], v[i], a[i], sg[i]);
         if let Some((since, vr)) = impact {
@@ -1765,6 +1795,9 @@ pub fn play_device(
         }
         out.xm.push(walk.xm);
         out.free.push(free);
+        if compliant {
+            out.spring.push(walk.spring);
+        }
     }
     out
 }
@@ -1790,6 +1823,13 @@ pub struct PlayWalk {
     vm: f64,
     /// The motion's position at the last step (None before the first).
     x_last: Option<f64>,
+    /// The contact's stiffness over the device's inertia, ω_c² (1/s²): a flank that is a
+    /// spring of stiffness M·ω_c², its contact mode at ω_c; infinite (`new`): a rigid flank.
+    wc2: f64,
+    /// The force the contact's spring carries while the device is held off its sliding
+    /// contact (signed: + pushes the device towards +): unloading after the motion reverses
+    /// on a flank, loading before the device breaks away; 0 otherwise and on a rigid flank.
+    pub spring: f64,
 }
 
 impl PlayWalk {
@@ -1811,7 +1851,43 @@ impl PlayWalk {
             xm: 0.0,
             vm: 0.0,
             x_last: None,
+            wc2: f64::INFINITY,
+            spring: 0.0,
         }
+    }
+
+    /// The same device behind a contact of finite stiffness k = M·(2π·`hz`)² (a gear's or a
+    /// ballscrew's flank is a spring, not a wall; `hz` its contact mode with the device's
+    /// inertia; `hz` ≤ 0 or not finite: rigid, `new`'s walk). On a flank the spring carries the
+    /// device's force f = M·a + Fv·v + Fc·sgn v and the device lags the flank by f/k. When the
+    /// motion reverses on a flank, the device's friction stops it (static friction, anywhere
+    /// within Fc, holds it) with the spring loaded by the force it carried, M·a + Fv·v +
+    /// Fc·sign (sliding friction in the flank's direction, as it stops): the spring then
+    /// unloads linearly with the motion's retreat, k·pen, and the device is free only once it
+    /// has unloaded (over f/k of travel, where a rigid flank releases it at once). A flank
+    /// that reaches a device at rest loads its spring likewise until k·pen reaches the force
+    /// the device needs to move with it. A device that coasts off the flank mid-motion (the
+    /// motion decelerating faster than its friction) leaves it unloaded, as on a rigid flank.
+    pub fn with_contact_hz(mut self, hz: f64) -> Self {
+        self.wc2 = f64::INFINITY;
+        if hz.is_finite() && hz > 0.0 {
+            let w = 2.0 * std::f64::consts::PI * hz;
+            self.wc2 = w * w;
+        }
+        self
+    }
+
+    /// The contact of `backlash`'s second parameter `c` (`play_contact`): a rigid flank of
+    /// restitution c ≥ 0 (`with_restitution`), or a compliant, plastic one of contact
+    /// frequency −c > 0 (`with_contact_hz`).
+    pub fn with_contact(self, c: f64) -> Self {
+        let (e, hz) = play_contact(c);
+        self.with_restitution(e).with_contact_hz(hz)
+    }
+
+    /// The contact's stiffness (N/m; infinite for a rigid flank).
+    pub fn stiffness(&self) -> f64 {
+        self.m * self.wc2
     }
 
     /// The same device behind a contact of restitution `e` (0 ≤ e < 1; values outside are
@@ -1840,14 +1916,37 @@ impl PlayWalk {
             return (true, None);
         };
         let mut impact = None;
+        let k = self.stiffness();
+        let compliant = k.is_finite() && k > 0.0;
+        self.spring = 0.0;
         if self.flank != 0.0 {
             // on the flank while it pushes; otherwise the device left it after the last step
-            let f = self.m * a + self.fv * v + self.fc * sg;
-            if self.flank * f >= 0.0 {
-                self.xm = x - self.flank * h;
-                self.vm = v;
+            let s = self.flank;
+            if !compliant {
+                let f = self.m * a + self.fv * v + self.fc * sg;
+                if s * f >= 0.0 {
+                    self.xm = x - s * h;
+                    self.vm = v;
+                } else {
+                    self.flank = 0.0;
+                }
             } else {
-                self.flank = 0.0;
+                // a compliant flank: the force its spring carries while the device slides in
+                // the flank's direction (its friction the sliding one, Fc·s, at any speed)
+                let hold = self.m * a + self.fv * v + self.fc * s;
+                if s * v > 0.0 && s * hold >= 0.0 {
+                    // the spring carries `hold`, the device hold/k behind the flank
+                    self.xm = x - s * h - hold / k;
+                    self.vm = v;
+                } else {
+                    self.flank = 0.0;
+                    if s * hold > 0.0 {
+                        // the motion stops or reverses on the flank: static friction holds
+                        // the device where it stopped, the spring loaded by `hold`
+                        self.xm = x_prev - s * h - hold / k;
+                        self.vm = 0.0;
+                    }
+                }
             }
         }
         if self.flank == 0.0 {
@@ -1866,6 +1965,39 @@ impl PlayWalk {
             self.vm = vn;
             let d = x - self.xm;
             for s in [1.0, -1.0] {
+                if compliant && s * d > h {
+                    let pen = s * d - h;
+                    let vr = v - self.vm;
+                    // the spring was compressed at the last sample: no new contact
+                    let was_in = s * dp > h;
+                    let need = s * (self.m * a + self.fv * v + self.fc * sg);
+                    // a moving device is struck at the contact; one at rest when the spring
+                    // carries what it needs to move (it breaks away): the impact then, at
+                    // the penetration need/k (interpolated within the step)
+                    let at = if self.vm != 0.0 {
+                        (!was_in).then_some(0.0)
+                    } else {
+                        Some(need.max(0.0) / k)
+                    };
+                    if let Some(p_at) = at.filter(|&p| s * vr > 0.0 && pen >= p) {
+                        let p_prev = s * dp - h;
+                        let phi = ((p_at - p_prev) / (pen - p_prev)).clamp(0.0, 1.0);
+                        impact = Some((1.0 - phi, vr));
+                        self.flank = s;
+                        self.vm = v;
+                        self.xm = x - s * h - s * need.max(0.0) / k;
+                    } else if s * vr > 0.0 && self.vm != 0.0 {
+                        // a moving device the compressed spring catches up: on the flank
+                        self.flank = s;
+                        self.vm = v;
+                        self.xm = x - s * h - s * need.max(0.0) / k;
+                    } else {
+                        // unloading after a reversal, or loading against a device at rest:
+                        // the device held, the spring carrying k·pen
+                        self.spring = s * k * pen;
+                    }
+                    continue;
+                }
                 if s * d >= h {
                     let vr = v - self.vm;
                     self.xm = x - s * h;
@@ -2053,7 +2185,11 @@ pub fn play_columns_with(
     let (mi, fv, fc) = device.unwrap_or_else(|| play_device_coefficients(ctx, end, b, e));
     let dev = play_device_on(ctx, end, b, e, (mi, fv, fc));
     let va = ctx.v_with_a();
-    let free_force = |i: usize| -(mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i]);
+    // off the flank's sliding contact: the force the contact's spring still carries (0 on a
+    // rigid flank) in place of the device's
+    let free_force = |i: usize| {
+        dev.spring.get(i).copied().unwrap_or(0.0) - (mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i])
+    };
     // position of sample i among the rows (None when not a row)
     let slot = |i: usize| match rows {
         None => Some(i),
@@ -2994,9 +3130,10 @@ pub fn parameters(
         ],
         EffectKind::Backlash => {
             let (mi, fvd, fcd) = play_device_coefficients(ctx, ctx.rec.x.len(), e.param, e.param2);
-            vec![
+            let (rest, hz) = play_contact(e.param2);
+            let mut p = vec![
                 ("width_m".into(), e.param),
-                ("restitution".into(), e.param2),
+                ("restitution".into(), rest),
                 ("gain".into(), get("free")),
                 (
                     "impact_mass_kg".into(),
@@ -3005,7 +3142,12 @@ pub fn parameters(
                 ("device_inertia_kg".into(), mi),
                 ("device_viscous_Ns_per_m".into(), fvd),
                 ("device_coulomb_N".into(), fcd),
-            ]
+            ];
+            if hz > 0.0 {
+                // a compliant flank: its contact mode with the device's inertia
+                p.push(("contact_Hz".into(), hz));
+            }
+            p
         }
         EffectKind::PreslidingHysteresis => vec![
             ("characteristic_displacement_m".into(), e.param),
@@ -3059,6 +3201,10 @@ pub fn describe(ctx: &Context, e: &Effect) -> String {
         ),
         EffectKind::CurrentLimit => format!("force clipped near {:.1} N", e.param),
         EffectKind::Compliance => format!("resonance near {:.3} Hz", e.param),
+        EffectKind::Backlash if e.param2 < 0.0 => format!(
+            "play of {:.3e} m after reversals, its flank a spring (contact mode {:.1} Hz)",
+            e.param, -e.param2
+        ),
         EffectKind::Backlash if e.param2 > 0.0 => format!(
             "play of {:.3e} m after reversals, its contact rebounding (restitution {:.2})",
             e.param, e.param2
@@ -3398,6 +3544,71 @@ mod tests {
             assert_eq!(vr, v0);
             assert!((x[i] - 0.5 * b).abs() <= v0 * dt * 1.0001, "{}", x[i]);
         }
+    }
+
+    /// A compliant flank unloads as Hooke's spring: a device (M 10 kg, Coulomb 20 N) carried
+    /// on the + flank at 10 mm/s, the motion then decelerating at A = 0.5 m/s² through its
+    /// reversal (M·A below the friction, so the device stops with the flank), the play
+    /// 0.2 mm wide. As the motion
+    /// stops, the flank's spring carries the device's sliding force M·(−A) + Fc = 15 N; the
+    /// device then stays (static friction) and the spring force falls as 15 N − k·u with the
+    /// retreat u, k = M·(2π·50 Hz)², to 0 at u = 15 N / k = 15.2 µm, where the device is
+    /// free (forces and stiffness from the closed form, not the walk). A rigid flank
+    /// releases it on the reversal's sample; so does a flank of 10⁶ Hz (the rigid walk's
+    /// free samples, one for one).
+    #[test]
+    fn compliant_flank_unloads_as_its_spring() {
+        let (dt, v0, acc, b, m, fc, hz) = (1e-4, 0.01, 0.5, 2e-4, 10.0, 20.0, 50.0);
+        let n = 2000;
+        let t1 = 0.05;
+        let (mut x, mut v, mut a) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for i in 0..n {
+            let t = i as f64 * dt;
+            let u = (t - t1).max(0.0);
+            v[i] = v0 - acc * u;
+            x[i] = v0 * t - 0.5 * acc * u * u;
+            a[i] = if t > t1 { -acc } else { 0.0 };
+        }
+        let sg: Vec<f64> = v
+            .iter()
+            .map(|&v| if v == 0.0 { 0.0 } else { v.signum() })
+            .collect();
+        // started centred: the + flank takes the device on within 25 ms
+        let k = m * (2.0 * std::f64::consts::PI * hz).powi(2);
+        let hold = m * (-acc) + fc;
+        let walk = |c: f64| play_device(&x, &v, &a, &sg, dt, b, m, 0.0, fc, -c);
+        let soft = walk(hz);
+        let rigid = walk(0.0);
+        let stiff = walk(1e6);
+        assert!(rigid.spring.is_empty() && soft.spring.len() == n);
+        // the last sample moving forward, and the flank's position there
+        let last = (0..n).rev().find(|&i| v[i] > 0.0).unwrap();
+        assert!(!soft.free[last] && !rigid.free[last]);
+        assert!(rigid.free[last + 1]);
+        let mut released = None;
+        // up to the − flank, which the device meets at a retreat of b + hold/k
+        for i in (last + 1..n).take_while(|&i| x[last] - x[i] < b) {
+            let u = x[last] - x[i];
+            let want = (hold - k * u).max(0.0);
+            assert!(
+                (soft.spring[i] - want).abs() < 1e-6 * hold,
+                "sample {i}: retreat {u}: spring {} N, Hooke {want} N",
+                soft.spring[i]
+            );
+            assert!(soft.free[i], "{i}");
+            if released.is_none() && want == 0.0 {
+                released = Some(u);
+            }
+        }
+        // released past hold/k, within a sample's retreat of it
+        let u = released.expect("the spring unloads");
+        let step = acc * (n as f64 * dt) * dt;
+        assert!(
+            u >= hold / k && u - hold / k <= step,
+            "{u} m for {} m",
+            hold / k
+        );
+        assert_eq!(stiff.free, rigid.free);
     }
 
     /// A rebounding contact (restitution e) against the closed-form flight: a viscous device

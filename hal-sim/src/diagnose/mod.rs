@@ -1516,6 +1516,30 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                         .collect();
                     scan(&alt, cache, &mut cb, &mut cb_key);
                 }
+                // a compliant, plastic flank (`effects::PLAY_CONTACT_FRACTIONS`) when the
+                // rigid, plastic one is the best restitution and itself passes the selection
+                // (the flank's stiffness refines a play the record shows; on a record without
+                // one it is not walked); the spring is one parameter more, so it must cut the
+                // rigid flank's held-out rss by the selection's margin, as an added effect must
+                let rigid_passes = cb.as_ref().is_some_and(|c| {
+                    1.0 - c.0 / rss_h0.max(1e-300) >= opt.min_holdout_gain && c.1 < 0.0
+                });
+                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                    if centre.param2 == 0.0 && rigid_passes {
+                        let alt: Vec<Effect> = effects::PLAY_CONTACT_FRACTIONS
+                            .iter()
+                            .map(|&q| Effect {
+                                param2: -q / ctx.dt,
+                                ..centre.clone()
+                            })
+                            .collect();
+                        let (mut sb, mut sb_key) = (None, f64::INFINITY);
+                        scan(&alt, cache, &mut sb, &mut sb_key);
+                        if sb_key <= (1.0 - opt.min_holdout_gain) * cb_key {
+                            (cb, cb_key) = (sb, sb_key);
+                        }
+                    }
+                }
                 if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
                     if centre.param2 != 0.0 {
                         let fine = effects::refine(&ctx, &centre, 0.03);
