@@ -1629,6 +1629,33 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             break;
         }
     }
+    // A compliant flank is chosen on the screening window; the whole record must bear it out:
+    // where the rigid flank at the same width fits the whole record's held-out part as well or
+    // better, the rigid flank is kept (the stiffness refines a play, it is not a second cause).
+    let whole_holdout = |set: &[Effect]| -> f64 {
+        let z: Vec<(String, Vec<f64>)> = set
+            .iter()
+            .flat_map(|e| effects::effect_columns(&ctx, e))
+            .collect();
+        let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
+        let n = extend_normals_dense(
+            &base_full,
+            &refs(&cols[..n_base]),
+            &zr,
+            &rec.f,
+            &HoldWeights::new(&hold),
+        );
+        n.1.rss(&n.0.solve())
+    };
+    for k in 0..chosen.len() {
+        if chosen[k].kind == EffectKind::Backlash && chosen[k].param2 < 0.0 {
+            let mut rigid = chosen.clone();
+            rigid[k].param2 = 0.0;
+            if whole_holdout(&rigid) <= whole_holdout(&chosen) {
+                chosen = rigid;
+            }
+        }
+    }
     // The findings in their order: each one's held-out gain and BIC change on the subsample
     // with the findings before it, then added to the whole record's normal equations.
     let mut ho_rel = baseline_holdout;
