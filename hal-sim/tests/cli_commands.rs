@@ -107,7 +107,7 @@ fn impossible_physics_is_refused_with_key_value_and_range() {
         (
             "r_load_ohm = 306.0",
             "r_load_ohm = 1e-50",
-            &["law.r_load_ohm = 0.00000", "f32"],
+            &["law.r_load_ohm = 1e-50", "f32"],
         ),
         (
             "r_load_ohm = 306.0",
