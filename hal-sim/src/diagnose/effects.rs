@@ -2589,34 +2589,25 @@ pub fn stribeck_within_presliding(e: &Effect, chosen: &[Effect], ctx: &Context) 
     all > 0.0 && inside > 0.5 * all
 }
 
-/// True when `e` and `chosen` would hold both a position ripple (`cogging` or
-/// `position_periodic_friction`, wavelength λ) and a `compliance` (resonance f_r, damping
-/// ratio ζ from `Context::compliance_zeta`) and on more than half of the samples in motion the
+/// True when `e` is a position ripple (`cogging` or `position_periodic_friction`, wavelength
+/// λ), `chosen` holds a `compliance` (resonance f_r, damping ratio ζ from
+/// `Context::compliance_zeta`), and on more than half of the samples in motion the
 /// ripple's time frequency |v|/λ lies within the mode's half-power band f_r·(1 ± ζ). Where the
 /// motion moves at such speeds (a rounded triangle's constant-speed flanks) a ripple of λ is a
 /// force at f_r in time, and a mode's ringing after each turn, locked to the turn, is locked
 /// to the turn's position too: the two columns draw the same force, and what the mode's fit
 /// leaves of its own ringing a ripple takes. The mode is named: a ripple beside a mode kept is not kept (`diagnose`'s verdicts).
 pub fn ripple_at_mode(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
-    let ripple = |k: EffectKind| {
-        matches!(
-            k,
-            EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-        )
-    };
-    let (lambda, fr) = if ripple(e.kind) {
-        match chosen.iter().find(|c| c.kind == EffectKind::Compliance) {
-            Some(c) => (e.param, c.param),
-            None => return false,
-        }
-    } else if e.kind == EffectKind::Compliance {
-        match chosen.iter().find(|c| ripple(c.kind)) {
-            Some(c) => (c.param, e.param),
-            None => return false,
-        }
-    } else {
+    if !matches!(
+        e.kind,
+        EffectKind::Cogging | EffectKind::PositionPeriodicFriction
+    ) {
+        return false;
+    }
+    let Some(mode) = chosen.iter().find(|c| c.kind == EffectKind::Compliance) else {
         return false;
     };
+    let (lambda, fr) = (e.param, mode.param);
     let Some(z) = ctx.compliance_zeta(fr) else {
         return false;
     };

@@ -1999,7 +1999,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
         .collect();
     let at_mode: Vec<bool> = chosen
         .iter()
-        .map(|e| e.kind != EffectKind::Compliance && effects::ripple_at_mode(e, &modes, &ctx))
+        .map(|e| effects::ripple_at_mode(e, &modes, &ctx))
         .collect();
     let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
     let mut dropped_notes = Vec::new();
