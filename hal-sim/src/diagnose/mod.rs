@@ -1219,6 +1219,10 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             .any(|((&e, &s), &h)| e != s && h != AT_REST)
             .then_some(z)
     };
+    // a candidate is added when it cuts the held-out rss by the margin and lowers the BIC
+    let passes = |rh: f64, rss_h0: f64, dbic: f64| {
+        1.0 - rh / rss_h0.max(1e-300) >= opt.min_holdout_gain && dbic < 0.0
+    };
     // The best candidate to add to a set (every kind not in it, every grid value, refined):
     // (held-out rss of the set, and of the best candidate with its training BIC change).
     let scan = |set: &[Effect], cache: &mut Cache| -> (f64, Option<(f64, f64, Effect)>) {
@@ -1521,9 +1525,7 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
                 // (the flank's stiffness refines a play the record shows; on a record without
                 // one it is not walked); the spring is one parameter more, so it must cut the
                 // rigid flank's held-out rss by the selection's margin, as an added effect must
-                let rigid_passes = cb.as_ref().is_some_and(|c| {
-                    1.0 - c.0 / rss_h0.max(1e-300) >= opt.min_holdout_gain && c.1 < 0.0
-                });
+                let rigid_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
                 if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
                     if centre.param2 == 0.0 && rigid_passes {
                         let alt: Vec<Effect> = effects::PLAY_CONTACT_FRACTIONS
@@ -1562,10 +1564,6 @@ fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
             }
         }
         (rss_h0, best)
-    };
-    // a candidate is added when it cuts the held-out rss by the margin and lowers the BIC
-    let passes = |rh: f64, rss_h0: f64, dbic: f64| {
-        1.0 - rh / rss_h0.max(1e-300) >= opt.min_holdout_gain && dbic < 0.0
     };
     let forward = |chosen: &mut Vec<Effect>, cache: &mut Cache| -> bool {
         let mut added = false;
