@@ -1787,7 +1787,7 @@ pub fn play_device(
         spring: Vec::new(),
     };
     let mut walk = PlayWalk::new(b, m, fv, fc, dt).with_contact(e);
-    let compliant = walk.stiffness().is_finite();
+    let compliant = walk.compliant();
     for i in 0..n {
         let (free, impact) = walk.step(x[i], v[i], a[i], sg[i]);
         if let Some((since, vr)) = impact {
@@ -1890,6 +1890,12 @@ impl PlayWalk {
         self.m * self.wc2
     }
 
+    /// Whether the flank is a spring (a finite, positive stiffness; otherwise the rigid walk).
+    pub fn compliant(&self) -> bool {
+        let k = self.stiffness();
+        k.is_finite() && k > 0.0
+    }
+
     /// The same device behind a contact of restitution `e` (0 ≤ e < 1; values outside are
     /// clamped to it): a flank striking the device at the relative velocity v_r = v − v_m
     /// throws it ahead at v + e·v_r, and it flies free (no force passes: viscous decay and
@@ -1917,7 +1923,7 @@ impl PlayWalk {
         };
         let mut impact = None;
         let k = self.stiffness();
-        let compliant = k.is_finite() && k > 0.0;
+        let compliant = self.compliant();
         self.spring = 0.0;
         if self.flank != 0.0 {
             // on the flank while it pushes; otherwise the device left it after the last step
@@ -1979,15 +1985,15 @@ impl PlayWalk {
                     } else {
                         Some(need.max(0.0) / k)
                     };
-                    if let Some(p_at) = at.filter(|&p| s * vr > 0.0 && pen >= p) {
+                    let struck = at.filter(|&p| s * vr > 0.0 && pen >= p);
+                    if let Some(p_at) = struck {
                         let p_prev = s * dp - h;
                         let phi = ((p_at - p_prev) / (pen - p_prev)).clamp(0.0, 1.0);
                         impact = Some((1.0 - phi, vr));
-                        self.flank = s;
-                        self.vm = v;
-                        self.xm = x - s * h - s * need.max(0.0) / k;
-                    } else if s * vr > 0.0 && self.vm != 0.0 {
-                        // a moving device the compressed spring catches up: on the flank
+                    }
+                    // struck, or a moving device the compressed spring catches up: on the
+                    // flank, the spring carrying what the device needs
+                    if struck.is_some() || (s * vr > 0.0 && self.vm != 0.0) {
                         self.flank = s;
                         self.vm = v;
                         self.xm = x - s * h - s * need.max(0.0) / k;
