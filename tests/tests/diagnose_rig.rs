@@ -185,9 +185,7 @@ fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Ta
     // RIG_KINDS=none,delay runs only those kinds (same seeds as in the full run)
     let only = std::env::var("RIG_KINDS").ok();
     // RIG_SEEDS=400002,600022 runs only those records (the seeds of the full run)
-    let seeds: Option<Vec<u64>> = std::env::var("RIG_SEEDS")
-        .ok()
-        .map(|v| v.split(',').filter_map(|s| s.trim().parse().ok()).collect());
+    let seeds = std::env::var("RIG_SEEDS").is_ok().then(env_seeds);
     let mut jobs = Vec::new();
     for (ki, kind) in Hidden::KINDS.iter().enumerate() {
         if only
