@@ -924,16 +924,35 @@ impl Sim {
         }
     }
 
+    /// The sample the converters and the encoder take now: [`Sim::sample_as`], the ideal
+    /// converters' inline, the shunt sampling's and the sensors' noise out of line.
+    #[inline(always)]
     fn sample_now(&mut self) -> RawSample {
+        if self.shunt.on || self.pre.noisy {
+            self.sample_general()
+        } else {
+            self.sample_as::<true>()
+        }
+    }
+
+    #[inline(never)]
+    fn sample_general(&mut self) -> RawSample {
+        self.sample_as::<false>()
+    }
+
+    /// The sample; `IDEAL` (only without the shunt sampling and the sensors' noise) leaves
+    /// them out at compile time.
+    #[inline(always)]
+    fn sample_as<const IDEAL: bool>(&mut self) -> RawSample {
         let mut i = self.currents();
-        if self.shunt.on {
+        if !IDEAL && self.shunt.on {
             i = self.shunt_read(i);
         }
         let p = &self.pre;
         let mut c: [f64; 3] =
             core::array::from_fn(|k| i[k] * p.counts_per_amp_k[k] + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
-        if p.noisy {
+        if !IDEAL && p.noisy {
             self.add_noise(&mut c, &mut vc);
         }
         if self.index.on {
@@ -974,7 +993,7 @@ impl Sim {
     }
 
     /// The sensors' noise (in counts) on the three current codes, then on the bus code.
-    #[inline(never)]
+    #[inline(always)]
     fn add_noise(&mut self, c: &mut [f64; 3], vc: &mut f64) {
         let p = &self.pre;
         if p.noise_i_counts > 0.0 {
@@ -1832,6 +1851,7 @@ impl PeriodHw for SimTimer {
 }
 
 impl DriveIo for PlantIo<'_> {
+    #[inline(always)]
     fn sample(&mut self) -> RawSample {
         self.0.sample_now()
     }
@@ -2108,10 +2128,10 @@ mod tests {
 
     #[test]
     fn common_period_is_the_general_one() {
-        // The common period (`Sim::advance_as::<true>`) against the general code on the same
-        // run, bit for bit (`Debug` prints every f64 exactly): the closed loop of the
-        // reference TMD, then open-loop periods with random duties (some beyond 1), the gates
-        // off and the brake closed.
+        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<true>`) against the
+        // general code on the same run, bit for bit (`Debug` prints every f64 exactly): the
+        // closed loop of the reference TMD, then open-loop periods with random duties (some
+        // beyond 1), the gates off and the brake closed.
         use regen_fw::fx::Duty;
         use regen_fw::io::Actuation;
         let sc = Scenario::tmd(306.0);
@@ -2121,6 +2141,8 @@ mod tests {
         b.pre.common = false;
         let bits = |s: &super::Sim| format!("{:?} {:?} {:?}", s.s, s.flows, s.energy());
         for _ in 0..20_000 {
+            let sample = a.sample_as::<true>();
+            assert_eq!(sample, a.sample_as::<false>());
             a.step();
             b.step();
         }
