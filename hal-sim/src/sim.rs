@@ -1031,16 +1031,23 @@ impl Sim {
     /// excitation (its constants in [`Pre::exc_sine`]), the plain averaged inverter, no
     /// friction ripple, a source on the bus — so that its tests and the other cases' code
     /// drop out; the arithmetic is the same (`common_period_is_the_general_one`).
+    ///
+    /// The period's work is ordered by its chains, not by its parts: the next period's
+    /// motion (position → rotor angle → emf → mean q current → acceleration → next
+    /// position) is the longest chain from one period to the next, so the mechanics come
+    /// right after the mean currents and before the drive losses and the bus, which they do
+    /// not need. The results do not depend on the order (each operation keeps its operands).
     #[inline(always)]
     fn advance_as<const COMMON: bool>(&mut self, act: &Actuation) {
         let ts = self.ts;
         let p = &self.pre;
         let (x0, v0) = (self.s.x, self.s.v);
+        let t0 = self.s.t;
         // Mid-period motion estimate (exact for imposed motion; a structure's was made at the
         // end of the last period).
         let (xm, vm_est, am_imposed) = match (&self.rig.drive, COMMON) {
             (Drive::Imposed { motion }, false) => {
-                motion.at_tracked(&mut self.rot_motion[0], self.s.t + ts / 2.0)
+                motion.at_tracked(&mut self.rot_motion[0], t0 + ts / 2.0)
             }
             _ => (self.s.xm, self.s.vm, 0.0),
         };
@@ -1049,6 +1056,12 @@ impl Sim {
         let kw = p.ke * w;
         let e = [-kw * sn, kw * cs];
         self.s.e_ab = e;
+        // A structure's base excitation (it depends on nothing else of the period).
+        let ag = match (&self.rig.drive, COMMON) {
+            (_, true) => p.exc_sine.next(&mut self.exc, t0, ts),
+            (Drive::Structure { excitation, .. }, false) => excitation.next(&mut self.exc, t0, ts),
+            (Drive::Imposed { .. }, false) => 0.0,
+        };
 
         // Electrical period: the averaged inverter inline, everything else out of line.
         let vb0 = self.s.v_bus;
@@ -1077,6 +1090,74 @@ impl Sim {
         let f_e = p.force_per_iq * iq_avg; // −T/l, T = 3/2·K_e·i_q
         fl.to_inverter -= p_inv;
 
+        // Mechanics (before the drive losses and the bus, which they do not need).
+        let (jr, br) = (p.jr, p.br);
+        // Friction f_d(x, ẋ) of eq. 13 at the mid-period estimate (as `Screw::friction`).
+        let fd = {
+            let sgn = (vm_est * p.inv_stick).clamp(-1.0, 1.0);
+            let c = if !COMMON && p.ripple {
+                p.coulomb * ripple(p, &mut self.rot_ripple, xm)
+            } else {
+                p.coulomb
+            };
+            c * sgn + p.viscous * vm_est
+        };
+        match (&self.rig.drive, COMMON) {
+            (Drive::Imposed { motion }, false) => {
+                let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
+                let vm = vm_est;
+                let (inner, fd) = match self.model.as_deref_mut() {
+                    None => (f_e + jr * am_imposed + br * vm, fd),
+                    Some(m) => (
+                        f_e,
+                        m.step_kin(xm, vm, motion.v_kin_at(t0 + ts / 2.0, vm), am_imposed),
+                    ),
+                };
+                let out = ((inner + fd) * vm < 0.0) as usize;
+                let h = if out == 0 { p.h_in } else { p.h_out };
+                let f = h * inner + fd;
+                fl.friction_loss += fd * vm;
+                fl.vv += vm * vm;
+                fl.inner[out] += inner * vm;
+                fl.electromechanical += f_e * vm;
+                self.s.x = x1;
+                self.s.v = v1m;
+                self.s.force = f;
+            }
+            _ => {
+                // A structure (the imposed motion's arm is above).
+                let mag = p.mass * ag;
+                let rhs0 = mag - p.damping * vm_est - p.stiffness * xm;
+                let f_eb = f_e + br * vm_est;
+                let mut h = p.h_in;
+                // (rhs0 − h·f_eb − fd)/(m + h·J/l²) with the electromagnetic force's term
+                // last (`iq_avg` arrives last: the critical path).
+                let mut a =
+                    (rhs0 - fd - h * (br * vm_est)) * p.inv_mass_h[0] - p.accel_per_iq * iq_avg;
+                let mut inner = f_eb + jr * a;
+                let mut out = 0;
+                if p.lossy_screw && (h * inner + fd) * vm_est < 0.0 {
+                    h = p.h_out;
+                    a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[1];
+                    inner = f_eb + jr * a;
+                    out = 1;
+                }
+                let f = h * inner + fd;
+                // The period's end with `a` held, and the next period's mid-point estimate,
+                // each one product and sum after `a`.
+                let vm = v0 + a * p.half_ts;
+                self.s.x = (x0 + v0 * ts) + a * p.ts2_2;
+                self.s.v = v0 + a * ts;
+                self.s.xm = (x0 + v0 * p.ts_3_2) + a * p.ts2_9_8;
+                self.s.vm = v0 + a * p.ts_3_2;
+                fl.external_work += mag * vm;
+                fl.friction_loss += fd * vm;
+                fl.vv += vm_est * vm;
+                fl.inner[out] += inner * vm;
+                fl.electromechanical += f_e * vm;
+                self.s.force = f;
+            }
+        }
         // Drive losses and bus.
         let (p_sw, p_cond) = if act.enable {
             let ph = [
@@ -1135,82 +1216,6 @@ impl Sim {
         };
         self.s.v_bus = v1;
 
-        // Mechanics.
-        let t0 = self.s.t;
-        let (jr, br) = (p.jr, p.br);
-        // Friction f_d(x, ẋ) of eq. 13 at the mid-period estimate (as `Screw::friction`).
-        let fd = {
-            let sgn = (vm_est * p.inv_stick).clamp(-1.0, 1.0);
-            let c = if !COMMON && p.ripple {
-                p.coulomb * ripple(p, &mut self.rot_ripple, xm)
-            } else {
-                p.coulomb
-            };
-            c * sgn + p.viscous * vm_est
-        };
-        match (&self.rig.drive, COMMON) {
-            (Drive::Imposed { motion }, false) => {
-                let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
-                let vm = vm_est;
-                let (inner, fd) = match self.model.as_deref_mut() {
-                    None => (f_e + jr * am_imposed + br * vm, fd),
-                    Some(m) => (
-                        f_e,
-                        m.step_kin(xm, vm, motion.v_kin_at(t0 + ts / 2.0, vm), am_imposed),
-                    ),
-                };
-                let out = ((inner + fd) * vm < 0.0) as usize;
-                let h = if out == 0 { p.h_in } else { p.h_out };
-                let f = h * inner + fd;
-                fl.friction_loss += fd * vm;
-                fl.vv += vm * vm;
-                fl.inner[out] += inner * vm;
-                fl.electromechanical += f_e * vm;
-                self.s.x = x1;
-                self.s.v = v1m;
-                self.s.force = f;
-            }
-            (drive, _) => {
-                // A structure (the imposed motion's arm is above).
-                let ag = match (drive, COMMON) {
-                    (_, true) => p.exc_sine.next(&mut self.exc, t0, ts),
-                    (Drive::Structure { excitation, .. }, false) => {
-                        excitation.next(&mut self.exc, t0, ts)
-                    }
-                    (Drive::Imposed { .. }, false) => 0.0,
-                };
-                let mag = p.mass * ag;
-                let rhs0 = mag - p.damping * vm_est - p.stiffness * xm;
-                let f_eb = f_e + br * vm_est;
-                let mut h = p.h_in;
-                // (rhs0 − h·f_eb − fd)/(m + h·J/l²) with the electromagnetic force's term
-                // last (`iq_avg` arrives last: the critical path).
-                let mut a =
-                    (rhs0 - fd - h * (br * vm_est)) * p.inv_mass_h[0] - p.accel_per_iq * iq_avg;
-                let mut inner = f_eb + jr * a;
-                let mut out = 0;
-                if p.lossy_screw && (h * inner + fd) * vm_est < 0.0 {
-                    h = p.h_out;
-                    a = (rhs0 - h * f_eb - fd) * p.inv_mass_h[1];
-                    inner = f_eb + jr * a;
-                    out = 1;
-                }
-                let f = h * inner + fd;
-                // The period's end with `a` held, and the next period's mid-point estimate,
-                // each one product and sum after `a`.
-                let vm = v0 + a * p.half_ts;
-                self.s.x = (x0 + v0 * ts) + a * p.ts2_2;
-                self.s.v = v0 + a * ts;
-                self.s.xm = (x0 + v0 * p.ts_3_2) + a * p.ts2_9_8;
-                self.s.vm = v0 + a * p.ts_3_2;
-                fl.external_work += mag * vm;
-                fl.friction_loss += fd * vm;
-                fl.vv += vm_est * vm;
-                fl.inner[out] += inner * vm;
-                fl.electromechanical += f_e * vm;
-                self.s.force = f;
-            }
-        }
         self.s.force_em = f_e;
         self.s.p_inv = -p_inv;
         self.s.t = t0 + ts;
