@@ -1041,7 +1041,6 @@ impl Sim {
     fn advance_as<const COMMON: bool>(&mut self, act: &Actuation) {
         let ts = self.ts;
         let p = &self.pre;
-        let (x0, v0) = (self.s.x, self.s.v);
         let t0 = self.s.t;
         // Mid-period motion estimate (exact for imposed motion; a structure's was made at the
         // end of the last period).
@@ -1062,6 +1061,7 @@ impl Sim {
             (Drive::Structure { excitation, .. }, false) => excitation.next(&mut self.exc, t0, ts),
             (Drive::Imposed { .. }, false) => 0.0,
         };
+        self.s.t = t0 + ts;
 
         // Electrical period: the averaged inverter inline, everything else out of line.
         let vb0 = self.s.v_bus;
@@ -1126,6 +1126,7 @@ impl Sim {
             }
             _ => {
                 // A structure (the imposed motion's arm is above).
+                let (x0, v0) = (self.s.x, self.s.v);
                 let mag = p.mass * ag;
                 let rhs0 = mag - p.damping * vm_est - p.stiffness * xm;
                 let f_eb = f_e + br * vm_est;
@@ -1218,7 +1219,6 @@ impl Sim {
 
         self.s.force_em = f_e;
         self.s.p_inv = -p_inv;
-        self.s.t = t0 + ts;
     }
 }
 
