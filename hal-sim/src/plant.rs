@@ -331,6 +331,23 @@ pub fn read_series_csv(path: &std::path::Path) -> Result<(Vec<f64>, Vec<f64>), S
     Ok((t, v))
 }
 
+/// A sine excitation a(t) = a0·sin(w·t) with w = 2π·f taken once ([`Excitation::sine`]):
+/// [`Excitation::next`]'s sine, which a caller may hold instead of the excitation (the
+/// simulator's common period, `crate::sim`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SineExcitation {
+    a0: f64,
+    w: f64,
+}
+
+impl SineExcitation {
+    /// [`Excitation::next`] of the sine: its value at the step's middle, t + dt/2.
+    #[inline(always)]
+    pub fn next(self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
+        self.a0 * st.rot.at(self.w * (t + dt / 2.0)).0
+    }
+}
+
 /// State of an excitation: noise filter and generator, the sine's incremental sin/cos, the
 /// recorded series' cursor.
 #[derive(Clone, Debug, Default)]
@@ -360,11 +377,21 @@ impl Excitation {
     /// Ground acceleration over the step [t, t+dt] (held constant over the step).
     #[inline(always)]
     pub fn next(&self, st: &mut ExcitationState, t: f64, dt: f64) -> f64 {
+        match self.sine() {
+            Some(sine) => sine.next(st, t, dt),
+            None => self.next_other(st, t, dt),
+        }
+    }
+
+    /// A sine's constants ([`SineExcitation`]); `None` for every other kind.
+    #[inline(always)]
+    pub fn sine(&self) -> Option<SineExcitation> {
         match self {
-            Excitation::Sine { a0_m_s2, freq_hz } => {
-                a0_m_s2 * st.rot.at(TAU * freq_hz * (t + dt / 2.0)).0
-            }
-            _ => self.next_other(st, t, dt),
+            Excitation::Sine { a0_m_s2, freq_hz } => Some(SineExcitation {
+                a0: *a0_m_s2,
+                w: TAU * freq_hz,
+            }),
+            _ => None,
         }
     }
 

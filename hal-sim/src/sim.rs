@@ -17,6 +17,7 @@
 use crate::fastmath::{floor_wrap_u16, Gauss, SinCos};
 use crate::plant::{
     Bus, Drive, Excitation, ExcitationState, Inverter, Losses, Machine, Screw, Sensors,
+    SineExcitation,
 };
 use crate::powerup::IndexPulse;
 use crate::sampling::ShuntPre;
@@ -942,17 +943,35 @@ impl Sim {
         }
     }
 
+    /// The sample the converters and the encoder take now: [`Sim::sample_as`], the ideal
+    /// converters' inline, the shunt sampling's and the sensors' noise out of line.
     #[inline(always)]
     fn sample_now(&mut self) -> RawSample {
+        if self.shunt.on || self.pre.noisy {
+            self.sample_general()
+        } else {
+            self.sample_as::<true>()
+        }
+    }
+
+    #[inline(never)]
+    fn sample_general(&mut self) -> RawSample {
+        self.sample_as::<false>()
+    }
+
+    /// The sample; `IDEAL` (only without the shunt sampling and the sensors' noise) leaves
+    /// them out at compile time.
+    #[inline(always)]
+    fn sample_as<const IDEAL: bool>(&mut self) -> RawSample {
         let mut i = self.currents();
-        if self.shunt.on {
+        if !IDEAL && self.shunt.on {
             i = self.shunt_read(i);
         }
         let p = &self.pre;
         let mut c: [f64; 3] =
             core::array::from_fn(|k| i[k] * p.counts_per_amp_k[k] + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
-        if p.noisy {
+        if !IDEAL && p.noisy {
             self.add_noise(&mut c, &mut vc);
         }
         if self.index.on {
@@ -993,7 +1012,7 @@ impl Sim {
     }
 
     /// The sensors' noise (in counts) on the three current codes, then on the bus code.
-    #[inline(never)]
+    #[inline(always)]
     fn add_noise(&mut self, c: &mut [f64; 3], vc: &mut f64) {
         let p = &self.pre;
         if p.noise_i_counts > 0.0 {
@@ -1006,24 +1025,63 @@ impl Sim {
         }
     }
 
+    /// One plant period under the actuation `act`: [`Sim::advance_as`] specialised to the
+    /// common period ([`Pre::common`]) or general, each out of line.
     #[inline(always)]
     fn advance(&mut self, act: &Actuation) {
+        if self.pre.common {
+            self.advance_common(act)
+        } else {
+            self.advance_general(act)
+        }
+    }
+
+    #[inline(never)]
+    fn advance_common(&mut self, act: &Actuation) {
+        self.advance_as::<true>(act)
+    }
+
+    #[inline(never)]
+    fn advance_general(&mut self, act: &Actuation) {
+        self.advance_as::<false>(act)
+    }
+
+    /// One plant period. `COMMON` (only when [`Pre::common`] holds) makes what the common
+    /// period's configuration fixes known at compile time — a structure under a sine
+    /// excitation (its constants in [`Pre::exc_sine`]), the plain averaged inverter, no
+    /// friction ripple, a source on the bus — so that its tests and the other cases' code
+    /// drop out; the arithmetic is the same (`common_period_is_the_general_one`).
+    ///
+    /// The period's work is ordered by its chains, not by its parts: the next period's
+    /// motion (position → rotor angle → emf → mean q current → acceleration → next
+    /// position) is the longest chain from one period to the next, so the mechanics come
+    /// right after the mean currents and before the drive losses and the bus, which they do
+    /// not need. The results do not depend on the order (each operation keeps its operands).
+    #[inline(always)]
+    fn advance_as<const COMMON: bool>(&mut self, act: &Actuation) {
         let ts = self.ts;
         let p = &self.pre;
-        let (x0, v0) = (self.s.x, self.s.v);
+        let t0 = self.s.t;
         // Mid-period motion estimate (exact for imposed motion; a structure's was made at the
         // end of the last period).
-        let (xm, vm_est, am_imposed) = match &self.rig.drive {
-            Drive::Imposed { motion } => {
-                motion.at_tracked(&mut self.rot_motion[0], self.s.t + ts / 2.0)
+        let (xm, vm_est, am_imposed) = match (&self.rig.drive, COMMON) {
+            (Drive::Imposed { motion }, false) => {
+                motion.at_tracked(&mut self.rot_motion[0], t0 + ts / 2.0)
             }
-            Drive::Structure { .. } => (self.s.xm, self.s.vm, 0.0),
+            _ => (self.s.xm, self.s.vm, 0.0),
         };
         let w = vm_est * p.inv_lead;
         let (sn, cs) = self.rot_theta.at(xm * p.theta_per_m + p.theta_offset);
         let kw = p.ke * w;
         let e = [-kw * sn, kw * cs];
         self.s.e_ab = e;
+        // A structure's base excitation (it depends on nothing else of the period).
+        let ag = match (&self.rig.drive, COMMON) {
+            (_, true) => p.exc_sine.next(&mut self.exc, t0, ts),
+            (Drive::Structure { excitation, .. }, false) => excitation.next(&mut self.exc, t0, ts),
+            (Drive::Imposed { .. }, false) => 0.0,
+        };
+        self.s.t = t0 + ts;
 
         // Electrical period: the averaged inverter inline, everything else out of line.
         let vb0 = self.s.v_bus;
@@ -1035,7 +1093,7 @@ impl Sim {
                 p_inv,
             },
             iq_avg,
-        ) = if act.enable && p.plain_average {
+        ) = if act.enable && (COMMON || p.plain_average) {
             let dv = duty_clarke(act);
             let v = [dv[0] * vb0, dv[1] * vb0];
             let iq = mean_iq(p, (sn, cs), kw, v, self.s.i_ab);
@@ -1052,79 +1110,20 @@ impl Sim {
         let f_e = p.force_per_iq * iq_avg; // −T/l, T = 3/2·K_e·i_q
         fl.to_inverter -= p_inv;
 
-        // Drive losses and bus.
-        let (p_sw, p_cond) = if act.enable {
-            let ph = [
-                i_avg[0],
-                -0.5 * i_avg[0] + SQRT3_2 * i_avg[1],
-                -0.5 * i_avg[0] - SQRT3_2 * i_avg[1],
-            ];
-            (
-                p.k_sw_f * vb0 * (ph[0].abs() + ph[1].abs() + ph[2].abs()),
-                p.r_on_15 * i2_avg,
-            )
-        } else {
-            (0.0, 0.0)
-        };
-        fl.switching_loss += p_sw;
-        let p_logic = if vb0 >= p.logic_min_v { p.logic_w } else { 0.0 };
-        fl.logic += p_logic;
-        // Summed in the order the terms arrive (the bus voltage's path through the period:
-        // the conduction loss, from the mean of i², comes last).
-        let p_draw = ((p_logic + p_inv) + p_sw) + p_cond;
-        let bk = &p.bus[act.brake as usize];
-        // Injection current such that ∫V·i_inj dt equals the energy the inverter drew, by one
-        // fixed-point step from the guess i₀ = −p/max(V, 1) (the rest, second order, shows in
-        // the ledger's residual): the mean of V over the period is α + β·i, linear in the
-        // injection, so i = −p/max(α + β·i₀, 1) = −p·V_ref/max(α·V_ref − β·p, V_ref), one
-        // division.
-        let vref = vb0.max(1.0);
-        let alpha = bk.iv_c + bk.iv_a * vb0;
-        let den = (alpha * vref - bk.iv_b * p_draw).max(vref);
-        let i_inj = -p_draw * vref / den;
-        // The bus over the period (exact for the held injection): end voltage, mean of V
-        // and of V², and the source/sink's part.
-        let v1 = if bk.gt > 0.0 {
-            let vinf = (i_inj + p.i_source) * bk.inv_gt;
-            let d0 = vb0 - vinf;
-            // V∞ + d0·k = (k·V0 + (1 − k)·i_s/g) + (1 − k)/g·i_inj: one product and sum
-            // after the division.
-            let v1 = (vb0 * bk.k + bk.v_src) + bk.v_per_inj * i_inj;
-            let d0k = d0 * bk.ak;
-            let d0k2 = d0 * d0 * bk.ak2;
-            let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
-            if let Some(vs) = p.source_v {
-                // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
-                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
-                // the mean of (V − vs)² involves no cancellation of large terms.
-                // (Their constants applied when the ledger is read: `Flows::bus`.)
-                let dl = vinf - vs;
-                fl.dv += dl + d0k;
-                fl.dv2 += dl * dl + 2.0 * dl * d0k + d0k2;
-            }
-            fl.v2[act.brake as usize] += v2_mean;
-            v1
-        } else {
-            // No conductance on the bus (brake open, no source): nothing flows out of it.
-            vb0 + i_inj * p.ts_per_c
-        };
-        self.s.v_bus = v1;
-
-        // Mechanics.
-        let t0 = self.s.t;
+        // Mechanics (before the drive losses and the bus, which they do not need).
         let (jr, br) = (p.jr, p.br);
         // Friction f_d(x, ẋ) of eq. 13 at the mid-period estimate (as `Screw::friction`).
         let fd = {
             let sgn = (vm_est * p.inv_stick).clamp(-1.0, 1.0);
-            let c = if p.ripple {
+            let c = if !COMMON && p.ripple {
                 p.coulomb * ripple(p, &mut self.rot_ripple, xm)
             } else {
                 p.coulomb
             };
             c * sgn + p.viscous * vm_est
         };
-        match &self.rig.drive {
-            Drive::Imposed { motion } => {
+        match (&self.rig.drive, COMMON) {
+            (Drive::Imposed { motion }, false) => {
                 let (x1, v1m, _) = motion.at_tracked(&mut self.rot_motion[1], t0 + ts);
                 let vm = vm_est;
                 let (inner, fd) = match self.model.as_deref_mut() {
@@ -1145,8 +1144,9 @@ impl Sim {
                 self.s.v = v1m;
                 self.s.force = f;
             }
-            Drive::Structure { excitation, .. } => {
-                let ag = excitation.next(&mut self.exc, t0, ts);
+            _ => {
+                // A structure (the imposed motion's arm is above).
+                let (x0, v0) = (self.s.x, self.s.v);
                 let mag = p.mass * ag;
                 let rhs0 = mag - p.damping * vm_est - p.stiffness * xm;
                 let f_eb = f_e + br * vm_est;
@@ -1179,9 +1179,66 @@ impl Sim {
                 self.s.force = f;
             }
         }
+        // Drive losses and bus.
+        let (p_sw, p_cond) = if act.enable {
+            let ph = [
+                i_avg[0],
+                -0.5 * i_avg[0] + SQRT3_2 * i_avg[1],
+                -0.5 * i_avg[0] - SQRT3_2 * i_avg[1],
+            ];
+            (
+                p.k_sw_f * vb0 * (ph[0].abs() + ph[1].abs() + ph[2].abs()),
+                p.r_on_15 * i2_avg,
+            )
+        } else {
+            (0.0, 0.0)
+        };
+        fl.switching_loss += p_sw;
+        let p_logic = if vb0 >= p.logic_min_v { p.logic_w } else { 0.0 };
+        fl.logic += p_logic;
+        // Summed in the order the terms arrive (the bus voltage's path through the period:
+        // the conduction loss, from the mean of i², comes last).
+        let p_draw = ((p_logic + p_inv) + p_sw) + p_cond;
+        let bk = &p.bus[act.brake as usize];
+        // Injection current such that ∫V·i_inj dt equals the energy the inverter drew, by one
+        // fixed-point step from the guess i₀ = −p/max(V, 1) (the rest, second order, shows in
+        // the ledger's residual): the mean of V over the period is α + β·i, linear in the
+        // injection, so i = −p/max(α + β·i₀, 1) = −p·V_ref/max(α·V_ref − β·p, V_ref), one
+        // division.
+        let vref = vb0.max(1.0);
+        let alpha = bk.iv_c + bk.iv_a * vb0;
+        let den = (alpha * vref - bk.iv_b * p_draw).max(vref);
+        let i_inj = -p_draw * vref / den;
+        // The bus over the period (exact for the held injection): end voltage, mean of V
+        // and of V², and the source/sink's part.
+        let v1 = if COMMON || bk.gt > 0.0 {
+            let vinf = (i_inj + p.i_source) * bk.inv_gt;
+            let d0 = vb0 - vinf;
+            // V∞ + d0·k = (k·V0 + (1 − k)·i_s/g) + (1 − k)/g·i_inj: one product and sum
+            // after the division.
+            let v1 = (vb0 * bk.k + bk.v_src) + bk.v_per_inj * i_inj;
+            let d0k = d0 * bk.ak;
+            let d0k2 = d0 * d0 * bk.ak2;
+            let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
+            if let Some(vs) = if COMMON { Some(p.vs) } else { p.source_v } {
+                // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
+                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
+                // the mean of (V − vs)² involves no cancellation of large terms.
+                // (Their constants applied when the ledger is read: `Flows::bus`.)
+                let dl = vinf - vs;
+                fl.dv += dl + d0k;
+                fl.dv2 += dl * dl + 2.0 * dl * d0k + d0k2;
+            }
+            fl.v2[act.brake as usize] += v2_mean;
+            v1
+        } else {
+            // No conductance on the bus (brake open, no source): nothing flows out of it.
+            vb0 + i_inj * p.ts_per_c
+        };
+        self.s.v_bus = v1;
+
         self.s.force_em = f_e;
         self.s.p_inv = -p_inv;
-        self.s.t = t0 + ts;
     }
 }
 
@@ -1654,6 +1711,13 @@ struct Pre {
     noisy: bool,
     plain_average: bool,
     ripple: bool,
+    /// The source's EMF (0 without a source).
+    vs: f64,
+    /// A structure's sine excitation (zero for any other drive).
+    exc_sine: SineExcitation,
+    /// The common period ([`Sim::advance_as`]): a structure under a sine excitation, the
+    /// plain averaged inverter, no friction ripple, a source on the bus.
+    common: bool,
 }
 
 impl Pre {
@@ -1713,6 +1777,12 @@ impl Pre {
             },
         };
         let mass = st.mass_kg;
+        let exc_sine = match &rig.drive {
+            Drive::Structure { excitation, .. } => excitation.sine(),
+            Drive::Imposed { .. } => None,
+        };
+        let ripple = sc.p3 != 0.0 || sc.p5 != 0.0;
+        let plain_average = !rig.inverter.switched && !dead_time;
         Pre {
             counts_per_amp,
             counts_per_amp_k: [counts_per_amp; 3],
@@ -1759,8 +1829,11 @@ impl Pre {
             damping: st.damping_n_s_per_m,
             stiffness: st.stiffness_n_per_m,
             noisy: sn.current_noise_a > 0.0 || sn.vbus_noise_v > 0.0,
-            plain_average: !rig.inverter.switched && !dead_time,
-            ripple: sc.p3 != 0.0 || sc.p5 != 0.0,
+            plain_average,
+            ripple,
+            vs: b.source_v.unwrap_or(0.0),
+            exc_sine: exc_sine.unwrap_or_default(),
+            common: exc_sine.is_some() && plain_average && !ripple && b.source_v.is_some(),
             jr,
             br: sc.reflected_viscosity(),
             inv_stick: 1.0 / sc.stick_velocity,
@@ -2076,6 +2149,45 @@ mod tests {
                 assert!((got[k] - want[k]).abs() <= tol, "{got:?} {want:?}");
             }
         }
+    }
+
+    #[test]
+    fn common_period_is_the_general_one() {
+        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<true>`) against the
+        // general code on the same run, bit for bit (`Debug` prints every f64 exactly): the
+        // closed loop of the reference TMD, then open-loop periods with random duties (some
+        // beyond 1), the gates off and the brake closed.
+        use regen_fw::fx::Duty;
+        use regen_fw::io::Actuation;
+        let sc = Scenario::tmd(306.0);
+        let mut a = sc.build().unwrap();
+        let mut b = sc.build().unwrap();
+        assert!(a.pre.common, "the reference TMD's period is the common one");
+        b.pre.common = false;
+        let bits = |s: &super::Sim| format!("{:?} {:?} {:?}", s.s, s.flows, s.energy());
+        for _ in 0..20_000 {
+            let sample = a.sample_as::<true>();
+            assert_eq!(sample, a.sample_as::<false>());
+            a.step();
+            b.step();
+        }
+        assert_eq!(bits(&a), bits(&b));
+        let mut st = 0x2545_f491_4f6c_dd1du64;
+        for k in 0..20_000 {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            let act = Actuation {
+                duties: [0, 1, 2].map(|j| Duty::from_bits(((st >> (16 * j)) % 36_000) as u16)),
+                enable: k % 7 != 0,
+                brake: k % 5 == 0,
+            };
+            assert_eq!(a.take_sample(), b.take_sample());
+            a.apply_and_advance(&act);
+            b.apply_and_advance(&act);
+        }
+        assert_eq!(bits(&a), bits(&b));
+        assert!(a.energy().brake > 0.0 && a.flows.i2_off > 0.0);
     }
 
     #[test]
