@@ -1026,7 +1026,8 @@ impl Sim {
     }
 
     /// One plant period under the actuation `act`: [`Sim::advance_as`] specialised to the
-    /// common period ([`Pre::common`]) or general, each out of line.
+    /// common period ([`Pre::common`]), inline in its callers (the closed loop's period and
+    /// `apply_and_advance`), or general, out of line.
     #[inline(always)]
     fn advance(&mut self, act: &Actuation) {
         if self.pre.common {
@@ -1036,7 +1037,7 @@ impl Sim {
         }
     }
 
-    #[inline(never)]
+    #[inline(always)]
     fn advance_common(&mut self, act: &Actuation) {
         self.advance_as::<true>(act)
     }
