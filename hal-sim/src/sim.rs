@@ -2244,7 +2244,7 @@ mod tests {
         let sc = Scenario::imposed(m, 50.0, 1.0);
         let mut a = sc.build().unwrap();
         let mut b = sc.build().unwrap();
-        let bus = b.rig().bus.clone();
+        let bus = b.rig().bus;
         b.set_bus(bus).unwrap();
         for _ in 0..4000 {
             a.step();
