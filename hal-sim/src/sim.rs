@@ -147,7 +147,7 @@ struct Flows {
 impl Flows {
     /// The bus's flows since the last bank, W (summed mean powers).
     fn bus(&self, p: &Pre) -> (f64, f64, f64) {
-        let vs = p.source_v.unwrap_or(0.0);
+        let vs = p.vs;
         (
             self.brake + p.bus[0].g_brake * self.v2[0] + p.bus[1].g_brake * self.v2[1],
             self.source_r_loss + p.g_source * self.dv2,
@@ -807,7 +807,7 @@ impl Sim {
         }
     }
 
-    /// One PWM period: sample, controller step, plant advance.
+    /// One PWM period: sample, plant advance (on the actuation in force), controller step.
     pub fn step(&mut self) {
         self.step_with(|_| {}, |_| {})
     }
@@ -1034,15 +1034,10 @@ impl Sim {
     #[inline(always)]
     fn advance(&mut self, act: &Actuation) {
         if self.pre.common {
-            self.advance_common(act)
+            self.advance_as::<true>(act)
         } else {
             self.advance_general(act)
         }
-    }
-
-    #[inline(always)]
-    fn advance_common(&mut self, act: &Actuation) {
-        self.advance_as::<true>(act)
     }
 
     #[inline(never)]
