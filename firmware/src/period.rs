@@ -2,8 +2,8 @@
 //! [`Controller::step`], written once for the board's ADC interrupt and the simulator.
 //!
 //! One period ([`Period::run`]):
-//! 1. sample ([`DriveIo::sample`]), step up to the outputs ([`Controller::step_outputs`]), add
-//!    the period's electrical power to the exact energy sum ([`Period::step`]);
+//! 1. sample ([`DriveIo::sample`]), add the last period's electrical power to the exact
+//!    energy sum, step up to the outputs ([`Controller::step_outputs`]) ([`Period::step`]);
 //! 2. actuate ([`DriveIo::apply`]): the duties are written before any slower work;
 //! 3. [`Period::finish`]: a fault latch the step began finished ([`Controller::complete_latch`]:
 //!    its record and slow terms; the outputs just written are already the safe state's), a
@@ -125,7 +125,8 @@ impl Pending {
 pub struct Period {
     /// Periods until the next supervision (0: this one).
     countdown: u32,
-    /// Σ `p_elec` over all periods, Q16.16 watt·periods (saturating; 2^47 W·periods).
+    /// Σ `p_elec` over all periods but the last, Q16.16 watt·periods (saturating; 2^47
+    /// W·periods); the last one's is still the controller's ([`Period::energy_bits`]).
     energy: i64,
     /// Periods run (wraps).
     pub periods: u32,
@@ -154,12 +155,23 @@ impl Period {
         a
     }
 
-    /// The step up to its outputs and the energy sum.
+    /// The energy sum and the step up to its outputs. The sum takes the last period's power
+    /// (its step's record, [`Controller::p_elec`]) before this period's step, whose inputs are
+    /// long known by then; added after the step, it would wait for the step's last values
+    /// (the PI's voltages), and hold up the work behind it (in the simulator, the next
+    /// period's plant: the closed loop 3 % slower, `docs/simulator.md`, "Speed"). The same sum:
+    /// [`Period::energy_bits`] adds the last period's power when read.
     #[inline(always)]
     pub fn step(&mut self, ctl: &mut Controller, s: &RawSample) -> Actuation {
-        let a = ctl.step_outputs(s);
         self.energy = self.energy.saturating_add(ctl.p_elec().to_bits() as i64);
-        a
+        ctl.step_outputs(s)
+    }
+
+    /// The controller `ctl` is about to be replaced (a reboot of the MCU's model with the
+    /// period kept): its last period's power goes into the sum now, since the next step adds
+    /// the new controller's (nothing yet: no step, no power).
+    pub fn bank(&mut self, ctl: &Controller) {
+        self.energy = self.energy_bits(ctl);
     }
 
     /// After the actuation: the step's latch finished, hardware trip, supervision, counters,
@@ -222,14 +234,16 @@ impl Period {
         mail.mode = Slot::Empty;
     }
 
-    /// Σ `p_elec` over all periods, Q16.16 watt·periods.
-    pub fn energy_bits(&self) -> i64 {
-        self.energy
+    /// Σ `p_elec` over all periods, Q16.16 watt·periods: the sum and the last period's power,
+    /// still in `ctl`, the controller this period steps.
+    pub fn energy_bits(&self, ctl: &Controller) -> i64 {
+        self.energy.saturating_add(ctl.p_elec().to_bits() as i64)
     }
 
-    /// Energy since the start, J, for a period `ts` in seconds.
-    pub fn energy_j(&self, ts: f32) -> f32 {
-        self.energy as f32 / 65_536.0 * ts
+    /// Energy since the start, J, for a period `ts` in seconds (`ctl` as in
+    /// [`Period::energy_bits`]).
+    pub fn energy_j(&self, ctl: &Controller, ts: f32) -> f32 {
+        self.energy_bits(ctl) as f32 / 65_536.0 * ts
     }
 
     /// Periods until the next supervision (0: the next period supervises).
@@ -386,11 +400,11 @@ mod tests {
             nonzero > 10_000,
             "the run must carry power ({nonzero} periods)"
         );
-        assert_eq!(per.energy_bits() as f64, sum);
+        assert_eq!(per.energy_bits(&ctl) as f64, sum);
         let ts = ctl.config().ts();
         let j = sum / 65_536.0 * ts as f64;
         // energy_j: one rounding to f32 of the sum and one of the product: ≤ 2·2^−24.
-        assert!((per.energy_j(ts) as f64 / j - 1.0).abs() <= 2.0 * f32::EPSILON as f64 / 2.0);
+        assert!((per.energy_j(&ctl, ts) as f64 / j - 1.0).abs() <= 2.0 * f32::EPSILON as f64 / 2.0);
     }
 
     /// A configuration, a mode and a fault clearance posted in the mailbox take effect after

@@ -477,7 +477,9 @@ impl Sim {
     /// alignment again ([`Controller::require_alignment`], then [`Sim::boot`]).
     pub fn reboot(&mut self) -> Result<(), String> {
         let cfg = *self.ctl.config();
-        self.ctl = power_up_controller(&cfg)?;
+        let ctl = power_up_controller(&cfg)?;
+        self.per.bank(&self.ctl);
+        self.ctl = ctl;
         self.break_flag = None; // the reset clears the timer's flags
         if self.powered_up {
             self.ctl.require_alignment();
@@ -2248,5 +2250,29 @@ mod tests {
         assert!(a.force().0 > 100.0, "the law brakes: {:?}", a.force());
         assert_eq!(a.force(), b.force());
         assert_eq!(a.energy(), b.energy());
+    }
+
+    #[test]
+    fn a_reboot_keeps_the_firmware_energy_sum() {
+        // The period's sum takes each period's power at the next period's step
+        // (`Period::step`): a reboot between two periods replaces the controller that still
+        // holds the last period's power, which `Period::bank` folds in first. The sum read
+        // right after the reboot is the sum read right before it (without the bank: short
+        // by the last period's power).
+        let mut sim = Scenario::tmd(306.0).build().unwrap();
+        sim.run_for(8.0);
+        let before = sim.loop_period().energy_bits(sim.controller());
+        assert!(
+            sim.controller().p_elec().to_bits() != 0,
+            "the last period carries power"
+        );
+        sim.reboot().unwrap();
+        assert_eq!(sim.loop_period().energy_bits(sim.controller()), before);
+        // And the fresh controller's first period adds nothing before its own step's power.
+        sim.step();
+        assert_eq!(
+            sim.loop_period().energy_bits(sim.controller()) - before,
+            sim.controller().p_elec().to_bits() as i64
+        );
     }
 }

@@ -240,7 +240,9 @@ fn firmware_energy_sum_matches_the_plant() {
         let mut sim = sc.build().unwrap();
         sim.run_for(sc.duration_s);
         let plant = sim.energy().to_inverter;
-        let fw = sim.loop_period().energy_j(sim.period() as f32) as f64;
+        let fw = sim
+            .loop_period()
+            .energy_j(sim.controller(), sim.period() as f32) as f64;
         let dev = fw / plant - 1.0;
         println!(
             "R_L {r_l}: firmware {fw:.4} J, plant {plant:.4} J, dev {:+.4} %",

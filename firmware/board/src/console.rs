@@ -217,7 +217,7 @@ pub async fn console_task(
                 for _ in 0..batch {
                     con.tick(&ctl, &mut tel);
                 }
-                con.energy_j = c.energy_j(ctl.config().ts());
+                con.energy_j = c.energy_j(&ctl, ctl.config().ts());
                 // A fault latched since the last batch: announced at once, never dropped.
                 reply.clear();
                 if con.notice(&ctl, reply) {
