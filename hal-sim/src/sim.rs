@@ -142,6 +142,21 @@ struct Flows {
     dv2: f64,
     /// Σ the logic supply's power over the periods, W (nothing below its lockout).
     logic: f64,
+    /// The last period's bus flows, not yet in the sums above ([`Flows::settle`]).
+    due: BusDue,
+}
+
+/// What the bus's flows of one period are computed from: the voltage at its start, the
+/// current injected over it and the brake's state. The period records them and the next one
+/// sums them ([`Flows::settle`]): they depend on the period's division, its last result, and
+/// summed right after it they held up the next period's work (the closed loop 8 % slower,
+/// `docs/simulator.md`, "Speed"), while one period later their inputs are long known.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct BusDue {
+    vb0: f64,
+    i_inj: f64,
+    brake: usize,
+    set: bool,
 }
 
 impl Flows {
@@ -155,9 +170,43 @@ impl Flows {
         )
     }
 
+    /// The last period's bus flows ([`BusDue`]) into the sums, with the constants `p` of that
+    /// period: the means over it of V² and, with a source, of V − v_s and (V − v_s)², from
+    /// V(t) = V∞ + d0·e^(−g·t/C) (exact for the held injection).
+    #[inline(always)]
+    fn settle(&mut self, p: &Pre) {
+        if !self.due.set {
+            return;
+        }
+        let BusDue {
+            vb0, i_inj, brake, ..
+        } = self.due;
+        self.due.set = false;
+        let bk = &p.bus[brake];
+        if bk.gt > 0.0 {
+            let vinf = (i_inj + p.i_source) * bk.inv_gt;
+            let d0 = vb0 - vinf;
+            let d0k = d0 * bk.ak;
+            let d0k2 = d0 * d0 * bk.ak2;
+            let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
+            if let Some(vs) = p.source_v {
+                // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
+                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
+                // the mean of (V − vs)² involves no cancellation of large terms.
+                // (Their constants applied when the ledger is read: `Flows::bus`.)
+                let dl = vinf - vs;
+                self.dv += dl + d0k;
+                self.dv2 += dl * dl + 2.0 * dl * d0k + d0k2;
+            }
+            self.v2[brake] += v2_mean;
+        }
+        // No conductance on the bus (brake open, no source): nothing flows out of it.
+    }
+
     /// Fold the bus's sums into its flows with the constants `p` in force until now (before
     /// a plant change replaces them).
     fn bank(&mut self, p: &Pre) {
+        self.settle(p);
         (self.brake, self.source_r_loss, self.sink) = self.bus(p);
         (self.v2, self.dv, self.dv2) = ([0.0; 2], 0.0, 0.0);
     }
@@ -571,8 +620,10 @@ impl Sim {
     }
     /// The energy ledger now (its stored energies evaluated from the state).
     pub fn energy(&self) -> Energy {
-        let f = &self.flows;
         let p = &self.pre;
+        let mut f = self.flows;
+        f.settle(p);
+        let f = &f;
         let ts = self.ts;
         let device = (p.h_in * f.inner[0] + p.h_out * f.inner[1] + f.friction_loss) * ts;
         let (brake, source_r_loss, sink) = f.bus(p);
@@ -1060,6 +1111,8 @@ impl Sim {
     /// not need. The results do not depend on the order (each operation keeps its operands).
     #[inline(always)]
     fn advance_as<const COMMON: bool>(&mut self, act: &Actuation) {
+        // The last period's bus flows, whose inputs are long known.
+        self.flows.settle(&self.pre);
         let ts = self.ts;
         let p = &self.pre;
         let t0 = self.s.t;
@@ -1210,31 +1263,20 @@ impl Sim {
         let alpha = bk.iv_c + bk.iv_a * vb0;
         let den = (alpha * vref - bk.iv_b * p_draw).max(vref);
         let i_inj = -p_draw * vref / den;
-        // The bus over the period (exact for the held injection): end voltage, mean of V
-        // and of V², and the source/sink's part.
+        // The bus over the period (exact for the held injection): the end voltage now, the
+        // flows by the next period (`Flows::settle`).
         let v1 = if COMMON || bk.gt > 0.0 {
-            let vinf = (i_inj + p.i_source) * bk.inv_gt;
-            let d0 = vb0 - vinf;
-            // V∞ + d0·k = (k·V0 + (1 − k)·i_s/g) + (1 − k)/g·i_inj: one product and sum
-            // after the division.
-            let v1 = (vb0 * bk.k + bk.v_src) + bk.v_per_inj * i_inj;
-            let d0k = d0 * bk.ak;
-            let d0k2 = d0 * d0 * bk.ak2;
-            let v2_mean = vinf * vinf + 2.0 * vinf * d0k + d0k2;
-            if let Some(vs) = if COMMON { Some(p.vs) } else { p.source_v } {
-                // Source current (vs − V)·g: its EMF's energy and the loss in its resistance,
-                // from δ = V∞ − vs and the decaying part (V − vs = δ + d0·e^(−t/τ)), so that
-                // the mean of (V − vs)² involves no cancellation of large terms.
-                // (Their constants applied when the ledger is read: `Flows::bus`.)
-                let dl = vinf - vs;
-                fl.dv += dl + d0k;
-                fl.dv2 += dl * dl + 2.0 * dl * d0k + d0k2;
-            }
-            fl.v2[act.brake as usize] += v2_mean;
-            v1
+            // V∞ + d0·k = (k·V0 + (1 − k)·i_s/g) + (1 − k)/g·i_inj, with V∞ = (i_inj + i_s)/g
+            // and d0 = V0 − V∞: one product and sum after the division.
+            (vb0 * bk.k + bk.v_src) + bk.v_per_inj * i_inj
         } else {
-            // No conductance on the bus (brake open, no source): nothing flows out of it.
             vb0 + i_inj * p.ts_per_c
+        };
+        fl.due = BusDue {
+            vb0,
+            i_inj,
+            brake: act.brake as usize,
+            set: true,
         };
         self.s.v_bus = v1;
 
