@@ -2,8 +2,8 @@
 //! [`Controller::step`], written once for the board's ADC interrupt and the simulator.
 //!
 //! One period ([`Period::run`]):
-//! 1. sample ([`DriveIo::sample`]), add the last period's electrical power to the exact
-//!    energy sum, step up to the outputs ([`Controller::step_outputs`]) ([`Period::step`]);
+//! 1. sample ([`DriveIo::sample`]); [`Period::step`]: add the last period's electrical power
+//!    to the exact energy sum, then step up to the outputs ([`Controller::step_outputs`]);
 //! 2. actuate ([`DriveIo::apply`]): the duties are written before any slower work;
 //! 3. [`Period::finish`]: a fault latch the step began finished ([`Controller::complete_latch`]:
 //!    its record and slow terms; the outputs just written are already the safe state's), a
