@@ -1000,34 +1000,37 @@ impl Sim {
     }
 
     /// The sample the converters and the encoder take now: [`Sim::sample_as`], the ideal
-    /// converters' inline, the shunt sampling's and the sensors' noise out of line.
+    /// converters' and the shunt sampling's inline, the sensors' noise out of line.
     #[inline(always)]
     fn sample_now(&mut self) -> RawSample {
-        if self.shunt.on || self.pre.noisy {
+        if self.pre.noisy {
             self.sample_general()
+        } else if self.shunt.on {
+            self.sample_as::<true, false>()
         } else {
-            self.sample_as::<true>()
+            self.sample_as::<false, false>()
         }
     }
 
     #[inline(never)]
     fn sample_general(&mut self) -> RawSample {
-        self.sample_as::<false>()
+        self.sample_as::<true, true>()
     }
 
-    /// The sample; `IDEAL` (only without the shunt sampling and the sensors' noise) leaves
-    /// them out at compile time.
+    /// The sample; `SHUNT` and `NOISE` compile in the shunt sampling and the sensors' noise
+    /// (each then taken when the run has it), so that the ideal converters' sample has
+    /// neither test.
     #[inline(always)]
-    fn sample_as<const IDEAL: bool>(&mut self) -> RawSample {
+    fn sample_as<const SHUNT: bool, const NOISE: bool>(&mut self) -> RawSample {
         let mut i = self.currents();
-        if !IDEAL && self.shunt.on {
+        if SHUNT && self.shunt.on {
             i = self.shunt_read(i);
         }
         let p = &self.pre;
         let mut c: [f64; 3] =
             core::array::from_fn(|k| i[k] * p.counts_per_amp_k[k] + p.code_base[k]);
         let mut vc = self.s.v_bus * p.counts_per_volt + p.vcode_base;
-        if !IDEAL && p.noisy {
+        if NOISE && p.noisy {
             self.add_noise(&mut c, &mut vc);
         }
         if self.index.on {
@@ -2197,7 +2200,7 @@ mod tests {
 
     #[test]
     fn common_period_is_the_general_one() {
-        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<true>`) against the
+        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<false, false>`) against the
         // general code on the same run, bit for bit (`Debug` prints every f64 exactly): the
         // closed loop of the reference TMD, then open-loop periods with random duties (some
         // beyond 1), the gates off and the brake closed.
@@ -2210,8 +2213,8 @@ mod tests {
         b.pre.common = false;
         let bits = |s: &super::Sim| format!("{:?} {:?} {:?}", s.s, s.flows, s.energy());
         for _ in 0..20_000 {
-            let sample = a.sample_as::<true>();
-            assert_eq!(sample, a.sample_as::<false>());
+            let sample = a.sample_as::<false, false>();
+            assert_eq!(sample, a.sample_as::<true, true>());
             a.step();
             b.step();
         }
