@@ -189,7 +189,7 @@ impl FaultSim {
             }
             Inject::ComparatorFalseTrip { enable_s, bus, .. } => {
                 let t = self.sim.time();
-                let spec = self.stage.as_ref().ok_or("needs the stage model")?.spec;
+                let spec = *self.stage.as_ref().ok_or("needs the stage model")?.spec();
                 let mut st = Stage::new(spec, t);
                 st.glitch(enable_s, bus);
                 self.stage = Some(st);
@@ -198,7 +198,7 @@ impl FaultSim {
                 self.stage
                     .as_mut()
                     .ok_or("needs the stage model")?
-                    .dac_scale = scale;
+                    .set_dac_scale(scale);
             }
             _ => {}
         }
@@ -231,7 +231,7 @@ impl FaultSim {
         if st.cpu == crate::stage::Cpu::Halted {
             match self.inject {
                 Inject::WatchdogReset { timeout_s } if t >= self.at_s + timeout_s => st.reset(t),
-                Inject::McuHalt if t >= self.at_s + st.spec.iwdg_s => {
+                Inject::McuHalt if t >= self.at_s + st.spec().iwdg_s => {
                     st.reset(t);
                     st.cpu = crate::stage::Cpu::Reset {
                         until_s: f64::INFINITY,

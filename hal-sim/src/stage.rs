@@ -128,10 +128,37 @@ pub enum Cpu {
     },
 }
 
+/// The comparators' thresholds with the DACs' multiplier applied (only the MCU's comparators
+/// have a DAC: an external chopper's are the spec's).
+#[derive(Clone, Copy, Debug)]
+struct Thresholds {
+    /// The chopper's threshold while it is off (on above it) and while it is on (off below).
+    chopper: [f64; 2],
+    ov_v: f64,
+    oc_a: f64,
+}
+
+impl Thresholds {
+    fn new(s: &StageSpec, dac_scale: f64) -> Thresholds {
+        let chop = if s.chopper == Chopper::External {
+            1.0
+        } else {
+            dac_scale
+        };
+        Thresholds {
+            chopper: [s.brake_on_v * chop, s.brake_off_v * chop],
+            ov_v: s.ov_hw_v * dac_scale,
+            oc_a: s.oc_hw_a * dac_scale,
+        }
+    }
+}
+
 /// The stage's state.
 #[derive(Clone, Debug)]
 pub struct Stage {
-    pub spec: StageSpec,
+    /// The settings ([`Stage::spec`]); fixed for the stage's life, the thresholds derive
+    /// from them.
+    spec: StageSpec,
     pub cpu: Cpu,
     /// Break inputs armed (after settling, flags cleared).
     pub armed: bool,
@@ -144,8 +171,11 @@ pub struct Stage {
     /// Pending output glitch on a break comparator: its length, s, and whether it is on the
     /// bus comparator (BRK2) or a phase comparator (BRK).
     glitch: Option<(f64, bool)>,
-    /// Multiplier on the DAC thresholds (a wrong DAC code: fault injection).
-    pub dac_scale: f64,
+    /// Multiplier on the DAC thresholds (a wrong DAC code: fault injection):
+    /// [`Stage::set_dac_scale`].
+    dac_scale: f64,
+    /// The comparators' thresholds as the DACs set them ([`Thresholds::new`]).
+    thr: Thresholds,
     /// The last actuation the firmware gave the timer (held while the core is halted).
     last: Actuation,
     /// Time of the first break action, s.
@@ -166,6 +196,7 @@ impl Stage {
             enabled_at: t,
             glitch: None,
             dac_scale: 1.0,
+            thr: Thresholds::new(&spec, 1.0),
             last: Actuation::OFF,
             first_break_s: None,
         }
@@ -175,6 +206,22 @@ impl Stage {
     /// comparator, else a phase comparator.
     pub fn glitch(&mut self, len_s: f64, bus: bool) {
         self.glitch = Some((len_s, bus));
+    }
+
+    /// The stage's rating and settings.
+    pub fn spec(&self) -> &StageSpec {
+        &self.spec
+    }
+
+    /// Every DAC threshold multiplied by `scale` (a wrong code), from now on.
+    pub fn set_dac_scale(&mut self, scale: f64) {
+        self.dac_scale = scale;
+        self.thr = Thresholds::new(&self.spec, scale);
+    }
+
+    /// The DAC thresholds' multiplier ([`Stage::set_dac_scale`]).
+    pub fn dac_scale(&self) -> f64 {
+        self.dac_scale
     }
 
     /// The core stops now.
@@ -219,18 +266,13 @@ impl Stage {
     /// The comparators see the plant's true bus `v_bus` and phase currents `i` at time `t`
     /// (end of a period); latches the breaks and sets the chopper.
     pub fn observe(&mut self, t: f64, v_bus: f64, i: [f64; 3]) {
-        let s = &self.spec;
+        let (s, thr) = (&self.spec, &self.thr);
         // Chopper comparator (not a break: no filter; its own hysteresis). An MCU comparator
-        // is dead in reset, an external one is not; only the MCU's has a DAC.
-        let scale = if s.chopper == Chopper::External {
-            1.0
-        } else {
-            self.dac_scale
-        };
-        let (on, off) = (s.brake_on_v * scale, s.brake_off_v * scale);
-        let live = s.chopper == Chopper::External || !self.in_reset();
-        self.chopper_on = live && v_bus > if self.chopper_on { off } else { on };
-        if self.in_reset() {
+        // is dead in reset, an external one is not.
+        let in_reset = self.in_reset();
+        let live = s.chopper == Chopper::External || !in_reset;
+        self.chopper_on = live && v_bus > thr.chopper[self.chopper_on as usize];
+        if in_reset {
             return;
         }
         if !self.armed && t >= self.enabled_at + s.settle_s {
@@ -238,9 +280,10 @@ impl Stage {
             self.armed = true;
             self.glitch = None;
         }
-        let ov = v_bus > s.ov_hw_v * self.dac_scale;
-        // One-sided: a phase current below −oc_hw_a.
-        let oc = i.iter().any(|x| -x > s.oc_hw_a * self.dac_scale);
+        let ov = v_bus > thr.ov_v;
+        // One-sided: a phase current below −oc (`min` skips a NaN, as the comparison
+        // would fail on it).
+        let oc = -i[0].min(i[1]).min(i[2]) > thr.oc_a;
         // A real crossing lasts a whole period (≫ the filters); a glitch only its length.
         let (g_oc, g_ov) = match self.glitch.take() {
             Some((len, true)) => (false, len >= s.filter2_s),
@@ -381,9 +424,16 @@ mod tests {
         let g = st.gate(&run);
         assert!(!g.enable && !st.brk2, "reset: all off, nothing armed");
         assert!(!g.brake, "the MCU's comparator is dead in reset");
-        st.spec.chopper = Chopper::External;
-        st.observe(2.6e-3, s.v_abs_max, [0.0; 3]);
-        assert!(st.gate(&run).brake, "an external one is not");
+        let mut ext = Stage::new(
+            StageSpec {
+                chopper: Chopper::External,
+                ..s
+            },
+            0.0,
+        );
+        ext.reset(2e-3);
+        ext.observe(2.6e-3, s.v_abs_max, [0.0; 3]);
+        assert!(ext.gate(&run).brake, "an external one is not");
         assert!(!st.cpu_runs(2e-3 + 0.5 * s.boot_s));
         assert!(st.cpu_runs(2e-3 + s.boot_s));
     }
