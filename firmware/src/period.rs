@@ -163,7 +163,7 @@ impl Period {
     /// [`Period::energy_bits`] adds the last period's power when read.
     #[inline(always)]
     pub fn step(&mut self, ctl: &mut Controller, s: &RawSample) -> Actuation {
-        self.energy = self.energy.saturating_add(ctl.p_elec().to_bits() as i64);
+        self.energy = self.energy_bits(ctl);
         ctl.step_outputs(s)
     }
 
@@ -236,6 +236,7 @@ impl Period {
 
     /// Σ `p_elec` over all periods, Q16.16 watt·periods: the sum and the last period's power,
     /// still in `ctl`, the controller this period steps.
+    #[inline(always)]
     pub fn energy_bits(&self, ctl: &Controller) -> i64 {
         self.energy.saturating_add(ctl.p_elec().to_bits() as i64)
     }
