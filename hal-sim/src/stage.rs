@@ -171,10 +171,8 @@ pub struct Stage {
     /// Pending output glitch on a break comparator: its length, s, and whether it is on the
     /// bus comparator (BRK2) or a phase comparator (BRK).
     glitch: Option<(f64, bool)>,
-    /// Multiplier on the DAC thresholds (a wrong DAC code: fault injection):
-    /// [`Stage::set_dac_scale`].
-    dac_scale: f64,
-    /// The comparators' thresholds as the DACs set them ([`Thresholds::new`]).
+    /// The comparators' thresholds as the DACs set them ([`Thresholds::new`]; a wrong DAC
+    /// code, fault injection: [`Stage::set_dac_scale`]).
     thr: Thresholds,
     /// The last actuation the firmware gave the timer (held while the core is halted).
     last: Actuation,
@@ -195,7 +193,6 @@ impl Stage {
             chopper_on: false,
             enabled_at: t,
             glitch: None,
-            dac_scale: 1.0,
             thr: Thresholds::new(&spec, 1.0),
             last: Actuation::OFF,
             first_break_s: None,
@@ -215,13 +212,7 @@ impl Stage {
 
     /// Every DAC threshold multiplied by `scale` (a wrong code), from now on.
     pub fn set_dac_scale(&mut self, scale: f64) {
-        self.dac_scale = scale;
         self.thr = Thresholds::new(&self.spec, scale);
-    }
-
-    /// The DAC thresholds' multiplier ([`Stage::set_dac_scale`]).
-    pub fn dac_scale(&self) -> f64 {
-        self.dac_scale
     }
 
     /// The core stops now.
