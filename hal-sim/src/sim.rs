@@ -2200,10 +2200,10 @@ mod tests {
 
     #[test]
     fn common_period_is_the_general_one() {
-        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<false, false>`) against the
-        // general code on the same run, bit for bit (`Debug` prints every f64 exactly): the
-        // closed loop of the reference TMD, then open-loop periods with random duties (some
-        // beyond 1), the gates off and the brake closed.
+        // The common period (`Sim::advance_as::<true>`, `Sim::sample_as::<false, false>`)
+        // against the general code on the same run, bit for bit (`Debug` prints every f64
+        // exactly): the closed loop of the reference TMD, then open-loop periods with random
+        // duties (some beyond 1), the gates off and the brake closed.
         use regen_fw::fx::Duty;
         use regen_fw::io::Actuation;
         let sc = Scenario::tmd(306.0);
