@@ -14,7 +14,7 @@ use crate::params::{ParamError, PARAMS};
 use crate::pi::PiGains;
 
 /// The drive's configuration (SI units). Defaults describe the reference device (Kollmorgen
-/// AKM42E on a 16 mm-lead ballscrew, see `shared/reference/transducer.md`) on the reference
+/// AKM42E on a 16 mm-lead ballscrew, see `docs/physics.md`) on the reference
 /// board scalings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Config {

@@ -50,3 +50,18 @@ pub fn two_sine(t: f64) -> (f64, f64, f64) {
     }
     (x, v, a)
 }
+
+/// The repository's copy of an EMPS benchmark record (`data/emps/NAME`, see its README). A
+/// missing file fails the calling test with its path: the data is part of the repository, so
+/// its absence is an error, never a reason to skip or to test something else.
+pub fn emps_file(name: &str) -> std::path::PathBuf {
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../data/emps")
+        .join(name);
+    assert!(
+        p.is_file(),
+        "EMPS record missing: {} (the repository's data/emps/, see its README)",
+        p.display()
+    );
+    p
+}

@@ -1,36 +1,16 @@
-//! Real data: the EMPS ballscrew benchmark (Janot, Gautier, Brunot 2019), read at run time from
-//! `shared/data/emps/` beside an ancestor of this crate; skipped with a printed reason when
-//! absent. Published reference (README there): symmetric friction model 4.08 % relative force
-//! error on the estimation record, direction-dependent 3.11 %.
+//! Real data: the EMPS ballscrew benchmark (Janot, Gautier, Brunot 2019), the repository's copy
+//! in `data/emps/` (a missing file fails the test with its path). Published reference (README
+//! there): symmetric friction model 4.08 % relative force error on the estimation record,
+//! direction-dependent 3.11 %.
 
 use hal_sim::diagnose::{cross_check, diagnose, read_csv, Options};
-use std::path::PathBuf;
-
-fn emps_dir() -> Option<PathBuf> {
-    let mut d = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    loop {
-        let c = d.join("shared/data/emps");
-        if c.join("emps_estimation.csv").is_file() {
-            return Some(c);
-        }
-        if !d.pop() {
-            return None;
-        }
-    }
-}
+use regen_tests::emps_file;
 
 #[test]
 fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
-    let Some(dir) = emps_dir() else {
-        println!(
-            "SKIPPED: shared/data/emps not found beside any ancestor of {}",
-            env!("CARGO_MANIFEST_DIR")
-        );
-        return;
-    };
-    let est = read_csv(&dir.join("emps_estimation.csv"), None).expect("estimation record parses");
+    let est = read_csv(&emps_file("emps_estimation.csv"), None).expect("estimation record parses");
     let val =
-        read_csv(&dir.join("emps_validation_pulses.csv"), None).expect("validation record parses");
+        read_csv(&emps_file("emps_validation_pulses.csv"), None).expect("validation record parses");
     let mut d = diagnose(&est, &Options::default());
     cross_check(&mut d, &val);
     println!("{}", hal_sim::diagnose::report::text(&est, &d));
@@ -181,15 +161,8 @@ fn emps_finds_coulomb_and_asymmetric_friction_within_published_error() {
 /// the cross-test error comes within the published 5.98 %.
 #[test]
 fn emps_validation_pulses_where_the_model_misses_and_parallel_filtering() {
-    let Some(dir) = emps_dir() else {
-        println!(
-            "SKIPPED: shared/data/emps not found beside any ancestor of {}",
-            env!("CARGO_MANIFEST_DIR")
-        );
-        return;
-    };
     let val =
-        read_csv(&dir.join("emps_validation_pulses.csv"), None).expect("validation record parses");
+        read_csv(&emps_file("emps_validation_pulses.csv"), None).expect("validation record parses");
     // (1) diagnose the validation record itself (raw force) and locate its residual
     let dv = diagnose(&val, &Options::default());
     let pulses = val.extra.get("pulses_N").expect("pulses_N column");
@@ -235,7 +208,7 @@ fn emps_validation_pulses_where_the_model_misses_and_parallel_filtering() {
 
     // (2) parallel filtering on both records
     let mut est =
-        read_csv(&dir.join("emps_estimation.csv"), None).expect("estimation record parses");
+        read_csv(&emps_file("emps_estimation.csv"), None).expect("estimation record parses");
     est.filter_force(None);
     let mut valf = val.clone();
     valf.filter_force(None);

@@ -166,12 +166,9 @@ fn reader_and_pipeline_never_panic() {
 /// diagnosis or a verdict, never a panic.
 #[test]
 fn emps_prefixes_never_panic() {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/emps/emps_estimation.csv");
-    let Ok(text) = std::fs::read_to_string(&p) else {
-        println!("EMPS data not found at {}: skipped", p.display());
-        return;
-    };
+    let p = regen_tests::emps_file("emps_estimation.csv");
+    let text = std::fs::read_to_string(&p)
+        .unwrap_or_else(|e| panic!("EMPS record {} unreadable: {e}", p.display()));
     let lines: Vec<&str> = text.lines().collect();
     let mut n_ok = 0;
     for k in (4..700).step_by(13) {

@@ -6,30 +6,29 @@ use hal_sim::bench_rig::{Hidden, RigSpec, Trajectory};
 use hal_sim::diagnose::{diagnose, parse_csv, Diagnosis, Options};
 use std::collections::BTreeMap;
 
-fn emps_x() -> Option<Vec<f64>> {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data/emps/emps_estimation.csv");
-    let r = hal_sim::diagnose::read_csv(&p, None).ok()?;
-    Some(r.x)
+/// The EMPS estimation record's measured position (the repository's `data/emps/`; a missing or
+/// unreadable file fails the test with its path).
+fn emps_x() -> Vec<f64> {
+    let p = regen_tests::emps_file("emps_estimation.csv");
+    hal_sim::diagnose::read_csv(&p, None)
+        .unwrap_or_else(|e| panic!("EMPS record {}: {e}", p.display()))
+        .x
 }
 
 /// The long run's trajectory of record `j` of a kind (families in turn; the recorded one is
-/// EMPS's position, a multisine without the data).
-fn trajectory(j: usize, emps: &Option<Vec<f64>>, samples: usize) -> Trajectory {
+/// EMPS's position).
+fn trajectory(j: usize, emps: &[f64], samples: usize) -> Trajectory {
     match j % 5 {
         0 => Trajectory::Multisine,
         1 => Trajectory::RoundedTriangle,
         2 => Trajectory::PointToPoint,
         3 => Trajectory::Narrowband,
-        _ => match emps {
-            Some(x) => Trajectory::Recorded(x[..samples.min(x.len())].to_vec()),
-            None => Trajectory::Multisine,
-        },
+        _ => Trajectory::Recorded(emps[..samples.min(emps.len())].to_vec()),
     }
 }
 
 /// The long run's record of a seed (`rig_long_run`: seed 1 + 100,000·kind + j, 12,000 samples).
-fn long_run_spec(seed: u64, emps: &Option<Vec<f64>>) -> RigSpec {
+fn long_run_spec(seed: u64, emps: &[f64]) -> RigSpec {
     let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
     let j = ((seed - 1) % 100_000) as usize;
     RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000)
@@ -104,13 +103,7 @@ struct Outcome {
 }
 
 /// Diagnose the record of `seed` (`kind`, trajectory family of `j`) and say how it came out.
-fn outcome(
-    kind: &'static str,
-    j: usize,
-    seed: u64,
-    samples: usize,
-    emps: &Option<Vec<f64>>,
-) -> Outcome {
+fn outcome(kind: &'static str, j: usize, seed: u64, samples: usize, emps: &[f64]) -> Outcome {
     use std::fmt::Write;
     let spec = RigSpec::random(seed, kind, trajectory(j, emps, samples), samples);
     let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
@@ -518,9 +511,7 @@ fn unobservable_effects_redraw_the_motion() {
 /// (`rest_of` all false) keeps the three on the recorded motion and the first assert fails.
 #[test]
 fn effect_at_rest_is_no_evidence() {
-    let Some(x) = emps_x() else {
-        return;
-    };
+    let x = emps_x();
     for seed in [400_015, 400_030, 400_035] {
         let rec_traj = Trajectory::Recorded(x[..12_000].to_vec());
         let s = RigSpec::random(seed, "stribeck", rec_traj.clone(), 12_000);
@@ -641,15 +632,9 @@ fn impact_travel_is_the_play_width() {
         (600_008, Trajectory::PointToPoint),
         (
             600_005,
-            match &emps {
-                Some(x) => Trajectory::Recorded(x[..12_000.min(x.len())].to_vec()),
-                None => Trajectory::Multisine,
-            },
+            Trajectory::Recorded(emps[..12_000.min(emps.len())].to_vec()),
         ),
     ] {
-        if seed == 600_005 && emps.is_none() {
-            continue;
-        }
         let spec = RigSpec::random(seed, "backlash", traj, 12_000);
         let Hidden::Backlash { width_m } = spec.hidden else {
             panic!("seed {seed}: not a play record");
@@ -761,9 +746,7 @@ fn rig_true_acceleration() {
 /// at Wald 12.4). Break: the rule removed names the friction beside `backlash`.
 #[test]
 fn recorded_near_stops_name_no_speed_friction() {
-    let Some(x) = emps_x() else {
-        return;
-    };
+    let x = emps_x();
     let spec = RigSpec::random(
         600050,
         "backlash",
@@ -925,9 +908,7 @@ fn rig_play_width_profile() {
 /// kept and the test fails.
 #[test]
 fn recorded_play_agrees_on_the_segments_that_hold() {
-    let Some(x) = emps_x() else {
-        return;
-    };
+    let x = emps_x();
     for seed in [600_010, 600_015] {
         let spec = RigSpec::random(
             seed,

@@ -1,5 +1,5 @@
 //! The reference device reproduced (Cassidy, Scruggs & Behrens 2011; numbers from
-//! shared/reference/transducer.md): sizing indices, the TMD power optimum, the force-range and
+//! docs/physics.md): sizing indices, the TMD power optimum, the force-range and
 //! rise-time tests, and what they say about the K_e convention (docs/simulator.md §K_e).
 
 use hal_sim::analytic::{optimum_load, sizing, tmd_power, DampingFormula, DesignCase};

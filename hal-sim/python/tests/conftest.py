@@ -8,7 +8,7 @@ import subprocess
 import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
-EMPS = REPO.parent / "shared" / "data" / "emps"
+EMPS = REPO / "data" / "emps"
 
 
 def _regen_bin():

@@ -220,10 +220,9 @@ def test_study_numpy_table_and_process_pool():
 
 def _emps():
     est, val = EMPS / "emps_estimation.csv", EMPS / "emps_validation_pulses.csv"
-    if not (est.exists() and val.exists()):
-        msg = f"EMPS record absent ({EMPS})"
-        print(f"SKIP: {msg}")
-        pytest.skip(msg)
+    for p in (est, val):
+        if not p.is_file():
+            raise FileNotFoundError(f"EMPS record missing: {p} (the repository's data/emps/)")
     return est, val
 
 
