@@ -256,3 +256,150 @@ fn realignment_from_seeded_angles_and_speeds_up_to_the_rating() {
     assert!(e_lo > -0.8 && e_hi < 0.8, "{e_lo} … {e_hi}");
     assert!(t_emf < 0.5, "{t_emf}");
 }
+
+/// Encoders that disagree with the emf, on imposed motions at seeded speeds (10 … 95 % of the
+/// rating): reversed A/B, ×2 decoding where ×4 is configured (half the counts), and a pole
+/// count of 4 configured for the machine's 5 (the d-axis steps' 25 % check passes that one):
+/// each latches `encoder_mismatch` within the probe's time, short of any Run.
+#[test]
+fn inconsistent_encoders_latch_encoder_mismatch() {
+    let w_rate = rating(&tmd306());
+    let mut t = vec![];
+    for seed in 0..30 {
+        let w = w_rate * (0.1 + 0.85 * unit(seed, 7));
+        let sc = triangle(w * lead());
+        let kind = seed % 3;
+        let mut sim = sc.build().unwrap();
+        if kind == 2 {
+            let mut cfg = *sim.controller().config();
+            cfg.pole_pairs = 4;
+            sim.controller_mut().set_config(&cfg).unwrap();
+        }
+        sim.power_up(&powerup(400 + seed)).unwrap();
+        let t0 = sim.time();
+        let (mut last, mut pos) = (None::<u16>, 0i64);
+        let r = sim.boot_with(|s| match kind {
+            0 => s.encoder = 0u16.wrapping_sub(s.encoder),
+            1 => {
+                if let Some(l) = last {
+                    pos += s.encoder.wrapping_sub(l) as i16 as i64;
+                }
+                last = Some(s.encoder);
+                s.encoder = (pos / 2) as u16;
+            }
+            _ => {}
+        });
+        let name = ["reversed", "x2 decoding", "4 poles for 5"][kind as usize];
+        assert_eq!(
+            r.unwrap_err(),
+            "encoder_mismatch",
+            "{name} at {w:.1} rad/s, seed {seed}"
+        );
+        assert_ne!(sim.controller().boot(), Boot::Aligned);
+        t.push(sim.time() - t0);
+    }
+    let (_, t_max) = stats("encoder mismatch: latched after power-up, s", &t);
+    // Calibration 0.103 s, then the probe's window (≥ 20 ms and one electrical turn of the
+    // emf: 0.13 s at 10 % of the rating); measured ≤ 0.25 s: bound 0.5 s.
+    assert!(t_max < 0.5, "{t_max}");
+}
+
+/// `mode short` at seeded speeds up to the rating: refused (by name) where the bound on the
+/// short's peak current (`Controller::short_peak_a`) passes `i_trip_a`; where accepted, no
+/// over-current in 0.3 s of short and the measured peak under the bound.
+#[test]
+fn short_at_speed_is_refused_or_trips_nothing() {
+    let w_rate = rating(&tmd306());
+    let (mut accepted, mut refused, mut margin) = (vec![], vec![], vec![]);
+    for seed in 0..40 {
+        let w = w_rate * unit(seed, 8);
+        let mut sim = triangle(w * lead()).build().unwrap();
+        sim.run_for(0.1);
+        let bound = sim.controller().short_peak_a() as f64;
+        let trip = sim.controller().config().i_trip_a as f64;
+        match sim.controller_mut().set_mode(Mode::Short) {
+            Err(e) => {
+                assert!(bound > trip, "{w}: refused at a bound of {bound} A");
+                assert!(e.name().contains("i_trip_a"), "{}", e.name());
+                assert_eq!(sim.controller().mode(), Mode::Run);
+                refused.push(w);
+            }
+            Ok(()) => {
+                let mut peak = 0f64;
+                for _ in 0..(0.3 / sim.period()) as u32 {
+                    sim.step();
+                    for c in [Channel::Ia, Channel::Ib, Channel::Ic] {
+                        peak = peak.max(sim.channel(c).abs());
+                    }
+                }
+                assert_eq!(sim.controller().fault(), None, "short at {w:.1} rad/s");
+                assert!(peak <= bound, "{w}: peak {peak} A over the bound {bound} A");
+                assert!(bound <= trip);
+                accepted.push(w);
+                margin.push(peak / bound);
+            }
+        }
+    }
+    let (_, w_ok) = stats("short accepted at, rad/s", &accepted);
+    let (w_no, _) = stats("short refused at, rad/s", &refused);
+    stats("short: measured peak / bound", &margin);
+    assert!(w_ok < w_no);
+    // The case: 177 rad/s on the reference machine.
+    let mut sim = triangle(177.0 * lead()).build().unwrap();
+    sim.run_for(0.1);
+    assert!(sim.controller_mut().set_mode(Mode::Short).is_err());
+}
+
+/// The console path on `hal-sim/scenarios/tmd-306.toml` while the structure moves: `mode
+/// idle`, `mode align`, `mode run` refused with "aligning", the `# aligning` and `# aligned`
+/// notices, then `mode run` accepted and 2 s of harvesting without a fault.
+#[test]
+fn console_idle_align_aligned_run_on_tmd_306() {
+    let mut speeds = vec![];
+    for k in 0..5 {
+        let mut d = SimDrive::from_scenario(&tmd306()).unwrap();
+        let mut tel = String::new();
+        let mut run = |d: &mut SimDrive, s: f64, notes: &mut String| {
+            let n = (s / d.sim().period()) as u64;
+            for _ in 0..n {
+                d.step(&mut tel);
+                tel.clear();
+                d.notice(notes);
+            }
+        };
+        let mut notes = String::new();
+        run(&mut d, 3.0 + 0.7 * k as f64, &mut notes);
+        let mut out = String::new();
+        for (line, want) in [
+            ("mode idle", "ok mode idle"),
+            ("mode align", "ok mode align"),
+            ("mode run", "error: mode run refused: aligning"),
+        ] {
+            out.clear();
+            let _ = d.execute(line, &mut out);
+            assert!(out.contains(want), "{line}: {out}");
+            if line == "mode idle" {
+                run(&mut d, 0.1, &mut notes);
+            }
+            if line == "mode align" {
+                speeds.push((d.sim().channel(Channel::V) / lead()).abs());
+                d.notice(&mut notes);
+            }
+        }
+        let t0 = d.sim().time();
+        while !notes.contains("# aligned") {
+            run(&mut d, 0.001, &mut notes);
+            assert!(d.sim().time() - t0 < 1.0, "{notes}");
+        }
+        println!("run {k}: {}", notes.trim().replace("\r\n", " | "));
+        assert!(notes.contains("# aligning"), "{notes}");
+        assert!(notes.contains("from the emf at"), "{notes}");
+        assert!(!notes.contains("# fault"), "{notes}");
+        out.clear();
+        d.execute("mode run", &mut out).unwrap();
+        run(&mut d, 2.0, &mut notes);
+        assert_eq!(d.sim().controller().fault(), None);
+        assert_eq!(d.sim().controller().mode(), Mode::Run);
+    }
+    stats("console: speed at mode align, rad/s", &speeds);
+}
