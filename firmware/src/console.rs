@@ -333,6 +333,8 @@ pub struct Console {
     pub cycle: CycleMean,
     /// Code of the fault last announced by [`Console::notice`] (0: none).
     noticed: u8,
+    /// The alignment state last announced by [`Console::notice`].
+    boot_seen: crate::control::Boot,
 }
 
 /// Mean power over whole motion cycles: from one upward zero crossing of the shaft speed to
@@ -465,8 +467,52 @@ impl Console {
 
     /// Announce a fault the moment it is seen latched (call after [`Console::tick`], with
     /// output that is never dropped): `# fault CODE NAME: what; now in mode M (faults: details)`
-    /// and the prompt. Once per latched fault; `true` when something was written.
+    /// and the prompt. Once per latched fault; `true` when something was written. Then the
+    /// alignment's states, once each: `# aligning`, `# aligned: …` with the angle found and
+    /// how, or `# alignment gave up: FAULT` (docs/protection.md, "Power-up").
     pub fn notice<W: Write>(&mut self, ctl: &Controller, out: &mut W) -> bool {
+        let wrote = self.notice_fault(ctl, out);
+        self.notice_align(ctl, out) | wrote
+    }
+
+    fn notice_align<W: Write>(&mut self, ctl: &Controller, out: &mut W) -> bool {
+        use crate::control::{AlignMethod, Boot};
+        let b = ctl.boot();
+        let was = core::mem::replace(&mut self.boot_seen, b);
+        if b == was {
+            return false;
+        }
+        match (b, ctl.aligned_by()) {
+            (Boot::Aligning, _) => {
+                out.s("\r\n# aligning\r\n");
+            }
+            (Boot::Aligned, by) => {
+                let deg = ctl.angle_offset().0 as f32 * (360.0 / 4_294_967_296.0);
+                out.s("\r\n# aligned: angle ")
+                    .num(deg)
+                    .s(" deg electrical, ");
+                match by {
+                    Some(AlignMethod::Emf { ratio, omega_m }) => out
+                        .s("from the emf at ")
+                        .num(omega_m)
+                        .s(" rad/s (encoder/emf travel ")
+                        .num(ratio)
+                        .s(")\r\n"),
+                    _ => out.s("from the d-axis steps\r\n"),
+                };
+            }
+            _ if was == Boot::Aligning => {
+                out.s("\r\n# alignment gave up: ")
+                    .s(ctl.fault().map_or("stopped by a mode change", |f| f.name()))
+                    .s("\r\n");
+            }
+            _ => return false,
+        }
+        out.s(PROMPT);
+        true
+    }
+
+    fn notice_fault<W: Write>(&mut self, ctl: &Controller, out: &mut W) -> bool {
         let f = ctl.fault();
         let code = f.map_or(0, |f| f.code() + 1);
         if code == self.noticed {

@@ -30,8 +30,9 @@ pub enum Mode {
     /// Current controlled to zero: open terminals emulated even when the back-emf exceeds
     /// the bus.
     Open = 3,
-    /// Power-up alignment: d-axis current at an imposed angle, two steps a quarter of an
-    /// electrical turn apart (docs/protection.md); back to Idle when done. (Discriminant 5:
+    /// Alignment: the back-emf read at zero current while the rotor moves, else d-axis
+    /// current at an imposed angle, two steps a quarter of an electrical turn apart
+    /// (docs/protection.md); back to Idle when done. (Discriminant 5:
     /// the modes that control current are then the odd ones, one bit for the step to test.)
     Align = 5,
 }
@@ -89,6 +90,9 @@ pub enum ModeError {
     Fault(Fault),
     /// Run (or Align) needs the boot sequence to have reached a state it has not.
     Boot(Boot),
+    /// Short refused: at the present speed the short-circuit current could pass
+    /// `i_trip_a` ([`Controller::short_peak_a`]).
+    ShortCurrent,
 }
 
 impl ModeError {
@@ -97,7 +101,11 @@ impl ModeError {
         match self {
             ModeError::Fault(f) => f.name(),
             ModeError::Boot(Boot::Calibrating) => "calibrating current offsets",
+            ModeError::Boot(Boot::Aligning) => "aligning",
             ModeError::Boot(_) => "not aligned: mode align first",
+            ModeError::ShortCurrent => {
+                "the short-circuit current at this speed could pass i_trip_a: open or run until the speed falls"
+            }
         }
     }
 }
@@ -106,10 +114,25 @@ impl ModeError {
 /// of 2,048 codes is exact to the rounding of the sum's quotient (±0.5 code).
 pub const CAL_PERIODS: u32 = 2048;
 
+/// How the last successful alignment found the angle ([`Controller::aligned_by`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlignMethod {
+    /// The back-emf at zero current (the rotor moving), with the encoder's travel over the
+    /// emf's (1 for a consistent encoder) and the speed then, rad/s.
+    Emf { ratio: f32, omega_m: f32 },
+    /// The two d-axis steps (the rotor still).
+    Steps,
+}
+
 /// Offset calibration and alignment state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct BootState {
     boot: Boot,
+    /// Alignment: the emf probe runs (the d-axis steps once it finds the rotor still).
+    probe: bool,
+    emf: crate::align::EmfProbe,
+    /// How the last alignment succeeded.
+    by: Option<AlignMethod>,
     /// Calibration sums of the three phase codes and their count.
     sum: [u32; 3],
     n_cal: u32,
@@ -336,7 +359,10 @@ impl Controller {
         if let Some(o) = self.bs.offset {
             e.offset = o;
         }
-        if self.mode == Mode::Align {
+        if self.mode == Mode::Align && self.bs.probe {
+            // The probe's frame: the encoder's own angle, offset 0.
+            e.offset = Angle(0);
+        } else if self.mode == Mode::Align {
             self.bs.e_per_count = e.e_per_count;
             e.e_per_count = 0;
             e.offset = Angle((self.bs.step as u32) << 30);
@@ -423,6 +449,9 @@ impl Controller {
                 return Err(ModeError::Boot(b))
             }
             Mode::Align if b == Boot::Calibrating => return Err(ModeError::Boot(b)),
+            Mode::Short if self.mode != Mode::Short && self.short_peak_a() > self.cfg.i_trip_a => {
+                return Err(ModeError::ShortCurrent)
+            }
             _ => {}
         }
         if m != self.mode {
@@ -439,11 +468,63 @@ impl Controller {
         Ok(())
     }
 
-    /// Enter alignment: step 0 at the imposed angle 0, the d current ramping from zero.
+    /// A bound on the phase current's peak if the phases were shorted now, from zero
+    /// current at the present speed estimate, A. The short's current vector is
+    /// `i(t) = i_ss(t) − i_ss(0)·e^(−t/τ)` (τ = L/R) with `|i_ss| = E/√(R² + (ω_e·L)²)`,
+    /// `E = K_e·|ω_m|`, and `d|i|/dt ≤ E/L` from zero: so `|i| ≤ E·t/L` up to `t₁`, where that
+    /// reaches 90 % of `i_trip_a`, and `|i| ≤ |i_ss|·(1 + τ/(τ + t₁))` after (`e^(−x) ≤
+    /// 1/(1 + x)`). Returns the larger of the two (or the first when the second is below it:
+    /// the bound is then under 90 % of the trip). The speed does not grow during a short
+    /// (it brakes), so the bound holds for the whole short.
+    pub fn short_peak_a(&self) -> f32 {
+        let c = &self.cfg;
+        let w = crate::numtext::q_f32(self.enc.omega_m(&self.g.enc));
+        let w = if w < 0.0 { -w } else { w };
+        let e = c.ke_v_s_per_rad * w;
+        let xl = w * c.pole_pairs as f32 * c.l_phase_h;
+        let z2 = c.r_phase_ohm * c.r_phase_ohm + xl * xl;
+        let i_lim = 0.9 * c.i_trip_a;
+        let tau = c.l_phase_h / c.r_phase_ohm;
+        let t1 = if e > 0.0 {
+            i_lim * c.l_phase_h / e
+        } else {
+            f32::MAX
+        };
+        let k = 1.0 + tau / (tau + t1);
+        // |i_ss|·k against i_lim, squared (no root): the bound is i_lim when below it.
+        let iss2k2 = e * e / z2 * k * k;
+        if iss2k2 <= i_lim * i_lim {
+            i_lim
+        } else {
+            // Above: |i_ss|·k by Newton's root (cold path, `+ − × ÷` only).
+            let mut r = iss2k2;
+            for _ in 0..40 {
+                r = 0.5 * (r + iss2k2 / r);
+            }
+            r
+        }
+    }
+
+    /// How the last successful alignment found the angle (None before one, or after the
+    /// angle was lost).
+    pub fn aligned_by(&self) -> Option<AlignMethod> {
+        if self.bs.boot == Boot::Aligned {
+            self.bs.by
+        } else {
+            None
+        }
+    }
+
+    /// Enter alignment: the emf probe first (zero current in the encoder's frame, offset 0,
+    /// [`crate::align::EmfProbe`]); the d-axis steps once it finds the rotor still.
     #[cold]
     fn start_align(&mut self) {
         let (c, b) = (&self.cfg, &mut self.bs);
         b.boot = Boot::Aligning;
+        b.probe = true;
+        b.emf = crate::align::EmfProbe::NEW;
+        b.by = None;
+        b.e_per_count = self.g.enc.e_per_count;
         b.offset = None;
         b.step = 0;
         b.done = false;
@@ -470,6 +551,62 @@ impl Controller {
         self.apply_angle();
     }
 
+    /// The emf probe found the rotor still: the d-axis steps from here (step 0 at the
+    /// imposed angle 0, the d current ramping from zero, the travel counted from here).
+    #[cold]
+    fn start_steps(&mut self) {
+        let b = &mut self.bs;
+        b.probe = false;
+        b.step = 0;
+        b.n = 0;
+        b.i_d = 0;
+        b.p_start = self.enc.position;
+        self.held.i_ref = Dq::default();
+        self.held.advance = Rotation::default();
+        self.pi.reset();
+        self.apply_angle();
+    }
+
+    /// The supervision tick's part of the emf probe: one tick of it on the last period's
+    /// record; what it decides takes effect here (the steps, the angle found) or at the next
+    /// tick (a fault, as the step's).
+    #[cold]
+    fn probe_tick(&mut self, t: &Telemetry) {
+        use crate::align::{Probe, ProbeIn};
+        use crate::numtext::q_f32;
+        let s = ProbeIn {
+            omega_m: q_f32(t.omega_m),
+            v_d: q_f32(t.v_dq.d),
+            v_q: q_f32(t.v_dq.q),
+            saturated: t.v_saturated,
+            theta_f: t.theta_e.0,
+            position: self.enc.position,
+        };
+        let c = &self.cfg;
+        let (ke, e_min) = (c.ke_v_s_per_rad, c.angle_emf_min_v);
+        let (per, still) = (self.bs.e_per_count, self.bs.settle);
+        match self.bs.emf.tick(&s, ke, e_min, per, still) {
+            Probe::Continue => {}
+            Probe::Still => self.start_steps(),
+            Probe::Found { offset, ratio } => {
+                self.bs.by = Some(AlignMethod::Emf {
+                    ratio,
+                    omega_m: s.omega_m,
+                });
+                self.bs.offset = Some(Angle(offset));
+                self.finish_align();
+            }
+            Probe::Mismatch { .. } => {
+                self.bs.pending = Some(Fault::EncoderMismatch);
+                self.held.i_ref = Dq::default();
+            }
+            Probe::Timeout => {
+                self.bs.pending = Some(Fault::AlignMoving);
+                self.held.i_ref = Dq::default();
+            }
+        }
+    }
+
     /// Leave alignment: the angle per count restored, the offset found (or the stored
     /// one's place kept for a failed or aborted alignment, and Unaligned).
     #[cold]
@@ -494,7 +631,7 @@ impl Controller {
     #[inline(always)]
     fn align_ref(&mut self) {
         let b = &self.bs;
-        self.held.i_ref = if b.pending.is_some() {
+        self.held.i_ref = if b.pending.is_some() | b.probe {
             Dq::default()
         } else {
             let g = &self.g;
@@ -512,7 +649,7 @@ impl Controller {
     fn align_ramp(&mut self) {
         let pos = self.enc.position;
         let b = &mut self.bs;
-        if b.pending.is_some() | b.done {
+        if b.pending.is_some() | b.done | b.probe {
             return;
         }
         b.n += 1;
@@ -530,6 +667,10 @@ impl Controller {
     fn align_check(&mut self) {
         let pos = self.enc.position;
         let b = &mut self.bs;
+        if b.probe {
+            // The probe's output angle advance (the frame turns with the encoder).
+            return self.refresh_advance();
+        }
         if b.pending.is_some() | b.done {
             return;
         }
@@ -554,6 +695,7 @@ impl Controller {
                 b.offset = Some(Angle(
                     (1u32 << 30).wrapping_sub(self.enc.in_turn.wrapping_mul(per)),
                 ));
+                b.by = Some(AlignMethod::Steps);
                 b.done = true;
                 return;
             };
@@ -686,6 +828,9 @@ impl Controller {
             .supervise(&self.cfg, self.mode, &t, self.enc.position);
         if self.bs.done && self.mode == Mode::Align {
             self.finish_align();
+        }
+        if self.mode == Mode::Align && self.bs.probe && self.bs.pending.is_none() {
+            self.probe_tick(&t);
         }
         if let Some(f) = self.bs.pending.take() {
             self.trip(f, &t);
@@ -1460,6 +1605,17 @@ mod tests {
         }
         assert_eq!(ctl.boot(), Boot::Unaligned);
         ctl.set_mode(Mode::Align).unwrap();
+        // The rotor still: the emf probe hands over to the steps after STILL_TICKS ticks.
+        let mut ticks = 0;
+        while ctl.bs.probe {
+            for _ in 0..20 {
+                ctl.step(&s);
+            }
+            ctl.supervise();
+            ticks += 1;
+            assert!(ticks <= crate::align::STILL_TICKS, "{ticks}");
+        }
+        assert_eq!(ticks, crate::align::STILL_TICKS);
         // 0.004 m at 0.016 m per 10,000 counts: 2,500 counts; passed after 1,251 periods at
         // 2 counts per period.
         let per_m = cfg.encoder_cpr as f64 / (cfg.lead_m_per_rad as f64 * core::f64::consts::TAU);
@@ -1666,7 +1822,14 @@ mod tests {
                 if m == Mode::Align {
                     c.set_mode(Mode::Idle).unwrap();
                 }
-                c.set_mode(m).unwrap();
+                if m == Mode::Short {
+                    // At these speeds a commanded short is refused (its current could pass
+                    // i_trip_a); a fault's latch puts the drive there all the same.
+                    c.mode = m;
+                    c.refresh_now();
+                } else {
+                    c.set_mode(m).unwrap();
+                }
                 starts.push(c);
             }
             for f in [OverForce, EncoderLoss, BusOverVoltage] {

@@ -74,8 +74,9 @@ pub enum Fault {
     /// The back-emf the current loop needs lies more than `angle_tol_deg` from the q axis of
     /// the angle in use (commutation angle wrong: the law would motor).
     AngleImplausible = 13,
-    /// Power-up alignment: the rotor did not settle, or travelled beyond `align_travel_m`
-    /// (rotor driven by the structure).
+    /// Alignment: the rotor moved too fast for the emf probe (its emf above the bus) for
+    /// 1.5 s, or, still enough for the d-axis steps, did not settle or travelled beyond
+    /// `align_travel_m` (rotor driven by the structure).
     AlignMoving = 14,
     /// Power-up alignment: the quarter-turn check step moved the rotor by the wrong angle
     /// (rotor blocked, encoder dead or reversed, wrong pole count or counts per turn).
@@ -83,6 +84,9 @@ pub enum Fault {
     /// Boot calibration: a phase's zero-current code lies more than `offset_tol_a` from
     /// `adc_zero_code`.
     CurrentOffset = 16,
+    /// Alignment's emf probe: the encoder's electrical travel disagrees with the back-emf's
+    /// (encoder reversed, wrong counts per turn or pole count).
+    EncoderMismatch = 17,
 }
 
 impl Fault {
@@ -104,6 +108,7 @@ impl Fault {
         Fault::AlignMoving,
         Fault::AlignCheck,
         Fault::CurrentOffset,
+        Fault::EncoderMismatch,
     ];
 
     /// Numeric code.
@@ -135,6 +140,7 @@ impl Fault {
             Fault::AlignMoving => "align_moving",
             Fault::AlignCheck => "align_check",
             Fault::CurrentOffset => "current_offset",
+            Fault::EncoderMismatch => "encoder_mismatch",
         }
     }
 
@@ -156,9 +162,14 @@ impl Fault {
             Fault::CurrentSensor => "phase currents do not sum to zero (sensor fault)",
             Fault::BusSensor => "bus reading at ADC rail",
             Fault::AngleImplausible => "back-emf off the q axis by more than angle_tol_deg",
-            Fault::AlignMoving => "rotor moved during alignment (not settled or too far)",
+            Fault::AlignMoving => {
+                "rotor moved during alignment (emf above the bus, or not settled for the steps)"
+            }
             Fault::AlignCheck => "alignment check step moved the rotor by the wrong angle",
             Fault::CurrentOffset => "a phase's zero-current code beyond offset_tol_a",
+            Fault::EncoderMismatch => {
+                "encoder travel disagrees with the back-emf's (direction, counts per turn, poles)"
+            }
         }
     }
 
@@ -189,7 +200,8 @@ impl Fault {
             | Fault::StrokeLimit
             | Fault::AngleImplausible
             | Fault::AlignMoving
-            | Fault::AlignCheck => Mode::Short,
+            | Fault::AlignCheck
+            | Fault::EncoderMismatch => Mode::Short,
         }
     }
 
@@ -738,7 +750,10 @@ impl Protection {
             }
             // Cleared, the drive must align again (the controller forgets its angle); a
             // cleared offset fault recalibrates (the controller restarts the calibration).
-            Fault::AngleImplausible | Fault::AlignMoving | Fault::AlignCheck => None,
+            Fault::AngleImplausible
+            | Fault::AlignMoving
+            | Fault::AlignCheck
+            | Fault::EncoderMismatch => None,
             Fault::CurrentOffset => None,
         }
     }
@@ -777,8 +792,8 @@ pub fn onset_bits(cfg: &Config) -> u32 {
 }
 
 /// Faults after which the measured speed is not trusted (bits `1 << code`): encoder
-/// implausible, encoder loss, speed implausible.
-pub const SPEED_DOUBT: u32 = 1 << 4 | 1 << 7 | 1 << 8;
+/// implausible, encoder loss, speed implausible, encoder mismatch.
+pub const SPEED_DOUBT: u32 = 1 << 4 | 1 << 7 | 1 << 8 | 1 << 17;
 
 /// The safe state when fault `f` arrives in `mode` with `latched` faults already latched
 /// (`docs/protection.md`, "The rule"): a fresh fault goes to its own safe state; open
@@ -988,7 +1003,10 @@ mod tests {
         }
         assert_eq!(
             SPEED_DOUBT,
-            EncoderImplausible.bit() | EncoderLoss.bit() | SpeedImplausible.bit()
+            EncoderImplausible.bit()
+                | EncoderLoss.bit()
+                | SpeedImplausible.bit()
+                | EncoderMismatch.bit()
         );
         // The onset: √3·K_e·ω = 0.9·v_bus_ov.
         let c = Config::default();
@@ -1028,7 +1046,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(n, 7 * 5 * 137 * 4);
+        assert_eq!(n, 7 * 5 * 154 * 4);
     }
 
     /// The two faults a step can find in one period, against the safe-state table

@@ -57,6 +57,8 @@ pub struct SimDrive {
     store: SimStore,
     /// Plant energy into the inverter at the last `sim` command (for its interval average).
     mark: (f64, f64),
+    /// The alignment's retry, as the board's supervision task runs it (`regen_fw::align`).
+    retry: regen_fw::align::AlignRetry,
 }
 
 impl SimDrive {
@@ -74,6 +76,7 @@ impl SimDrive {
                 factory,
             },
             mark: (0.0, 0.0),
+            retry: regen_fw::align::AlignRetry::NEW,
         }
     }
 
@@ -94,6 +97,10 @@ impl SimDrive {
 
     /// One control period; telemetry lines due are appended to `out`.
     pub fn step<W: Write>(&mut self, out: &mut W) {
+        let n = self.sim.loop_period().periods;
+        if self.retry.poll(self.sim.controller(), n) == regen_fw::align::Retry::Post {
+            regen_fw::align::post(self.sim.mailbox());
+        }
         self.sim.step();
         self.console.tick(self.sim.controller(), out);
     }

@@ -789,9 +789,10 @@ impl Sim {
                 .set_mode(Mode::Align)
                 .map_err(|e| e.name().to_string())?;
         }
-        // Each alignment: two steps of align_time_s (the second holds for half of it), the
-        // wait in the safe state, and margin.
-        let per_try = (3.0 * self.ctl.config().align_time_s as f64 / self.ts) as u64
+        // Each alignment: the emf probe (at most PROBE_TICKS ms), two steps of align_time_s
+        // (the second holds for half of it), the wait in the safe state, and margin.
+        let per_try = (regen_fw::align::PROBE_TICKS as f64 * 1e-3 / self.ts) as u64
+            + (3.0 * self.ctl.config().align_time_s as f64 / self.ts) as u64
             + (ALIGN_RETRY_S as f64 / self.ts) as u64
             + 10;
         let mut n = 0;
