@@ -1,13 +1,20 @@
-//! The power-up alignment's retry: an alignment that found the rotor moving (`align_moving`:
-//! the structure kept the screw turning) is cleared and started again after
+//! Alignment on a moving structure, and its retry.
+//!
+//! [`EmfProbe`]: the flying alignment, the back-emf read at zero current in the encoder's
+//! frame (its angle there is the commutation offset; its travel against the encoder's counts
+//! checks the encoder's direction and counts per turn). `Controller` runs it first in `mode
+//! align` and hands over to the d-axis steps once it finds the rotor still
+//! (docs/protection.md, "Power-up").
+//!
+//! [`AlignRetry`]: an alignment that ended in `align_moving` (the probe found no window it
+//! could read, or the steps found the rotor moving) is cleared and started again after
 //! [`ALIGN_RETRY_S`] in its safe state (the short circuit damps the structure meanwhile), up
 //! to [`ALIGN_TRIES`] alignments in all; any other fault, or the last try failing, stays
-//! latched for the user.
-//!
-//! One implementation for both callers: the board's supervision task polls it every 10 ms
-//! against a copy of the controller, the simulator's boot sequence every period; each puts
-//! the returned changes in a [`Pending`] that [`crate::period::Period::apply`] applies between
-//! two periods (the fault cleared, then `mode align`).
+//! latched for the user. One implementation for its callers: the board's supervision task
+//! polls it every 10 ms against a copy of the controller, the simulator's boot sequence and
+//! its console drive every period; each puts the returned changes in a [`Pending`] that
+//! [`crate::period::Period::apply`] applies between two periods (the fault cleared, then
+//! `mode align`).
 
 use crate::control::{Boot, Controller, Fault, Mode};
 use crate::period::{Pending, Slot};

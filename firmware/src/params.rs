@@ -523,7 +523,7 @@ registry! {
         0.1,
         2_000.0,
         true,
-        "angle check only above this emf"
+        "angle check, alignment's emf probe only above this emf"
     ),
     real!(
         m_max,

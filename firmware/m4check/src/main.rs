@@ -136,8 +136,9 @@ pub fn regen_step_boot(ctl: &mut Controller, s: RawSample) -> Actuation {
 }
 
 /// The boot paths: calibration (2,048 Idle periods), then two alignments with 20 ms steps,
-/// the first followed by an encoder that turns the quarter turn (aligned), the second by
-/// one that runs away (align_moving), each step through `regen_step_boot`.
+/// each begun by the emf probe on a still rotor (50 ms, then the steps), the first followed
+/// by an encoder that turns the quarter turn (aligned), the second by one that runs away
+/// (align_moving), each step through `regen_step_boot`.
 fn boot_paths(cfg: &Config) {
     let cfg = Config {
         align_time_s: 0.02,
@@ -161,17 +162,20 @@ fn boot_paths(cfg: &Config) {
         if ctl.set_mode(Mode::Align).is_err() {
             exit(7);
         }
-        for k in 0..1000u16 {
+        // The probe hands over to the steps at the 50th supervision tick (period 999).
+        let st = 20 * regen_fw::align::STILL_TICKS as u16;
+        for k in 0..st + 1000 {
             if ctl.mode() != Mode::Align {
                 break;
             }
-            // 400 periods per step: the quarter turn (500 counts) in the second one.
+            // The rotor still through the probe, then 400 periods per step: the quarter turn
+            // (500 counts) in the second one.
             // (The second run continues from the first one's count: a runaway, not a jump the
             // encoder check would take for a glitch.)
             s.encoder = if run == 0 {
-                7u16.wrapping_add(k.saturating_sub(400).min(100) * 5)
+                7u16.wrapping_add(k.saturating_sub(st + 400).min(100) * 5)
             } else {
-                507u16.wrapping_add(k)
+                507u16.wrapping_add(k.saturating_sub(st))
             };
             black_box(regen_step_boot(&mut ctl, s));
             // Supervision every 20 periods, as the period routine runs it: it latches a boot
