@@ -239,13 +239,14 @@ impl Measure {
         let wc = core::f32::consts::TAU * cfg.current_bw_hz * BW_SHARE;
         let n_l = periods(cfg.meas_l_time_s, cfg);
         // ΔV·T = L·Δi (the resistance's share neglected: the pulse is short against L/R).
-        let dv = cfg.l_phase_h * SWING * cfg.meas_i_a / (n_l as f32 * ts);
+        let i_hi = cfg.meas_i_a.min(cfg.i_max_a);
+        let dv = cfg.l_phase_h * SWING * i_hi / (n_l as f32 * ts);
         *self = Measure {
             phase: Phase::Ke,
             ts,
             kp: cfg.l_phase_h * wc,
             ki: cfg.r_phase_ohm * wc * ts,
-            i_hi: cfg.meas_i_a,
+            i_hi,
             n_r: periods(cfg.meas_r_time_s, cfg),
             n_l,
             n_gap: periods(0.02, cfg).max(2 * N_BASE),

@@ -785,7 +785,7 @@ impl Console {
                     Err(e) => fail!(.s("mode ").s(m.name()).s(" refused: ").s(e.name())),
                 }
             }
-            "measure" if nargs <= 1 => return Some(crate::commission::command(ctl, a1, out)),
+            "measure" if nargs <= 1 => Some(crate::commission::command(ctl, a1, out)),
             "tel" if want(1) && a1 == Some("off") => {
                 self.tel_every = 0;
                 ok!(.s(" tel off"))
