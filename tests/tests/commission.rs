@@ -299,3 +299,27 @@ fn regen_commission_on_a_simulated_board() {
     let cfg = port.0.sim().controller().config();
     assert!((cfg.ke_v_s_per_rad as f64 / m.ke_v_s_per_rad - 1.0).abs() < TOL[3]);
 }
+
+/// The board scenarios' plant as drawn (printed for docs/simulator.md).
+#[test]
+fn board_scenarios_plants() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
+    for f in [
+        "board-72v-tmd-306",
+        "board-72v-rise-time",
+        "board-72v-force-range-1ohm",
+    ] {
+        let sc = Scenario::from_file(&dir.join(format!("{f}.toml"))).unwrap();
+        let (n, p) = (sc.machine, sc.plant_machine());
+        println!(
+            "{f}: R {:+.2} %, L {:+.2} %, K_e {:+.2} %",
+            100.0 * (p.r_ohm / n.r_ohm - 1.0),
+            100.0 * (p.l_h / n.l_h - 1.0),
+            100.0 * (p.ke_v_s_per_rad / n.ke_v_s_per_rad - 1.0)
+        );
+        assert!(
+            sc.plant_draw.r_rel > 0.0 && p != n,
+            "{f}: the plant is the nameplate"
+        );
+    }
+}
