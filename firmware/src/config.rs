@@ -152,6 +152,21 @@ pub struct Config {
     /// `[x m, ω_m rad/s, applied i_q A]`, output `i_q*` A). Default all zero: commands no
     /// current until a design is loaded (`regen study design`).
     pub opt: LtiParams,
+    /// Commissioning (`measure`, `docs/commissioning.md`): the d current of the resistance's
+    /// upper step (the lower is half of it) and the inductance pulses' swing, A (at most
+    /// `i_max_a` is used).
+    pub meas_i_a: f32,
+    /// Commissioning: each of the resistance's two current steps, s.
+    pub meas_r_time_s: f32,
+    /// Commissioning: each inductance voltage pulse (8 per axis), s.
+    pub meas_l_time_s: f32,
+    /// Commissioning: the back-emf window (zero current, the structure's own motion), s.
+    pub meas_ke_time_s: f32,
+    /// Commissioning: the r.m.s. shaft speed below which K_e is refused (`ke_no_motion`),
+    /// rad/s.
+    pub meas_speed_min_rad_s: f32,
+    /// Commissioning: largest travel while the d current flows (R, L), m.
+    pub meas_travel_m: f32,
 }
 
 impl Default for Config {
@@ -213,6 +228,12 @@ impl Default for Config {
             trk_gain: 1.0,
             trk_step_max: 0.3,
             trk_r_min_ohm: 1.0,
+            meas_i_a: 1.9,
+            meas_r_time_s: 0.025,
+            meas_l_time_s: 1.0e-3,
+            meas_ke_time_s: 2.0,
+            meas_speed_min_rad_s: 2.0,
+            meas_travel_m: 0.2,
             trk_r_max_ohm: 10_000.0,
             trk_p_min_w: 0.5,
             opt: LtiParams::default(),
@@ -664,7 +685,7 @@ mod tests {
     #[test]
     fn differs_covers_every_field() {
         let names = field_names();
-        assert_eq!(names.len(), 56, "{names:?}");
+        assert_eq!(names.len(), 62, "{names:?}");
         for n in &names {
             assert!(
                 n == "opt" || PARAMS.iter().any(|p| p.name == n.as_str()),

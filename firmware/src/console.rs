@@ -65,6 +65,11 @@ pub static COMMANDS: &[(&str, &str, &str)] = &[
         "idle, open: gates off; run: harvest; short: phases shorted; align: find the angle",
     ),
     ("tel", "CH[,CH..] HZ|off", "stream channels as CSV t,v1,.."),
+    (
+        "measure",
+        "[show|apply]",
+        "measure R, L_d, L_q, K_e (idle, calibrated); show them; put them in RAM",
+    ),
 ];
 
 /// A line from [`LineEditor::feed`].
@@ -826,6 +831,7 @@ impl Console {
                     Err(e) => fail!(.s("mode ").s(m.name()).s(" refused: ").s(e.name())),
                 }
             }
+            "measure" if nargs <= 1 => Some(crate::commission::command(ctl, a1, out)),
             "tel" if want(1) && a1 == Some("off") => {
                 self.tel_every = 0;
                 ok!(.s(" tel off"))

@@ -35,6 +35,10 @@ pub enum Mode {
     /// (docs/protection.md); back to Idle when done. (Discriminant 5:
     /// the modes that control current are then the odd ones, one bit for the step to test.)
     Align = 5,
+    /// Commissioning (`measure`, [`crate::commission`]): the measurement's own current loop
+    /// on the controller's sample and modulation; back to Idle when done. (Even: the step's
+    /// control path is not taken.)
+    Measure = 4,
 }
 
 impl Mode {
@@ -46,6 +50,7 @@ impl Mode {
             Mode::Short => "short",
             Mode::Open => "open",
             Mode::Align => "align",
+            Mode::Measure => "measure",
         }
     }
 }
@@ -265,6 +270,8 @@ pub struct Controller {
     latching: Latching,
     law: Law,
     cfg: Config,
+    /// Commissioning: the measurement's state and results.
+    meas: crate::commission::Measure,
 }
 
 /// A latch begun by the step ([`Controller::step_outputs`]: the faults found, their safe
@@ -318,6 +325,7 @@ impl Controller {
                 zero: [cfg.adc_zero_code as i32; 3],
                 ..BootState::default()
             },
+            meas: crate::commission::Measure::default(),
         })
     }
 
@@ -452,11 +460,21 @@ impl Controller {
             Mode::Short if self.mode != Mode::Short && self.short_peak_a() > self.cfg.i_trip_a => {
                 return Err(ModeError::ShortCurrent)
             }
+            Mode::Measure if !matches!(b, Boot::Stored | Boot::Aligned) => {
+                return Err(ModeError::Boot(b))
+            }
             _ => {}
         }
         if m != self.mode {
             if self.mode == Mode::Align {
                 self.end_align(None);
+            }
+            if self.mode == Mode::Measure {
+                self.meas.fail(crate::commission::Failure::Aborted);
+            }
+            if m == Mode::Measure {
+                let x = crate::numtext::q_f32(self.enc.x(&self.g.enc));
+                self.meas.start(&self.cfg, x);
             }
             self.pi.reset();
             self.mode = m;
@@ -1189,6 +1207,12 @@ impl Controller {
     #[cold]
     #[inline(never)]
     fn step_off(&mut self) -> Actuation {
+        if self.mode == Mode::Measure {
+            if let Some(a) = self.measure_step() {
+                return a;
+            }
+            self.mode = Mode::Idle;
+        }
         if self.bs.boot == Boot::Calibrating && self.mode == Mode::Idle {
             self.calibrate();
         }
@@ -1206,6 +1230,47 @@ impl Controller {
             enable,
             brake: self.brake,
         }
+    }
+
+    /// A period of the measurement ([`crate::commission`]): its d/q voltage, advanced by
+    /// 1.5 periods of rotation as the loop's, through the modulation; `None` when it is over.
+    #[cold]
+    #[inline(never)]
+    fn measure_step(&mut self) -> Option<Actuation> {
+        use crate::numtext::{q_f32, q_of};
+        let t = self.telemetry();
+        let w = q_f32(t.omega_m);
+        let i = [q_f32(t.i_dq.d), q_f32(t.i_dq.q)];
+        let v = self
+            .meas
+            .step(&self.cfg, i, w, q_f32(t.x), q_f32(t.v_bus))?;
+        let v = Dq {
+            d: q_of(v[0]),
+            q: q_of(v[1]),
+        };
+        let adv = 1.5 * self.cfg.ts() * self.cfg.pole_pairs as f32 * w;
+        let adv = (adv * (4_294_967_296.0 / core::f32::consts::TAU)) as i32 as u32;
+        let (sin, cos) = Angle(t.theta_e.0.wrapping_add(adv)).sin_cos();
+        let v_ab = inverse_park_bounded(v, sin, cos);
+        let duties = modulate_scaled(v_ab, (inv_bus(t.v_bus) << 8) as i32);
+        let r = self.meas.i_ref();
+        self.rec.i_ref = Dq {
+            d: q_of(r[0]),
+            q: q_of(r[1]),
+        };
+        self.rec.v_dq = v;
+        self.rec.duties = duties;
+        self.rec.v_saturated = false;
+        Some(Actuation {
+            duties,
+            enable: true,
+            brake: self.brake,
+        })
+    }
+
+    /// The commissioning measurement: its state and results.
+    pub fn measurement(&self) -> &crate::commission::Measure {
+        &self.meas
     }
 
     /// Tick 0: back-emf `K_e·ω_e` from the speed estimate, and the resistor law's reference

@@ -28,6 +28,7 @@
 extern crate std;
 
 pub mod align;
+pub mod commission;
 pub mod config;
 pub mod console;
 pub mod control;

@@ -604,6 +604,54 @@ registry! {
         false,
         "bus voltage per ADC count"
     ),
+    real!(
+        meas_i_a,
+        "A",
+        0.05,
+        1_000.0,
+        true,
+        "measure: d current of R's upper step, L's swing"
+    ),
+    real!(
+        meas_r_time_s,
+        "s",
+        0.01,
+        10.0,
+        true,
+        "measure: each of R's two current steps"
+    ),
+    real!(
+        meas_l_time_s,
+        "s",
+        1e-4,
+        0.05,
+        true,
+        "measure: each L voltage pulse (8 per axis)"
+    ),
+    real!(
+        meas_ke_time_s,
+        "s",
+        0.1,
+        60.0,
+        true,
+        "measure: K_e window at zero current"
+    ),
+    real!(
+        meas_speed_min_rad_s,
+        "rad/s",
+        0.01,
+        1_000.0,
+        true,
+        "measure: least rms speed for K_e"
+    ),
+    real!(
+        meas_travel_m,
+        "m",
+        1e-4,
+        10.0,
+        true,
+        "measure: largest travel while R and L run"
+    ),
 }
 
 /// The entry of a name (exact, case-sensitive).

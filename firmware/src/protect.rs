@@ -889,6 +889,7 @@ const fn mode_of(d: usize) -> Option<Mode> {
         1 => Some(Mode::Run),
         2 => Some(Mode::Short),
         3 => Some(Mode::Open),
+        4 => Some(Mode::Measure),
         5 => Some(Mode::Align),
         _ => None,
     }
@@ -1020,7 +1021,14 @@ mod tests {
     /// alone, every pair, with or without a fault in force) and either side of the onset.
     #[test]
     fn step_table_is_the_rule_fault_by_fault() {
-        let modes = [Mode::Idle, Mode::Run, Mode::Short, Mode::Open, Mode::Align];
+        let modes = [
+            Mode::Idle,
+            Mode::Run,
+            Mode::Short,
+            Mode::Open,
+            Mode::Align,
+            Mode::Measure,
+        ];
         let mut sets = std::vec![0u32];
         for (i, f) in Fault::ALL.iter().enumerate() {
             sets.push(f.bit());
@@ -1046,7 +1054,7 @@ mod tests {
                 }
             }
         }
-        assert_eq!(n, 7 * 5 * 154 * 4);
+        assert_eq!(n, 7 * 6 * 154 * 4);
     }
 
     /// The two faults a step can find in one period, against the safe-state table

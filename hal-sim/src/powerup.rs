@@ -108,6 +108,67 @@ impl PowerUp {
     }
 }
 
+/// The `[plant_draw]` scenario table: the plant's machine drawn off its nameplate (the
+/// scenario's `[machine]`, which the firmware is configured with unless `[firmware]` says
+/// otherwise), each value uniformly within ±its relative tolerance, from its own seeded
+/// generator. The plant is non-salient: one inductance stands for L_d and L_q.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlantDraw {
+    /// Phase resistance within ±this, relative (0 = the nameplate's).
+    pub r_rel: f64,
+    /// Phase inductance within ±this, relative.
+    pub l_rel: f64,
+    /// Back-emf constant within ±this, relative.
+    pub ke_rel: f64,
+    /// Seed of the draws.
+    pub seed: u64,
+}
+
+impl Default for PlantDraw {
+    fn default() -> Self {
+        PlantDraw {
+            r_rel: 0.0,
+            l_rel: 0.0,
+            ke_rel: 0.0,
+            seed: 1,
+        }
+    }
+}
+
+impl PlantDraw {
+    /// Refuse tolerances outside [0, 0.5], naming the key.
+    pub fn check(&self) -> Result<(), String> {
+        for (k, v) in [
+            ("plant_draw.r_rel", self.r_rel),
+            ("plant_draw.l_rel", self.l_rel),
+            ("plant_draw.ke_rel", self.ke_rel),
+        ] {
+            if !(v.is_finite() && (0.0..=0.5).contains(&v)) {
+                return Err(format!("{k} = {v}: must lie in [0, 0.5]"));
+            }
+        }
+        Ok(())
+    }
+
+    /// The plant's machine for the nameplate `m`: R, L and K_e each times `1 + u·tol`, `u`
+    /// uniform in [−1, 1) (splitmix64, drawn in that order; shares nothing with the other
+    /// generators).
+    pub fn draw(&self, m: &crate::plant::Machine) -> crate::plant::Machine {
+        let mut st = self.seed ^ 0x6e61_6d65_706c_6174; // "nameplat": apart from [powerup]'s
+        let mut u = move || {
+            2.0 * ((crate::study::splitmix(&mut st) >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+        };
+        let (ur, ul, uk) = (u(), u(), u());
+        crate::plant::Machine {
+            r_ohm: m.r_ohm * (1.0 + ur * self.r_rel),
+            l_h: m.l_h * (1.0 + ul * self.l_rel),
+            ke_v_s_per_rad: m.ke_v_s_per_rad * (1.0 + uk * self.ke_rel),
+            ..*m
+        }
+    }
+}
+
 /// The index channel's state: where the mark is in rotor revolutions, and the revolution the
 /// rotor was in at the last sample.
 #[derive(Clone, Copy, Debug, Default)]

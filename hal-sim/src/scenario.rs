@@ -224,6 +224,10 @@ pub struct Scenario {
     /// firmware's boot sequence (offset calibration, alignment) before the run.
     #[serde(default)]
     pub powerup: PowerUp,
+    /// The plant's machine drawn off the nameplate `[machine]` ([`crate::powerup::PlantDraw`]):
+    /// off by default (the plant is the nameplate).
+    #[serde(default)]
+    pub plant_draw: crate::powerup::PlantDraw,
     #[serde(default)]
     pub firmware: FirmwareSpec,
     #[serde(default)]
@@ -292,6 +296,7 @@ impl Scenario {
             losses: Losses::default(),
             sensors: Sensors::default(),
             powerup: PowerUp::default(),
+            plant_draw: Default::default(),
             firmware: FirmwareSpec::default(),
             law: LawSpec {
                 r_load_ohm,
@@ -357,6 +362,7 @@ impl Scenario {
         self.law_kind()?;
         self.config()?;
         self.powerup.check()?;
+        self.plant_draw.check()?;
         Ok(())
     }
 
@@ -721,10 +727,15 @@ impl Scenario {
         Ok(d)
     }
 
+    /// The plant's machine: the nameplate `[machine]` as `[plant_draw]` draws it.
+    pub fn plant_machine(&self) -> Machine {
+        self.plant_draw.draw(&self.machine)
+    }
+
     /// The simulation, recording the chosen channels.
     pub fn build(&self) -> Result<Sim, String> {
         let rig = Rig {
-            machine: self.machine,
+            machine: self.plant_machine(),
             screw: self.screw,
             drive: self.loaded_drive()?,
             bus: self.bus,

@@ -196,6 +196,69 @@ fn boot_paths(cfg: &Config) {
     }
 }
 
+/// One period of the commissioning measurement (`measure`, `regen_fw::commission`): not the
+/// running step, counted on its own (`measure_path`): not in the digest.
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_measure(ctl: &mut Controller, s: RawSample) -> Actuation {
+    ctl.step_outputs(black_box(&s))
+}
+
+/// A whole measurement against a machine of its own (R = 2 Ω, L = 5 mH, the rotor still:
+/// K_e refused for want of motion, the rest measured), each period through
+/// `regen_step_measure`; the machine's currents from the voltage the step commanded (the
+/// Euler step of `L·di/dt = v − R·i` per d/q axis) back into phase codes at the step's angle.
+fn measure_path(cfg: &Config) {
+    let cfg = Config {
+        meas_ke_time_s: 0.1,
+        meas_r_time_s: 0.01,
+        ..*cfg
+    };
+    let Ok(mut ctl) = Controller::new(&cfg) else {
+        exit(9)
+    };
+    if ctl.set_mode(Mode::Measure).is_err() {
+        exit(10);
+    }
+    let (r, l, ts) = (2.0f32, 5e-3f32, 1.0 / cfg.pwm_hz);
+    let mut i = [0.0f32; 2];
+    let z = cfg.adc_zero_code as f32;
+    let mut s = RawSample {
+        i_abc: [cfg.adc_zero_code; 3],
+        v_bus: 2458,
+        encoder: 7,
+    };
+    let mut n = 0u32;
+    while ctl.mode() == Mode::Measure && n < 100_000 {
+        black_box(regen_step_measure(&mut ctl, s));
+        let t = ctl.telemetry();
+        let v = [t.v_dq.d.to_num::<f32>(), t.v_dq.q.to_num::<f32>()];
+        for k in 0..2 {
+            i[k] += (v[k] - r * i[k]) * ts / l;
+        }
+        let (sn, cs) = t.theta_e.sin_cos();
+        let (sn, cs) = (sn.to_num::<f32>(), cs.to_num::<f32>());
+        let a = i[0] * cs - i[1] * sn;
+        let b = i[0] * sn + i[1] * cs;
+        let ph = [a, -0.5 * a + 0.866_025_4 * b, -0.5 * a - 0.866_025_4 * b];
+        for k in 0..3 {
+            s.i_abc[k] = (z + ph[k] / cfg.amps_per_count + 0.5) as u16;
+        }
+        n += 1;
+        if n % 20 == 0 {
+            ctl.supervise();
+        }
+    }
+    let m = ctl.measurement();
+    if m.phase() != regen_fw::commission::Phase::Done {
+        exit(11);
+    }
+    let rel = m.r.mean() / r - 1.0;
+    if !(rel > -0.05 && rel < 0.05) {
+        exit(12);
+    }
+}
+
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
 /// separately from the step.
 #[no_mangle]
@@ -293,6 +356,7 @@ fn main() -> ! {
         exit(4);
     }
     boot_paths(&cfg);
+    measure_path(&cfg);
     let half = VECTORS.len() / STEP_BYTES / 2;
     let every = ctl.supervise_every() as usize;
     let mut k = 0usize;

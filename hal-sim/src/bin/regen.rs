@@ -38,6 +38,10 @@ enum Command {
     /// Send console commands (arguments or --script) to a serial port or `regen serve`'s
     /// pseudo-terminal and print the replies; exit status 1 on an error reply or a timeout.
     Client(cli::client::ClientArgs),
+    /// Commission a drive over its console: align, measure R, L_d, L_q and K_e, show them
+    /// against the configuration (--apply, --save), and the load the device wants
+    /// (--scenario, --model).
+    Commission(cli::commission::CommissionArgs),
 }
 
 /// Parse the command line; a usage error is one line (clap's message and tip, without the
@@ -75,6 +79,7 @@ fn main() {
         #[cfg(unix)]
         Some(Command::Serve(a)) => cli::serve::run(&a),
         Some(Command::Client(a)) => cli::client::run(&a),
+        Some(Command::Commission(a)) => cli::commission::run(&a),
         Some(Command::Diagnose(a)) => {
             hal_sim::diagnose::cli::cli_main(a).map_err(|e| e.to_string())
         }

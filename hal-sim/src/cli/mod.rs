@@ -2,6 +2,7 @@
 //! variant of `Command` in `src/bin/regen.rs`).
 
 pub mod client;
+pub mod commission;
 pub mod output;
 pub mod progress;
 pub mod run;
