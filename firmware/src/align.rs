@@ -246,7 +246,7 @@ impl EmfProbe {
             let enc = self.t_enc as f64 * e_per_count as f64;
             let ratio = (enc / self.t_emf as f64) as f32;
             let r = ratio - 1.0;
-            if r > RATIO_TOL || r < -RATIO_TOL {
+            if !(-RATIO_TOL..=RATIO_TOL).contains(&r) {
                 return Probe::Mismatch { ratio };
             }
             let offset = angle_lsb(atan2(-self.sum_d, self.sum_q));
@@ -293,7 +293,7 @@ pub fn atan2(y: f32, x: f32) -> f32 {
         * (0.999_977_26
             + t2 * (-0.332_623_47
                 + t2 * (0.193_543_46
-                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_20)))));
+                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_2)))));
     let a = if swap { FRAC_PI_2 - p } else { p };
     let a = if x < 0.0 { PI - a } else { a };
     if y < 0.0 {
