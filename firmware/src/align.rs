@@ -243,10 +243,10 @@ impl EmfProbe {
         }
         let turn = 1i64 << 32;
         if self.n >= MIN_TICKS && self.t_emf.abs() >= turn {
-            let enc = self.t_enc as f64 * e_per_count as f64;
-            let ratio = (enc / self.t_emf as f64) as f32;
+            // In f32 (the M4F's FPU; f64 would be software on the board).
+            let ratio = self.t_enc as f32 * e_per_count as f32 / self.t_emf as f32;
             let r = ratio - 1.0;
-            if r > RATIO_TOL || r < -RATIO_TOL {
+            if !(-RATIO_TOL..=RATIO_TOL).contains(&r) {
                 return Probe::Mismatch { ratio };
             }
             let offset = angle_lsb(atan2(-self.sum_d, self.sum_q));
@@ -269,9 +269,10 @@ impl EmfProbe {
     }
 }
 
-/// An angle in radians as angle LSB (2^32 a turn, wrapping).
+/// An angle in radians as angle LSB (2^32 a turn, wrapping; f32's 24 bits: within 2^-24 of
+/// a turn).
 pub fn angle_lsb(rad: f32) -> u32 {
-    (rad as f64 * (4_294_967_296.0 / core::f64::consts::TAU)) as i64 as u32
+    (rad * (4_294_967_296.0 / core::f32::consts::TAU)) as i64 as u32
 }
 
 /// `atan2(y, x)` in radians, (−π, π], with `+ − × ÷` only (no libm: the same bits on the
@@ -293,7 +294,7 @@ pub fn atan2(y: f32, x: f32) -> f32 {
         * (0.999_977_26
             + t2 * (-0.332_623_47
                 + t2 * (0.193_543_46
-                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_20)))));
+                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_2)))));
     let a = if swap { FRAC_PI_2 - p } else { p };
     let a = if x < 0.0 { PI - a } else { a };
     if y < 0.0 {
