@@ -22,9 +22,11 @@
 //! id (`#ID` in front of the command, `-` without one). A command's text is written once, for
 //! both modes: its data lines and its final line go through [`Out`], which tags them.
 //!
-//! Store rule: `save` is refused while the mode is `run` (a flash page erase stalls the core
-//! for ~20 ms on the G474, i.e. 400 current-loop periods); `load` and `defaults` are refused in
-//! `run` as well because they change non-runtime parameters.
+//! Store rule: `save`, `load` and `defaults` are refused while the bridge is live (`run`,
+//! `align`): a configuration is stored between runs, not half way through a run's changes,
+//! and `load`/`defaults` change parameters that may not change in `run`. Not for the loop's
+//! sake: on the board the store is flash bank 2 while the code runs from bank 1
+//! (read-while-write, RM0440 "dual bank"), and the save is awaited in the console's task.
 
 use core::fmt::Write;
 
@@ -788,6 +790,9 @@ impl Console {
         let a2 = it.next();
         let extra = it.next().is_some();
         let running = ctl.mode() == Mode::Run;
+        // The store rule (docs/console.md): `save`, `load`, `defaults` while the bridge is
+        // live, in `run` or `align`, are refused.
+        let busy = running || ctl.mode() == Mode::Align;
         // `fail!(.s("…").num(v)…)`: one `error: …` line, refused. `ok!(…)`: one `ok…` line
         // (its line end is written by `execute`).
         // The text is written piece by piece (`Put`), not through `write!`.
@@ -871,12 +876,14 @@ impl Console {
                     .col("default", 11)
                     .s("set  description\r\n");
                 for p in PARAMS.iter().filter(hit) {
+                    let mut range = heapless::String::<40>::new();
+                    let _ = range.push_str(Num(p.min).text().as_str());
+                    let _ = range.push_str(" .. ");
+                    let _ = range.push_str(Num(p.max).text().as_str());
                     out.col(p.name, 19)
                         .col(Num(p.get(c)).text().as_str(), 12)
                         .col(p.unit(), 7)
-                        .num(p.min)
-                        .s(" .. ")
-                        .col(Num(p.max).text().as_str(), 10)
+                        .col(range.as_str(), 18)
                         .col(Num(p.get(&f)).text().as_str(), 11)
                         .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc())
@@ -890,14 +897,16 @@ impl Console {
                     Some(p) => {
                         ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
                     }
-                    None => fail!(.s("unknown parameter '").clip(n).s("' (try list)")),
+                    None => {
+                        fail!(.s("unknown parameter '").clip(n).s("'").hint(nearest(n, PARAMS.iter().map(|p| p.name))).s(" (try list)"))
+                    }
                 }
             }
             "set" if want(2) => {
                 let n = a1.unwrap_or("");
                 let vs = a2.unwrap_or("");
                 let Some(p) = params::find(n) else {
-                    fail!(.s("unknown parameter '").clip(n).s("' (try list)"))
+                    fail!(.s("unknown parameter '").clip(n).s("'").hint(nearest(n, PARAMS.iter().map(|p| p.name))).s(" (try list)"))
                 };
                 let mut c = *ctl.config();
                 // The reason, and for a refused configuration the field it conflicts with.
@@ -923,16 +932,15 @@ impl Console {
                         .num(p.max)
                         .s(" ")
                         .s(p.unit())
+                        .laws(p.kind == params::Kind::Law)
                         .s(", now ")
                         .num(p.get(ctl.config())))
                 }
                 ok!(.s(" ").s(p.name).s(" = ").num(p.get(ctl.config())).s(" ").s(p.unit()))
             }
             "save" if want(0) => {
-                if running {
-                    fail!(.s(
-                        "save refused while running (mode idle first): flash erase stalls the loop"
-                    ))
+                if busy {
+                    fail!(.s("save refused in mode ").s(ctl.mode().name()).s(" (mode idle first): a configuration is stored between runs, not half way through a run's changes"))
                 }
                 match store.save(ctl.config()) {
                     Ok(Saved::Done) => Some(save_reply(Ok(()), out)),
@@ -942,8 +950,8 @@ impl Console {
                 }
             }
             "load" | "defaults" if want(0) => {
-                if running {
-                    fail!(.s(cmd).s(" refused while running (mode idle first)"))
+                if busy {
+                    fail!(.s(cmd).s(" refused in mode ").s(ctl.mode().name()).s(" (mode idle first): it changes parameters that may not change while the bridge is live"))
                 }
                 let c = if cmd == "load" {
                     match store.load() {
@@ -1176,7 +1184,9 @@ impl Console {
                 let c = COMMANDS.iter().find(|c| c.0 == cmd).unwrap_or(&COMMANDS[0]);
                 fail!(.s("usage: ").s(c.0).s(" ").s(c.1))
             }
-            _ => fail!(.s("unknown command '").clip(cmd).s("' (see help)")),
+            _ => {
+                fail!(.s("unknown command '").clip(cmd).s("'").hint(nearest(cmd, COMMANDS.iter().map(|c| c.0))).s(" (see help)"))
+            }
         }
     }
 }
@@ -1200,6 +1210,10 @@ trait Put {
     /// At most 24 characters of user input (keeps errors one short line), control
     /// characters as `?`.
     fn clip(&mut self, s: &str) -> &mut Self;
+    /// ` (did you mean NAME?)` when there is a NAME.
+    fn hint(&mut self, name: Option<&str>) -> &mut Self;
+    /// When `on`: the command laws by code and name, ` (0 resistor, 1 impedance, …)`.
+    fn laws(&mut self, on: bool) -> &mut Self;
 }
 
 impl<W: Write> Put for W {
@@ -1254,6 +1268,26 @@ impl<W: Write> Put for W {
         };
         self.fixed(m, d).s(" ").s(prefix).s(unit)
     }
+    #[inline(never)]
+    fn hint(&mut self, name: Option<&str>) -> &mut Self {
+        if let Some(n) = name {
+            self.s(" (did you mean ").s(n).s("?)");
+        }
+        self
+    }
+    #[inline(never)]
+    fn laws(&mut self, on: bool) -> &mut Self {
+        if on {
+            for (i, k) in crate::laws::LawKind::ALL.iter().enumerate() {
+                self.s(if i == 0 { " (" } else { ", " })
+                    .uint(*k as u32)
+                    .s(" ")
+                    .s(k.name());
+            }
+            self.s(")");
+        }
+        self
+    }
     #[inline(never)] // one copy per sink type: these are called from ~150 places
     fn clip(&mut self, s: &str) -> &mut Self {
         // By bytes (no UTF-8 decoding): a character starts at every byte that is not a
@@ -1282,6 +1316,42 @@ impl<W: Write> Put for W {
         }
         self.s(s.get(start..).unwrap_or(""))
     }
+}
+
+/// The name in `names` nearest `typed` by edit distance (Levenshtein, by bytes: the names
+/// are ASCII), if it is near enough to be a typing slip: at most 2 edits, and fewer than
+/// half of the typed length (`pwm` is not a slip of `law`). The first of equally near names.
+fn nearest<'n>(typed: &str, names: impl Iterator<Item = &'n str>) -> Option<&'n str> {
+    let t = typed.as_bytes();
+    if t.len() > 32 {
+        return None;
+    }
+    let mut best: Option<(&str, usize)> = None;
+    for n in names {
+        let d = edit_distance(t, n.as_bytes());
+        if d <= 2 && 2 * d < t.len() && best.is_none_or(|b| d < b.1) {
+            best = Some((n, d));
+        }
+    }
+    best.map(|b| b.0)
+}
+
+/// Levenshtein distance of `a` (at most 32 bytes) and `b`: one row of the table at a time.
+fn edit_distance(a: &[u8], b: &[u8]) -> usize {
+    let mut row = [0usize; 33];
+    for (j, r) in row.iter_mut().enumerate().take(a.len() + 1) {
+        *r = j;
+    }
+    for (i, &cb) in b.iter().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        for (j, &ca) in a.iter().enumerate() {
+            let sub = diag + usize::from(ca != cb);
+            diag = row[j + 1];
+            row[j + 1] = sub.min(diag + 1).min(row[j] + 1);
+        }
+    }
+    row[a.len()]
 }
 
 /// `<lead><code> <name>: <description>` and a line end.
@@ -1889,6 +1959,128 @@ mod tests {
         // Current still high in the last telemetry: clear refused on the later fault.
         let (r, s) = run(&mut con, &mut ctl, "clear");
         assert!(r.is_err() && s.contains("i_trip_a"), "{s}");
+    }
+
+    /// The final line of every console example in `docs/console.md`: each `> CMD` line of a
+    /// fenced block is run on a fresh drive (`Config::default()`, idle, no store) and the
+    /// `ok …` / `error: …` line the block shows after it must be the console's, word for
+    /// word. So the doc's refusals and counts come from the code.
+    #[test]
+    fn docs_examples_match_the_console() {
+        let doc = include_str!("../../docs/console.md");
+        let mut n = 0;
+        let mut in_block = false;
+        let lines: Vec<&str> = doc.lines().collect();
+        for (i, l) in lines.iter().enumerate() {
+            if l.starts_with("```") {
+                in_block = !in_block;
+                continue;
+            }
+            let Some(cmd) = l.strip_prefix("> ").filter(|c| in_block && !c.is_empty()) else {
+                continue;
+            };
+            // The reply: the lines up to the next prompt or the block's end; its final line.
+            let shown = lines[i + 1..]
+                .iter()
+                .take_while(|x| !x.starts_with('>') && !x.starts_with("```"))
+                .filter(|x| x.starts_with("ok") || x.starts_with("error: "))
+                .last();
+            let Some(shown) = shown else { continue };
+            let mut ctl = Controller::new(&Config::default()).unwrap();
+            let mut con = Console::new();
+            let (_, got) = run(&mut con, &mut ctl, cmd);
+            let last = got.trim_end().lines().last().unwrap_or("");
+            assert_eq!(last, *shown, "docs/console.md line {}: > {cmd}", i + 1);
+            n += 1;
+        }
+        std::println!("{n} examples of docs/console.md checked");
+        assert!(n >= 10, "{n}");
+    }
+
+    /// Refusals name the real range and reason: the laws by code and name, a near name
+    /// suggested, the store rule in `align` as in `run`.
+    #[test]
+    fn refusals_name_range_reason_and_near_names() {
+        let mut ctl = Controller::new(&Config::default()).unwrap();
+        let mut con = Console::new();
+        let (_, s) = run(&mut con, &mut ctl, "set law 7");
+        assert_eq!(
+            s,
+            "error: law 7: value out of range; allowed 0 .. 4 code (0 resistor, 1 impedance, 2 tracking, 3 two_way, 4 one_way), now 0\r\n"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "get r_load_om");
+        assert_eq!(
+            s,
+            "error: unknown parameter 'r_load_om' (did you mean r_load_ohm?) (try list)\r\n"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "stauts");
+        assert_eq!(
+            s,
+            "error: unknown command 'stauts' (did you mean status?) (see help)\r\n"
+        );
+        let (_, s) = run(&mut con, &mut ctl, "frobnicate");
+        assert_eq!(s, "error: unknown command 'frobnicate' (see help)\r\n");
+        // Too short to be a slip of anything.
+        let (_, s) = run(&mut con, &mut ctl, "get x");
+        assert_eq!(s, "error: unknown parameter 'x' (try list)\r\n");
+        // The store rule holds in `align` as in `run`.
+        for m in ["run", "align"] {
+            assert!(run(&mut con, &mut ctl, "mode idle").0.is_ok());
+            let (r, s) = run(&mut con, &mut ctl, &format!("mode {m}"));
+            assert!(r.is_ok(), "{s}");
+            for c in ["save", "load", "defaults"] {
+                let (r, s) = run(&mut con, &mut ctl, c);
+                assert!(
+                    r.is_err()
+                        && s.starts_with(&format!(
+                            "error: {c} refused in mode {m} (mode idle first): "
+                        )),
+                    "{s}"
+                );
+            }
+        }
+    }
+
+    /// The edit distance against the textbook recursion (memoised), over random pairs.
+    #[test]
+    fn edit_distance_is_levenshtein() {
+        fn reference(a: &[u8], b: &[u8]) -> usize {
+            let mut m = std::collections::HashMap::new();
+            fn go(
+                a: &[u8],
+                b: &[u8],
+                m: &mut std::collections::HashMap<(usize, usize), usize>,
+            ) -> usize {
+                if a.is_empty() || b.is_empty() {
+                    return a.len().max(b.len());
+                }
+                if let Some(&d) = m.get(&(a.len(), b.len())) {
+                    return d;
+                }
+                let d = (go(&a[1..], &b[1..], m) + usize::from(a[0] != b[0]))
+                    .min(go(&a[1..], b, m) + 1)
+                    .min(go(a, &b[1..], m) + 1);
+                m.insert((a.len(), b.len()), d);
+                d
+            }
+            go(a, b, &mut m)
+        }
+        let mut x = 0x2545_f491_u32;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x
+        };
+        for _ in 0..3000 {
+            let mut word = |n: u32| -> Vec<u8> {
+                (0..next() % n)
+                    .map(|_| b"abc_"[(next() % 4) as usize])
+                    .collect()
+            };
+            let (a, b) = (word(33), word(20));
+            assert_eq!(edit_distance(&a, &b), reference(&a, &b), "{a:?} {b:?}");
+        }
     }
 
     /// One line the drive sends in machine mode, parsed by the grammar of
