@@ -229,7 +229,7 @@ registry! {
         law,
         "code",
         0.0,
-        255.0,
+        4.0,
         false,
         "command law code (0 resistor, 1 impedance, 2 tracking, 3 two-way, 4 one-way)"
     ),
