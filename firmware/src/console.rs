@@ -2464,34 +2464,34 @@ mod tests {
         let mut ed = LineEditor::new();
         // Nothing to recall yet.
         assert_eq!(feed(&mut ed, UP), (vec![], String::new()));
-        for l in ["a1", "b2", "b2", "", "c3", "d4", "e5"] {
+        for l in ["z0", "a1", "b2", "b2", "", "c3", "d4"] {
             feed(&mut ed, format!("{l}\r").as_bytes());
         }
-        // Newest first; "b2" once; only the last four ("a1" forgotten).
+        // Newest first; "b2" once, so the last four are a1 b2 c3 d4 (z0 forgotten).
         let (_, e) = feed(&mut ed, UP);
-        assert_eq!(e, "e5");
+        assert_eq!(e, "d4");
         let (_, e) = feed(&mut ed, UP);
-        assert_eq!(e, "\x08 \x08\x08 \x08d4");
+        assert_eq!(e, "\x08 \x08\x08 \x08c3");
         feed(&mut ed, UP);
         let (_, e) = feed(&mut ed, UP);
-        assert!(e.ends_with("b2"), "{e:?}");
+        assert!(e.ends_with("a1"), "{e:?}");
         let (_, e) = feed(&mut ed, UP);
         assert_eq!(e, "", "the oldest stays");
         let (l, _) = feed(&mut ed, b"\r");
-        assert_eq!(l, ["b2"]);
-        // Down past the newest: an empty line; a recalled line edited before Enter.
+        assert_eq!(l, ["a1"]);
+        // Now b2 c3 d4 a1. Down past the newest: an empty line.
         feed(&mut ed, UP);
         let (_, e) = feed(&mut ed, DOWN);
         assert_eq!(e, "\x08 \x08\x08 \x08");
+        // A recalled line edited before Enter: two up is d4, edited to dX.
         let mut keys = UP.to_vec();
         keys.extend(UP);
         keys.extend(b"\x7fX\r");
-        // (The history is now c3 d4 e5 b2: two up is e5.)
         let (l, _) = feed(&mut ed, &keys);
-        assert_eq!(l, ["eX"]);
-        // d4 e5 b2 eX: up three times is e5, down once b2.
+        assert_eq!(l, ["dX"]);
+        // c3 d4 a1 dX: up three times is d4, down once a1.
         let (l, _) = feed(&mut ed, b"\x1b[A\x1b[A\x1b[A\x1b[B\r");
-        assert_eq!(l, ["b2"]);
+        assert_eq!(l, ["a1"]);
     }
 
     /// The line editor in machine mode: no echo, no editing, CR/LF/CRLF end lines, an
