@@ -134,7 +134,18 @@ pub struct LineEditor {
     text: heapless::String<LINE_MAX>,
     /// Machine mode ([`LineEditor::set_machine`]): no echo, no editing.
     machine: bool,
+    /// The last [`HISTORY`] lines entered (non-empty, each once in a row), a ring:
+    /// `hist[(head + HISTORY - k) % HISTORY]` is the k-th most recent (k ≥ 1).
+    hist: [heapless::String<LINE_MAX>; HISTORY],
+    /// Next slot to write; lines stored (≤ [`HISTORY`]).
+    head: usize,
+    stored: usize,
+    /// The history line shown (0: the line being typed).
+    shown: usize,
 }
+
+/// Lines the editor remembers for the up/down arrow keys.
+pub const HISTORY: usize = 4;
 
 impl Default for LineEditor {
     fn default() -> Self {
@@ -146,6 +157,10 @@ impl Default for LineEditor {
             esc: 0,
             text: heapless::String::new(),
             machine: false,
+            hist: Default::default(),
+            head: 0,
+            stored: 0,
+            shown: 0,
         }
     }
 }
@@ -180,7 +195,11 @@ impl LineEditor {
             };
         }
         if self.esc != 0 {
-            // ESC X (two bytes) or ESC [ … final byte (0x40..=0x7e).
+            // ESC X (two bytes) or ESC [ … final byte (0x40..=0x7e); ESC [ A and ESC [ B,
+            // the up and down arrow keys, walk the history.
+            if self.esc == 2 && (b == b'A' || b == b'B') {
+                self.recall(b == b'A', out);
+            }
             self.esc =
                 if (self.esc == 1 && b == b'[') || (self.esc == 2 && !(0x40..=0x7e).contains(&b)) {
                     2
@@ -227,6 +246,31 @@ impl LineEditor {
         }
     }
 
+    /// Up (`older`) or down the history: the line on the terminal and in the editor becomes
+    /// that entry (down past the newest: an empty line).
+    fn recall<W: Write>(&mut self, older: bool, out: &mut W) {
+        let k = if older {
+            (self.shown + 1).min(self.stored)
+        } else {
+            self.shown.saturating_sub(1)
+        };
+        if k == self.shown {
+            return;
+        }
+        self.shown = k;
+        while self.len > 0 {
+            self.erase(out);
+        }
+        self.overlong = false;
+        if k > 0 {
+            let e = &self.hist[(self.head + HISTORY - k) % HISTORY];
+            let b = e.as_bytes();
+            self.buf[..b.len()].copy_from_slice(b);
+            self.len = b.len();
+            out.s(e.as_str());
+        }
+    }
+
     /// Append a received byte; `false` (and the line marked overlong) when it is full.
     fn push(&mut self, b: u8) -> bool {
         if self.len == LINE_MAX {
@@ -242,6 +286,7 @@ impl LineEditor {
     /// empty line.
     fn end<W: Write>(&mut self, out: &mut W) -> Option<Line<'_>> {
         let n = core::mem::replace(&mut self.len, 0);
+        self.shown = 0;
         let raw = self.buf.get(..n).unwrap_or(&[]);
         let why = if core::mem::replace(&mut self.overlong, false) {
             "line longer than 128 characters"
@@ -250,6 +295,7 @@ impl LineEditor {
             let mut rest = raw;
             loop {
                 if rest.is_empty() {
+                    self.remember();
                     return Some(self.text.as_str());
                 }
                 let Some((ch, k)) = utf8_first(rest) else {
@@ -268,6 +314,21 @@ impl LineEditor {
         }
         out.s(why).s("\r\n");
         Some("")
+    }
+
+    /// The line just ended (`text`) into the history, unless empty or the same as the newest.
+    fn remember(&mut self) {
+        self.shown = 0;
+        if self.machine || self.text.trim().is_empty() {
+            return;
+        }
+        let newest = (self.head + HISTORY - 1) % HISTORY;
+        if self.stored > 0 && self.hist[newest] == self.text {
+            return;
+        }
+        self.hist[self.head] = self.text.clone();
+        self.head = (self.head + 1) % HISTORY;
+        self.stored = (self.stored + 1).min(HISTORY);
     }
 
     /// Where the last character starts (its continuation bytes are `0b10xx_xxxx`).
@@ -1800,8 +1861,8 @@ mod tests {
         let (l, e) = feed(&mut ed, b"set x 1\x15status\r");
         assert_eq!(l, ["status"]);
         assert_eq!(e, format!("set x 1{}status\r\n", "\x08 \x08".repeat(7)));
-        // An arrow key (ESC [ A) and other controls are ignored.
-        let (l, _) = feed(&mut ed, b"st\x1b[Aa\x01tus\r");
+        // A left/right arrow key (ESC [ C, ESC [ D) and other controls are ignored.
+        let (l, _) = feed(&mut ed, b"st\x1b[Ca\x01t\x1b[Dus\r");
         assert_eq!(l, ["status"]);
         // A multi-byte character is echoed when complete and erased whole.
         let (l, e) = feed(&mut ed, "aΩ\x7fb\r".as_bytes());
@@ -2433,6 +2494,56 @@ mod tests {
         assert_eq!(con.prompt(), PROMPT);
         let (_, s) = ex(&mut con, &mut ctl, &mut st, "#z status");
         assert_eq!(s, "error: unknown command '#z' (see help)\r\n");
+    }
+
+    /// History: up/down arrows recall the last lines entered (at most [`HISTORY`], a repeat
+    /// stored once), the terminal's line erased and the entry echoed; a recalled line can be
+    /// edited; down past the newest gives an empty line.
+    #[test]
+    fn line_editor_history() {
+        fn feed(ed: &mut LineEditor, bytes: &[u8]) -> (Vec<String>, String) {
+            let mut echo = String::new();
+            let mut lines = Vec::new();
+            for &b in bytes {
+                if let Some(l) = ed.feed(b, &mut echo) {
+                    lines.push(l.to_string());
+                }
+            }
+            (lines, echo)
+        }
+        const UP: &[u8] = b"\x1b[A";
+        const DOWN: &[u8] = b"\x1b[B";
+        let mut ed = LineEditor::new();
+        // Nothing to recall yet.
+        assert_eq!(feed(&mut ed, UP), (vec![], String::new()));
+        for l in ["z0", "a1", "b2", "b2", "", "c3", "d4"] {
+            feed(&mut ed, format!("{l}\r").as_bytes());
+        }
+        // Newest first; "b2" once, so the last four are a1 b2 c3 d4 (z0 forgotten).
+        let (_, e) = feed(&mut ed, UP);
+        assert_eq!(e, "d4");
+        let (_, e) = feed(&mut ed, UP);
+        assert_eq!(e, "\x08 \x08\x08 \x08c3");
+        feed(&mut ed, UP);
+        let (_, e) = feed(&mut ed, UP);
+        assert!(e.ends_with("a1"), "{e:?}");
+        let (_, e) = feed(&mut ed, UP);
+        assert_eq!(e, "", "the oldest stays");
+        let (l, _) = feed(&mut ed, b"\r");
+        assert_eq!(l, ["a1"]);
+        // Now b2 c3 d4 a1. Down past the newest: an empty line.
+        feed(&mut ed, UP);
+        let (_, e) = feed(&mut ed, DOWN);
+        assert_eq!(e, "\x08 \x08\x08 \x08");
+        // A recalled line edited before Enter: two up is d4, edited to dX.
+        let mut keys = UP.to_vec();
+        keys.extend(UP);
+        keys.extend(b"\x7fX\r");
+        let (l, _) = feed(&mut ed, &keys);
+        assert_eq!(l, ["dX"]);
+        // c3 d4 a1 dX: up three times is d4, down once a1.
+        let (l, _) = feed(&mut ed, b"\x1b[A\x1b[A\x1b[A\x1b[B\r");
+        assert_eq!(l, ["a1"]);
     }
 
     /// The line editor in machine mode: no echo, no editing, CR/LF/CRLF end lines, an
