@@ -2,14 +2,15 @@
 //!
 //! It shares no code with `diagnose` (its own random source, trajectories, device physics and
 //! CSV writer): an actuator imposes a motion on the device's rod and a load cell measures the
-//! force. The device is simulated as physics at `SUB` substeps per sample:
+//! force. The device is simulated as physics at `SUB` substeps per sample (`substeps_for` at
+//! other sample rates):
 //! inertia, a damping drive (the motor emulating a damper through its current loop),
 //! LuGre friction (presliding, its displacement below what the record shows, and standstill included), a force offset, and at most one hidden
 //! effect: a clipped current loop, a delay of the force channel, a load-path resonance (a mass on
 //! a spring-damper), a Stribeck bump (static above Coulomb), a soft presliding regime, play in
 //! the screw (the device's mass and drive sit behind a gap), or an effect outside the
 //! diagnosis's catalogue (a force disturbance at a frequency unrelated to the motion, or a
-//! thermal drift of the force offset).
+//! thermal drift of the force offset); the widened rig adds the kinds below.
 //!
 //! **Observability rule**: a hidden effect is kept only when the force it changes, simulated
 //! with and without it on the same motion, holds on the samples in motion (`rest_of`: the
@@ -34,12 +35,31 @@
 //! at most `SIZE_MAX_SCALE` times the draw, a clip's level down to `CLIP_MIN_FRACTION` of the
 //! drive's peak force); only when that maximum does not reach the rule is the record flagged
 //! `observable = false`. A record observable on its first motion is unchanged by the redraws.
+//!
+//! **Two generators.** `RigSpec::random` is the classic rig: 1 kHz, a length given by the
+//! caller, the nine kinds of `Hidden::KINDS`. `RigSpec::widened` draws the conditions too: the
+//! sample rate (500 Hz … 10 kHz; the physics at a substep rate of at least 20 kHz,
+//! `substeps_for`), the length (6–20 s), the force noise (0.05–5 N), the encoder (0.1–25.6 µm),
+//! the lead, wider devices, a chirp family beside the classic four and the recorded one, and
+//! the kinds of `Hidden::WIDE_KINDS`: beside the classic ones a load path whose compliance the
+//! force is measured in front of (the device behind the spring), play without impact (a light
+//! side behind the gap), a spring, a spring beside presliding, and a drag growing with the
+//! square of the speed (outside the catalogue). Its observability rule adds a clause: the part
+//! of the effect's force no refitted baseline (inertia, viscous, Coulomb, offset, on the true
+//! motion) explains holds at least `REFIT_NOISE_RATIO` times the noise (`unexplained_rms`).
 
 use std::f64::consts::TAU;
 use std::fmt::Write as _;
 
-/// Substeps per output sample of the physics integration.
+/// Substeps per output sample of the physics integration at the classic rig's 1 kHz; other
+/// sample rates take `substeps_for` (a substep rate of at least 20 kHz).
 pub const SUB: usize = 20;
+
+/// Substeps per sample at sample rate `fs`: at least 2, and a substep rate of at least 20 kHz
+/// (the play's contact modes, up to about 420 Hz, are integrated at ω·h ≤ 0.13).
+pub fn substeps_for(fs: f64) -> usize {
+    ((20_000.0 / fs).ceil() as usize).max(2)
+}
 
 /// xorshift64* random source (independent of the diagnosis's generator).
 pub struct RigRng(u64);
@@ -88,6 +108,8 @@ pub enum Trajectory {
     Narrowband,
     /// A recorded position (metres, at the record's sample rate), e.g. EMPS's trajectory.
     Recorded(Vec<f64>),
+    /// A sine swept linearly in frequency from 0.1–0.3 Hz to 1.5–4 Hz over the record.
+    Chirp,
 }
 
 impl Trajectory {
@@ -98,6 +120,7 @@ impl Trajectory {
             Trajectory::PointToPoint => "point_to_point",
             Trajectory::Narrowband => "narrowband",
             Trajectory::Recorded(_) => "recorded",
+            Trajectory::Chirp => "chirp",
         }
     }
 }
@@ -142,7 +165,37 @@ pub enum Hidden {
     Drift {
         total_n: f64,
     },
+    /// A compliant load path with the force measured on the actuator's side of it: the load
+    /// cell carries a spring-damper, the whole device (mass, drive, friction) sits behind it.
+    ResonanceBehind {
+        freq_hz: f64,
+        zeta: f64,
+    },
+    /// Play without impact: only `PLAY_LIGHT_SIDE` of the device's mass, with its drive and
+    /// friction, sits behind the gap (the rest moves with the load cell), and the contact is
+    /// critically damped: taking up the play exchanges almost no momentum.
+    PlayNoImpact {
+        width_m: f64,
+    },
+    /// A position-proportional force (a mount, a centring spring), k·x about the stroke's
+    /// middle.
+    Spring {
+        k_n_per_m: f64,
+    },
+    /// A spring beside soft presliding (the stiffness a friction hysteresis shows at small
+    /// displacement, as in a passive friction damper on a mount).
+    SpringPresliding {
+        k_n_per_m: f64,
+        x_char_m: f64,
+    },
+    /// Out of catalogue: a force growing with the square of the speed, c₂·v·|v|.
+    QuadraticDrag {
+        c2_n_s2_per_m2: f64,
+    },
 }
+
+/// Share of the device's mass behind the gap of `Hidden::PlayNoImpact`.
+pub const PLAY_LIGHT_SIDE: f64 = 0.02;
 
 impl Hidden {
     /// The diagnosis's name for this effect (`unexplained` for effects outside the catalogue,
@@ -156,8 +209,36 @@ impl Hidden {
             Hidden::Stribeck { .. } => "stribeck",
             Hidden::Presliding { .. } => "presliding_hysteresis",
             Hidden::Backlash { .. } => "backlash",
-            Hidden::Hum { .. } | Hidden::Drift { .. } => "unexplained",
+            Hidden::Hum { .. } | Hidden::Drift { .. } | Hidden::QuadraticDrag { .. } => {
+                "unexplained"
+            }
+            Hidden::ResonanceBehind { .. } => "compliance",
+            Hidden::PlayNoImpact { .. } => "backlash",
+            Hidden::Spring { .. } | Hidden::SpringPresliding { .. } => "spring",
         })
+    }
+    /// Every name the diagnosis should give this effect, sorted (empty for no effect,
+    /// `unexplained` alone for effects outside the catalogue).
+    pub fn expected_names(&self) -> &'static [&'static str] {
+        match self {
+            Hidden::SpringPresliding { .. } => &["presliding_hysteresis", "spring"],
+            Hidden::None => &[],
+            h => match h.expected() {
+                Some("current_limit") => &["current_limit"],
+                Some("lag") => &["lag"],
+                Some("compliance") => &["compliance"],
+                Some("stribeck") => &["stribeck"],
+                Some("presliding_hysteresis") => &["presliding_hysteresis"],
+                Some("backlash") => &["backlash"],
+                Some("spring") => &["spring"],
+                _ => &["unexplained"],
+            },
+        }
+    }
+    /// Whether the effect lies outside the diagnosis's catalogue (its right answer is
+    /// `unexplained`).
+    pub fn out_of_catalogue(&self) -> bool {
+        self.expected() == Some("unexplained")
     }
     pub fn kind(&self) -> &'static str {
         match self {
@@ -170,9 +251,15 @@ impl Hidden {
             Hidden::Backlash { .. } => "backlash",
             Hidden::Hum { .. } => "hum",
             Hidden::Drift { .. } => "drift",
+            Hidden::ResonanceBehind { .. } => "resonance_behind",
+            Hidden::PlayNoImpact { .. } => "play_no_impact",
+            Hidden::Spring { .. } => "spring",
+            Hidden::SpringPresliding { .. } => "spring_presliding",
+            Hidden::QuadraticDrag { .. } => "quadratic_drag",
         }
     }
-    /// Every kind, in the order the long run cycles through them.
+    /// The classic rig's kinds (`RigSpec::random`), in the order its long run cycles through
+    /// them.
     pub const KINDS: [&'static str; 9] = [
         "none",
         "clipped_current_loop",
@@ -183,6 +270,24 @@ impl Hidden {
         "backlash",
         "hum",
         "drift",
+    ];
+    /// Every kind of the widened rig (`RigSpec::widened`): the classic ones, then the
+    /// topologies and effects the classic rig lacks.
+    pub const WIDE_KINDS: [&'static str; 14] = [
+        "none",
+        "clipped_current_loop",
+        "delay",
+        "resonance",
+        "stribeck",
+        "presliding",
+        "backlash",
+        "hum",
+        "drift",
+        "resonance_behind",
+        "play_no_impact",
+        "spring",
+        "spring_presliding",
+        "quadratic_drag",
     ];
 }
 
@@ -222,7 +327,21 @@ pub struct RigSpec {
     /// The trajectory family the record was asked for (`trajectory` is another one when that
     /// family could not show the hidden effect; see the observability rule).
     pub requested: &'static str,
+    /// Substeps per sample of the physics (`substeps_for(fs)`).
+    pub sub: usize,
+    /// Samples of the rest window (`rest_of`): 20 ms.
+    pub rest_window: usize,
+    /// The widened rig's second observability clause: what a refitted baseline cannot explain
+    /// (`unexplained_rms`) holds at least `REFIT_NOISE_RATIO` times the noise.
+    pub refit_rule: bool,
+    /// rms of the part of the effect's force no refitted baseline explains (`unexplained_rms`),
+    /// N.
+    pub effect_unexplained_n: f64,
 }
+
+/// Least ratio of the unexplained part of an effect (`unexplained_rms`) to the force noise in
+/// the widened rig.
+pub const REFIT_NOISE_RATIO: f64 = 4.0;
 
 /// Imposed motion at the substep rate: (x, v, a), drawn from the record's motion stream.
 fn motion_of(s: &RigSpec) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
@@ -236,8 +355,9 @@ fn motion_of(s: &RigSpec) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
 
 /// Imposed motion at the substep rate: (x, v, a).
 fn motion(s: &RigSpec, rng: &mut RigRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let n = s.samples * SUB;
-    let h = 1.0 / (s.fs * SUB as f64);
+    let sub = s.sub;
+    let n = s.samples * sub;
+    let h = 1.0 / (s.fs * sub as f64);
     let mut x = vec![0.0; n];
     match &s.trajectory {
         Trajectory::Multisine => {
@@ -311,7 +431,7 @@ fn motion(s: &RigSpec, rng: &mut RigRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         Trajectory::Recorded(r) => {
             // linear interpolation of the recorded samples to the substep rate
             for (i, xi) in x.iter_mut().enumerate() {
-                let u = i as f64 / SUB as f64;
+                let u = i as f64 / sub as f64;
                 let k = (u as usize).min(r.len().saturating_sub(2));
                 let fr = (u - k as f64).min(1.0);
                 *xi = if r.len() >= 2 {
@@ -321,11 +441,21 @@ fn motion(s: &RigSpec, rng: &mut RigRng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
                 };
             }
         }
+        Trajectory::Chirp => {
+            let f0 = rng.uni(0.1, 0.3);
+            let f1 = rng.uni(1.5, 4.0);
+            let ph = rng.uni(0.0, TAU);
+            let dur = n as f64 * h;
+            for (i, xi) in x.iter_mut().enumerate() {
+                let t = i as f64 * h;
+                *xi = (TAU * (f0 * t + 0.5 * (f1 - f0) * t * t / dur) + ph).sin();
+            }
+        }
     }
     // smooth the substep interpolation / integration (moving average of one sample period,
     // twice) so that the acceleration is defined, then centre and scale to the amplitude
     let smooth = |x: &[f64]| -> Vec<f64> {
-        let w = SUB;
+        let w = sub;
         let mut out = vec![0.0; x.len()];
         let mut acc = 0.0;
         for i in 0..x.len() {
@@ -370,12 +500,12 @@ fn lugre(z: &mut f64, v: f64, h: f64, sigma0: f64, g: f64) {
 /// Simulate the device force (true, at the substep rate) for motion (x, v, a).
 fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) -> Vec<f64> {
     let n = x.len();
-    let h = 1.0 / (s.fs * SUB as f64);
+    let h = 1.0 / (s.fs * s.sub as f64);
     let dur = n as f64 * h;
     let fc = s.coulomb;
     // bristle stiffness: the base presliding displacement unless the effect softens it
     let x_char = match hidden {
-        Hidden::Presliding { x_char_m } => x_char_m,
+        Hidden::Presliding { x_char_m } | Hidden::SpringPresliding { x_char_m, .. } => x_char_m,
         _ => s.base_x_char_m,
     };
     let sigma0 = fc / x_char;
@@ -393,13 +523,29 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
         _ => f64::INFINITY,
     };
     // play: the device (mass, drive, friction) sits behind a gap of `width`; contact
-    // stiffness and damping put the contact mode at 60 Hz, ζ 0.5
-    let width = match hidden {
-        Hidden::Backlash { width_m } => width_m,
-        _ => 0.0,
+    // stiffness and damping put the contact mode at 60 Hz, ζ 0.5. Without impact only a
+    // light part of the mass sits behind the gap, on the same stiffness critically damped.
+    let (width, m_behind) = match hidden {
+        Hidden::Backlash { width_m } => (width_m, s.mass_kg),
+        Hidden::PlayNoImpact { width_m } => (width_m, PLAY_LIGHT_SIDE * s.mass_kg),
+        _ => (0.0, s.mass_kg),
     };
+    let m_front = s.mass_kg - m_behind;
     let wc = TAU * 60.0;
-    let (kc, cc) = (s.mass_kg * wc * wc, s.mass_kg * wc);
+    let kc = s.mass_kg * wc * wc;
+    let cc = if matches!(hidden, Hidden::PlayNoImpact { .. }) {
+        2.0 * (kc * m_behind).sqrt()
+    } else {
+        s.mass_kg * wc
+    };
+    // a compliant load path with the device behind it: the link's spring-damper
+    let link = match hidden {
+        Hidden::ResonanceBehind { freq_hz, zeta } => {
+            let w = TAU * freq_hz;
+            Some((s.mass_kg * w * w, 2.0 * zeta * s.mass_kg * w))
+        }
+        _ => None,
+    };
     let (mut xm, mut vm) = (x[0], v[0]);
     let mut z = 0.0;
     let (mut y2, mut yd2) = (x[0], v[0]);
@@ -428,10 +574,19 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
             let fdrive = (s.drive_damping * vm).clamp(-limit, limit);
             lugre(&mut z, vm, h, sigma0, g(vm));
             let ffr = sigma0 * z + s.viscous * vm;
-            let am = (fct - fdrive - ffr) / s.mass_kg;
+            let am = (fct - fdrive - ffr) / m_behind;
             vm += am * h;
             xm += vm * h;
-            f_cell = fct;
+            f_cell = fct + m_front * a[i];
+        } else if let Some((kl, cl)) = link {
+            // the cell measures the force through the link; the device moves behind it
+            let fl = kl * (x[i] - xm) + cl * (v[i] - vm);
+            let fdrive = (s.drive_damping * vm).clamp(-limit, limit);
+            lugre(&mut z, vm, h, sigma0, g(vm));
+            let ffr = sigma0 * z + s.viscous * vm;
+            vm += (fl - fdrive - ffr) / s.mass_kg * h;
+            xm += vm * h;
+            f_cell = fl;
         } else {
             let fdrive = (s.drive_damping * v[i]).clamp(-limit, limit);
             lugre(&mut z, v[i], h, sigma0, g(v[i]));
@@ -453,6 +608,12 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
             }
             Hidden::Hum { freq_hz, amp_n } => f_cell += amp_n * (TAU * freq_hz * t).sin(),
             Hidden::Drift { total_n } => f_cell += total_n * (t / dur - 0.5),
+            Hidden::Spring { k_n_per_m } | Hidden::SpringPresliding { k_n_per_m, .. } => {
+                f_cell += k_n_per_m * x[i]
+            }
+            Hidden::QuadraticDrag { c2_n_s2_per_m2 } => {
+                f_cell += c2_n_s2_per_m2 * v[i] * v[i].abs()
+            }
             _ => {}
         }
         out.push(f_cell);
@@ -469,7 +630,8 @@ fn device_force(s: &RigSpec, hidden: Hidden, x: &[f64], v: &[f64], a: &[f64]) ->
     out
 }
 
-/// Samples of the rig's rest window: 20 ms at the rig's 1 kHz (see `rest_of`).
+/// Samples of the rig's rest window: 20 ms at the classic rig's 1 kHz (see `rest_of`; other
+/// sample rates take 20 ms of their samples, `RigSpec::rest_window`).
 pub const REST_WINDOW: usize = 20;
 
 /// The record's samples at rest as the rig's own sensor defines them, from the true motion:
@@ -486,10 +648,10 @@ pub const REST_WINDOW: usize = 20;
 /// reversals and minimum-jerk starts last 50 ms and more). `v` is the true velocity at the
 /// substep rate; the result is per record sample.
 fn rest_of(s: &RigSpec, v: &[f64]) -> Vec<bool> {
-    let w = REST_WINDOW;
+    let w = s.rest_window;
     let v_q = s.quantum_m * s.fs / w as f64;
     let n = s.samples;
-    let still: Vec<bool> = (0..n).map(|i| v[i * SUB].abs() < v_q).collect();
+    let still: Vec<bool> = (0..n).map(|i| v[i * s.sub].abs() < v_q).collect();
     let mut rest = vec![false; n];
     let mut last: Option<usize> = None;
     for i in 0..n {
@@ -515,13 +677,107 @@ fn rest_of(s: &RigSpec, v: &[f64]) -> Vec<bool> {
 /// motion only would inflate the evidence of a record that is mostly at rest. An effect with
 /// nothing at rest has the rms over every sample.
 fn rms_in_motion(x: &[f64], rest: &[bool]) -> f64 {
+    let sub = (x.len() / rest.len().max(1)).max(1);
     let mut e = 0.0;
-    for (c, &r) in x.chunks(SUB).zip(rest) {
+    for (c, &r) in x.chunks(sub).zip(rest) {
         if !r {
             e += c.iter().map(|v| v * v).sum::<f64>();
         }
     }
     (e / x.len().max(1) as f64).sqrt()
+}
+
+/// Most samples of a widened-rig record (10 kHz × 6 s).
+pub const WIDE_MAX_SAMPLES: usize = 60_000;
+
+/// `n` samples at `fs_to` of a position recorded at `fs_from`, linearly interpolated (held at
+/// its last sample beyond its end).
+pub fn resample(x: &[f64], fs_from: f64, fs_to: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| {
+            let u = i as f64 * fs_from / fs_to;
+            let k = (u as usize).min(x.len().saturating_sub(2));
+            match x.len() {
+                0 => 0.0,
+                1 => x[0],
+                _ => x[k] + (x[k + 1] - x[k]) * (u - k as f64).min(1.0),
+            }
+        })
+        .collect()
+}
+
+/// The part of an effect's force `d` (at the substep rate) no refitted baseline explains: `d`
+/// fitted by least squares, on the samples in motion (`rest` false), with the baseline's
+/// columns from the true motion (inertia a, viscous v, Coulomb sgn v, offset 1); the rms of
+/// what is left there, per sample of the record (as `rms_in_motion`). The rig's own solver
+/// (normal equations, Gaussian elimination with partial pivoting).
+fn unexplained_rms(sub: usize, d: &[f64], v: &[f64], a: &[f64], rest: &[bool]) -> f64 {
+    const K: usize = 4;
+    let row = |k: usize| [a[k], v[k], v[k].signum(), 1.0];
+    let mut m = [[0.0f64; K + 1]; K];
+    for (i, &r) in rest.iter().enumerate() {
+        if r {
+            continue;
+        }
+        let k = i * sub;
+        let c = row(k);
+        for p in 0..K {
+            for q in 0..K {
+                m[p][q] += c[p] * c[q];
+            }
+            m[p][K] += c[p] * d[k];
+        }
+    }
+    // scale each column to a unit diagonal so that the pivots compare
+    let sc: Vec<f64> = (0..K).map(|p| m[p][p].sqrt().max(1e-300)).collect();
+    for p in 0..K {
+        for q in 0..K {
+            m[p][q] /= sc[p] * sc[q];
+        }
+        m[p][K] /= sc[p];
+    }
+    let mut th = [0.0f64; K];
+    let mut ok = true;
+    for c in 0..K {
+        let piv = (c..K)
+            .max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))
+            .unwrap_or(c);
+        m.swap(c, piv);
+        if m[c][c].abs() < 1e-12 {
+            ok = false;
+            break;
+        }
+        for r in c + 1..K {
+            let f = m[r][c] / m[c][c];
+            let pivot_row = m[c];
+            for (x, p) in m[r].iter_mut().zip(&pivot_row).skip(c) {
+                *x -= f * p;
+            }
+        }
+    }
+    if ok {
+        for c in (0..K).rev() {
+            let mut acc = m[c][K];
+            for q in c + 1..K {
+                acc -= m[c][q] * th[q];
+            }
+            th[c] = acc / m[c][c];
+        }
+        for (t, s) in th.iter_mut().zip(&sc) {
+            *t /= s;
+        }
+    }
+    let mut e = 0.0;
+    for (i, &r) in rest.iter().enumerate() {
+        if r {
+            continue;
+        }
+        let k = i * sub;
+        let c = row(k);
+        let fit: f64 = c.iter().zip(&th).map(|(x, t)| x * t).sum();
+        e += (d[k] - fit) * (d[k] - fit);
+    }
+    (e / rest.len().max(1) as f64).sqrt()
 }
 
 /// The largest factor by which `size_to_rule` scales a hum's amplitude or a drift's total
@@ -564,6 +820,26 @@ fn draw_hidden(kind: &str, s: &RigSpec, vmax: f64, rng: &mut RigRng) -> Hidden {
                 * rng.uni(0.4, 1.0)
                 * if rng.uni(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 },
         },
+        "resonance_behind" => Hidden::ResonanceBehind {
+            freq_hz: rng.uni(1.0, 8.0),
+            zeta: rng.uni(0.03, 0.3),
+        },
+        "play_no_impact" => Hidden::PlayNoImpact {
+            width_m: s.amplitude_m * rng.uni(0.01, 0.04),
+        },
+        // a spring's force at the stroke's end 0.3–2× the Coulomb level
+        "spring" => Hidden::Spring {
+            k_n_per_m: s.coulomb * rng.uni(0.3, 2.0) / s.amplitude_m,
+        },
+        "spring_presliding" => Hidden::SpringPresliding {
+            k_n_per_m: s.coulomb * rng.uni(0.3, 2.0) / s.amplitude_m,
+            x_char_m: s.amplitude_m * rng.uni(0.01, 0.04),
+        },
+        // the drag at the peak speed 1–4× the Coulomb level (a refitted viscous and Coulomb
+        // term takes most of a smaller one)
+        "quadratic_drag" => Hidden::QuadraticDrag {
+            c2_n_s2_per_m2: s.coulomb * rng.uni(1.0, 4.0) / (vmax * vmax).max(1e-12),
+        },
         _ => Hidden::None,
     }
 }
@@ -593,6 +869,75 @@ impl RigSpec {
             base_x_char_m: 2e-6,
             motion_draw: 0,
             requested: trajectory.name(),
+            sub: SUB,
+            rest_window: REST_WINDOW,
+            refit_rule: false,
+            effect_unexplained_n: 0.0,
+        }
+        .with_base_friction()
+        .with_hidden(kind, seed)
+    }
+
+    /// The widened rig: a random device, sensors and test (seeded) with a hidden effect of
+    /// `kind` (one of `Hidden::WIDE_KINDS`). Beside the classic rig's ranges it draws the
+    /// sample rate (500 Hz … 10 kHz), the record's length (6–20 s, at most `WIDE_MAX_SAMPLES`
+    /// samples), the force noise (0.05–5 N rms, log-uniform), the encoder's quantum (0.1 …
+    /// 25.6 µm), the lead, and the trajectory family (the classic four, a chirp, and `recorded`
+    /// when a recorded position at `recorded_fs` is given, resampled to the record's rate). Its
+    /// observability rule adds a clause: the part of the effect's force no refitted baseline
+    /// explains (`unexplained_rms`) holds at least `REFIT_NOISE_RATIO` times the noise.
+    pub fn widened(seed: u64, kind: &str, recorded: Option<(&[f64], f64)>) -> Self {
+        let mut rng = RigRng::new(seed ^ 0x005E_ED0F_71DE_0000);
+        let fs = [500.0, 1000.0, 2000.0, 5000.0, 10_000.0][rng.pick(5)];
+        let mut dur = rng.uni(6.0, 20.0);
+        let families = if recorded.is_some() { 6 } else { 5 };
+        let trajectory = match rng.pick(families) {
+            0 => Trajectory::Multisine,
+            1 => Trajectory::RoundedTriangle,
+            2 => Trajectory::PointToPoint,
+            3 => Trajectory::Narrowband,
+            4 => Trajectory::Chirp,
+            _ => {
+                let (x, rfs) = recorded.unwrap_or((&[], 1.0));
+                dur = dur.min((x.len().saturating_sub(2)) as f64 / rfs);
+                let n = ((dur * fs) as usize).min(WIDE_MAX_SAMPLES);
+                Trajectory::Recorded(resample(x, rfs, fs, n))
+            }
+        };
+        let samples = ((dur * fs) as usize).min(WIDE_MAX_SAMPLES);
+        let amplitude_m = rng.uni(0.01, 0.08);
+        let mass_kg = rng.uni(10.0, 150.0);
+        let drive_damping = rng.uni(100.0, 1500.0);
+        let viscous = rng.uni(10.0, 150.0);
+        let coulomb = rng.uni(10.0, 80.0);
+        let offset_n = rng.uni(-10.0, 10.0);
+        let noise_n = (rng.uni(0.05f64.ln(), 5.0f64.ln())).exp();
+        let quantum_m = [0.1e-6, 0.4e-6, 1.6e-6, 6.4e-6, 25.6e-6][rng.pick(5)];
+        let lead_m = [0.005, 0.01, 0.016, 0.025][rng.pick(4)];
+        RigSpec {
+            seed,
+            fs,
+            samples,
+            trajectory: trajectory.clone(),
+            amplitude_m,
+            mass_kg,
+            drive_damping,
+            viscous,
+            coulomb,
+            offset_n,
+            noise_n,
+            quantum_m,
+            lead_m,
+            hidden: Hidden::None,
+            observable: true,
+            effect_rms_n: 0.0,
+            base_x_char_m: 2e-6,
+            motion_draw: 0,
+            requested: trajectory.name(),
+            sub: substeps_for(fs),
+            rest_window: ((0.02 * fs).round() as usize).max(2),
+            refit_rule: true,
+            effect_unexplained_n: 0.0,
         }
         .with_base_friction()
         .with_hidden(kind, seed)
@@ -616,7 +961,7 @@ impl RigSpec {
             let e2: f64 = f
                 .iter()
                 .zip(&rigid)
-                .step_by(SUB)
+                .step_by(self.sub)
                 .map(|(a, b)| (a - b) * (a - b))
                 .sum();
             if e2.sqrt() < 3.0 * self.noise_n {
@@ -635,19 +980,22 @@ impl RigSpec {
         if self.observable_on_family(kind, &mut rng) {
             return self;
         }
-        // the family cannot show the effect: the next parametric families, in turn
-        const FAMILIES: [Trajectory; 4] = [
+        // the family cannot show the effect: the next parametric families, in turn (the
+        // widened rig's chirp among them)
+        const ALL_FAMILIES: [Trajectory; 5] = [
             Trajectory::Multisine,
             Trajectory::RoundedTriangle,
             Trajectory::PointToPoint,
             Trajectory::Narrowband,
+            Trajectory::Chirp,
         ];
-        let own = FAMILIES.iter().position(|f| *f == self.trajectory);
+        let families = &ALL_FAMILIES[..if self.refit_rule { 5 } else { 4 }];
+        let own = families.iter().position(|f| *f == self.trajectory);
         let start = own.map_or(0, |k| k + 1);
         let mut other = self.clone();
-        for k in 0..FAMILIES.len() {
-            let fam = &FAMILIES[(start + k) % FAMILIES.len()];
-            if Some((start + k) % FAMILIES.len()) == own {
+        for k in 0..families.len() {
+            let fam = &families[(start + k) % families.len()];
+            if Some((start + k) % families.len()) == own {
                 continue;
             }
             other.trajectory = fam.clone();
@@ -714,6 +1062,10 @@ impl RigSpec {
         self.hidden = hd;
         self.effect_rms_n = r;
         self.observable = r >= 5.0 * self.noise_n && r >= 0.03 * f0r;
+        if self.refit_rule {
+            self.effect_unexplained_n = unexplained_rms(self.sub, &d, v, a, rest);
+            self.observable &= self.effect_unexplained_n >= REFIT_NOISE_RATIO * self.noise_n;
+        }
         self.observable
     }
 
@@ -793,7 +1145,7 @@ impl RigSpec {
     /// signals miss.
     pub fn true_motion(&self) -> (Vec<f64>, Vec<f64>) {
         let (_, v, a) = motion_of(self);
-        let at = |u: &[f64]| (0..self.samples).map(|i| u[i * SUB]).collect();
+        let at = |u: &[f64]| (0..self.samples).map(|i| u[i * self.sub]).collect();
         (at(&v), at(&a))
     }
 
@@ -820,7 +1172,7 @@ impl RigSpec {
         let _ = writeln!(out, "# lead_m_per_rev = {}", self.lead_m);
         out.push_str("t_s,x_m,f_N\n");
         for i in 0..self.samples {
-            let k = i * SUB;
+            let k = i * self.sub;
             let xq = (x[k] / self.quantum_m).round() * self.quantum_m;
             let fi = f[k] + self.noise_n * rng.gauss();
             let _ = writeln!(out, "{:.6},{:.9e},{:.5}", i as f64 / self.fs, xq, fi);

@@ -93,8 +93,8 @@ fn drift_change(d: &Diagnosis) -> Option<f64> {
 /// A −30 N drift on moves one way then back is reported with its change and carried (no
 /// catalogue name), on 2 seeds; the same moves without the drift report none. Break: without
 /// the baseline refitted beside the trend (`diagnose_checked`'s second slow-change test) no
-/// drift is found and the test fails (seed 1 is then named `position_dependent_friction` and
-/// `position_periodic_friction`).
+/// drift is found and the test fails (one of the two records is then named
+/// `position_dependent_friction` and `position_periodic_friction`).
 #[test]
 fn drift_on_moves_one_way_then_back_is_found() {
     for seed in [1u64, 2] {

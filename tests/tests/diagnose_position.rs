@@ -15,7 +15,7 @@ const SAMPLES: usize = 12_000;
 fn hidden_position_periodic_force_shows_at_its_wavelength() {
     // 8 seeds: a position-periodic force (direction independent `cogging` for even seeds,
     // sign-changing `position_periodic_friction` for odd ones), 15-35 % of the 40 N Coulomb
-    // force, wavelength 3-30 mm (or the 16 mm lead for seeds 0 and 1). The catalogue is
+    // force, wavelength 3-30 mm (or the 16 mm lead for the first two). The catalogue is
     // switched off (max_effects 0) so the periodic force stays in the final residual, which is
     // then the baseline residual: the spatial analysis alone must find it.
     let opt = Options {
@@ -162,7 +162,7 @@ fn short_wavelength_ripple_is_named_through_the_spatial_seeding() {
     // decorrelates from a wavelength a few % off, and the catalogue's log grid is ≈ 13 %
     // apart: whether the coarse grid catches it depends on where λ falls. The baseline
     // residual's spatial peaks seed the grid (as the 2.5 mm ripple on EMPS). Measured
-    // 2026-11-23: 12/12 named with the seeding, 10/12 without it (seeds 0 and 6, cogging at
+    // 2026-11-23: 12/12 named with the seeding, 10/12 without it (two cogging records at
     // 2.01 and 1.99 mm, not named at all), so this test fails without the seeding. 12 seeds,
     // cogging and position_periodic_friction alternately, 15-35 % of Coulomb.
     let seeds = 12u64;

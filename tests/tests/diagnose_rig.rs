@@ -1,10 +1,99 @@
-//! The diagnosis on records of the independent bench rig (`hal_sim::bench_rig`: effects as
-//! physics, several trajectory families, random noise and sensor resolution). Per hidden kind:
-//! exactly right (catalogue names = the hidden one, or none), detection rate, false names.
+//! The diagnosis judged on records of the independent bench rig (`hal_sim::bench_rig`: effects
+//! as physics, several trajectory families, random noise and sensor resolution), on seeds it
+//! was never tuned on.
+//!
+//! **Seed ranges.** Every rig seed lies in one of two disjoint ranges: `TUNING` (the records
+//! the diagnosis may be developed against: the classic long run's and every tool's below) and
+//! `HELD_OUT` (the records it is judged on). Every target is asserted on the held-out range
+//! only; the tuning range's figure is printed beside it and the difference (tuning − held-out)
+//! is the overfit. Two rigs: the classic one (`RigSpec::random`: 1 kHz, 12 s, the nine
+//! classic kinds; the generator the diagnosis was tuned on) and the widened one
+//! (`RigSpec::widened`: 500 Hz … 10 kHz, 6–20 s, wider noise, encoders and devices, a chirp
+//! family, and the kinds the classic rig lacks: a load path measured behind its compliance,
+//! play without impact, a spring, a spring beside presliding, a drag growing with the square
+//! of the speed). Per record: exactly right (the catalogue names are the hidden effect's, or
+//! none; `unexplained` for an effect outside the catalogue), detected, false names.
 
 use hal_sim::bench_rig::{Hidden, RigSpec, Trajectory};
 use hal_sim::diagnose::{diagnose, parse_csv, Diagnosis, Options};
 use std::collections::BTreeMap;
+use std::ops::Range;
+
+/// The tuning range of rig seeds: the classic long run's (1 + 100,000·kind + j), the widened
+/// rig's tuning records (`WIDE_TUNING_BASE` + 100,000·kind + j) and the tools' `RIG_SEEDS`.
+const TUNING: Range<u64> = 1..100_000_000;
+/// The held-out range of rig seeds: the classic rig's (`CLASSIC_HELD_OUT_BASE` +
+/// 1,000,000·kind + j) and the widened rig's (`WIDE_HELD_OUT_BASE` + 1,000,000·kind + j).
+const HELD_OUT: Range<u64> = 1_000_000_000..2_000_000_000;
+// the ranges do not overlap (checked when the file compiles)
+const _: () = assert!(TUNING.end <= HELD_OUT.start);
+const CLASSIC_TUNING_BASE: u64 = 1;
+const WIDE_TUNING_BASE: u64 = 10_000_001;
+const CLASSIC_HELD_OUT_BASE: u64 = 1_000_000_001;
+const WIDE_HELD_OUT_BASE: u64 = 1_500_000_001;
+
+/// Which generator draws a record.
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Rig {
+    Classic,
+    Widened,
+}
+
+impl Rig {
+    fn name(self) -> &'static str {
+        match self {
+            Rig::Classic => "classic",
+            Rig::Widened => "widened",
+        }
+    }
+    fn kinds(self) -> &'static [&'static str] {
+        match self {
+            Rig::Classic => &Hidden::KINDS,
+            Rig::Widened => &Hidden::WIDE_KINDS,
+        }
+    }
+    /// Seed of record `j` of kind number `k` in the tuning or the held-out range.
+    fn seed(self, held_out: bool, k: usize, j: usize) -> u64 {
+        let (base, stride) = match (self, held_out) {
+            (Rig::Classic, false) => (CLASSIC_TUNING_BASE, 100_000),
+            (Rig::Widened, false) => (WIDE_TUNING_BASE, 100_000),
+            (Rig::Classic, true) => (CLASSIC_HELD_OUT_BASE, 1_000_000),
+            (Rig::Widened, true) => (WIDE_HELD_OUT_BASE, 1_000_000),
+        };
+        assert!(
+            j < stride as usize,
+            "record {j} beyond the kind's {stride} seeds"
+        );
+        let s = base + stride * k as u64 + j as u64;
+        let range = if held_out { &HELD_OUT } else { &TUNING };
+        assert!(range.contains(&s), "seed {s} outside its range {range:?}");
+        s
+    }
+    /// The record of `seed` (kind `kind`, record number `j` of its kind).
+    fn spec(self, seed: u64, kind: &str, j: usize, emps: &[f64]) -> RigSpec {
+        match self {
+            Rig::Classic => RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000),
+            Rig::Widened => RigSpec::widened(seed, kind, Some((emps, 1000.0))),
+        }
+    }
+}
+
+/// The two ranges are disjoint and every seed the evaluation draws lies in its own: the largest
+/// tuning seed a run can draw is below the held-out range's start.
+#[test]
+fn seed_ranges_are_disjoint() {
+    for rig in [Rig::Classic, Rig::Widened] {
+        let k = rig.kinds().len() - 1;
+        for held_out in [false, true] {
+            let (lo, hi) = (rig.seed(held_out, 0, 0), rig.seed(held_out, k, 99_999));
+            let range = if held_out { &HELD_OUT } else { &TUNING };
+            assert!(
+                range.contains(&lo) && range.contains(&hi),
+                "{rig:?} {held_out}"
+            );
+        }
+    }
+}
 
 /// The EMPS estimation record's measured position (the repository's `data/emps/`; a missing or
 /// unreadable file fails the test with its path).
@@ -15,7 +104,7 @@ fn emps_x() -> Vec<f64> {
         .x
 }
 
-/// The long run's trajectory of record `j` of a kind (families in turn; the recorded one is
+/// The classic rig's trajectory of record `j` of a kind (families in turn; the recorded one is
 /// EMPS's position).
 fn trajectory(j: usize, emps: &[f64], samples: usize) -> Trajectory {
     match j % 5 {
@@ -27,49 +116,13 @@ fn trajectory(j: usize, emps: &[f64], samples: usize) -> Trajectory {
     }
 }
 
-/// The long run's record of a seed (`rig_long_run`: seed 1 + 100,000·kind + j, 12,000 samples).
+/// The classic long run's record of a tuning seed (1 + 100,000·kind + j, 12,000 samples): the
+/// tools below take these.
 fn long_run_spec(seed: u64, emps: &[f64]) -> RigSpec {
+    assert!(TUNING.contains(&seed), "the tools take tuning seeds only");
     let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
     let j = ((seed - 1) % 100_000) as usize;
     RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000)
-}
-
-/// The long run's record of `seed` (`long_run_spec`) diagnosed with the default options.
-fn diagnosed_long_run_record(seed: u64) -> (RigSpec, Diagnosis) {
-    let spec = long_run_spec(seed, &emps_x());
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    (spec, d)
-}
-
-/// The first parameter of the finding named `effect` (0 when there is none).
-fn first_parameter(d: &Diagnosis, effect: &str) -> f64 {
-    d.findings
-        .iter()
-        .find(|f| f.effect == effect)
-        .map_or(0.0, |f| f.parameters[0].1)
-}
-
-/// The record `seed` of the long run is named its hidden effect alone (`lag`, `stribeck`,
-/// `presliding_hysteresis` or `backlash`), the finding's first parameter (delay, v_s, x_c,
-/// width) within `bound` (relative) of the rig's.
-fn named_alone(seed: u64, bound: f64) {
-    let (spec, d) = diagnosed_long_run_record(seed);
-    let (name, truth) = match spec.hidden {
-        Hidden::Delay { delay_s } => ("lag", delay_s),
-        Hidden::Stribeck { vs_m_s, .. } => ("stribeck", vs_m_s),
-        Hidden::Presliding { x_char_m } => ("presliding_hysteresis", x_char_m),
-        Hidden::Backlash { width_m } => ("backlash", width_m),
-        _ => panic!("{seed} is a delay, Stribeck, presliding or backlash record"),
-    };
-    let names = d.catalogue_names();
-    let p = first_parameter(&d, name);
-    println!("{seed}: {names:?}: {name} {p} for {truth}");
-    assert_eq!(names, [name], "{:?}", d.verdicts);
-    assert!(
-        (p / truth - 1.0).abs() < bound,
-        "{seed}: {name} {p} for {truth}"
-    );
 }
 
 /// The seeds listed in `RIG_SEEDS` (comma-separated).
@@ -81,7 +134,7 @@ fn env_seeds() -> Vec<u64> {
         .collect()
 }
 
-#[derive(Default)]
+#[derive(Default, Clone)]
 struct Tally {
     records: usize,
     exact: usize,
@@ -92,37 +145,59 @@ struct Tally {
     observable_exact: usize,
 }
 
-/// One diagnosed record of a run: its tally flags and the lines it prints.
+impl Tally {
+    fn add(&mut self, o: &Tally) {
+        self.records += o.records;
+        self.exact += o.exact;
+        self.detected += o.detected;
+        self.false_name += o.false_name;
+        self.observable += o.observable;
+        self.observable_exact += o.observable_exact;
+    }
+}
+
+/// How one record came out: its tally (one record) and the line it prints.
 struct Outcome {
     kind: &'static str,
-    exact: bool,
-    detected: bool,
-    false_names: bool,
-    observable: bool,
+    tally: Tally,
     text: String,
 }
 
-/// Diagnose the record of `seed` (`kind`, trajectory family of `j`) and say how it came out.
-fn outcome(kind: &'static str, j: usize, seed: u64, samples: usize, emps: &[f64]) -> Outcome {
-    use std::fmt::Write;
-    let spec = RigSpec::random(seed, kind, trajectory(j, emps, samples), samples);
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
+/// Whether a diagnosis is exactly right for a hidden effect: (exact, detected, false names).
+/// In the catalogue: every expected name given (detected) and no other catalogue name; outside
+/// it: `unexplained` reported and no catalogue name; no effect: no catalogue name.
+fn judge(hidden: &Hidden, d: &Diagnosis) -> (bool, bool, bool) {
     let names = d.catalogue_names();
     let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
-    let want = spec.hidden.expected();
-    let detected = match want {
-        None => true,
-        Some("unexplained") => unexpl,
-        Some(w) => names.contains(&w),
+    let want = hidden.expected_names();
+    let (detected, false_names) = if hidden.out_of_catalogue() {
+        (unexpl, !names.is_empty())
+    } else {
+        (
+            want.iter().all(|w| names.contains(w)),
+            names.iter().any(|n| !want.contains(n)),
+        )
     };
-    let false_names = names.iter().any(|n| Some(*n) != want);
-    let exact = detected && !false_names;
+    (detected && !false_names, detected, false_names)
+}
+
+/// Diagnose the record of `seed` and say how it came out.
+fn outcome(rig: Rig, kind: &'static str, j: usize, seed: u64, emps: &[f64]) -> Outcome {
+    use std::fmt::Write;
+    let spec = rig.spec(seed, kind, j, emps);
+    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let d = diagnose(&rec, &Options::default());
+    let (exact, detected, false_names) = judge(&spec.hidden, &d);
+    let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
     let mut text = format!(
-        "{kind:>20} {:>16} seed {seed}: hidden {:?} (rms {:.2} N, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}\n",
+        "{kind:>20} {:>16} seed {seed} ({} Hz, {} samples, quantum {:.1e} m): hidden {:?} (rms {:.2} N, unexplained by a refit {:.2} N, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}\n",
         spec.trajectory.name(),
+        spec.fs,
+        spec.samples,
+        spec.quantum_m,
         spec.hidden,
         spec.effect_rms_n,
+        spec.effect_unexplained_n,
         spec.noise_n,
         spec.observable,
         if spec.requested != spec.trajectory.name() {
@@ -130,7 +205,7 @@ fn outcome(kind: &'static str, j: usize, seed: u64, samples: usize, emps: &[f64]
         } else {
             String::new()
         },
-        names,
+        d.catalogue_names(),
         if unexpl { " + unexplained" } else { "" },
         100.0 * d.baseline_holdout_rel_error,
         100.0 * d.final_holdout_rel_error,
@@ -156,299 +231,465 @@ fn outcome(kind: &'static str, j: usize, seed: u64, samples: usize, emps: &[f64]
     }
     Outcome {
         kind,
-        exact,
-        detected,
-        false_names,
-        observable: spec.observable,
+        tally: Tally {
+            records: 1,
+            exact: exact as usize,
+            detected: detected as usize,
+            false_name: false_names as usize,
+            observable: spec.observable as usize,
+            observable_exact: (spec.observable && exact) as usize,
+        },
         text,
     }
 }
 
-/// Whether `RIG_KINDS` or `RIG_SEEDS` narrows the run to some records.
-fn narrowed() -> bool {
-    std::env::var("RIG_KINDS").is_ok() || std::env::var("RIG_SEEDS").is_ok()
-}
-
-/// Run `per_kind` records of every kind, trajectories cycling; returns the tallies. The
-/// records are diagnosed in parallel (each alone: the diagnosis is a pure function of its
-/// record) and printed and tallied in the order of their seeds.
-fn run(per_kind: usize, samples: usize, seed0: u64) -> BTreeMap<&'static str, Tally> {
+/// Run `per_kind` records of every kind of `rig` in the tuning or the held-out range (records
+/// `j0 .. j0 + per_kind` of each kind); returns the tallies per kind. `RIG_KINDS=none,delay`
+/// narrows the kinds. The records are diagnosed in parallel (each alone: the diagnosis is a
+/// pure function of its record) and printed in the order of their seeds when `RIG_VERBOSE` is
+/// set, or when not exact.
+fn run(
+    rig: Rig,
+    held_out: bool,
+    per_kind: usize,
+    j0: usize,
+    emps: &[f64],
+) -> BTreeMap<&'static str, Tally> {
     use rayon::prelude::*;
-    let emps = emps_x();
-    // RIG_KINDS=none,delay runs only those kinds (same seeds as in the full run)
     let only = std::env::var("RIG_KINDS").ok();
-    // RIG_SEEDS=400002,600022 runs only those records (the seeds of the full run)
-    let seeds = std::env::var("RIG_SEEDS").is_ok().then(env_seeds);
+    let verbose = std::env::var("RIG_VERBOSE").is_ok();
     let mut jobs = Vec::new();
-    for (ki, kind) in Hidden::KINDS.iter().enumerate() {
+    for (k, kind) in rig.kinds().iter().enumerate() {
         if only
             .as_ref()
-            .is_some_and(|o| !o.split(',').any(|k| k == *kind))
+            .is_some_and(|o| !o.split(',').any(|x| x == *kind))
         {
             continue;
         }
-        for j in 0..per_kind {
-            let seed = seed0 + (ki * 100_000 + j) as u64;
-            if seeds.as_ref().is_none_or(|s| s.contains(&seed)) {
-                jobs.push((*kind, j, seed));
-            }
+        for j in j0..j0 + per_kind {
+            jobs.push((*kind, j, rig.seed(held_out, k, j)));
         }
     }
     let outcomes: Vec<Outcome> = jobs
         .par_iter()
-        .map(|&(kind, j, seed)| outcome(kind, j, seed, samples, &emps))
+        .map(|&(kind, j, seed)| {
+            let o = outcome(rig, kind, j, seed, emps);
+            if std::env::var("RIG_STREAM").is_ok() {
+                // each record as it completes (a long run's partial figures)
+                eprintln!(
+                    "RECORD {} {} {kind} exact {} detected {} false {} j {j}",
+                    rig.name(),
+                    if held_out { "held-out" } else { "tuning" },
+                    o.tally.exact,
+                    o.tally.detected,
+                    o.tally.false_name
+                );
+            }
+            o
+        })
         .collect();
     let mut out: BTreeMap<&'static str, Tally> = BTreeMap::new();
     for o in &outcomes {
-        let t = out.entry(o.kind).or_default();
-        t.records += 1;
-        t.exact += o.exact as usize;
-        t.detected += o.detected as usize;
-        t.false_name += o.false_names as usize;
-        t.observable += o.observable as usize;
-        t.observable_exact += (o.observable && o.exact) as usize;
-        print!("{}", o.text);
-    }
-    println!(
-        "{:>20} {:>8} {:>8} {:>9} {:>11}",
-        "kind", "records", "exact", "detected", "false name"
-    );
-    for (k, t) in &out {
-        println!(
-            "{k:>20} {:>8} {:>7.0}% {:>8.0}% {:>10.0}%",
-            t.records,
-            100.0 * t.exact as f64 / t.records as f64,
-            100.0 * t.detected as f64 / t.records as f64,
-            100.0 * t.false_name as f64 / t.records as f64
-        );
+        out.entry(o.kind).or_default().add(&o.tally);
+        if verbose || o.tally.exact == 0 {
+            print!(
+                "{} {}: {}",
+                rig.name(),
+                if held_out { "held-out" } else { "tuning" },
+                o.text
+            );
+        }
     }
     out
 }
 
-/// The long run (`RIG_N` records per kind, 56 by default: 504 records of 12 s) against
-/// issue #16's targets, asserted on the whole run (not when `RIG_KINDS` or `RIG_SEEDS`
-/// narrows it): ≥ 95 % of the records exactly right (measured 485/504; the target's 479 is 6
-/// records below), ≤ 2 % of the effect-free records given a catalogue name (measured 0/56;
-/// the limit is 1), ≥ 90 % of the out-of-catalogue effects (hum, drift) reported
-/// `unexplained` (measured 112/112; the limit is 101). The bounds are the issue's; the rig
-/// is the independent generator (`hal_sim::bench_rig`). Run by CI (`.ci/run`).
+/// The share `a/b` in per cent (0 of 0 is printed as 0).
+fn pct(a: usize, b: usize) -> f64 {
+    100.0 * a as f64 / b.max(1) as f64
+}
+
+/// The figures the targets are judged by, of one set of tallies.
+#[derive(Debug, Clone, Copy)]
+struct Figures {
+    all: usize,
+    exact: usize,
+    none: usize,
+    none_named: usize,
+    out_all: usize,
+    out_unexpl: usize,
+}
+
+fn figures(t: &BTreeMap<&'static str, Tally>) -> Figures {
+    let mut f = Figures {
+        all: 0,
+        exact: 0,
+        none: 0,
+        none_named: 0,
+        out_all: 0,
+        out_unexpl: 0,
+    };
+    for (k, t) in t {
+        f.all += t.records;
+        f.exact += t.exact;
+        if *k == "none" {
+            f.none += t.records;
+            f.none_named += t.false_name;
+        }
+        if matches!(*k, "hum" | "drift" | "quadratic_drag") {
+            f.out_all += t.records;
+            f.out_unexpl += t.detected;
+        }
+    }
+    f
+}
+
+/// Print the held-out figures per kind with the tuning range's beside them, the difference
+/// (tuning − held-out: the overfit) and the three targets' figures; returns the held-out
+/// figures.
+fn table(
+    rig: Rig,
+    held: &BTreeMap<&'static str, Tally>,
+    tune: &BTreeMap<&'static str, Tally>,
+) -> Figures {
+    println!(
+        "\n{} rig: exactly right per kind, held-out (judged) and tuning (beside it)",
+        rig.name()
+    );
+    println!(
+        "{:>20} {:>16} {:>16} {:>9} {:>10} {:>10}",
+        "kind", "held-out exact", "tuning exact", "overfit", "detected", "false name"
+    );
+    for kind in rig.kinds() {
+        let Some(h) = held.get(kind) else { continue };
+        let t = tune.get(kind).cloned().unwrap_or_default();
+        println!(
+            "{kind:>20} {:>8}/{:<3} {:>3.0}% {:>8}/{:<3} {:>3.0}% {:>+8.1}% {:>9.0}% {:>9.0}%",
+            h.exact,
+            h.records,
+            pct(h.exact, h.records),
+            t.exact,
+            t.records,
+            pct(t.exact, t.records),
+            pct(t.exact, t.records) - pct(h.exact, h.records),
+            pct(h.detected, h.records),
+            pct(h.false_name, h.records)
+        );
+    }
+    let (h, t) = (figures(held), figures(tune));
+    let obs: usize = held.values().map(|t| t.observable).sum();
+    let obs_exact: usize = held.values().map(|t| t.observable_exact).sum();
+    println!(
+        "{} held-out: {}/{} exactly right ({:.1} %; tuning {}/{}, {:.1} %: overfit {:+.1} points); \
+         effect-free named {}/{} ({:.1} %; tuning {}/{}); out of catalogue unexplained {}/{} \
+         ({:.1} %; tuning {}/{}); of the {obs} observable held-out records {obs_exact} exactly right",
+        rig.name(),
+        h.exact,
+        h.all,
+        pct(h.exact, h.all),
+        t.exact,
+        t.all,
+        pct(t.exact, t.all),
+        pct(t.exact, t.all) - pct(h.exact, h.all),
+        h.none_named,
+        h.none,
+        pct(h.none_named, h.none),
+        t.none_named,
+        t.none,
+        h.out_unexpl,
+        h.out_all,
+        pct(h.out_unexpl, h.out_all),
+        t.out_unexpl,
+        t.out_all
+    );
+    h
+}
+
+/// The issue's three targets on held-out figures: ≥ 95 % exactly right, ≤ 2 % of the
+/// effect-free records given a catalogue name, ≥ 90 % of the out-of-catalogue effects
+/// `unexplained` (whole numbers of records: the smallest count that reaches each target).
+/// Returns the targets missed, in words.
+fn targets_missed(rig: Rig, f: &Figures) -> Vec<String> {
+    let floor = |share: f64, of: usize| (share * of as f64 - 1e-9).ceil() as usize;
+    let mut missed = Vec::new();
+    if f.exact < floor(0.95, f.all) {
+        missed.push(format!(
+            "{}: {}/{} exactly right, the target ≥ 95 % needs {}",
+            rig.name(),
+            f.exact,
+            f.all,
+            floor(0.95, f.all)
+        ));
+    }
+    if f.none_named as f64 > 0.02 * f.none as f64 {
+        missed.push(format!(
+            "{}: {}/{} effect-free records named, the target is ≤ 2 %",
+            rig.name(),
+            f.none_named,
+            f.none
+        ));
+    }
+    if f.out_unexpl < floor(0.90, f.out_all) {
+        missed.push(format!(
+            "{}: {}/{} out-of-catalogue effects unexplained, the target ≥ 90 % needs {}",
+            rig.name(),
+            f.out_unexpl,
+            f.out_all,
+            floor(0.90, f.out_all)
+        ));
+    }
+    missed
+}
+
+/// Records per kind of the long run: `RIG_N` for the classic rig (56 by default: 504
+/// records, the tuned run's size), `RIG_N_WIDE` for the widened one (36: 504 records);
+/// `RIG_N_TUNING` tuning records per kind beside them (as many as held-out by default).
+fn per_kind(var: &str, default: usize) -> usize {
+    std::env::var(var)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// The long run: both rigs, the held-out range judged against the issue's targets and the
+/// tuning range beside it (`cargo test --release -p regen-tests --test diagnose_rig
+/// rig_long_run -- --ignored --nocapture`; minutes on 2 cores). 504 held-out records of the
+/// classic rig's nine kinds and 504 of the widened rig's fourteen, as many tuning records of
+/// each beside them. The targets are asserted on each rig's held-out records (not when
+/// `RIG_KINDS` narrows the run).
 #[test]
 #[ignore]
 fn rig_long_run() {
-    let n: usize = std::env::var("RIG_N")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(56);
-    let t = run(n, 12_000, 1);
-    let all: usize = t.values().map(|t| t.records).sum();
-    let exact: usize = t.values().map(|t| t.exact).sum();
-    let obs: usize = t.values().map(|t| t.observable).sum();
-    let obs_exact: usize = t.values().map(|t| t.observable_exact).sum();
-    println!(
-        "all kinds: {exact}/{all} exactly right; of the {obs} records whose effect is observable \
-         (the rig's rule), {obs_exact} exactly right"
-    );
-    if narrowed() {
+    let emps = emps_x();
+    let mut missed = Vec::new();
+    for (rig, n) in [
+        (Rig::Classic, per_kind("RIG_N", 56)),
+        (Rig::Widened, per_kind("RIG_N_WIDE", 36)),
+    ] {
+        if n == 0 {
+            continue;
+        }
+        let held = run(rig, true, n, 0, &emps);
+        let tune = run(rig, false, per_kind("RIG_N_TUNING", n), 0, &emps);
+        let f = table(rig, &held, &tune);
+        missed.extend(targets_missed(rig, &f));
+    }
+    if std::env::var("RIG_KINDS").is_ok() {
         return;
     }
-    // whole numbers of records: the smallest count that reaches each target
-    let floor = |share: f64, of: usize| (share * of as f64 - 1e-9).ceil() as usize;
-    assert!(
-        exact >= floor(0.95, all),
-        "{exact}/{all} exactly right: the target is ≥ 95 % ({})",
-        floor(0.95, all)
-    );
-    let none = &t["none"];
-    assert!(
-        none.false_name as f64 <= 0.02 * none.records as f64,
-        "{}/{} effect-free records given a catalogue name: the target is ≤ 2 %",
-        none.false_name,
-        none.records
-    );
-    let (out_all, out_unexpl) = (
-        t["hum"].records + t["drift"].records,
-        t["hum"].detected + t["drift"].detected,
-    );
-    assert!(
-        out_unexpl >= floor(0.90, out_all),
-        "{out_unexpl}/{out_all} out-of-catalogue effects reported unexplained: the target is \
-         ≥ 90 % ({})",
-        floor(0.90, out_all)
-    );
+    assert!(missed.is_empty(), "targets missed: {missed:#?}");
 }
 
+/// The sampled held-out subset CI runs (`.ci/run`; `cargo test -p regen-tests --test
+/// diagnose_rig rig_held_out_sample -- --ignored --nocapture`): `RIG_SAMPLE` held-out records
+/// per kind of each rig (4 by default: 36 classic and 56 widened records), records
+/// `RIG_SAMPLE_J0 ..` of each kind (0 by default: the long run's first held-out records; no
+/// tuning records beside them, for CI's time). Asserts the floors `SAMPLE_FLOOR` (what the
+/// diagnosis reaches there today, less a margin) and prints the issue's targets' figures; the
+/// long run asserts the targets themselves.
+#[test]
+#[ignore]
+fn rig_held_out_sample() {
+    let emps = emps_x();
+    let n = per_kind("RIG_SAMPLE", 4);
+    let j0 = per_kind("RIG_SAMPLE_J0", 0);
+    for (rig, floor) in [
+        (Rig::Classic, SAMPLE_FLOOR[0]),
+        (Rig::Widened, SAMPLE_FLOOR[1]),
+    ] {
+        let held = run(rig, true, n, j0, &emps);
+        let f = table(rig, &held, &BTreeMap::new());
+        for m in targets_missed(rig, &f) {
+            println!("target missed on the sample: {m}");
+        }
+        if std::env::var("RIG_KINDS").is_ok() || (n, j0) != (4, 0) {
+            continue;
+        }
+        assert!(
+            f.exact >= floor.0,
+            "{}: {}/{} exactly right, the floor is {}",
+            rig.name(),
+            f.exact,
+            f.all,
+            floor.0
+        );
+        assert!(
+            f.none_named <= floor.1,
+            "{}: {}/{} effect-free records named, the floor is {}",
+            rig.name(),
+            f.none_named,
+            f.none,
+            floor.1
+        );
+        assert!(
+            f.out_unexpl >= floor.2,
+            "{}: {}/{} out-of-catalogue unexplained, the floor is {}",
+            rig.name(),
+            f.out_unexpl,
+            f.out_all,
+            floor.2
+        );
+    }
+}
+
+/// Floors of `rig_held_out_sample` (classic, widened): exactly right, effect-free records
+/// named (at most), out-of-catalogue effects unexplained. Measured (the long run's records):
+/// classic 34/36 exactly right, 0/4 named, 8/8 unexplained; widened 29/56, 0/4, 11/12. Three
+/// records of margin on the first, one on the third, none on the second.
+const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (26, 0, 10)];
+
+/// A held-out sample in every `cargo test`: records 200 and 201 of each kind of both rigs
+/// (apart from the long run's and CI's), exactly right at least as often as `QUICK_FLOOR`
+/// says and effect-free records named at most as often. A floor under what the diagnosis
+/// reaches there today, not the issue's targets (the long run asserts those).
 #[test]
 fn rig_sample() {
-    let t = run(3, 8_000, 500);
-    let all: usize = t.values().map(|t| t.records).sum();
-    let exact: usize = t.values().map(|t| t.exact).sum();
-    let detected: usize = t.values().map(|t| t.detected).sum();
-    println!("all kinds: {exact}/{all} exactly right, {detected}/{all} detected");
-    // measured: 22/27 exactly right, 24/27 detected (the drift point-to-point 800502, its
-    // moves running one way then back, carried as a drift since the slow change is also
-    // tested beside the baseline's refit); the bounds guard what is reached, 3 records of
-    // margin (a seeded sample: the figures move only with the code)
-    assert!(exact >= 19, "{exact}/{all} exactly right (measured 22)");
-    assert!(detected >= 21, "{detected}/{all} detected (measured 24)");
-    // the drift (a slow change of the residual's mean) is reported as unexplained on 3/3
-    // drift records, and no effect-free record gets a catalogue name (0/3); one record of
-    // margin on the first (the check runs on the baseline residual of any motion)
-    assert!(
-        t["drift"].detected >= 2,
-        "drift detected {}/3 (measured 3)",
-        t["drift"].detected
-    );
-    assert_eq!(
-        t["none"].false_name, 0,
-        "effect-free records given a catalogue name"
-    );
+    let emps = emps_x();
+    for (rig, (floor, named)) in [
+        (Rig::Classic, QUICK_FLOOR[0]),
+        (Rig::Widened, QUICK_FLOOR[1]),
+    ] {
+        let held = run(rig, true, 2, 200, &emps);
+        let f = figures(&held);
+        let line = format!(
+            "{}: {}/{} exactly right; effect-free named {}/{}; out of catalogue unexplained {}/{}",
+            rig.name(),
+            f.exact,
+            f.all,
+            f.none_named,
+            f.none,
+            f.out_unexpl,
+            f.out_all
+        );
+        println!("{line}");
+        assert!(f.exact >= floor, "{line} (floor {floor})");
+        assert!(f.none_named <= named, "{line} (at most {named} named)");
+    }
 }
 
-/// The rig's linear offset drift (out of the catalogue) on the first four trajectory families
-/// of the long run (seeds 800001–800004): reported as a slow change of the residual's mean
-/// (`unexplained` with `change_N`), of the hidden drift's sign and size, and given no
-/// catalogue name. Size: the baseline's other terms take a part of a drift that correlates
-/// with the motion; measured ratios 0.936 (point-to-point) … 1.001, asserted within 0.8 … 1.2
-/// (3× the largest measured deviation, 6.4 %).
+/// Floors of `rig_sample` (classic, widened): the least records exactly right and the most
+/// effect-free records named. Measured 18/18 and 0/2 (classic), 12/28 and 1/2 (widened: an
+/// effect-free 1 kHz recorded-motion record named `actuator_lag`); 3 records of margin on the
+/// first, none on the second.
+const QUICK_FLOOR: [(usize, usize); 2] = [(15, 0), (9, 1)];
+
+/// The parameter a named effect reports against the rig's: (finding, parameter) the diagnosis
+/// gives, and the rig's value, for the kinds with one size (None for the others).
+fn truth_of(h: &Hidden) -> Option<(&'static str, &'static str, f64)> {
+    Some(match *h {
+        Hidden::ClippedCurrentLoop { limit_n } => ("current_limit", "limit_N", limit_n),
+        Hidden::Delay { delay_s } => ("lag", "", delay_s),
+        Hidden::Resonance { freq_hz, .. } => ("compliance", "", freq_hz),
+        Hidden::Stribeck { vs_m_s, .. } => ("stribeck", "", vs_m_s),
+        Hidden::Presliding { x_char_m } => ("presliding_hysteresis", "", x_char_m),
+        Hidden::Backlash { width_m } => ("backlash", "width_m", width_m),
+        Hidden::Drift { total_n } => ("unexplained", "change_N", total_n),
+        _ => return None,
+    })
+}
+
+/// The parameters of named effects as a distribution over held-out records of the classic rig
+/// (`PARAM_RECORDS` records of each kind with one size, records 300 … of each kind): per kind,
+/// how many records name the effect and the median and largest relative deviation of its size
+/// (the first parameter, or the one named in `truth_of`) from the rig's. Asserted: at least
+/// `PARAM_BOUNDS`' share named, and the median and largest deviations within their bounds (3×
+/// the measured).
 #[test]
-fn drift_is_reported_as_a_slow_change() {
-    let trajs = [
-        Trajectory::Multisine,
-        Trajectory::RoundedTriangle,
-        Trajectory::PointToPoint,
-        Trajectory::Narrowband,
+fn named_parameters_on_held_out() {
+    use rayon::prelude::*;
+    let emps = emps_x();
+    let kinds = [
+        "clipped_current_loop",
+        "delay",
+        "resonance",
+        "stribeck",
+        "presliding",
+        "backlash",
+        "drift",
     ];
-    for (j, traj) in trajs.into_iter().enumerate() {
-        let seed = 1 + (8 * 100_000 + j) as u64;
-        let spec = RigSpec::random(seed, "drift", traj, 12_000);
-        let hal_sim::bench_rig::Hidden::Drift { total_n } = spec.hidden else {
-            panic!("seed {seed}: not a drift");
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
-        let change = d
-            .findings
+    let jobs: Vec<(usize, &str, usize)> = kinds
+        .iter()
+        .flat_map(|kind| {
+            let k = Hidden::KINDS.iter().position(|x| x == kind).unwrap();
+            (300..300 + PARAM_RECORDS).map(move |j| (k, *kind, j))
+        })
+        .collect();
+    let devs: Vec<(&str, Option<f64>)> = jobs
+        .par_iter()
+        .map(|&(k, kind, j)| {
+            let seed = Rig::Classic.seed(true, k, j);
+            let spec = Rig::Classic.spec(seed, kind, j, &emps);
+            let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+            let d = diagnose(&rec, &Options::default());
+            let (effect, param, truth) = truth_of(&spec.hidden).expect("a kind with a size");
+            let p = d
+                .findings
+                .iter()
+                .filter(|f| f.effect == effect)
+                .find_map(|f| {
+                    if param.is_empty() {
+                        f.parameters.first().map(|p| p.1)
+                    } else {
+                        f.parameters.iter().find(|p| p.0 == param).map(|p| p.1)
+                    }
+                });
+            (kind, p.map(|p| p / truth - 1.0))
+        })
+        .collect();
+    for (i, kind) in kinds.iter().enumerate() {
+        let mut dev: Vec<f64> = devs
             .iter()
-            .filter(|f| f.effect == "unexplained")
-            .find_map(|f| f.parameters.iter().find(|p| p.0 == "change_N").map(|p| p.1));
-        let names = d.catalogue_names();
+            .filter(|d| d.0 == *kind)
+            .filter_map(|d| d.1.map(f64::abs))
+            .collect();
+        dev.sort_by(f64::total_cmp);
+        let med = dev.get(dev.len() / 2).copied().unwrap_or(f64::NAN);
+        let max = dev.last().copied().unwrap_or(f64::NAN);
         println!(
-            "seed {seed} {}: hidden drift {total_n:.2} N -> slow change {change:?} N, names {names:?}",
-            spec.trajectory.name()
+            "{kind:>20}: named on {}/{PARAM_RECORDS}; |deviation| median {:.2} %, largest {:.2} %",
+            dev.len(),
+            100.0 * med,
+            100.0 * max
         );
-        let c = change.unwrap_or_else(|| panic!("seed {seed}: no slow change reported"));
-        let ratio = c / total_n;
+        let (share, bound_med, bound_max) = PARAM_BOUNDS[i];
         assert!(
-            (0.8..1.2).contains(&ratio),
-            "seed {seed}: {c} N against {total_n} N"
+            dev.len() as f64 >= share * PARAM_RECORDS as f64,
+            "{kind}: named on {}/{PARAM_RECORDS}",
+            dev.len()
         );
-        assert!(names.is_empty(), "seed {seed}: {names:?}");
+        assert!(med <= bound_med, "{kind}: median deviation {med}");
+        assert!(max <= bound_max, "{kind}: largest deviation {max}");
     }
 }
 
-/// A drive acting as a damper whose force saturates (the rig clips c·v at ±L): `current_limit`
-/// is named under the drive's hypothesis, with the level and the drive's damping of the rig,
-/// on a rounded triangle too (`effects::speed_levels`: without the crossing quantiles its
-/// saturation speed is outside the scanned range and `current_limit` is not named).
-#[test]
-fn clipped_drive_is_named_with_its_level() {
-    let mut worst: (f64, f64) = (0.0, 0.0);
-    for (seed, traj) in [
-        (100_001, Trajectory::Multisine),
-        (100_003, Trajectory::PointToPoint),
-        (100_004, Trajectory::Narrowband),
-        (100_006, Trajectory::Multisine),
-        // a motion cruising at one speed: the saturation speed lies below every time
-        // quantile of |v| and is scanned through the speeds the motion crosses
-        (100_007, Trajectory::RoundedTriangle),
-    ] {
-        let spec = RigSpec::random(seed, "clipped_current_loop", traj, 12_000);
-        let Hidden::ClippedCurrentLoop { limit_n } = spec.hidden else {
-            unreachable!()
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
-        let f = d
-            .findings
-            .iter()
-            .find(|f| f.effect == "current_limit")
-            .unwrap_or_else(|| panic!("seed {seed}: current_limit not named"));
-        let p = |k: &str| f.parameters.iter().find(|(n, _)| n == k).map(|p| p.1);
-        let (l, cd) = (p("limit_N").unwrap(), p("drive_damping_Ns_per_m").unwrap());
-        let (el, ec) = (l / limit_n - 1.0, cd / spec.drive_damping - 1.0);
-        println!(
-            "seed {seed}: limit {l:.2} N (rig {limit_n:.2}, {:+.1} %), drive damping {cd:.1} N·s/m (rig {:.1}, {:+.1} %)",
-            100.0 * el,
-            spec.drive_damping,
-            100.0 * ec
-        );
-        worst = (worst.0.max(el.abs()), worst.1.max(ec.abs()));
-    }
-    println!(
-        "worst: limit {:.1} %, drive damping {:.1} %",
-        100.0 * worst.0,
-        100.0 * worst.1
-    );
-    // Measured 2026-11-24: worst 0.5 % on the level and 0.5 % on the drive's damping (the
-    // rig's c·v clipped at L, 20 substeps per sample, noise and quantisation; the rounded
-    // triangle 0.1 %). Bound 3×: 1.5 %.
-    // With the column's sign flipped `current_limit` is named on none of these records.
-    assert!(worst.0 < 0.015 && worst.1 < 0.015, "{worst:?}");
-}
-
-/// Play named with its width on three rig records (seeds of the long run: rounded triangle,
-/// narrowband, multisine; the rig's device behind the gap with a 60 Hz, ζ 0.5 contact):
-/// `backlash` the only catalogue name, its width within 4.5 % of the rig's (measured −0.2 %
-/// … +1.5 %: 3× the worst), the gain of the force that stops across the gap within the unit
-/// range and the impact's momentum within the rule (measured 0.84 … 1.00·M; gain 0.83 … 0.99).
-#[test]
-fn backlash_is_named_with_its_width() {
-    for (seed, traj) in [
-        (600_002, Trajectory::RoundedTriangle),
-        (600_004, Trajectory::Narrowband),
-        (600_006, Trajectory::Multisine),
-    ] {
-        let spec = RigSpec::random(seed, "backlash", traj, 12_000);
-        let Hidden::Backlash { width_m } = spec.hidden else {
-            panic!("seed {seed}: not a play record");
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
-        let names = d.catalogue_names();
-        assert_eq!(names, ["backlash"], "seed {seed}");
-        let f = &d.findings.iter().find(|f| f.effect == "backlash").unwrap();
-        let p = |k: &str| f.parameters.iter().find(|(n, _)| n == k).unwrap().1;
-        let (w, g, mi) = (p("width_m"), p("gain"), p("impact_mass_kg"));
-        println!(
-            "seed {seed}: width {w:.4e} m (rig {width_m:.4e}, {:+.1} %), gain {g:.3}, impact {mi:.1} kg (rig mass {:.1} kg)",
-            100.0 * (w / width_m - 1.0),
-            spec.mass_kg
-        );
-        assert!(
-            (w / width_m - 1.0).abs() < 0.045,
-            "seed {seed}: width {w} against {width_m}"
-        );
-        assert!((0.8..=1.25).contains(&g), "seed {seed}: gain {g}");
-        assert!(
-            mi >= 0.5 * spec.mass_kg && mi <= 2.0 * spec.mass_kg,
-            "seed {seed}: impact {mi} kg, mass {}",
-            spec.mass_kg
-        );
-    }
-}
+/// Records per kind of `named_parameters_on_held_out`.
+const PARAM_RECORDS: usize = 6;
+/// Per kind of `named_parameters_on_held_out` (in its order: clip level, delay, mode
+/// frequency, Stribeck speed, presliding displacement, play width, drift's change): the least
+/// share of records that name the effect (measured 6/6 on every kind; one record of margin),
+/// and the bounds on the median and the largest relative deviation of its size, 3× the
+/// measured (medians 0.29, 0.87, 0.23, 0.78, 2.02, 2.97, 0.88 %; largest 0.72, 6.71, 0.73,
+/// 1.94, 10.98, 11.62, 14.91 %).
+const PARAM_BOUNDS: [(f64, f64, f64); 7] = [
+    (0.8, 0.009, 0.022),
+    (0.8, 0.026, 0.20),
+    (0.8, 0.007, 0.022),
+    (0.8, 0.023, 0.058),
+    (0.8, 0.061, 0.33),
+    (0.8, 0.089, 0.35),
+    (0.8, 0.026, 0.45),
+];
 
 /// The rig's observability rule redraws the trajectory's own parameters when 40 draws of the
 /// effect fail on the first motion, and moves the record to the next family when 8 motions of
-/// its own fail (`bench_rig`, module doc). Stribeck 400047 (rounded triangle) is observable on
-/// its sixth triangle (2.59 N rms in motion against 0.49 N noise); 400002, 400017 and 400022
-/// stay unobservable over 8 triangles (a rounded triangle crosses the Stribeck band only at
-/// its reversals, whatever its period and sharpness, and the samples near a reversal are at
-/// rest) and are drawn as point-to-point records (5.48, 21.5, 6.71 N rms in motion). A clipping
-/// level that no family shows, even lowered to a tenth of the drive's peak force (seed
-/// 100038, 0.63 N rms against 1.95 N noise), stays flagged in its own family. Records
+/// its own fail (`bench_rig`, module doc). It tests the generator, not the diagnosis: a
+/// rounded-triangle Stribeck record observable only on its sixth triangle (2.59 N rms in motion
+/// against 0.49 N noise); three that stay unobservable over 8 triangles (a rounded triangle
+/// crosses the Stribeck band only at its reversals, whatever its period and sharpness, and the
+/// samples near a reversal are at rest) and are drawn as point-to-point records (5.48, 21.5,
+/// 6.71 N rms in motion); a clipping level no family shows, even lowered to a tenth of the
+/// drive's peak force (0.63 N rms against 1.95 N noise), flagged in its own family; records
 /// observable on their first motion keep it (draw 0: the same record as without the rule).
-/// Without the motion redraw the first assert fails (400047 not observable); without the
-/// family's change the second (400002 flagged on its triangle).
+/// Without the motion redraw the first assert fails; without the family's change the second.
 #[test]
 fn unobservable_effects_redraw_the_motion() {
     let s = RigSpec::random(400_047, "stribeck", Trajectory::RoundedTriangle, 12_000);
@@ -503,7 +744,7 @@ fn unobservable_effects_redraw_the_motion() {
 
 /// The observability rule counts only the samples in motion (`bench_rig::rest_of`: within 20
 /// samples of a true speed below one encoder quantum per 20 ms), where a fit may use the
-/// force: the recorded (EMPS) Stribeck records 400015, 400030, 400035, whose effect lies on
+/// force: three recorded-motion (EMPS) Stribeck records, whose effect lies on
 /// the static friction held at the near-stops, are not observable on the recorded motion (a
 /// recorded motion has nothing to redraw) and are drawn as multisines. The rig's rest set and
 /// the diagnosis's (`effects::at_rest`, from the quantised record) agree on the recorded
@@ -569,10 +810,10 @@ const REST_AGREEMENT: f64 = 0.61;
 
 /// Effects sized to the rule (`bench_rig`, `size_to_rule`): a record no family shows at its
 /// drawn size keeps its motion and draw, and its size is raised to the least the rule
-/// accepts. Drift 800012 (rounded triangle, eighth motion) and hum 700013 (point-to-point)
-/// are observable with an rms in motion of 5× the force noise (the binding clause; within
-/// 10⁻⁵); drift 800028, whose rule needs more than `SIZE_MAX_SCALE` times its draw, stays
-/// flagged. Break: the sizing removed, 800012 is flagged and the first assert fails.
+/// accepts. A rounded-triangle drift (eighth motion) and a point-to-point hum are observable
+/// with an rms in motion of 5× the force noise (the binding clause; within 10⁻⁵); a drift
+/// whose rule needs more than `SIZE_MAX_SCALE` times its draw stays flagged. Break: the sizing
+/// removed, the first drift is flagged and the first assert fails.
 #[test]
 fn effects_are_sized_to_the_rule() {
     for (seed, kind, traj) in [
@@ -592,70 +833,8 @@ fn effects_are_sized_to_the_rule() {
     assert!(!s.observable, "seed 800028");
 }
 
-/// A load-path mode 2 % below the motion's band edge (rig seed 300006, multisine, 2.643 Hz,
-/// the last Welch bin holding the motion at 2.686 Hz) is inside the compliance scan, which
-/// reaches one bin width beyond the edge (`effects::motion_bandwidth`), and is named alone.
-/// Measured: 2.707 Hz (+2.4 %); bound 7.5 % (3×). Without the bin beyond the edge the fit's
-/// optimum (2.718 Hz) is not bracketed and nothing is named.
-#[test]
-fn mode_at_the_motion_band_edge_is_named() {
-    let spec = RigSpec::random(300_006, "resonance", Trajectory::Multisine, 12_000);
-    let Hidden::Resonance { freq_hz, .. } = spec.hidden else {
-        panic!("not a resonance");
-    };
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    let names = d.catalogue_names();
-    let f = d.findings.iter().find(|f| f.effect == "compliance");
-    println!(
-        "rig {freq_hz:.4} Hz -> {names:?} {:?}",
-        f.map(|f| &f.parameters)
-    );
-    assert_eq!(names, ["compliance"]);
-    let fr = f.unwrap().parameters[0].1;
-    assert!(
-        (fr / freq_hz - 1.0).abs() < 0.075,
-        "{fr} Hz against {freq_hz}"
-    );
-}
-
-/// The play's width as its impacts show it (`effects::impact_travel`: the travel from each
-/// reversal to the first impact in the new direction of motion, median) on rig records of the
-/// long run whose coarse width grid missed the play (point-to-point 600003, 600008; recorded
-/// EMPS motion 600005): within 3× the measured deviation of the rig's width (measured +0.71 %,
-/// +0.60 %, +0.27 %; the travel is read at whole samples and position quanta).
-#[test]
-fn impact_travel_is_the_play_width() {
-    let emps = emps_x();
-    for (seed, traj) in [
-        (600_003, Trajectory::PointToPoint),
-        (600_008, Trajectory::PointToPoint),
-        (
-            600_005,
-            Trajectory::Recorded(emps[..12_000.min(emps.len())].to_vec()),
-        ),
-    ] {
-        let spec = RigSpec::random(seed, "backlash", traj, 12_000);
-        let Hidden::Backlash { width_m } = spec.hidden else {
-            panic!("seed {seed}: not a play record");
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let ctx = hal_sim::diagnose::effects::Context::new(&rec);
-        let t = hal_sim::diagnose::effects::impact_travel(&ctx);
-        println!("seed {seed}: impact travel {t:?} m, rig width {width_m:.4e} m");
-        let t = t.unwrap_or_else(|| panic!("seed {seed}: no impact travel"));
-        assert!(
-            (t / width_m - 1.0).abs() < TRAVEL_BOUND,
-            "seed {seed}: {t} against {width_m}"
-        );
-    }
-}
-
-/// Bound of `impact_travel_is_the_play_width`: 3× the largest measured deviation.
-const TRAVEL_BOUND: f64 = 0.021;
-
 /// Records of the long run (`long_run_spec`, any family) diagnosed with the rig's true velocity
-/// and acceleration given as `v_m_s`, `a_m_s2` beside the derived ones (`RIG_SEEDS=500002,…
+/// and acceleration given as `v_m_s`, `a_m_s2` beside the derived ones (`RIG_SEEDS=S1,S2,…
 /// cargo test -p regen-tests --test diagnose_rig rig_true_acceleration -- --ignored
 /// --nocapture`; `RIG_TRUE=v` or `RIG_TRUE=a` gives only that one the rig's, the other derived):
 /// the inertial error M·(a − a_derived) at the reversals and what the diagnosis names without
@@ -739,80 +918,15 @@ fn rig_true_acceleration() {
     }
 }
 
-/// A recorded (EMPS position) record whose near-stops drew a false
-/// `velocity_strengthening_friction`: backlash 600050 (encoder 1.6 µm), exactly right by the
-/// build-up's band rule (`effects::buildup_in_band`: the rise where the derived signals follow
-/// the build-up, 12.4 N, differs from the one at the motion's fast near-stops, 6.3 N, by 49 %
-/// at Wald 12.4). Break: the rule removed names the friction beside `backlash`.
-#[test]
-fn recorded_near_stops_name_no_speed_friction() {
-    let x = emps_x();
-    let spec = RigSpec::random(
-        600050,
-        "backlash",
-        Trajectory::Recorded(x[..12_000].to_vec()),
-        12_000,
-    );
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    println!("seed 600050: {:?}", d.catalogue_names());
-    for v in &d.verdicts {
-        println!("  verdict: {v}");
-    }
-    assert_eq!(d.catalogue_names(), vec!["backlash"]);
-}
-
-/// The device behind the play fitted on its contact samples (`effects::play_device_fit`, the
-/// device walked at the rig's width with the baseline's coefficients and the velocity through
-/// the acceleration's band, `Context::v_with_a`, as `play_columns` starts it) is the rig's device: inertia, viscous (the drive's damping and the viscous friction)
-/// and Coulomb friction on rounded triangles, where an impact strikes the device from near
-/// rest at the cruise speed. The contact (60 Hz, ζ 0.5, it can only push) releases the device
-/// after its pulse and catches it again, so the samples within `CONTACT_SETTLE` of each
-/// contact are left out. Measured: see `PLAY_DEVICE_BOUND`. With only the pulse's
-/// `IMPACT_TAPS` left out, 600002's viscous is +12 % and 600032's −10 % and the test fails.
-#[test]
-fn play_device_is_fitted_off_the_contact_transient() {
-    for seed in [600_002, 600_007, 600_032] {
-        let spec = RigSpec::random(seed, "backlash", Trajectory::RoundedTriangle, 12_000);
-        let Hidden::Backlash { width_m } = spec.hidden else {
-            panic!("seed {seed}: not a play record");
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let ctx = hal_sim::diagnose::effects::Context::new(&rec);
-        let dev = hal_sim::diagnose::effects::play_device(
-            &rec.x,
-            ctx.v_with_a(),
-            &rec.a,
-            &ctx.sgn,
-            ctx.dt,
-            width_m,
-            ctx.base_th[0],
-            ctx.base_th[1],
-            ctx.base_th[2],
-            0.0,
-        );
-        let (m, fv, fc) = hal_sim::diagnose::effects::play_device_fit(&ctx, &dev)
-            .unwrap_or_else(|| panic!("seed {seed}: no device fit"));
-        assert_device_is_the_rigs(&spec, (m, fv, fc), PLAY_DEVICE_BOUND);
-    }
-}
-
-/// Bounds of `play_device_is_fitted_off_the_contact_transient` (inertia, viscous, Coulomb):
-/// 3× the largest measured deviation for inertia and viscous (−3.37 %, +0.94 % measured);
-/// Coulomb 4 % against 600032's −3.51 % (its device walked from the baseline fitted with the
-/// velocity through its own band, "Input" in docs/diagnose.md; 600002 and 600007 −0.45 %,
-/// +0.28 %): 1.1× the worst, the one record that sets it.
-const PLAY_DEVICE_BOUND: [f64; 3] = [0.105, 0.015, 0.04];
-
 /// The play's joint fit profiled over its width on records of the long run's backlash kind
-/// (`RIG_SEEDS=600007,600011 cargo test -p regen-tests --test diagnose_rig
+/// (`RIG_SEEDS=S1,S2 cargo test -p regen-tests --test diagnose_rig
 /// rig_play_width_profile -- --ignored --nocapture`): the play's columns
 /// (`effects::play_columns_with`) at the rig's width × (1 + 0.02k), k = −10 … 10, fitted with
 /// the baseline's columns on the training part; per width the held-out rss against the
 /// baseline's, the free force's gain and the impact's sum (kg), with the device the diagnosis
 /// fits (`play_device_coefficients`) and with the rig's own (inertia, drive damping plus
 /// viscous friction, Coulomb). It separates what the device's fit costs from what the walk
-/// lacks. The trajectory of a seed is the long run's (`run`: seed 600001 + j, family j mod 5).
+/// lacks. The trajectory of a seed is the classic long run's (`long_run_spec`).
 #[test]
 #[ignore]
 fn rig_play_width_profile() {
@@ -900,68 +1014,7 @@ fn rig_play_width_profile() {
     }
 }
 
-/// The recorded motion's play is named where the record's contacts lie in one of the five
-/// stability segments (`diagnose::agreement_of_held`): on 600010 and 600015 the fit without
-/// the first segment leaves the impact taps in their null space (±200 … ±3,000 kg,
-/// alternating), the play does not hold there, and the other four agree (gain 1.00 within
-/// 0.5 %). With the agreement asked of all five segments (t = 0.25 on both) the play is not
-/// kept and the test fails.
-#[test]
-fn recorded_play_agrees_on_the_segments_that_hold() {
-    let x = emps_x();
-    for seed in [600_010, 600_015] {
-        let spec = RigSpec::random(
-            seed,
-            "backlash",
-            Trajectory::Recorded(x[..12_000].to_vec()),
-            12_000,
-        );
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let d = diagnose(&rec, &Options::default());
-        println!("seed {seed}: {:?}", d.catalogue_names());
-        assert!(
-            d.catalogue_names().contains(&"backlash"),
-            "seed {seed}: play not named"
-        );
-    }
-}
-
-/// A drive's clip that a second effect's fit would leave non-physical (`diagnose::set_physical`:
-/// a candidate is refused when, beside it, an effect already in the set leaves its physical
-/// range). On the rig's clipped multisine 100051 (level 30.1 N) a `screw_efficiency` beside
-/// the clip took part of the viscous force, leaving the clip's damping above the viscous
-/// coefficient (353 against 297 N·s/m on every stability segment): the clip held on 0/5
-/// segments and nothing was named. With the rule it is named alone with the rig's level.
-/// Break: the rule removed from the scan, nothing is named and the test fails.
-#[test]
-fn clip_is_not_left_non_physical_by_a_second_effect() {
-    let spec = RigSpec::random(
-        100_051,
-        "clipped_current_loop",
-        Trajectory::Multisine,
-        12_000,
-    );
-    let Hidden::ClippedCurrentLoop { limit_n } = spec.hidden else {
-        unreachable!()
-    };
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-    let d = diagnose(&rec, &Options::default());
-    assert_eq!(d.catalogue_names(), vec!["current_limit"]);
-    let f = &d.findings[0];
-    let p = |k: &str| f.parameters.iter().find(|(n, _)| n == k).map(|p| p.1);
-    let (l, cd) = (p("limit_N").unwrap(), p("drive_damping_Ns_per_m").unwrap());
-    let (el, ec) = (l / limit_n - 1.0, cd / spec.drive_damping - 1.0);
-    println!(
-        "limit {l:.2} N (rig {limit_n:.2}, {:+.2} %), drive damping {cd:.1} N·s/m (rig {:.1}, {:+.2} %)",
-        100.0 * el,
-        spec.drive_damping,
-        100.0 * ec
-    );
-    // the bound of `clipped_drive_is_named_with_its_level` (3× its worst measured deviation)
-    assert!(el.abs() < 0.015 && ec.abs() < 0.015, "{el} {ec}");
-}
-
-/// Where a record's hidden effect acts (`RIG_SEEDS=400015,… cargo test -p regen-tests --test
+/// Where a record's hidden effect acts (`RIG_SEEDS=S1,S2,… cargo test -p regen-tests --test
 /// diagnose_rig rig_effect_at_rest -- --ignored --nocapture`; trajectories as in the long
 /// run): the force the effect changes (the record with and without it: the same motion and
 /// noise) split into the samples the diagnosis leaves out as at rest (`effects::at_rest`) and
@@ -999,147 +1052,6 @@ fn rig_effect_at_rest() {
             spec.noise_n
         );
     }
-}
-
-/// A presliding transition beside a lag must carry the margin on top of the lag's parts given
-/// amplitudes of their own (the scan's `carries_beyond_switch`, `effects::delayed_switch`):
-/// delay 200021 (multisine, 19.7 ms, 6.4 µm encoder), whose lag's least-squares gain is 0.80,
-/// is named `lag` alone. Break: the rule removed names a `presliding_hysteresis` of
-/// x_c 0.18 mm and 4.7 N beside the lag.
-#[test]
-fn delayed_switch_is_not_presliding() {
-    // measured +1.7 % (20.08 ms for 19.74); 5 % is the bound of the other lag tests
-    named_alone(200_021, 0.05);
-}
-
-/// A position ripple whose time frequency on the motion lies in the band of a mode kept is
-/// the mode's (`effects::ripple_at_mode`, among the verdicts): resonance 300017 (rounded
-/// triangle cruising at 72.4 mm/s on 89 % of its samples, a 2.686 Hz mode, ζ 0.107, 38.6 kg),
-/// where a `cogging` of 26.92 mm (72.4 mm/s / 26.92 mm = 2.689 Hz) took 13.8 % of the
-/// held-out rss beside the `compliance`, is named `compliance` alone. Break: the rule's
-/// condition flipped (a ripple dropped when most of the motion lies outside the mode's band)
-/// names the `cogging` beside it.
-#[test]
-fn ripple_at_the_mode_frequency_is_the_mode() {
-    let (spec, d) = diagnosed_long_run_record(300_017);
-    let Hidden::Resonance { freq_hz, .. } = spec.hidden else {
-        panic!("300017 is a resonance record");
-    };
-    let names = d.catalogue_names();
-    let f = first_parameter(&d, "compliance");
-    println!("300017: {names:?}: compliance {f} Hz for {freq_hz}");
-    assert_eq!(names, ["compliance"], "{:?}", d.verdicts);
-    // measured +0.06 % (2.6875 Hz for 2.6858): 0.2 % is 3× that
-    assert!((f / freq_hz - 1.0).abs() < 0.002, "{f} Hz for {freq_hz}");
-}
-
-/// A resonance beside a lag must carry the margin on top of the lag's three parts (delayed
-/// inertial, viscous and Coulomb) given amplitudes of their own (the scan's
-/// `carries_beyond_switch`): delay 200035 (recorded EMPS motion, 37.8 ms, 1.01 N noise),
-/// whose lag's one gain leaves part of its delayed inertial and viscous force, is named `lag`
-/// alone. Break: the rule removed names a 7.25 Hz `compliance` (8.2 kg, ζ 0.32, 5.0 % of the
-/// held-out rss) beside the lag.
-#[test]
-fn delay_remainder_is_not_a_resonance() {
-    // measured −0.66 % (37.57 ms for 37.82): 2 % is 3× that
-    named_alone(200_035, 0.02);
-}
-
-/// The derived acceleration's quantisation noise is no mode (the scan's rule on `compliance`,
-/// `Context::compliance_noise`): presliding 500002 and 500052 (rounded triangle, 6.4 µm
-/// encoder, M·(a − a_derived) 1.1 and 0.96 N rms against 1.05 and 1.30 N of force noise) are
-/// named `presliding_hysteresis` alone, its displacement within the bound below of the rig's.
-/// Break: the rule removed (the long run's base) names a `compliance` (8.8 and 5.2 Hz, modal
-/// mass 36 and 25 kg) beside it on both.
-#[test]
-fn derived_acceleration_noise_is_no_compliance() {
-    // measured −26.6 % and −8.9 % (the Dahl column fitted through the derived signals;
-    // with the `compliance` beside it 500002 gave −12.7 %); bound 40 % (1.5× the larger):
-    // a displacement of the build-up's order, not its precision, is what the name asserts
-    for seed in [500_002, 500_052] {
-        named_alone(seed, 0.4);
-    }
-}
-
-/// A mode must carry the margin on columns freed of the derived acceleration's noise (the
-/// scan's errors-in-variables rule on `compliance`: the fits with and without the mode
-/// corrected by `Context::compliance_noise`, the covariance of the inertia's, the viscous and
-/// the mode's columns): on 6.4 µm records whose mode's column is well above its noise (so the
-/// half-noise rule lets it through) least squares credits a modal mass with the quantisation
-/// noise it cancels in the inertia's column, on the held-out rows as on the training rows.
-/// Stribeck 400002 (point-to-point), presliding 500015 and backlash 600020 (recorded motion)
-/// are named their own effect alone, its first parameter within the bound below of the
-/// rig's. Break: the rule removed (the long run's base) names a `compliance` beside each
-/// (2.39 Hz, 6.4 kg; 4.29 Hz, 4.0 kg; 7.66 Hz, 5.0 kg); S × 0.5, or S without the mode's
-/// covariances with the inertia and viscous columns, names it beside `stribeck` on 400002.
-#[test]
-fn derived_acceleration_noise_carries_no_margin() {
-    // measured −1.04 % (v_s), +1.33 % (x_c), −0.64 % (width); bound 4 %, 3× the largest
-    for seed in [400_002, 500_015, 600_020] {
-        named_alone(seed, 0.04);
-    }
-}
-
-/// `lag`'s delays are ranked against each other on common rows (the scan leaves out, for every
-/// τ, the samples the longest τ scanned leaves out): each τ's own fit leaves out the first τ of
-/// each move (its delayed rest), where an undelayed baseline is furthest from the dwell's
-/// force, so on its own rows a longer τ is compared with a baseline relieved of more of its
-/// worst rows. Delay 200023 (point-to-point, 33.4 ms, 0.4 µm encoder: no derivation noise to
-/// speak of) is named `lag` alone. Break: ranked on each τ's own rows, the scan takes 29.8 ms
-/// (least-squares gain 1.24, at the top of its range), which holds on 1 of 5 segments, and
-/// nothing is named.
-#[test]
-fn delay_is_ranked_on_common_rows() {
-    // measured +11.4 % (37.26 ms for 33.43; the least-squares gain 0.82); bound 3× that
-    named_alone(200_023, 0.34);
-}
-
-/// A play is tested on its contacts: a `lag` chosen beside it leaves out of its own test the
-/// rows whose delayed motion is at rest or inside the Coulomb sign's band (right after each
-/// reversal), which are where the play's contacts lie, so the stability segments test the play
-/// and a lag beside it on every row in motion. Backlash 600012 (rounded triangle, 0.70 mm) is
-/// named `backlash` alone, its width within the bound below of the rig's. Breaks: the play
-/// tested on the lag's rows (the segment fits see no contact, the impact taps fit to zero
-/// and fail the momentum rule on 5/5 segments) names nothing (and `lag` alone when the lag
-/// too is tested on its own rows, as before the rule); the play on every row but the lag
-/// beside it still on its own rows names `backlash` and `lag`.
-#[test]
-fn play_is_tested_on_its_contacts() {
-    // measured +1.0 % (0.7095 mm for 0.7024); bound 3× that
-    named_alone(600_012, 0.03);
-}
-
-/// A play whose flank is a spring: recorded-motion backlash 600040 (1.46 mm, the rig's 60 Hz
-/// contact) is named `backlash` alone with a compliant flank (contact mode fs/8, kept by the
-/// selection's margin over the rigid flank). With the rigid flank only
-/// (`PLAY_CONTACT_FRACTIONS` empty) a `velocity_strengthening_friction` of 27 N over
-/// 0.26 mm/s is named beside it and the test fails.
-#[test]
-fn play_with_a_compliant_flank_is_named_alone() {
-    // measured +2.15 % (1.4932 mm for 1.4617); bound 3× that
-    named_alone(600_040, 0.065);
-}
-
-/// A compliant flank the whole record does not bear out is not kept: rounded-triangle
-/// backlash 600003 (1.02 mm) takes a 62.5 Hz flank on the screening window, but over the whole
-/// record's held-out part the rigid flank fits better (3.44 % against 6.40 % with the spring),
-/// so the rigid flank is kept. Measured 3.44 %; bound 4.5 %, between it and the compliant
-/// flank's 6.40 % (the test fails when the whole-record check is left out).
-#[test]
-fn a_flank_spring_the_whole_record_refutes_is_dropped() {
-    let (_, d) = diagnosed_long_run_record(600_003);
-    assert_eq!(d.catalogue_names(), ["backlash"], "{:?}", d.verdicts);
-    let f = d.findings.iter().find(|f| f.effect == "backlash").unwrap();
-    assert!(
-        !f.parameters.iter().any(|(k, _)| k == "contact_Hz"),
-        "{:?}",
-        f.parameters
-    );
-    assert!(
-        d.final_holdout_rel_error < 0.045,
-        "held-out {:.2} %",
-        100.0 * d.final_holdout_rel_error
-    );
 }
 
 /// The long run's records as the rig draws them, without the diagnosis (`RIG_N=56 cargo test
@@ -1182,85 +1094,4 @@ fn rig_specs() {
             );
         }
     }
-}
-
-/// The device behind the play is fitted from a second walk (`effects::PLAY_DEVICE_WALKS`):
-/// walked with the baseline's coefficients (on rounded triangles 600042 and 600037 a baseline
-/// biased by the impacts, viscous −982 N·s/m on 600042) the device's contacts fall off the
-/// rig's and the device fitted on them splits viscous and Coulomb friction wrongly (600042
-/// viscous −30 %, 600037 −18 %); walked once more with that device its contacts are the
-/// rig's and so is the device fitted on them: inertia, viscous (drive damping and viscous
-/// friction) and Coulomb at the rig's width, on the two triangles and point-to-point 600038.
-/// Bounds `PLAY_DEVICE_WALKED_BOUND`. With one walk (`PLAY_DEVICE_WALKS` = 1) 600042's
-/// viscous is −30 % and the test fails.
-#[test]
-fn play_device_is_fitted_from_its_own_walk() {
-    let emps = emps_x();
-    for seed in [600_042, 600_037, 600_038] {
-        let spec = long_run_spec(seed, &emps);
-        let Hidden::Backlash { width_m } = spec.hidden else {
-            panic!("seed {seed}: not a play record");
-        };
-        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
-        let ctx = hal_sim::diagnose::effects::Context::new(&rec);
-        let (m, fv, fc) =
-            hal_sim::diagnose::effects::play_device_coefficients(&ctx, rec.len(), width_m, 0.0);
-        assert_device_is_the_rigs(&spec, (m, fv, fc), PLAY_DEVICE_WALKED_BOUND);
-    }
-}
-
-/// Bounds of `play_device_is_fitted_from_its_own_walk` (inertia, viscous, Coulomb): 3× the
-/// largest measured deviation.
-const PLAY_DEVICE_WALKED_BOUND: [f64; 3] = [0.115, 0.084, 0.105];
-
-/// The play's device (inertia, viscous, Coulomb) against the rig's own (its mass, drive
-/// damping plus viscous friction, Coulomb), each relative deviation within its bound.
-fn assert_device_is_the_rigs(spec: &RigSpec, (m, fv, fc): (f64, f64, f64), bound: [f64; 3]) {
-    let seed = spec.seed;
-    let want = [
-        spec.mass_kg,
-        spec.drive_damping + spec.viscous,
-        spec.coulomb,
-    ];
-    let dev = [m / want[0] - 1.0, fv / want[1] - 1.0, fc / want[2] - 1.0];
-    println!(
-        "seed {seed} ({}): M {m:.2} kg ({:+.2} %), Fv {fv:.1} N·s/m ({:+.2} %), Fc {fc:.2} N ({:+.2} %)",
-        spec.trajectory.name(),
-        100.0 * dev[0],
-        100.0 * dev[1],
-        100.0 * dev[2]
-    );
-    for (k, (d, b)) in dev.iter().zip(bound).enumerate() {
-        assert!(
-            d.abs() < b,
-            "seed {seed}: coefficient {k} off by {:+.2} %",
-            100.0 * d
-        );
-    }
-}
-
-/// An effect-free point-to-point record (none 33: one move of 1.42 mm/s peak among moves up to
-/// 0.26 m/s, 279 of its samples in motion inside the Coulomb sign's linear band, ±0.52 mm/s)
-/// is named nothing: the Coulomb force the band's linear column leaves out there (baseline
-/// held-out error 5.01 %, 0.36 % with the exact sign) is not a Stribeck bump (the rule under
-/// "Effect-free records named" in docs/diagnose.md). Break: without the rule it is named
-/// `stribeck` (v_s 1.5 mm/s, 6.1 N, 94 % of the held-out rss).
-#[test]
-fn coulomb_band_is_not_stribeck() {
-    let (_, d) = diagnosed_long_run_record(33);
-    assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
-}
-
-/// An effect-free point-to-point record (none 38, 0.4 µm encoder, the velocity through its own
-/// band at 250 Hz, 6,535 of its 12,000 samples at rest) is named nothing: a Dahl state of a
-/// few µm has reached the direction of sliding within a few samples of each move's start, so
-/// where the motion slides inside the Coulomb sign's linear band its column z − sgn v is the
-/// force the band leaves out, sign v − v/v_eps; it must carry the margin against the baseline
-/// with the exact sign, as a Stribeck bump must (docs/diagnose.md, "One cause, one name").
-/// Break: without the rule for `presliding_hysteresis` it is named so (x_c 2.63 µm, 33.4 N,
-/// 49.9 % of the held-out rss, held on 4/5 segments).
-#[test]
-fn coulomb_band_is_not_presliding() {
-    let (_, d) = diagnosed_long_run_record(38);
-    assert!(d.catalogue_names().is_empty(), "{:?}", d.catalogue_names());
 }

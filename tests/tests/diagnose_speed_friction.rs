@@ -38,7 +38,7 @@ fn record(seed: u64, rise_n: f64, vb: f64, bump_n: f64, vs: f64) -> String {
 /// named first with its rise and build-up speed; a Stribeck bump of the same size (friction
 /// falling, not rising, as the speed rises) is named `stribeck`, never this effect.
 ///
-/// Measured (seeds 10–12): rise 7.39–7.47 N (−7.7 … −6.6 %), v_b 11.9–12.3 mm/s (+19 … +23 %),
+/// Measured (the three records): rise 7.39–7.47 N (−7.7 … −6.6 %), v_b 11.9–12.3 mm/s (+19 … +23 %),
 /// beside a `screw_efficiency` (ratio 1.20) that the same motion without the rise also gets
 /// (ratio 1.08: the true Coulomb step at each reversal falls between samples, which the
 /// fitted sgn, linear over ±0.2 % of the peak speed, does not follow; the rise, a low-speed

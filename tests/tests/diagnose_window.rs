@@ -107,12 +107,10 @@ fn records_within_the_window_are_unchanged() {
 /// (presliding: Dahl state; backlash: the device behind the play; resonance: the mode's
 /// resonator) and one effect-free record: the same names with and without the window, and
 /// Parameters: measured at most 1.30 % apart (the play's impact mass; a resonance 0.63 %, the
-/// presliding displacement of rounded triangle 500007 0.000 %), asserted within 3 %; the
+/// presliding displacement of the rounded triangle 0.000 %), asserted within 3 %; the
 /// compliance's damping ratio and modal mass, from the damping-ratio profile (its grid a
 /// factor 1.59 apart), 5.3 % and 7.1 % apart, asserted within 30 % (about half the profile's
-/// grid step). The names: 4/4 the same. (Rounded triangle 500002, the presliding case before
-/// the rig's rule over the samples in motion drew it anew, is given a spurious 7.2 Hz
-/// `compliance` whose profiled damping ratio differs by 43 % between the two.)
+/// grid step). The names: 4/4 the same.
 #[test]
 fn long_records_screened_in_the_window_name_the_same_effects() {
     let samples = 4 * SCREEN_WINDOW;
