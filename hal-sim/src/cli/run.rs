@@ -216,7 +216,10 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     }
     println!("{}", exact_ledger_line(&s.energy));
     print!("{}", s.text());
-    Ok(())
+    match &s.invalid {
+        Some(why) => Err(format!("invalid run: {why}")),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]
