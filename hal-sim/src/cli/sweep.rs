@@ -10,7 +10,7 @@ use super::output::{check_out_dir, write};
 use super::progress::Progress;
 use crate::analytic::{logspace, optimum_load, tmd_power, DampingFormula};
 use crate::plant::{Drive, Excitation};
-use crate::plot::{Plot, Series};
+use crate::plot::{Mark, Plot, Series};
 use crate::scenario::Scenario;
 use crate::summary::{run_scenario, si, RunSummary};
 use rayon::prelude::*;
@@ -87,22 +87,30 @@ pub fn parse_values(sc: &Scenario, param: &str, values: &[Number]) -> Result<Vec
     values
         .iter()
         .map(|n| {
+            if n.v.is_finite() {
+                return Ok(n.v);
+            }
             let t = &n.text;
-            Some(n.v).filter(|v| v.is_finite()).ok_or_else(|| {
-                // The range as the scenario's check states it for this parameter.
-                let mut probe = sc.clone();
-                let range = set_param(&mut probe, param, f64::NAN)
-                    .and_then(|_| probe.check())
-                    .err()
-                    .map(|e| match e.split_once(": ") {
-                        Some((key, why)) => {
-                            format!("; {} {why}", key.split(" = ").next().unwrap_or(key))
-                        }
-                        None => format!("; {e}"),
-                    })
-                    .unwrap_or_default();
-                format!("--param {param} --values {t}: not a finite number{range}")
-            })
+            // The scenario's own refusal of the value (as `Scenario.set` gives it in Python);
+            // where the scenario takes it (an infinite load is an open circuit), the range as
+            // the scenario states it for a NaN.
+            let mut s = sc.clone();
+            if let Err(e) = set_param(&mut s, param, n.v).and_then(|_| s.check()) {
+                return Err(format!("--param {param} --values {t}: {e}"));
+            }
+            let mut probe = sc.clone();
+            let range = set_param(&mut probe, param, f64::NAN)
+                .and_then(|_| probe.check())
+                .err()
+                .and_then(|e| {
+                    let (key, why) = e.split_once(": ")?;
+                    let key = key.split(" = ").next()?;
+                    Some(format!("; {key} {}", why.replace(" (or inf = open)", "")))
+                })
+                .unwrap_or_default();
+            Err(format!(
+                "--param {param} --values {t}: not a finite number{range}"
+            ))
         })
         .collect()
 }
@@ -161,7 +169,12 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         })
         .collect::<Result<_, String>>()?;
     check_out_dir(&a.out)?;
-    let reference = a.scenario.is_none();
+    // The reference sweep also runs the paper-equivalent device (per-phase peak K_e =
+    // 0.77·√1.5, whose consistent damping equals the paper's 9/4·0.77²) when the scenario's
+    // device is another: the paper's optimum reproduced in closed loop beside it.
+    let ke_p = 0.77 * 1.5f64.sqrt();
+    let reference =
+        a.scenario.is_none() && ((sc.machine.ke_v_s_per_rad - ke_p) / ke_p).abs() > 1e-6;
     let n = scs.len();
     let bar = Progress::new(
         &format!("sweep {}", a.param),
@@ -175,10 +188,6 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
             .collect()
     };
     let res = runs(&scs)?;
-    // The reference sweep also runs the paper-equivalent device (per-phase peak K_e =
-    // 0.77·√1.5, whose consistent damping equals the paper's 9/4·0.77²), so the plot shows
-    // the paper's optimum reproduced in closed loop beside the firmware-default device.
-    let ke_p = 0.77 * 1.5f64.sqrt();
     let paper_eq = if reference {
         let scs_p: Vec<Scenario> = scs
             .iter()
@@ -242,11 +251,11 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
     };
     let mut plot = Plot::new(
         format!(
-            "{}: mean power into the drive, {} runs of {} s",
+            "{}: mean harvested power, {} closed-loop runs of {} s",
             sc.name, n, sc.duration_s
         ),
         param_label(&a.param),
-        "mean harvested power (W)",
+        format!("mean harvested power after {} s (W)", sc.settle_s),
     );
     plot.xlog = a.param == "r_load_ohm";
     plot.fault_label = "invalid run (no power: drawn at 0 W)".into();
@@ -254,7 +263,7 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         faulted: with_fault(&res),
         ..Series::markers(
             format!(
-                "closed loop, K_e = {:.3} V·s/rad",
+                "closed loop, firmware in the loop (K_e = {:.3} V·s/rad)",
                 sc.machine.ke_v_s_per_rad
             ),
             points(&res),
@@ -339,14 +348,36 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         }
         header.push("p_analytic_w".into());
         header.push("p_paper_model_w".into());
-        plot.series.push(Series::line(
-            format!("harmonic balance (optimum {opt:.0} Ω)"),
-            an,
-        ));
-        plot.series.push(Series::line(
-            format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)"),
-            grid.iter().map(|&r| (r, paper(r))).collect(),
-        ));
+        let paper_curve: Vec<(f64, f64)> = grid.iter().map(|&r| (r, paper(r))).collect();
+        // The paper's curve is drawn only where it differs from the harmonic balance (with the
+        // reference K_e the two are the same curve: one line, one legend entry).
+        let same = an
+            .iter()
+            .zip(&paper_curve)
+            .all(|(a, b)| (a.1 - b.1).abs() <= 1e-6 * a.1.abs().max(b.1.abs()));
+        // The curves go under the closed-loop markers.
+        if same {
+            let name = "harmonic balance = paper's eq. 16 with 9/4·0.77²";
+            plot.series.insert(0, Series::line(name, an));
+        } else {
+            let name = format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)");
+            plot.series.insert(0, Series::line("harmonic balance", an));
+            plot.series.insert(1, Series::line(name, paper_curve));
+        }
+        plot.marks.push(Mark::VLine {
+            x: opt,
+            label: format!("analytic optimum R_L = {opt:.0} Ω"),
+        });
+    }
+    if let Some((v, r)) = best(&values, &res) {
+        plot.marks.push(Mark::Star {
+            at: (v, r.mean_power_w),
+            label: format!(
+                "best closed-loop point: {} = {v}, {}",
+                a.param,
+                si(r.mean_power_w, "W")
+            ),
+        });
     }
     let stem = format!("sweep-{}-{}", sc.name, a.param);
     let csv = a.out.join(format!("{stem}.csv"));
