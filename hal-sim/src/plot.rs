@@ -38,6 +38,8 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     pub style: Style,
     pub faulted: Vec<bool>,
+    /// Line width, px (default: 3 for the first two series, thinner after).
+    pub width: Option<u32>,
 }
 
 impl Series {
@@ -47,6 +49,7 @@ impl Series {
             points,
             style: Style::Line,
             faulted: Vec::new(),
+            width: None,
         }
     }
     pub fn markers(name: impl Into<String>, points: Vec<(f64, f64)>) -> Series {
@@ -72,6 +75,14 @@ pub struct Cells {
     pub rects: Vec<[f64; 4]>,
 }
 
+/// A mark on a plot, with its legend entry: a vertical dashed line at `x` (an event: the
+/// settle time), or a star at a point (an optimum).
+#[derive(Clone, Debug)]
+pub enum Mark {
+    VLine { x: f64, label: String },
+    Star { at: (f64, f64), label: String },
+}
+
 /// A plot: title, axis labels (with units), axes, series, and an optional x window.
 #[derive(Clone, Debug)]
 pub struct Plot {
@@ -93,6 +104,8 @@ pub struct Plot {
     pub colours: Vec<(u8, u8, u8)>,
     /// Legend text of the faulted points' mark.
     pub fault_label: String,
+    /// Marks drawn over the series ([`Mark`]).
+    pub marks: Vec<Mark>,
 }
 
 const COLOURS: [RGBColor; 6] = [
@@ -104,6 +117,7 @@ const COLOURS: [RGBColor; 6] = [
     RGBColor(0x17, 0xbe, 0xcf),
 ];
 const FAULT: RGBColor = RGBColor(0xd6, 0x27, 0x28);
+const MARK: RGBColor = RGBColor(0x33, 0x33, 0x33);
 
 impl Plot {
     pub fn new(
@@ -124,6 +138,7 @@ impl Plot {
             y_range: None,
             colours: Vec::new(),
             fault_label: "fault latched".into(),
+            marks: Vec::new(),
         }
     }
 
@@ -136,7 +151,7 @@ impl Plot {
             root.present()
                 .map_err(|e| format!("plot `{}`: {e}", self.title))?;
         }
-        Ok(text)
+        Ok(without_repeated_text(&text))
     }
 
     /// Render and write to `path` (its directory is created); the error names the path.
@@ -176,11 +191,21 @@ impl Plot {
             None if !self.cells.is_empty() => bounds(&xs),
             None => full_range(&xs, self.xlog),
         };
-        let (y0, y1) = match self.y_range {
+        let (y0, mut y1) = match self.y_range {
             Some(r) => r,
             None if !self.cells.is_empty() => bounds(&ys),
             None => robust_range(&ys, self.ylog),
         };
+        // When every corner the legend could take holds data, room is made for it above the
+        // data (a linear y axis whose range the data set).
+        if self.y_range.is_none() && self.cells.is_empty() && !self.ylog && !self.series.is_empty()
+        {
+            let counts = self.corner_counts(&pts, (x0, x1), (y0, y1));
+            if counts.iter().all(|&c| c > 0) {
+                let f = self.legend_fraction();
+                y1 += (y1 - y0) * f / (1.0 - f);
+            }
+        }
         match (self.xlog, self.ylog) {
             (false, false) => self.chart(root, x0..x1, y0..y1, &pts),
             (true, false) => self.chart(root, (x0..x1).log_scale(), y0..y1, &pts),
@@ -264,13 +289,16 @@ impl Plot {
             let marks = matches!(s.style, Style::Markers | Style::LineMarkers);
             let dots = s.style == Style::Dots;
             // Later series are drawn thinner so one lying on another leaves both visible.
-            let width = if line {
-                3usize.saturating_sub(k / 2).max(1) as u32
-            } else {
-                2
+            let width = match s.width {
+                Some(w) => w,
+                None if line => 3usize.saturating_sub(k / 2).max(1) as u32,
+                None => 2,
             };
+            // A point within 10⁻⁶ of the span from the frame (a zero computed as −1e-15) is on
+            // it, not beyond it.
+            let tol = 1e-6 * (yhi - ylo).abs();
             for q in p {
-                if q.1 < ylo || q.1 > yhi {
+                if q.1 < ylo - tol || q.1 > yhi + tol {
                     outliers.push(clamp((q.0, q.1)));
                 }
             }
@@ -315,24 +343,28 @@ impl Plot {
                 }
                 .map_err(e)?;
             }
-            // The legend entry: a line sample, a marker sample, or both.
-            ch.draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+            // The legend entry: a line sample (two dashes for a dashed line), or a marker
+            // sample for markers alone.
+            let anno = ch
+                .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
                 .map_err(e)?
-                .label(&s.name)
-                .legend(move |(x, y)| {
-                    // A line sample for a line, a marker sample for markers alone.
-                    let st = c.stroke_width(if line { width } else { 2 });
-                    match (line, shape) {
-                        (true, _) if dashed => {
-                            (PathElement::new(vec![(x, y), (x + 8, y)], st)).into_dyn()
-                        }
-                        (true, _) => PathElement::new(vec![(x, y), (x + 24, y)], st).into_dyn(),
-                        (false, _) if dots => Circle::new((x + 12, y), 3, c.filled()).into_dyn(),
-                        (false, 0) => Circle::new((x + 12, y), 4, st).into_dyn(),
-                        (false, 1) => TriangleMarker::new((x + 12, y), 5, st).into_dyn(),
-                        (false, _) => Cross::new((x + 12, y), 4, st).into_dyn(),
-                    }
+                .label(&s.name);
+            let st = c.stroke_width(if line { width } else { 2 });
+            if dashed {
+                anno.legend(move |(x, y)| {
+                    EmptyElement::at((x, y))
+                        + PathElement::new(vec![(0, 0), (9, 0)], st)
+                        + PathElement::new(vec![(15, 0), (24, 0)], st)
                 });
+            } else {
+                anno.legend(move |(x, y)| match (line, shape) {
+                    (true, _) => PathElement::new(vec![(x, y), (x + 24, y)], st).into_dyn(),
+                    (false, _) if dots => Circle::new((x + 12, y), 3, c.filled()).into_dyn(),
+                    (false, 0) => Circle::new((x + 12, y), 4, st).into_dyn(),
+                    (false, 1) => TriangleMarker::new((x + 12, y), 5, st).into_dyn(),
+                    (false, _) => Cross::new((x + 12, y), 4, st).into_dyn(),
+                });
+            }
             let bad: Vec<(f64, f64)> = p
                 .iter()
                 .filter(|q| q.2)
@@ -361,6 +393,36 @@ impl Plot {
             .label(format!("{n} point(s) beyond the range, drawn on the frame"))
             .legend(|(x, y)| TriangleMarker::new((x + 12, y), 6, FAULT.filled()));
         }
+        for m in &self.marks {
+            match m {
+                Mark::VLine { x, label } if *x >= xlo && *x <= xhi => {
+                    ch.draw_series(DashedLineSeries::new(
+                        [(*x, ylo), (*x, yhi)],
+                        6,
+                        4,
+                        MARK.stroke_width(1),
+                    ))
+                    .map_err(e)?
+                    .label(label)
+                    .legend(|(x, y)| {
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(12, -7), (12, -2)], MARK.stroke_width(1))
+                            + PathElement::new(vec![(12, 2), (12, 7)], MARK.stroke_width(1))
+                    });
+                }
+                Mark::Star { at, label } => {
+                    ch.draw_series(std::iter::once(
+                        EmptyElement::at(clamp(*at)) + Polygon::new(star(9), MARK.filled()),
+                    ))
+                    .map_err(e)?
+                    .label(label)
+                    .legend(|(x, y)| {
+                        EmptyElement::at((x + 12, y)) + Polygon::new(star(7), MARK.filled())
+                    });
+                }
+                Mark::VLine { .. } => {}
+            }
+        }
         if !self.series.is_empty() || !self.cells.is_empty() {
             ch.configure_series_labels()
                 .position(corner)
@@ -375,14 +437,24 @@ impl Plot {
 }
 
 impl Plot {
-    /// The corner of the plot holding the fewest points (each corner: 45 % of the width, 30 %
-    /// of the height), where the legend goes.
-    fn legend_corner(
+    /// The fraction of the plot's height the legend takes (its rows at 19 px, the frame's
+    /// height about 110 px less than the picture's).
+    fn legend_fraction(&self) -> f64 {
+        let rows = self.series.len()
+            + self.cells.len()
+            + self.marks.len()
+            + self.series.iter().any(|s| s.faulted.contains(&true)) as usize;
+        ((rows * 19 + 16) as f64 / (self.size.1 as f64 - 110.0)).clamp(0.1, 0.6)
+    }
+
+    /// The points in each corner the legend could take (upper right, upper left, lower right,
+    /// lower left; each 45 % of the width and the legend's fraction of the height).
+    fn corner_counts(
         &self,
         pts: &[Vec<(f64, f64, bool)>],
         (x0, x1): (f64, f64),
         (y0, y1): (f64, f64),
-    ) -> SeriesLabelPosition {
+    ) -> [usize; 4] {
         let fx = |x: f64| {
             if self.xlog {
                 (x.log10() - x0.log10()) / (x1.log10() - x0.log10())
@@ -397,15 +469,27 @@ impl Plot {
                 (y - y0) / (y1 - y0)
             }
         };
-        let mut count = [0usize; 4]; // upper right, upper left, lower right, lower left
+        let band = self.legend_fraction();
+        let mut count = [0usize; 4];
         for p in pts.iter().flatten() {
             let (u, v) = (fx(p.0), fy(p.1));
-            let (right, left, up, down) = (u > 0.55, u < 0.45, v > 0.7, v < 0.3);
+            let (right, left, up, down) = (u > 0.55, u < 0.45, v > 1.0 - band, v < band);
             count[0] += (right && up) as usize;
             count[1] += (left && up) as usize;
             count[2] += (right && down) as usize;
             count[3] += (left && down) as usize;
         }
+        count
+    }
+
+    /// The corner of the plot holding the fewest points, where the legend goes.
+    fn legend_corner(
+        &self,
+        pts: &[Vec<(f64, f64, bool)>],
+        xr: (f64, f64),
+        yr: (f64, f64),
+    ) -> SeriesLabelPosition {
+        let count = self.corner_counts(pts, xr, yr);
         let best = (0..4).min_by_key(|&k| count[k]).unwrap_or(0);
         match best {
             1 => SeriesLabelPosition::UpperLeft,
@@ -414,6 +498,52 @@ impl Plot {
             _ => SeriesLabelPosition::UpperRight,
         }
     }
+}
+
+/// A five-pointed star of outer radius `r` px around the origin (pixel offsets).
+fn star(r: i32) -> Vec<(i32, i32)> {
+    (0..10)
+        .map(|k| {
+            let a = std::f64::consts::PI * (k as f64 / 5.0 - 0.5);
+            let rr = if k % 2 == 0 {
+                r as f64
+            } else {
+                0.42 * r as f64
+            };
+            ((rr * a.cos()).round() as i32, (rr * a.sin()).round() as i32)
+        })
+        .collect()
+}
+
+/// The SVG without empty `<text>` elements and without a `<text>` element identical (position,
+/// style and text) to an earlier one: plotters gives a log axis's decades twice among its key
+/// points, and a label drawn twice on itself renders bold and ragged.
+fn without_repeated_text(svg: &str) -> String {
+    let mut out = String::with_capacity(svg.len());
+    let mut seen = std::collections::HashSet::new();
+    let mut rest = svg;
+    while let Some(k) = rest.find("<text") {
+        out.push_str(&rest[..k]);
+        let Some(end) = rest[k..].find("</text>").map(|e| k + e + "</text>".len()) else {
+            rest = &rest[k..];
+            break;
+        };
+        let el = &rest[k..end];
+        let body = el
+            .split_once('>')
+            .map_or("", |b| b.1)
+            .trim_end_matches("</text>");
+        if !body.trim().is_empty() && seen.insert(el.to_string()) {
+            out.push_str(el);
+        }
+        rest = &rest[end..];
+        // The newline after a dropped element goes with it.
+        if out.ends_with('\n') && rest.starts_with('\n') {
+            rest = &rest[1..];
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// The smallest and largest finite value.

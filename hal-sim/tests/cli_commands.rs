@@ -152,7 +152,23 @@ fn bad_command_line_values_are_refused() {
         &regen(&[
             "sweep", &sc, "--out", o, "--param", "freq_hz", "--values", "0.5,nan",
         ]),
-        &["freq_hz = NaN", "(0, 1000] Hz"],
+        &[
+            "--values nan: drive.excitation.freq_hz = NaN",
+            "(0, 1000] Hz",
+        ],
+    );
+    refused(
+        &regen(&[
+            "sweep",
+            &sc,
+            "--out",
+            o,
+            "--param",
+            "r_load_ohm",
+            "--values",
+            "10,1e400",
+        ]),
+        &["--values 1e400: not a finite number", "[0, 1000000000] Ω"],
     );
     refused(
         &regen(&[
@@ -219,7 +235,7 @@ fn sweep_reports_the_fault() {
         "--param",
         "a0_m_s2",
         "--values",
-        "1,1000",
+        "1,50",
     ]);
     let s = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -228,8 +244,15 @@ fn sweep_reports_the_fault() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(s.contains("best of the swept points: a0_m_s2 = 1,"), "{s}");
-    assert!(s.contains("faults latched in 1 of 2 runs"), "{s}");
-    assert!(s.contains("a0_m_s2 = 1000 (over_force)"), "{s}");
+    assert!(
+        s.contains("invalid runs: 1 of 2 (no power given, left out of the best): a0_m_s2 = 50"),
+        "{s}"
+    );
+    let line = s.lines().find(|l| l.contains("a0_m_s2 = 50 ")).unwrap();
+    assert!(
+        line.contains("INVALID: protection latched over_force") && !line.contains(" W"),
+        "{line}"
+    );
     let csv = std::fs::read_to_string(out.join("sweep-t-a0_m_s2.csv")).unwrap();
     let mut lines = csv.lines();
     let head: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -237,10 +260,18 @@ fn sweep_reports_the_fault() {
         .iter()
         .position(|h| *h == "fault")
         .expect("fault column");
-    let faults: Vec<String> = lines
-        .map(|l| l.split(',').nth(k).unwrap().to_string())
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(String::from).collect())
         .collect();
-    assert_eq!(faults, ["none", "over_force"]);
+    let col = |name: &str| {
+        let j = head.iter().position(|h| *h == name).unwrap();
+        rows.iter().map(|r| r[j].clone()).collect::<Vec<_>>()
+    };
+    assert_eq!(col("fault"), ["none", "over_force"]);
+    assert_eq!(col("valid"), ["true", "false"]);
+    // The invalid point has no power.
+    assert!(!col("p_closed_loop_w")[0].is_empty() && col("p_closed_loop_w")[1].is_empty());
+    let _ = k;
 }
 
 #[test]

@@ -125,7 +125,7 @@ fn every_plot_has_round_ticks_and_data() {
         std::fs::create_dir_all(k).unwrap();
     }
     let sc = d.join("tmd.toml");
-    std::fs::write(&sc, "name = \"tmd\"\nduration_s = 4.0\nsettle_s = 2.0\n[law]\nkind = \"resistor\"\nr_load_ohm = 306.0\n[drive]\nkind = \"structure\"\n[drive.excitation]\nkind = \"sine\"\na0_m_s2 = 1.0\nfreq_hz = 0.5\n[record]\nchannels = [\"t\", \"x\", \"v\", \"force\"]\nevery = 20\n").unwrap();
+    std::fs::write(&sc, "name = \"tmd\"\nduration_s = 4.0\nsettle_s = 2.0\n[law]\nkind = \"resistor\"\nr_load_ohm = 306.0\n[drive]\nkind = \"structure\"\n[drive.excitation]\nkind = \"sine\"\na0_m_s2 = 1.0\nfreq_hz = 0.5\n[record]\nchannels = [\"t\", \"x\", \"v\", \"force\", \"i_d\", \"i_q\", \"i_q_ref\", \"v_bus\", \"p_inverter\"]\nevery = 20\n").unwrap();
     let sc = sc.to_str().unwrap();
     let run = d.join("run");
     regen(&[
@@ -154,7 +154,7 @@ fn every_plot_has_round_ticks_and_data() {
         "--param",
         "a0_m_s2",
         "--values",
-        "0.5,1,2,1000",
+        "0.5,1,2,50",
     ]);
     // A synthetic record: inertia, viscous and Coulomb friction on a 2 Hz stroke, 1 kHz.
     let mut rec = String::from("t_s,x_m,f_N\n");

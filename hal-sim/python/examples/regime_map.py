@@ -10,7 +10,9 @@ switching and conduction losses (the logic supply is the same for both laws), W.
     python hal-sim/python/examples/regime_map.py --scheduler tcp://host:8786
     python hal-sim/python/examples/regime_map.py --no-dask            # local process pool
 
-Writes OUT/regime-map.csv and OUT/regime-map.svg (and .png when matplotlib is installed).
+Writes OUT/regime-map.csv and OUT/regime-map.svg (and .png when matplotlib is installed);
+OUT is regen-out/ by default (the reviewed figures in docs/figures/ are replaced only by
+asking for it: --out docs/figures).
 """
 
 import argparse
@@ -36,22 +38,26 @@ def base_scenario(duration_s: float, settle_s: float, r_on_ohm: float) -> rs.Sce
 
 
 def svg_map(path, xs, ys, z, xlabel, ylabel, title):
-    """A log-log heat map of z (rows: ys, columns: xs) in plain SVG: blue where z > 0 (two-way
-    wins), red where z < 0; the number in each cell."""
-    w, h, l, t, cw, ch = 760, 520, 110, 50, 600 / len(xs), 400 / len(ys)
+    """A heat map of z (rows: ys, columns: xs) in plain SVG: blue where z > 0 (two-way wins),
+    red where z < 0, the shade on a square-root scale of |z|, the number in each cell, and a
+    colour bar on the right that gives the scale in W."""
+    w, h, l, t, cw, ch = 840, 520, 110, 50, 600 / len(xs), 400 / len(ys)
     m = max(1e-12, float(np.nanmax(np.abs(z))))
+
+    def colour(v):
+        a = min(1.0, abs(v) / m) ** 0.5
+        return f"rgba(40,90,200,{a:.2f})" if v > 0 else f"rgba(210,50,40,{a:.2f})"
+
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" '
            'font-family="sans-serif" font-size="12">',
            f'<rect width="{w}" height="{h}" fill="white"/>',
-           f'<text x="{w / 2}" y="25" text-anchor="middle" font-size="15">{title}</text>']
+           f'<text x="{l + 300}" y="25" text-anchor="middle" font-size="15">{title}</text>']
     for i, y in enumerate(ys):
         for j, x in enumerate(xs):
             v = z[i, j]
-            a = min(1.0, abs(v) / m) ** 0.5
-            col = (f"rgba(40,90,200,{a:.2f})" if v > 0 else f"rgba(210,50,40,{a:.2f})")
             px, py = l + j * cw, t + (len(ys) - 1 - i) * ch
             out.append(f'<rect x="{px:.1f}" y="{py:.1f}" width="{cw:.1f}" height="{ch:.1f}" '
-                       f'fill="{col}" stroke="#888"/>')
+                       f'fill="{colour(v)}" stroke="#888"/>')
             out.append(f'<text x="{px + cw / 2:.1f}" y="{py + ch / 2 + 4:.1f}" '
                        f'text-anchor="middle">{v:+.3g}</text>')
     for j, x in enumerate(xs):
@@ -63,6 +69,23 @@ def svg_map(path, xs, ys, z, xlabel, ylabel, title):
     out.append(f'<text x="{l + 300}" y="{t + 400 + 40}" text-anchor="middle">{xlabel}</text>')
     out.append(f'<text x="20" y="{t + 200}" transform="rotate(-90 20 {t + 200})" '
                f'text-anchor="middle">{ylabel}</text>')
+    # The colour bar: -m (bottom) to +m (top) in 80 bands, ticks at 0, ±m/4 and ±m (the
+    # square-root shade makes ±m/4 half as dark as ±m).
+    bx, bw, n = l + 600 + 30, 22, 80
+    for k in range(n):
+        v = m * (1 - 2 * (k + 0.5) / n)
+        out.append(f'<rect x="{bx}" y="{t + k * 400 / n:.2f}" width="{bw}" '
+                   f'height="{400 / n + 0.3:.2f}" fill="{colour(v)}"/>')
+    out.append(f'<rect x="{bx}" y="{t}" width="{bw}" height="400" fill="none" stroke="#444"/>')
+    for v in (m, m / 4, 0.0, -m / 4, -m):
+        y = t + 200 * (1 - v / m)
+        out.append(f'<line x1="{bx + bw}" y1="{y:.1f}" x2="{bx + bw + 5}" y2="{y:.1f}" '
+                   'stroke="#444"/>')
+        out.append(f'<text x="{bx + bw + 8}" y="{y + 4:.1f}">'
+                   f'{"0" if v == 0 else format(v, "+.2g")}</text>')
+    out.append(f'<text x="{bx + bw + 58}" y="{t + 200}" '
+               f'transform="rotate(-90 {bx + bw + 58} {t + 200})" text-anchor="middle">'
+               'W (blue: two-way pays)</text>')
     out.append("</svg>")
     pathlib.Path(path).write_text("\n".join(out) + "\n")
 
@@ -75,7 +98,7 @@ def main():
     ap.add_argument("--seeds", type=int, default=2, help="ensemble size per point")
     ap.add_argument("--duration", type=float, default=40.0, help="simulated s per run")
     ap.add_argument("--settle", type=float, default=10.0, help="s before averaging")
-    ap.add_argument("--out", default="docs/figures")
+    ap.add_argument("--out", default="regen-out", help="output folder (default: regen-out)")
     a = ap.parse_args()
 
     s0 = [1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2]  # (m/s²)²/(rad/s)

@@ -320,8 +320,9 @@ fn energy_dict<'py>(py: Python<'py>, e: &Energy) -> PyResult<Bound<'py, PyDict>>
 
 /// One closed-loop run (`regen run`'s loop, `hal_sim::cli::run::simulate`) with the GIL
 /// released. Returns a dict: `channels` (name → float64 array), `energy` and
-/// `energy_at_settle` (J), `fault`, `faults_text`, `steps`, `settle_step`, `period_s`,
-/// `wall_s`, `summary`.
+/// `energy_at_settle` (J), `fault`, `faults_text`, `valid` and `why` (the run's verdict,
+/// `hal_sim::summary::verdict`: why it is not a result, or None), `steps`, `settle_step`,
+/// `period_s`, `wall_s`, `summary`.
 #[pyfunction]
 #[pyo3(signature = (scenario, record = true))]
 fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<PyAny>> {
@@ -348,6 +349,8 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
     )?;
     d.set_item("fault", o.summary.fault)?;
     d.set_item("faults_text", o.faults_text.clone())?;
+    d.set_item("valid", o.summary.valid())?;
+    d.set_item("why", o.summary.invalid.clone())?;
     d.set_item("steps", o.summary.steps)?;
     d.set_item("settle_step", o.summary.settle_step)?;
     let period = 1.0 / f64::from(sc.firmware.pwm_hz);
@@ -370,6 +373,8 @@ fn simulate(py: Python<'_>, scenario: &PyScenario, record: bool) -> PyResult<Py<
     s.set_item("energy_residual_j", o.summary.energy.residual())?;
     s.set_item("energy_residual_rel", o.summary.energy.relative_residual())?;
     s.set_item("fault", o.summary.fault)?;
+    s.set_item("valid", o.summary.valid())?;
+    s.set_item("why", o.summary.invalid.clone())?;
     // Mean power of every flow after settle_s, W: ΔE over the periods after the settle step.
     let span = (o.summary.steps - o.summary.settle_step) as f64 * period;
     if span > 0.0 {
@@ -552,6 +557,7 @@ fn names(py: Python<'_>) -> PyResult<Py<PyAny>> {
 #[pymodule]
 fn _regensim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("RegenError", m.py().get_type::<RegenError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<PyScenario>()?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(sizing, m)?)?;

@@ -69,6 +69,35 @@ def test_simulate_same_bits_as_cli(regen, tmp_path):
     assert s["p_to_inverter_w"] == (energy["to_inverter"] - r.energy_at_settle["to_inverter"]) / span
 
 
+def test_invalid_run_has_the_cli_verdict(regen, tmp_path):
+    """A run whose protection latches is returned with valid=False and the line `regen run`
+    exits 1 with; a valid run says valid=True."""
+    text = TMD.read_text().replace("a0_m_s2 = 1.0", "a0_m_s2 = 50.0")
+    path = tmp_path / "hard.toml"
+    path.write_text(text)
+    code, out, err = regen("run", path, "-q", "--out", tmp_path)
+    assert code == 1 and "INVALID run" in out, err
+    why = cli_error(err).removeprefix("invalid run: ")
+    r = rs.simulate(rs.Scenario.from_file(path), record=False)
+    assert (r.valid, r.why) == (False, why)
+    assert (r.summary["valid"], r.summary["why"]) == (False, why)
+    assert why.startswith("protection latched over_force")
+    ok = rs.simulate(rs.Scenario.tmd(306.0), record=False)
+    assert ok.valid and ok.why is None
+
+
+def test_short_repr_and_version():
+    import importlib.metadata
+
+    r = rs.simulate(rs.Scenario.tmd(306.0))
+    text = repr(r)
+    # One line, no array: the channels by name and their length.
+    assert "\n" not in text and len(text) < 300 and "array" not in text, text
+    assert text.startswith("RunResult(name='tmd', duration_s=12.0, valid=True, mean_power_w=")
+    assert f"x {len(r.channels['t'])})" in text and "channels=[t, x" in text
+    assert rs.__version__ == importlib.metadata.version("regensim")
+
+
 BAD_FILES = {
     "unknown_key": "[machine]\nr_ohmm = 3.0\n",
     "registry_range": "[law]\nkind = \"resistor\"\n[law.set]\ncurrent_bw_hz = 1.0e9\n",

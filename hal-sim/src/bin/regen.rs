@@ -69,7 +69,35 @@ fn parse() -> Cli {
     }
 }
 
+/// A reader that goes away (`regen client … | head -2`, a closed terminal) ends the command
+/// quietly: on Unix SIGPIPE gets its default action back (the process ends as `cat` or `grep`
+/// does under a closed pipe, status 141 in a shell), and a write to a standard stream that
+/// fails otherwise (a hung-up terminal: EIO) ends it with status 1 and no message, where
+/// `println!` would panic.
+fn quiet_on_closed_output() {
+    #[cfg(unix)]
+    {
+        use nix::sys::signal::{signal, SigHandler, Signal};
+        // SAFETY: restoring the default disposition installs no handler.
+        let _ = unsafe { signal(Signal::SIGPIPE, SigHandler::SigDfl) };
+    }
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.starts_with("failed printing to std") {
+            std::process::exit(1);
+        }
+        default(info);
+    }));
+}
+
 fn main() {
+    quiet_on_closed_output();
     let c = parse();
     let r = match c.command {
         Some(Command::Sizing(a)) => cli::sizing::run(&a),

@@ -1,13 +1,15 @@
 //! `regen run SCENARIO`: one closed-loop run → its answer (mean harvested power after
 //! settling, peak force, energy balance, faults latched; [`crate::summary::RunSummary`]), a
-//! CSV of the recorded channels and plots of force against time, displacement and velocity.
+//! CSV of the recorded channels and plots of force against time, displacement and velocity,
+//! and, when recorded, of the currents against their references, the bus voltage and the
+//! power into the drive, the settle time marked on each plot against time.
 
 use super::output::{check_out_dir, write};
 use super::progress::Progress;
-use crate::plot::{Plot, Series};
+use crate::plot::{Mark, Plot, Series};
 use crate::scenario::Scenario;
 use crate::sim::{Channel, Energy, Recorder};
-use crate::summary::{run_to_end, RunSummary};
+use crate::summary::{run_to_end, si, RunSummary};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -179,6 +181,10 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             let zip =
                 |a: &[f64], b: &[f64]| a.iter().copied().zip(b.iter().copied()).collect::<Vec<_>>();
             let what = format!("{} ({}, {} s)", sc.name, sc.law.kind, sc.duration_s);
+            let settle = Mark::VLine {
+                x: s.settle_s,
+                label: format!("settled: averages from t = {} s", s.settle_s),
+            };
             for (file, title, xl, xs, win) in [
                 (
                     "force-x",
@@ -199,8 +205,85 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
                 let mut p = Plot::new(format!("{what}: {title}"), xl, "force on the device (N)");
                 p.series.push(Series::line("force", zip(xs, &f)));
                 p.window = win;
+                if file == "force-t" {
+                    p.marks.push(settle.clone());
+                }
                 let path = p.write_svg(&a.out.join(format!("{}-{file}.svg", sc.name)))?;
                 println!("plot: {}", path.display());
+            }
+            let time_plot = |file: &str, title: &str, ylabel: &str, series: Vec<Series>| {
+                let mut p = Plot::new(format!("{what}: {title}"), "time t (s)", ylabel);
+                if file == "currents" {
+                    // The reference light, the measured current dark, i_d apart.
+                    p.colours = vec![(0x9e, 0xc5, 0xe8), (0x08, 0x30, 0x6b), (0xe6, 0x55, 0x0d)];
+                }
+                p.series = series;
+                p.window = window;
+                p.marks.push(settle.clone());
+                let path = p.write_svg(&a.out.join(format!("{}-{file}.svg", sc.name)))?;
+                println!("plot: {}", path.display());
+                Ok::<(), String>(())
+            };
+            if let (Some(iq), Some(iq_ref)) = (col(Channel::Iq), col(Channel::IqRef)) {
+                // The reference wide and light under the measured current, thin and dark.
+                let mut series = vec![
+                    Series {
+                        width: Some(5),
+                        ..Series::line("reference i_q* (the law's command)", zip(&t, &iq_ref))
+                    },
+                    Series {
+                        width: Some(1),
+                        ..Series::line("q current i_q (measured by the firmware)", zip(&t, &iq))
+                    },
+                ];
+                if let Some(id) = col(Channel::Id) {
+                    series.push(Series::line("d current i_d (reference 0 A)", zip(&t, &id)));
+                }
+                time_plot(
+                    "currents",
+                    "currents against their references",
+                    "current (A)",
+                    series,
+                )?;
+            }
+            if let Some(vb) = col(Channel::VBus) {
+                // A bus held by its source moves by millivolts: then its deviation from the
+                // first sample is drawn, in mV (round ticks, the ripple visible).
+                let v0 = vb.first().copied().unwrap_or(0.0);
+                let (lo, hi) = vb.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |m, &v| {
+                    (m.0.min(v), m.1.max(v))
+                });
+                let (ylabel, series) = if hi - lo < 0.01 * v0.abs() {
+                    let dv: Vec<f64> = vb.iter().map(|v| (v - v0) * 1e3).collect();
+                    (
+                        format!("bus voltage − {v0:.1} V (mV)"),
+                        Series::line(format!("bus voltage v_bus − {v0:.1} V"), zip(&t, &dv)),
+                    )
+                } else {
+                    (
+                        "bus voltage (V)".to_string(),
+                        Series::line("bus voltage v_bus", zip(&t, &vb)),
+                    )
+                };
+                time_plot("bus", "DC bus voltage", &ylabel, vec![series])?;
+            }
+            if let Some(pw) = col(Channel::PInverter) {
+                let mut series = vec![Series::line(
+                    "power from the machine into the inverter",
+                    zip(&t, &pw),
+                )];
+                if s.valid() {
+                    series.push(Series::line(
+                        format!("mean after settling: {}", si(s.mean_power_w, "W")),
+                        vec![(s.settle_s, s.mean_power_w), (s.duration_s, s.mean_power_w)],
+                    ));
+                }
+                time_plot(
+                    "power",
+                    "harvested power",
+                    "power into the drive (W)",
+                    series,
+                )?;
             }
         }
     }
@@ -216,7 +299,10 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     }
     println!("{}", exact_ledger_line(&s.energy));
     print!("{}", s.text());
-    Ok(())
+    match &s.invalid {
+        Some(why) => Err(format!("invalid run: {why}")),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]

@@ -1,15 +1,16 @@
 //! `regen sweep SCENARIO --param NAME --values ...`: one closed-loop run per value, in
 //! parallel (rayon), average power into the drive after `settle_s`; for the resistor load
 //! the analytic harmonic-balance curve is drawn beside it. With no scenario: the reference
-//! TMD sweep (what `cargo run --release` with no arguments does). Every run's fault is
-//! reported (text, the CSV's `fault` column, a red cross in the plot); the best point is the
-//! best of the runs that did not fault.
+//! TMD sweep (what `cargo run --release` with no arguments does). Every run is checked
+//! ([`crate::summary::verdict`]); an invalid one is reported with why, without a power (text,
+//! the CSV's `valid` and `invalid_why` columns, a red cross at 0 W in the plot), and the best
+//! point is the best of the valid runs.
 
 use super::output::{check_out_dir, write};
 use super::progress::Progress;
 use crate::analytic::{logspace, optimum_load, tmd_power, DampingFormula};
 use crate::plant::{Drive, Excitation};
-use crate::plot::{Plot, Series};
+use crate::plot::{Mark, Plot, Series};
 use crate::scenario::Scenario;
 use crate::summary::{run_scenario, si, RunSummary};
 use rayon::prelude::*;
@@ -24,8 +25,8 @@ pub struct SweepArgs {
     pub param: String,
     /// Values, comma separated, in the parameter's unit (its name's suffix: ohm, m_s2 = m/s²,
     /// hz, v_s_per_rad); default for r_load_ohm: 13 loads from 10 Ω to 1 kΩ including 306 Ω.
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    pub values: Vec<f64>,
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_parser = number)]
+    pub values: Vec<Number>,
     /// Output directory.
     #[arg(long, default_value = "regen-out")]
     pub out: PathBuf,
@@ -61,10 +62,67 @@ pub fn set_param(sc: &mut Scenario, name: &str, v: f64) -> Result<(), String> {
     Ok(())
 }
 
+/// A number as given on the command line: its value and its text.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Number {
+    pub v: f64,
+    pub text: String,
+}
+
+/// Text that is not a number is a usage error (clap's); `nan`, `inf` and an overflowing
+/// `1e400` are numbers here and refused by [`parse_values`] with the parameter's range.
+fn number(t: &str) -> Result<Number, String> {
+    t.trim()
+        .parse::<f64>()
+        .map(|v| Number {
+            v,
+            text: t.to_string(),
+        })
+        .map_err(|_| "not a number".to_string())
+}
+
+/// `--values` checked as finite numbers; a value that is not one (text, `nan`, `inf`, `1e400`,
+/// which overflows to inf) is refused with the parameter's key and allowed range.
+pub fn parse_values(sc: &Scenario, param: &str, values: &[Number]) -> Result<Vec<f64>, String> {
+    values
+        .iter()
+        .map(|n| {
+            if n.v.is_finite() {
+                return Ok(n.v);
+            }
+            let t = &n.text;
+            // The scenario's own refusal of the value (as `Scenario.set` gives it in Python);
+            // where the scenario takes it (an infinite load is an open circuit), the range as
+            // the scenario states it for a NaN.
+            let mut s = sc.clone();
+            if let Err(e) = set_param(&mut s, param, n.v).and_then(|_| s.check()) {
+                return Err(format!("--param {param} --values {t}: {e}"));
+            }
+            let mut probe = sc.clone();
+            let range = set_param(&mut probe, param, f64::NAN)
+                .and_then(|_| probe.check())
+                .err()
+                .and_then(|e| {
+                    let (key, why) = e.split_once(": ")?;
+                    let key = key.split(" = ").next()?;
+                    Some(format!("; {key} {}", why.replace(" (or inf = open)", "")))
+                })
+                .unwrap_or_default();
+            Err(format!(
+                "--param {param} --values {t}: not a finite number{range}"
+            ))
+        })
+        .collect()
+}
+
 /// Average power from the machine into the drive after `settle_s`, W, and the run's
-/// relative energy residual ([`run_scenario`]'s figures).
+/// relative energy residual ([`run_scenario`]'s figures); an invalid run
+/// ([`crate::summary::verdict`]) is an error naming why.
 pub fn average_power(sc: &Scenario) -> Result<(f64, f64), String> {
     let r = run_scenario(sc, &mut |_| {})?;
+    if let Some(why) = &r.invalid {
+        return Err(format!("{}: invalid run: {why}", sc.name));
+    }
     Ok((r.mean_power_w, r.energy.relative_residual()))
 }
 
@@ -96,7 +154,8 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         }
         DEFAULT_LOADS.to_vec()
     } else {
-        a.values.clone()
+        set_param(&mut sc.clone(), &a.param, 1.0)?;
+        parse_values(&sc, &a.param, &a.values)?
     };
     let scs: Vec<Scenario> = values
         .iter()
@@ -110,7 +169,12 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         })
         .collect::<Result<_, String>>()?;
     check_out_dir(&a.out)?;
-    let reference = a.scenario.is_none();
+    // The reference sweep also runs the paper-equivalent device (per-phase peak K_e =
+    // 0.77·√1.5, whose consistent damping equals the paper's 9/4·0.77²) when the scenario's
+    // device is another: the paper's optimum reproduced in closed loop beside it.
+    let ke_p = 0.77 * 1.5f64.sqrt();
+    let reference =
+        a.scenario.is_none() && ((sc.machine.ke_v_s_per_rad - ke_p) / ke_p).abs() > 1e-6;
     let n = scs.len();
     let bar = Progress::new(
         &format!("sweep {}", a.param),
@@ -124,10 +188,6 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
             .collect()
     };
     let res = runs(&scs)?;
-    // The reference sweep also runs the paper-equivalent device (per-phase peak K_e =
-    // 0.77·√1.5, whose consistent damping equals the paper's 9/4·0.77²), so the plot shows
-    // the paper's optimum reproduced in closed loop beside the firmware-default device.
-    let ke_p = 0.77 * 1.5f64.sqrt();
     let paper_eq = if reference {
         let scs_p: Vec<Scenario> = scs
             .iter()
@@ -144,12 +204,27 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
     bar.finish();
     let wall = t.elapsed().as_secs_f64();
     let fault_of = |r: &RunSummary| r.fault.unwrap_or("none");
+    // An invalid run's power is not a result: an empty CSV field, no figure in the text, its
+    // mark at 0 W in the plot.
+    let power_field = |r: &RunSummary| {
+        if r.valid() {
+            format!("{:.6e}", r.mean_power_w)
+        } else {
+            String::new()
+        }
+    };
+    let why_field = |r: &RunSummary| match &r.invalid {
+        Some(w) => w.replace(',', ";"),
+        None => String::new(),
+    };
     let mut header: Vec<String> = vec![
         a.param.clone(),
         "p_closed_loop_w".into(),
         "peak_force_n".into(),
         "energy_residual_rel".into(),
         "fault".into(),
+        "valid".into(),
+        "invalid_why".into(),
     ];
     let mut rows: Vec<Vec<String>> = values
         .iter()
@@ -157,36 +232,38 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         .map(|(v, r)| {
             vec![
                 format!("{v:.6e}"),
-                format!("{:.6e}", r.mean_power_w),
+                power_field(r),
                 format!("{:.6e}", r.peak_force_n),
                 format!("{:.3e}", r.energy.relative_residual()),
                 fault_of(r).to_string(),
+                r.valid().to_string(),
+                why_field(r),
             ]
         })
         .collect();
-    let with_fault =
-        |rs: &[RunSummary]| -> Vec<bool> { rs.iter().map(|r| r.fault.is_some()).collect() };
+    let with_fault = |rs: &[RunSummary]| -> Vec<bool> { rs.iter().map(|r| !r.valid()).collect() };
     let points = |rs: &[RunSummary]| -> Vec<(f64, f64)> {
         values
             .iter()
             .zip(rs)
-            .map(|(v, r)| (*v, r.mean_power_w))
+            .map(|(v, r)| (*v, if r.valid() { r.mean_power_w } else { 0.0 }))
             .collect()
     };
     let mut plot = Plot::new(
         format!(
-            "{}: mean power into the drive, {} runs of {} s",
+            "{}: mean harvested power, {} closed-loop runs of {} s",
             sc.name, n, sc.duration_s
         ),
         param_label(&a.param),
-        "mean harvested power (W)",
+        format!("mean harvested power after {} s (W)", sc.settle_s),
     );
     plot.xlog = a.param == "r_load_ohm";
+    plot.fault_label = "invalid run (no power: drawn at 0 W)".into();
     plot.series.push(Series {
         faulted: with_fault(&res),
         ..Series::markers(
             format!(
-                "closed loop, K_e = {:.3} V·s/rad",
+                "closed loop, firmware in the loop (K_e = {:.3} V·s/rad)",
                 sc.machine.ke_v_s_per_rad
             ),
             points(&res),
@@ -195,11 +272,13 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
     let mut answer = Vec::new();
     if let Some(pe) = &paper_eq {
         for (row, r) in rows.iter_mut().zip(pe) {
-            row.push(format!("{:.6e}", r.mean_power_w));
+            row.push(power_field(r));
             row.push(fault_of(r).to_string());
+            row.push(r.valid().to_string());
         }
         header.push("p_closed_loop_paper_equivalent_w".into());
         header.push("fault_paper_equivalent".into());
+        header.push("valid_paper_equivalent".into());
         plot.series.push(Series {
             faulted: with_fault(pe),
             ..Series::markers(
@@ -269,14 +348,36 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         }
         header.push("p_analytic_w".into());
         header.push("p_paper_model_w".into());
-        plot.series.push(Series::line(
-            format!("harmonic balance (optimum {opt:.0} Ω)"),
-            an,
-        ));
-        plot.series.push(Series::line(
-            format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)"),
-            grid.iter().map(|&r| (r, paper(r))).collect(),
-        ));
+        let paper_curve: Vec<(f64, f64)> = grid.iter().map(|&r| (r, paper(r))).collect();
+        // The paper's curve is drawn only where it differs from the harmonic balance (with the
+        // reference K_e the two are the same curve: one line, one legend entry).
+        let same = an
+            .iter()
+            .zip(&paper_curve)
+            .all(|(a, b)| (a.1 - b.1).abs() <= 1e-6 * a.1.abs().max(b.1.abs()));
+        // The curves go under the closed-loop markers.
+        if same {
+            let name = "harmonic balance = paper's eq. 16 with 9/4·0.77²";
+            plot.series.insert(0, Series::line(name, an));
+        } else {
+            let name = format!("paper's model, 9/4·0.77² (optimum {opt_paper:.0} Ω)");
+            plot.series.insert(0, Series::line("harmonic balance", an));
+            plot.series.insert(1, Series::line(name, paper_curve));
+        }
+        plot.marks.push(Mark::VLine {
+            x: opt,
+            label: format!("analytic optimum R_L = {opt:.0} Ω"),
+        });
+    }
+    if let Some((v, r)) = best(&values, &res) {
+        plot.marks.push(Mark::Star {
+            at: (v, r.mean_power_w),
+            label: format!(
+                "best closed-loop point: {} = {v}, {}",
+                a.param,
+                si(r.mean_power_w, "W")
+            ),
+        });
     }
     let stem = format!("sweep-{}-{}", sc.name, a.param);
     let csv = a.out.join(format!("{stem}.csv"));
@@ -291,56 +392,56 @@ pub fn run(a: &SweepArgs) -> Result<(), String> {
         sc.duration_s
     );
     for (v, r) in values.iter().zip(&res) {
-        println!(
-            "  {} = {v:<10}  mean power {:>11}  peak force {:>10}  energy residual {:.1e}{}",
-            a.param,
-            si(r.mean_power_w, "W"),
-            si(r.peak_force_n, "N"),
-            r.energy.relative_residual(),
-            r.fault
-                .map(|f| format!(
-                    "  FAULT {f} at t = {:.3} s",
-                    r.fault_t_s.unwrap_or(f64::NAN)
-                ))
-                .unwrap_or_default()
-        );
+        match &r.invalid {
+            None => println!(
+                "  {} = {v:<10}  mean power {:>11}  peak force {:>10}  energy residual {:.1e}",
+                a.param,
+                si(r.mean_power_w, "W"),
+                si(r.peak_force_n, "N"),
+                r.energy.relative_residual(),
+            ),
+            Some(why) => println!("  {} = {v:<10}  INVALID: {why}", a.param),
+        }
     }
     println!("CSV: {}\nplot: {}", csv.display(), svg.display());
     for l in &answer {
         println!("{l}");
     }
-    let faulted: Vec<String> = values
+    let invalid: Vec<String> = values
         .iter()
         .zip(&res)
-        .filter_map(|(v, r)| r.fault.map(|f| format!("{} = {v} ({f})", a.param)))
+        .filter(|(_, r)| !r.valid())
+        .map(|(v, _)| format!("{} = {v}", a.param))
         .collect();
-    match best(&values, &res) {
-        Some((v, r)) => println!(
-            "best of the swept points: {} = {v}, mean harvested power {}, peak force {}",
-            a.param,
-            si(r.mean_power_w, "W"),
-            si(r.peak_force_n, "N")
-        ),
-        None => println!("best of the swept points: none, every run latched a fault"),
-    }
-    if faulted.is_empty() {
-        println!("faults latched: none");
+    if invalid.is_empty() {
+        println!("invalid runs: none");
     } else {
         println!(
-            "faults latched in {} of {n} runs (their power is not a result): {}",
-            faulted.len(),
-            faulted.join(", ")
+            "invalid runs: {} of {n} (no power given, left out of the best): {}",
+            invalid.len(),
+            invalid.join(", ")
         );
     }
-    Ok(())
+    match best(&values, &res) {
+        Some((v, r)) => {
+            println!(
+                "best of the swept points: {} = {v}, mean harvested power {}, peak force {}",
+                a.param,
+                si(r.mean_power_w, "W"),
+                si(r.peak_force_n, "N")
+            );
+            Ok(())
+        }
+        None => Err("no valid run: the sweep has no best point".into()),
+    }
 }
 
-/// The run of highest mean power among those that latched no fault.
+/// The valid run of highest mean power ([`crate::summary::verdict`]).
 fn best<'a>(values: &[f64], rs: &'a [RunSummary]) -> Option<(f64, &'a RunSummary)> {
     values
         .iter()
         .copied()
         .zip(rs)
-        .filter(|(_, r)| r.fault.is_none() && r.mean_power_w.is_finite())
+        .filter(|(_, r)| r.valid() && r.mean_power_w.is_finite())
         .max_by(|a, b| a.1.mean_power_w.total_cmp(&b.1.mean_power_w))
 }

@@ -11,6 +11,11 @@ Units are SI throughout and named in the keys (``_s``, ``_w``, ``_ohm``, ...); e
 
 Refused input raises :class:`RegenError` (a ``ValueError``) carrying the command line's
 message: the key, the value and the allowed range; the object is left unchanged.
+
+A run that completes but is not a result (its protection latched, its energy ledger does not
+close, its state left the model's range) is returned, as ``scipy.optimize`` returns a failed
+fit, with ``valid = False`` and ``why`` saying why in one line (``regen run`` exits 1 with the
+same line); its figures are not the device's. Check ``run.valid`` before using a power.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from typing import Any, Dict, Optional, Union
 
 import numpy as np
 
-from ._regensim import RegenError, Scenario
+from ._regensim import RegenError, Scenario, __version__
 from ._regensim import design_two_way as _design_two_way
 from ._regensim import diagnose_csv as _diagnose_csv
 from ._regensim import names as _names
@@ -32,6 +37,7 @@ from ._regensim import tmd_power as _tmd_power
 from .study import study
 
 __all__ = [
+    "__version__",
     "RegenError",
     "Scenario",
     "RunResult",
@@ -65,11 +71,14 @@ class RunResult:
         energy_at_settle: the ledger after the PWM period nearest ``settle_s``, J.
         fault: name of the latched firmware fault, or None.
         faults_text: the firmware console's ``faults`` reply (snapshot, safe state), or None.
+        valid: whether the run is a result (``regen run``'s verdict: no protection latched,
+            the energy ledger closed, the state inside the model's range).
+        why: why the run is not a result, one line (None when ``valid``).
         steps: PWM periods simulated; settle_step: the one ``energy_at_settle`` follows.
         period_s: the PWM period, s. wall_s: wall time of the stepping, s.
         summary: the run's figures: name, durations (s), ``real_time_factor``,
-            ``energy_residual_j``, ``energy_residual_rel``, ``fault`` and the mean power of each
-            ledger flow after ``settle_s`` as ``p_<flow>_w`` (W).
+            ``energy_residual_j``, ``energy_residual_rel``, ``fault``, ``valid``, ``why`` and
+            the mean power of each ledger flow after ``settle_s`` as ``p_<flow>_w`` (W).
     """
 
     channels: Dict[str, np.ndarray]
@@ -77,11 +86,25 @@ class RunResult:
     energy_at_settle: Dict[str, float]
     fault: Optional[str]
     faults_text: Optional[str]
+    valid: bool
+    why: Optional[str]
     steps: int
     settle_step: int
     period_s: float
     wall_s: float
     summary: Dict[str, Any] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """One line: the scenario, the verdict, the mean power (valid runs), the channels."""
+        s = self.summary
+        n = len(next(iter(self.channels.values()))) if self.channels else 0
+        head = f"RunResult(name={s.get('name')!r}, duration_s={s.get('duration_s')}, "
+        if self.valid:
+            verdict = f"valid=True, mean_power_w={s.get('mean_power_w', float('nan')):.4g}"
+        else:
+            verdict = f"valid=False, why={self.why!r}"
+        chans = f"channels=[{', '.join(self.channels)}] x {n}"
+        return f"{head}{verdict}, fault={self.fault!r}, {chans})"
 
 
 def simulate(scenario: Scenario, record: bool = True) -> RunResult:
@@ -92,7 +115,9 @@ def simulate(scenario: Scenario, record: bool = True) -> RunResult:
         record: keep the scenario's recorded channels (False: the ledger and summary only,
             which is what studies need).
 
-    The GIL is released while Rust runs, so threads can run simulations side by side.
+    The GIL is released while Rust runs, so threads can run simulations side by side. The
+    result says whether the run is a result (``valid``, ``why``); an invalid run is returned,
+    not raised, so a study over a grid keeps its other points.
     """
     d = _simulate(scenario, record)
     return RunResult(**d)

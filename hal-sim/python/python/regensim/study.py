@@ -3,7 +3,7 @@ Dask client or a local process pool, gathered into one table.
 
 Each run is ``simulate(scenario with the point's keys set, record=False)``; its row is the
 point's values followed by the run's summary (``p_<flow>_w`` mean powers after ``settle_s``, W;
-the energy residual; the latched fault) and whatever ``reduce`` returns. Points are validated
+the energy residual; the latched fault; the verdict ``valid``, ``why``) and whatever ``reduce`` returns. Points are validated
 in the caller before anything is sent: a refused value raises :class:`RegenError` naming the
 key, the value and the range, and no run starts.
 """

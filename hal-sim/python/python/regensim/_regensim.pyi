@@ -3,6 +3,8 @@
 import os
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
+__version__: str
+
 class RegenError(ValueError):
     """Refused input; the message is the ``regen`` command line's (key, value, allowed range)."""
 
