@@ -13,7 +13,7 @@
 //! This is the simulator's own implementation of each effect, written from its physical
 //! description, not from the diagnosis's regressor columns.
 
-use crate::diagnose::effects::{PlayWalk, IMPACT_TAPS};
+use regen_physics::{PlayWalk, IMPACT_TAPS};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::f64::consts::TAU;

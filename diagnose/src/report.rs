@@ -1,5 +1,4 @@
-//! Residual analysis (whiteness, spectrum, breakdowns), plots (hand-written SVG, no font
-//! dependencies), the text report, the JSON report and the TOML model file.
+//! Residual analysis (whiteness, spectrum, breakdowns), the text report and the JSON report.
 
 use super::{Diagnosis, Record};
 use rustfft::num_complex::Complex;
@@ -561,97 +560,6 @@ pub fn breakdown(rec: &Record, r: &[f64]) -> Vec<(String, f64, usize)> {
         .collect()
 }
 
-/// A scatter plot of `ys` against `xs` (decimated to ~3000 points) through [`crate::plot`].
-fn scatter(
-    path: &std::path::Path,
-    title: &str,
-    xl: &str,
-    yl: &str,
-    xs: &[f64],
-    ys: &[f64],
-    ylog: bool,
-) -> Result<(), String> {
-    let step = (xs.len() / 3000).max(1);
-    let pts: Vec<(f64, f64)> = xs
-        .iter()
-        .zip(ys)
-        .step_by(step)
-        .map(|(x, y)| (*x, *y))
-        .collect();
-    let mut p = crate::plot::Plot::new(title, xl, yl);
-    p.ylog = ylog;
-    p.series.push(crate::plot::Series::dots(
-        format!("final-model residual ({} points)", pts.len()),
-        pts,
-    ));
-    p.write_svg(path).map(|_| ())
-}
-
-/// Write residual plots into `dir`: against time, position, velocity, and its spectrum.
-pub fn write_plots(
-    dir: &std::path::Path,
-    rec: &Record,
-    d: &Diagnosis,
-) -> Result<Vec<String>, String> {
-    let mut out = Vec::new();
-    for (name, what, xl, xs) in [
-        ("residual_vs_time.svg", "time", "time t (s)", &rec.t),
-        (
-            "residual_vs_position.svg",
-            "position",
-            "position x (m)",
-            &rec.x,
-        ),
-        (
-            "residual_vs_velocity.svg",
-            "velocity",
-            "velocity v (m/s)",
-            &rec.v,
-        ),
-    ] {
-        let p = dir.join(name);
-        scatter(
-            &p,
-            &format!("diagnosis: final-model force residual against {what}"),
-            xl,
-            "force residual (N)",
-            xs,
-            &d.residual,
-            false,
-        )?;
-        out.push(p.display().to_string());
-    }
-    let sp = welch(&d.residual, rec.dt());
-    let (f, a): (Vec<f64>, Vec<f64>) = sp.into_iter().skip(1).unzip();
-    let p = dir.join("residual_spectrum.svg");
-    scatter(
-        &p,
-        "diagnosis: residual amplitude spectrum (Welch)",
-        "frequency (Hz)",
-        "amplitude (N, log scale)",
-        &f,
-        &a,
-        true,
-    )?;
-    out.push(p.display().to_string());
-    let ps = &d.position_spectrum;
-    if !ps.spectrum.is_empty() {
-        let (nu, a): (Vec<f64>, Vec<f64>) = ps.spectrum.iter().cloned().unzip();
-        let p = dir.join("residual_spectrum_position.svg");
-        scatter(
-            &p,
-            "diagnosis: residual amplitude over position (wavelength = 1/spatial frequency)",
-            "spatial frequency (cycles/m)",
-            "amplitude (N, log scale)",
-            &nu,
-            &a,
-            true,
-        )?;
-        out.push(p.display().to_string());
-    }
-    Ok(out)
-}
-
 /// Human-readable report.
 pub fn text(rec: &Record, d: &Diagnosis) -> String {
     let mut s = String::new();
@@ -885,11 +793,6 @@ pub fn json(d: &Diagnosis) -> String {
     let mut s = serde_json::to_string_pretty(&report).unwrap_or_default();
     s.push('\n');
     s
-}
-
-/// Extended model as a scenario fragment (TOML, `[model]`; docs/diagnose.md, "The loop").
-pub fn model_toml(rec: &Record, d: &Diagnosis) -> String {
-    super::model::fragment_toml(rec, d)
 }
 
 #[cfg(test)]
