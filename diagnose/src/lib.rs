@@ -88,7 +88,7 @@ pub fn holdout_mask(n: usize) -> Vec<u8> {
 }
 
 /// One kept finding.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Finding {
     /// Catalogue name or `unexplained`.
     pub effect: String,
@@ -123,6 +123,9 @@ pub struct Diagnosis {
     pub verdicts: Vec<String>,
     pub derivative_method: String,
     pub baseline_terms: Vec<BaselineTerm>,
+    /// Baseline terms the record cannot tell apart (report names, centred correlation of
+    /// their columns; `CONFOUNDED_R`): only their combination is identified.
+    pub confounded: Vec<(String, String, f64)>,
     pub baseline_holdout_rel_error: f64,
     pub baseline_train_rel_error: f64,
     /// Baseline refitted on the whole record, error on the whole record (comparable with

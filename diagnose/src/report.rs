@@ -560,7 +560,138 @@ pub fn breakdown(rec: &Record, r: &[f64]) -> Vec<(String, f64, usize)> {
         .collect()
 }
 
-/// Human-readable report.
+/// `v` with four significant digits: fixed point from 0.001 to 99,999, scientific
+/// notation outside (5e-6 is `5.000e-6`, not `0.000005`).
+pub fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor();
+    if (-3.0..5.0).contains(&mag) {
+        format!("{v:.*}", (3.0 - mag).max(0.0) as usize)
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// The held-out error each finding takes away (percentage points of the force's energy):
+/// the error before it (the baseline's, or the finding's before) less the error after it.
+pub fn explained(d: &Diagnosis) -> Vec<f64> {
+    let mut before = d.baseline_holdout_rel_error;
+    d.findings
+        .iter()
+        .map(|f| {
+            let x = before - f.holdout_rel_error_after;
+            before = f.holdout_rel_error_after;
+            x
+        })
+        .collect()
+}
+
+/// The report's opening: what the model gets wrong, the likely causes by what they explain
+/// (with their size), the gain, and what the second record says, in plain sentences.
+pub fn summary(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    if d.residual.is_empty() {
+        return s;
+    }
+    let pct = |x: f64| 100.0 * x;
+    let _ = writeln!(
+        s,
+        "The baseline model (inertia, viscous and Coulomb friction, a force offset{}) misses {:.2} % of the force on the samples it was not fitted on (the held-out error: residual energy over force energy).",
+        if d.baseline_terms.iter().any(|b| b.effect == "electromagnetic_force") {
+            ", the machine's force"
+        } else {
+            ""
+        },
+        pct(d.baseline_holdout_rel_error)
+    );
+    let gain = explained(d);
+    let mut order: Vec<usize> = (0..d.findings.len()).collect();
+    order.sort_by(|&a, &b| gain[b].total_cmp(&gain[a]));
+    let named: Vec<String> = order
+        .iter()
+        .filter(|&&i| d.findings[i].effect != "unexplained")
+        .map(|&i| {
+            let f = &d.findings[i];
+            let p: Vec<String> = f
+                .parameters
+                .iter()
+                .take(2)
+                .map(|(k, v)| format!("{k} = {}", sig(*v)))
+                .collect();
+            format!(
+                "{} ({}) takes away {:.2} points",
+                f.effect,
+                p.join(", "),
+                pct(gain[i])
+            )
+        })
+        .collect();
+    if named.is_empty() {
+        let _ = writeln!(s, "No effect of the catalogue explains what it misses.");
+    } else {
+        let _ = writeln!(
+            s,
+            "Likely causes, by what they explain: {}. With them the held-out error is {:.2} % (a gain of {:.2} points).",
+            named.join("; "),
+            pct(d.final_holdout_rel_error),
+            pct(d.baseline_holdout_rel_error - d.final_holdout_rel_error)
+        );
+    }
+    for f in d.findings.iter().filter(|f| f.effect == "unexplained") {
+        let _ = writeln!(
+            s,
+            "Outside the catalogue (no effect named): {}.",
+            f.note.trim()
+        );
+    }
+    let weak: Vec<&str> = d
+        .baseline_terms
+        .iter()
+        .filter(|b| !b.significant)
+        .map(|b| b.effect.as_str())
+        .collect();
+    if !weak.is_empty() {
+        let _ = writeln!(
+            s,
+            "The record does not identify {}: leaving it out does not raise the held-out error beyond the noise.",
+            weak.join(", ")
+        );
+    }
+    for (a, b, r) in &d.confounded {
+        let _ = writeln!(
+            s,
+            "The record cannot tell {a} from {b}: their columns move together (correlation {r:.4} over the samples in motion), so only their combination is identified, not each value.",
+        );
+    }
+    if let Some(c) = &d.cross {
+        let worse: Vec<&str> = c
+            .after_each
+            .iter()
+            .zip(&c.worsens)
+            .filter(|(_, w)| **w)
+            .map(|((e, _), _)| e.as_str())
+            .collect();
+        let _ = writeln!(
+            s,
+            "On the second record the baseline misses {:.2} %, the extended model {:.2} %{}.",
+            pct(c.baseline_rel_error),
+            pct(c.final_rel_error),
+            if worse.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; {} makes it worse and is left out of the --model fragment",
+                    worse.join(", ")
+                )
+            }
+        );
+    }
+    s
+}
+
+/// Human-readable report: the summary's sentences, then the details.
 pub fn text(rec: &Record, d: &Diagnosis) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -569,6 +700,10 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         d.n,
         rec.dt()
     );
+    s.push_str(&summary(d));
+    if d.residual.len() == rec.len() {
+        let _ = writeln!(s, "Details:");
+    }
     for v in &d.verdicts {
         let _ = writeln!(s, "VERDICT: {v}");
     }
@@ -609,7 +744,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         100.0 * d.baseline_holdout_rel_error,
         100.0 * d.baseline_full_rel_error
     );
-    let _ = writeln!(s, "Findings (forward selection: held-out rss drop >= 2 % and BIC decrease), in order of importance:");
+    let _ = writeln!(s, "Findings (forward selection: held-out rss drop >= 2 % and BIC decrease), in the order the selection added them:");
     if d.findings.is_empty() {
         let _ = writeln!(s, "  none: the baseline explains the record");
     }
@@ -629,7 +764,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         );
         let _ = writeln!(s, "  {}", f.note);
         for (k, v) in &f.parameters {
-            let _ = writeln!(s, "      {k} = {v:.6}");
+            let _ = writeln!(s, "      {k} = {}", sig(*v));
         }
     }
     let _ = writeln!(
@@ -646,7 +781,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         .filter(|(n, _)| !n.contains('.'))
         .map(|(n, v)| {
             let (name, unit) = super::effects::baseline_term(n);
-            format!("{name} {v:.6} {unit}")
+            format!("{name} {} {unit}", sig(*v))
         })
         .collect();
     let _ = writeln!(
@@ -742,6 +877,10 @@ pub fn json(d: &Diagnosis) -> String {
         "final_holdout_rel_error": num(d.final_holdout_rel_error),
         "baseline_full_rel_error": num(d.baseline_full_rel_error),
         "final_full_rel_error": num(d.final_full_rel_error),
+        "confounded": d.confounded.iter().map(|(a, b, r)| json!({
+            "terms": [a, b],
+            "correlation": num(*r),
+        })).collect::<Vec<_>>(),
         "baseline_terms": d.baseline_terms.iter().map(|b| json!({
             "effect": b.effect,
             "value": num(b.value),
@@ -907,5 +1046,88 @@ mod tests {
             }
             assert!(worst < 1e-12 * l1, "n {n}: {worst:e} vs Σ|x| {l1}");
         }
+    }
+}
+
+#[cfg(test)]
+mod summary_tests {
+    use super::*;
+    use crate::{CrossCheck, Finding};
+
+    /// Four significant digits whatever the magnitude (closed forms).
+    #[test]
+    fn parameters_keep_their_significant_digits() {
+        for (v, s) in [
+            (5e-6, "5.000e-6"),
+            (-0.5, "-0.5000"),
+            (0.001, "0.001000"),
+            (123.456, "123.5"),
+            (12345.0, "12345"),
+            (123456.0, "1.235e5"),
+            (0.0, "0"),
+        ] {
+            assert_eq!(sig(v), s, "{v}");
+        }
+    }
+
+    fn finding(effect: &str, after: f64) -> Finding {
+        Finding {
+            effect: effect.into(),
+            parameters: vec![("x_m".into(), 5e-6)],
+            holdout_rel_error_after: after,
+            note: "where it shows".into(),
+            ..Finding::default()
+        }
+    }
+
+    /// The summary names the causes by what they explain (not in the order the selection
+    /// added them), their size, the gain, what is outside the catalogue, what the record
+    /// cannot identify and what the second record contradicts.
+    #[test]
+    fn the_summary_orders_causes_by_what_they_explain() {
+        let d = Diagnosis {
+            residual: vec![0.0; 10],
+            baseline_holdout_rel_error: 0.10,
+            baseline_terms: vec![crate::BaselineTerm {
+                effect: "viscous_friction".into(),
+                value: 1.0,
+                unit: "N·s/m".into(),
+                holdout_rel_error_without: 0.1,
+                significant: false,
+            }],
+            // `lag` added first takes 1 point, `backlash` then 6
+            findings: vec![
+                finding("lag", 0.09),
+                finding("backlash", 0.03),
+                finding("unexplained", 0.03),
+            ],
+            final_holdout_rel_error: 0.03,
+            cross: Some(CrossCheck {
+                baseline_rel_error: 0.1,
+                final_rel_error: 0.05,
+                after_each: vec![("lag".into(), 0.11), ("backlash".into(), 0.05)],
+                worsens: vec![true, false],
+            }),
+            ..Diagnosis::default()
+        };
+        let s = summary(&d);
+        println!("{s}");
+        let (b, l) = (s.find("backlash (").unwrap(), s.find("lag (").unwrap());
+        assert!(b < l, "{s}");
+        assert!(
+            s.contains("backlash (x_m = 5.000e-6) takes away 6.00 points"),
+            "{s}"
+        );
+        assert!(
+            s.contains("lag (x_m = 5.000e-6) takes away 1.00 points"),
+            "{s}"
+        );
+        assert!(
+            s.contains("held-out error is 3.00 % (a gain of 7.00 points)"),
+            "{s}"
+        );
+        assert!(s.contains("Outside the catalogue (no effect named): where it shows."));
+        assert!(s.contains("does not identify viscous_friction"), "{s}");
+        assert!(s.contains("lag makes it worse"), "{s}");
     }
 }

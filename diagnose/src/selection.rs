@@ -100,6 +100,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
         });
     }
+    // Baseline terms the record cannot tell apart: columns whose centred correlation over
+    // the samples in motion reaches CONFOUNDED_R (the coefficients' standard errors then grow
+    // by 1/√(1 − r²) ≥ 7× over independent columns: only their combination is identified).
+    let confounded = confounded_terms(&cols[..n_base], &spread_base, &spread_hold);
     // A slow change of the residual's mean over the record (a drifting offset: temperature,
     // a load cell's zero) is outside the catalogue. Checked on the baseline residual before
     // the search: when it shows, it is reported as `unexplained` with where it shows and
@@ -1322,6 +1326,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         verdicts,
         derivative_method: rec.derivative_method.clone(),
         baseline_terms,
+        confounded,
         baseline_holdout_rel_error: baseline_holdout,
         baseline_train_rel_error: baseline_train,
         baseline_full_rel_error: baseline_full,
@@ -1379,4 +1384,40 @@ pub(crate) fn coarse_len_gt1(lo: f64, hi: f64) -> bool {
 
 pub(crate) fn refs(c: &[(String, Vec<f64>)]) -> Vec<&[f64]> {
     c.iter().map(|(_, v)| v.as_slice()).collect()
+}
+
+/// The centred correlation at which two baseline columns are not told apart (|r| ≥ 0.99).
+pub const CONFOUNDED_R: f64 = 0.99;
+
+/// Pairs of baseline terms (by their report names) whose columns `spread` (the terms `cols`
+/// at the spread rows) correlate at |r| ≥ `CONFOUNDED_R` over the rows in motion, with r.
+pub(crate) fn confounded_terms(
+    cols: &[(String, Vec<f64>)],
+    spread: &[Vec<f64>],
+    hold: &[u8],
+) -> Vec<(String, String, f64)> {
+    let rows: Vec<usize> = (0..hold.len()).filter(|&i| hold[i] != AT_REST).collect();
+    let centred: Vec<Vec<f64>> = spread
+        .iter()
+        .map(|c| {
+            let m = rows.iter().map(|&i| c[i]).sum::<f64>() / rows.len().max(1) as f64;
+            rows.iter().map(|&i| c[i] - m).collect()
+        })
+        .collect();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut out = Vec::new();
+    for i in 0..centred.len() {
+        for j in i + 1..centred.len() {
+            let (a, b) = (&centred[i], &centred[j]);
+            let r = dot(a, b) / (dot(a, a) * dot(b, b)).sqrt();
+            if r.abs() >= CONFOUNDED_R {
+                out.push((
+                    effects::baseline_term(&cols[i].0).0.to_string(),
+                    effects::baseline_term(&cols[j].0).0.to_string(),
+                    r,
+                ));
+            }
+        }
+    }
+    out
 }

@@ -18,7 +18,11 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
         return Err("no model was fitted (see the report's verdict)".into());
     };
     let mut effects = Vec::new();
-    for (e, f) in d.effects.iter().zip(&d.findings) {
+    for (i, (e, f)) in d.effects.iter().zip(&d.findings).enumerate() {
+        if worsens_cross_check(d, i) {
+            // a finding the second record contradicts is not a device model
+            continue;
+        }
         if e.kind == EffectKind::ActuatorLag {
             // the recording's force channel (a drive's command ahead of the force), not the
             // device: the plant carries the force the motion needs
@@ -55,6 +59,13 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
     Ok(dm)
 }
 
+/// Whether the cross-check's second record is worse with finding `i` than without it.
+fn worsens_cross_check(d: &Diagnosis, i: usize) -> bool {
+    d.cross
+        .as_ref()
+        .is_some_and(|c| c.worsens.get(i).copied().unwrap_or(false))
+}
+
 /// The fragment file: a comment header (what the simulator cannot express) and the
 /// `[model]` table; a model that cannot be plant physics is written as comments only, with
 /// the reason, so that `regen run --model` refuses it by name.
@@ -70,10 +81,13 @@ pub fn fragment_toml(rec: &Record, d: &Diagnosis) -> String {
             ));
         }
     }
-    for f in &d.findings {
+    for (i, f) in d.findings.iter().enumerate() {
         let why = match f.effect.as_str() {
             "actuator_lag" => "the record's force channel leads the device's force, not simulated",
             "unexplained" => "no catalogue effect, not simulated",
+            _ if i < d.effects.len() && worsens_cross_check(d, i) => {
+                "worsens the cross-check's second record, left out"
+            }
             _ => continue,
         };
         let p: Vec<String> = f
@@ -154,5 +168,68 @@ mod actuator_lag_tests {
         assert!((got / tau - 1.0).abs() < 0.1, "{got}");
         let d = diagnose(&record(-tau), &Options::default());
         assert_eq!(delay(&d), None, "a lagging force named actuator_lag");
+    }
+}
+
+#[cfg(test)]
+mod cross_check_tests {
+    use super::fragment_toml;
+    use crate::device_model::Fragment;
+    use crate::diagnose::*;
+
+    /// A diagnosis of a baseline and one `cogging` finding (the parameters the report gives),
+    /// with a cross-check that says whether the finding worsens the second record.
+    fn diagnosis(worsens: bool) -> (Record, Diagnosis) {
+        let mut s = String::from("t_s,x_m,f_N\n");
+        for i in 0..1000 {
+            let t = i as f64 * 1e-3;
+            s.push_str(&format!("{t},{},{}\n", 0.01 * (6.0 * t).sin(), t.cos()));
+        }
+        let rec = parse_csv(&s, None).unwrap();
+        let base = [
+            ("inertia", 20.0),
+            ("viscous", 100.0),
+            ("coulomb", 15.0),
+            ("offset", 0.5),
+        ];
+        let d = Diagnosis {
+            model: base.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
+            effects: vec![Effect::new(EffectKind::Cogging, 0.004)],
+            findings: vec![Finding {
+                effect: "cogging".into(),
+                parameters: vec![
+                    ("wavelength_m".into(), 0.004),
+                    ("amplitude_N".into(), 3.0),
+                    ("phase_rad".into(), 0.2),
+                ],
+                ..Finding::default()
+            }],
+            cross: Some(CrossCheck {
+                baseline_rel_error: 0.05,
+                final_rel_error: if worsens { 0.06 } else { 0.04 },
+                after_each: vec![("cogging".into(), if worsens { 0.06 } else { 0.04 })],
+                worsens: vec![worsens],
+            }),
+            ..Diagnosis::default()
+        };
+        (rec, d)
+    }
+
+    /// A finding the second record contradicts is named in the fragment's header and left out
+    /// of its `[model]`; one the second record bears out is in it.
+    #[test]
+    fn a_finding_that_worsens_the_cross_check_stays_out_of_the_model() {
+        for worsens in [false, true] {
+            let (rec, d) = diagnosis(worsens);
+            let frag = fragment_toml(&rec, &d);
+            let m = Fragment::from_toml(&frag).expect("a model").model;
+            println!("worsens {worsens}:\n{frag}");
+            assert_eq!(m.effects.len(), usize::from(!worsens), "{frag}");
+            assert_eq!(
+                frag.contains("cogging (wavelength_m = 4e-3"),
+                worsens,
+                "{frag}"
+            );
+        }
     }
 }
