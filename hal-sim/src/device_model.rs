@@ -108,7 +108,7 @@ pub enum ModelEffect {
         damping_ratio: f64,
     },
     /// Play of total width between the motion and the device (the diagnosis's physics,
-    /// `effects::PlayWalk`, one implementation): the device (`device_*`, the model's inertia
+    /// `regen_physics::PlayWalk`, one implementation): the device (`device_*`, the model's inertia
     /// and friction when absent) moves with a flank while the flank pushes it, leaves it and
     /// coasts (viscous decay, Coulomb deceleration) when the motion decelerates faster, and
     /// carries no force off both flanks (`gain` of its force removed; the offset, a sensor
