@@ -13,7 +13,7 @@
 //! This is the simulator's own implementation of each effect, written from its physical
 //! description, not from the diagnosis's regressor columns.
 
-use crate::diagnose::effects::{PlayWalk, IMPACT_TAPS};
+use regen_physics::{PlayWalk, IMPACT_TAPS};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 use std::f64::consts::TAU;
@@ -108,7 +108,7 @@ pub enum ModelEffect {
         damping_ratio: f64,
     },
     /// Play of total width between the motion and the device (the diagnosis's physics,
-    /// `effects::PlayWalk`, one implementation): the device (`device_*`, the model's inertia
+    /// `regen_physics::PlayWalk`, one implementation): the device (`device_*`, the model's inertia
     /// and friction when absent) moves with a flank while the flank pushes it, leaves it and
     /// coasts (viscous decay, Coulomb deceleration) when the motion decelerates faster, and
     /// carries no force off both flanks (`gain` of its force removed; the offset, a sensor

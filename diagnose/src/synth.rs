@@ -209,12 +209,8 @@ pub fn generate_csv(s: &SynthSpec) -> String {
         if e.kind == EffectKind::Compliance {
             // coefficients (modal mass, damping ratio): the mode's force at its own damping
             // (the diagnosis's column takes the damping ratio from the record)
-            let col = &crate::diagnose::effects::compliance_columns_at(
-                &rec.a,
-                &[(e.param, c[1])],
-                dt,
-                None,
-            )[0];
+            let col =
+                &crate::effects::compliance_columns_at(&rec.a, &[(e.param, c[1])], dt, None)[0];
             for (fi, ci) in f.iter_mut().zip(col) {
                 *fi += c[0] * ci;
             }
@@ -227,8 +223,8 @@ pub fn generate_csv(s: &SynthSpec) -> String {
             // (`effects::delayed_switch`: the sign's linear band is the baseline's guard
             // against the derived velocity's noise at rest, not a force law to delay)
             let k = e.param / dt;
-            let d = crate::diagnose::effects::delayed;
-            let sw = crate::diagnose::effects::delayed_switch;
+            let d = crate::effects::delayed;
+            let sw = crate::effects::delayed_switch;
             for (i, fi) in f.iter_mut().enumerate() {
                 *fi += c[0]
                     * (s.mass_kg * (d(&rec.a, i, k) - rec.a[i])

@@ -1,5 +1,4 @@
-//! Residual analysis (whiteness, spectrum, breakdowns), plots (hand-written SVG, no font
-//! dependencies), the text report, the JSON report and the TOML model file.
+//! Residual analysis (whiteness, spectrum, breakdowns), the text report and the JSON report.
 
 use super::{Diagnosis, Record};
 use rustfft::num_complex::Complex;
@@ -561,98 +560,138 @@ pub fn breakdown(rec: &Record, r: &[f64]) -> Vec<(String, f64, usize)> {
         .collect()
 }
 
-/// A scatter plot of `ys` against `xs` (decimated to ~3000 points) through [`crate::plot`].
-fn scatter(
-    path: &std::path::Path,
-    title: &str,
-    xl: &str,
-    yl: &str,
-    xs: &[f64],
-    ys: &[f64],
-    ylog: bool,
-) -> Result<(), String> {
-    let step = (xs.len() / 3000).max(1);
-    let pts: Vec<(f64, f64)> = xs
+/// `v` with four significant digits: fixed point from 0.001 to 99,999, scientific
+/// notation outside (5e-6 is `5.000e-6`, not `0.000005`).
+pub fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor();
+    if (-3.0..5.0).contains(&mag) {
+        format!("{v:.*}", (3.0 - mag).max(0.0) as usize)
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// The held-out error each finding takes away (percentage points of the force's energy):
+/// the error before it (the baseline's, or the finding's before) less the error after it.
+pub fn explained(d: &Diagnosis) -> Vec<f64> {
+    let mut before = d.baseline_holdout_rel_error;
+    d.findings
         .iter()
-        .zip(ys)
-        .step_by(step)
-        .map(|(x, y)| (*x, *y))
+        .map(|f| {
+            let x = before - f.holdout_rel_error_after;
+            before = f.holdout_rel_error_after;
+            x
+        })
+        .collect()
+}
+
+/// The report's opening: what the model gets wrong, the likely causes by what they explain
+/// (with their size), the gain, and what the second record says, in plain sentences.
+pub fn summary(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    if d.residual.is_empty() {
+        return s;
+    }
+    let pct = |x: f64| 100.0 * x;
+    let _ = writeln!(
+        s,
+        "The baseline model (inertia, viscous and Coulomb friction, a force offset{}) misses {:.2} % of the force on the samples it was not fitted on (the held-out error: residual energy over force energy).",
+        if d.baseline_terms.iter().any(|b| b.effect == "electromagnetic_force") {
+            ", the machine's force"
+        } else {
+            ""
+        },
+        pct(d.baseline_holdout_rel_error)
+    );
+    let gain = explained(d);
+    let mut order: Vec<usize> = (0..d.findings.len()).collect();
+    order.sort_by(|&a, &b| gain[b].total_cmp(&gain[a]));
+    let named: Vec<String> = order
+        .iter()
+        .filter(|&&i| d.findings[i].effect != "unexplained")
+        .map(|&i| {
+            let f = &d.findings[i];
+            let p: Vec<String> = f
+                .parameters
+                .iter()
+                .take(2)
+                .map(|(k, v)| format!("{k} = {}", sig(*v)))
+                .collect();
+            format!(
+                "{} ({}) takes away {:.2} points",
+                f.effect,
+                p.join(", "),
+                pct(gain[i])
+            )
+        })
         .collect();
-    let mut p = crate::plot::Plot::new(title, xl, yl);
-    p.ylog = ylog;
-    p.series.push(crate::plot::Series::dots(
-        format!("final-model residual ({} points)", pts.len()),
-        pts,
-    ));
-    p.write_svg(path).map(|_| ())
+    if named.is_empty() {
+        let _ = writeln!(s, "No effect of the catalogue explains what it misses.");
+    } else {
+        let _ = writeln!(
+            s,
+            "Likely causes, by what they explain: {}. With them the held-out error is {:.2} % (a gain of {:.2} points).",
+            named.join("; "),
+            pct(d.final_holdout_rel_error),
+            pct(d.baseline_holdout_rel_error - d.final_holdout_rel_error)
+        );
+    }
+    for f in d.findings.iter().filter(|f| f.effect == "unexplained") {
+        let _ = writeln!(
+            s,
+            "Outside the catalogue (no effect named): {}.",
+            f.note.trim()
+        );
+    }
+    let weak: Vec<&str> = d
+        .baseline_terms
+        .iter()
+        .filter(|b| !b.significant)
+        .map(|b| b.effect.as_str())
+        .collect();
+    if !weak.is_empty() {
+        let _ = writeln!(
+            s,
+            "The record does not identify {}: leaving it out does not raise the held-out error beyond the noise.",
+            weak.join(", ")
+        );
+    }
+    for (a, b, r) in &d.confounded {
+        let _ = writeln!(
+            s,
+            "The record cannot tell {a} from {b}: their columns move together (correlation {r:.4} over the samples in motion), so only their combination is identified, not each value.",
+        );
+    }
+    if let Some(c) = &d.cross {
+        let worse: Vec<&str> = c
+            .after_each
+            .iter()
+            .zip(&c.worsens)
+            .filter(|(_, w)| **w)
+            .map(|((e, _), _)| e.as_str())
+            .collect();
+        let _ = writeln!(
+            s,
+            "On the second record the baseline misses {:.2} %, the extended model {:.2} %{}.",
+            pct(c.baseline_rel_error),
+            pct(c.final_rel_error),
+            if worse.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; {} makes it worse and is left out of the --model fragment",
+                    worse.join(", ")
+                )
+            }
+        );
+    }
+    s
 }
 
-/// Write residual plots into `dir`: against time, position, velocity, and its spectrum.
-pub fn write_plots(
-    dir: &std::path::Path,
-    rec: &Record,
-    d: &Diagnosis,
-) -> Result<Vec<String>, String> {
-    let mut out = Vec::new();
-    for (name, what, xl, xs) in [
-        ("residual_vs_time.svg", "time", "time t (s)", &rec.t),
-        (
-            "residual_vs_position.svg",
-            "position",
-            "position x (m)",
-            &rec.x,
-        ),
-        (
-            "residual_vs_velocity.svg",
-            "velocity",
-            "velocity v (m/s)",
-            &rec.v,
-        ),
-    ] {
-        let p = dir.join(name);
-        scatter(
-            &p,
-            &format!("diagnosis: final-model force residual against {what}"),
-            xl,
-            "force residual (N)",
-            xs,
-            &d.residual,
-            false,
-        )?;
-        out.push(p.display().to_string());
-    }
-    let sp = welch(&d.residual, rec.dt());
-    let (f, a): (Vec<f64>, Vec<f64>) = sp.into_iter().skip(1).unzip();
-    let p = dir.join("residual_spectrum.svg");
-    scatter(
-        &p,
-        "diagnosis: residual amplitude spectrum (Welch)",
-        "frequency (Hz)",
-        "amplitude (N, log scale)",
-        &f,
-        &a,
-        true,
-    )?;
-    out.push(p.display().to_string());
-    let ps = &d.position_spectrum;
-    if !ps.spectrum.is_empty() {
-        let (nu, a): (Vec<f64>, Vec<f64>) = ps.spectrum.iter().cloned().unzip();
-        let p = dir.join("residual_spectrum_position.svg");
-        scatter(
-            &p,
-            "diagnosis: residual amplitude over position (wavelength = 1/spatial frequency)",
-            "spatial frequency (cycles/m)",
-            "amplitude (N, log scale)",
-            &nu,
-            &a,
-            true,
-        )?;
-        out.push(p.display().to_string());
-    }
-    Ok(out)
-}
-
-/// Human-readable report.
+/// Human-readable report: the summary's sentences, then the details.
 pub fn text(rec: &Record, d: &Diagnosis) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -661,6 +700,10 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         d.n,
         rec.dt()
     );
+    s.push_str(&summary(d));
+    if d.residual.len() == rec.len() {
+        let _ = writeln!(s, "Details:");
+    }
     for v in &d.verdicts {
         let _ = writeln!(s, "VERDICT: {v}");
     }
@@ -701,7 +744,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         100.0 * d.baseline_holdout_rel_error,
         100.0 * d.baseline_full_rel_error
     );
-    let _ = writeln!(s, "Findings (forward selection: held-out rss drop >= 2 % and BIC decrease), in order of importance:");
+    let _ = writeln!(s, "Findings (forward selection: held-out rss drop >= 2 % and BIC decrease), in the order the selection added them:");
     if d.findings.is_empty() {
         let _ = writeln!(s, "  none: the baseline explains the record");
     }
@@ -721,7 +764,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         );
         let _ = writeln!(s, "  {}", f.note);
         for (k, v) in &f.parameters {
-            let _ = writeln!(s, "      {k} = {v:.6}");
+            let _ = writeln!(s, "      {k} = {}", sig(*v));
         }
     }
     let _ = writeln!(
@@ -738,7 +781,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
         .filter(|(n, _)| !n.contains('.'))
         .map(|(n, v)| {
             let (name, unit) = super::effects::baseline_term(n);
-            format!("{name} {v:.6} {unit}")
+            format!("{name} {} {unit}", sig(*v))
         })
         .collect();
     let _ = writeln!(
@@ -834,6 +877,10 @@ pub fn json(d: &Diagnosis) -> String {
         "final_holdout_rel_error": num(d.final_holdout_rel_error),
         "baseline_full_rel_error": num(d.baseline_full_rel_error),
         "final_full_rel_error": num(d.final_full_rel_error),
+        "confounded": d.confounded.iter().map(|(a, b, r)| json!({
+            "terms": [a, b],
+            "correlation": num(*r),
+        })).collect::<Vec<_>>(),
         "baseline_terms": d.baseline_terms.iter().map(|b| json!({
             "effect": b.effect,
             "value": num(b.value),
@@ -885,11 +932,6 @@ pub fn json(d: &Diagnosis) -> String {
     let mut s = serde_json::to_string_pretty(&report).unwrap_or_default();
     s.push('\n');
     s
-}
-
-/// Extended model as a scenario fragment (TOML, `[model]`; docs/diagnose.md, "The loop").
-pub fn model_toml(rec: &Record, d: &Diagnosis) -> String {
-    super::model::fragment_toml(rec, d)
 }
 
 #[cfg(test)]
@@ -1004,5 +1046,88 @@ mod tests {
             }
             assert!(worst < 1e-12 * l1, "n {n}: {worst:e} vs Σ|x| {l1}");
         }
+    }
+}
+
+#[cfg(test)]
+mod summary_tests {
+    use super::*;
+    use crate::{CrossCheck, Finding};
+
+    /// Four significant digits whatever the magnitude (closed forms).
+    #[test]
+    fn parameters_keep_their_significant_digits() {
+        for (v, s) in [
+            (5e-6, "5.000e-6"),
+            (-0.5, "-0.5000"),
+            (0.001, "0.001000"),
+            (123.456, "123.5"),
+            (12345.0, "12345"),
+            (123456.0, "1.235e5"),
+            (0.0, "0"),
+        ] {
+            assert_eq!(sig(v), s, "{v}");
+        }
+    }
+
+    fn finding(effect: &str, after: f64) -> Finding {
+        Finding {
+            effect: effect.into(),
+            parameters: vec![("x_m".into(), 5e-6)],
+            holdout_rel_error_after: after,
+            note: "where it shows".into(),
+            ..Finding::default()
+        }
+    }
+
+    /// The summary names the causes by what they explain (not in the order the selection
+    /// added them), their size, the gain, what is outside the catalogue, what the record
+    /// cannot identify and what the second record contradicts.
+    #[test]
+    fn the_summary_orders_causes_by_what_they_explain() {
+        let d = Diagnosis {
+            residual: vec![0.0; 10],
+            baseline_holdout_rel_error: 0.10,
+            baseline_terms: vec![crate::BaselineTerm {
+                effect: "viscous_friction".into(),
+                value: 1.0,
+                unit: "N·s/m".into(),
+                holdout_rel_error_without: 0.1,
+                significant: false,
+            }],
+            // `lag` added first takes 1 point, `backlash` then 6
+            findings: vec![
+                finding("lag", 0.09),
+                finding("backlash", 0.03),
+                finding("unexplained", 0.03),
+            ],
+            final_holdout_rel_error: 0.03,
+            cross: Some(CrossCheck {
+                baseline_rel_error: 0.1,
+                final_rel_error: 0.05,
+                after_each: vec![("lag".into(), 0.11), ("backlash".into(), 0.05)],
+                worsens: vec![true, false],
+            }),
+            ..Diagnosis::default()
+        };
+        let s = summary(&d);
+        println!("{s}");
+        let (b, l) = (s.find("backlash (").unwrap(), s.find("lag (").unwrap());
+        assert!(b < l, "{s}");
+        assert!(
+            s.contains("backlash (x_m = 5.000e-6) takes away 6.00 points"),
+            "{s}"
+        );
+        assert!(
+            s.contains("lag (x_m = 5.000e-6) takes away 1.00 points"),
+            "{s}"
+        );
+        assert!(
+            s.contains("held-out error is 3.00 % (a gain of 7.00 points)"),
+            "{s}"
+        );
+        assert!(s.contains("Outside the catalogue (no effect named): where it shows."));
+        assert!(s.contains("does not identify viscous_friction"), "{s}");
+        assert!(s.contains("lag makes it worse"), "{s}");
     }
 }

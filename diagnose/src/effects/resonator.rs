@@ -1,0 +1,364 @@
+//! The resonator columns (`compliance`): a mass hung on the device through a spring-damper, walked over the record, and the damping ratio the record shows.
+
+use super::*;
+
+/// Damping ratios over which `compliance_zeta` profiles a mode (log-spaced, 0.01 … 0.4).
+/// A mode damped by 0.4 or more amplifies its resonance by at most 1/(2ζ) ≈ 1.25: over such a
+/// broad band the column is a frequency-dependent inertia that also fits the remainder of
+/// other effects (a lag's, on 7/40 synthetic records), so a profile whose optimum lies at the
+/// last value does not identify a resonance (`compliance_zeta` gives None).
+pub const COMPLIANCE_ZETAS: [f64; 9] = [
+    0.01, 0.0159, 0.0252, 0.04, 0.0635, 0.1007, 0.1597, 0.2533, 0.4,
+];
+
+/// Second-order resonators (ω = 2π·f, damping ratio ζ per pair) driven by `u`, interleaved
+/// four per pass over the record (independent recurrences, so the pass is bound by arithmetic
+/// throughput rather than by one filter's feedback chain). Each is a zero-delay-feedback
+/// state-variable filter (bilinear transform prewarped at f, unconditionally stable) started
+/// at rest on the first input. Returns per pair the low-pass `ω²/(s²+2ζωs+ω²)·u` and band-pass
+/// `ωs/(s²+2ζωs+ω²)·u` outputs at `rows` (all samples when None).
+pub fn resonator_batch(
+    u: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let mut out = Vec::with_capacity(modes.len());
+    for (nf, kept) in resonator_passes(u, modes, dt, rows) {
+        for k in 0..nf {
+            out.push((
+                kept.iter().map(|o| o[k]).collect(),
+                kept.iter().map(|o| o[4 + k]).collect(),
+            ));
+        }
+    }
+    out
+}
+
+/// `resonator_batch`'s passes: per pass of up to four filters (the modes in order), their
+/// count and per row kept the low-pass outputs (indices 0..4) and band-pass outputs (4..8).
+pub(crate) fn resonator_passes(
+    u: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<(usize, Vec<[f64; 8]>)> {
+    let ca: Vec<[f64; 3]> = modes
+        .iter()
+        .map(|&(f, z)| {
+            let g = (std::f64::consts::PI * (f * dt).min(0.49)).tan();
+            let a1 = 1.0 / (1.0 + g * (g + 2.0 * z));
+            [a1, g * a1, g * g * a1]
+        })
+        .collect();
+    let u0 = u.first().copied().unwrap_or(0.0);
+    let cap = rows.map_or(u.len(), |r| r.len());
+    // four filters per pass, two per lane pair, their states held in registers (a pass per
+    // filter would walk the record m times; all m at once keeps their states in memory)
+    ca.chunks(4)
+        .map(|c| match c.len() {
+            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap),
+            _ => resonator_walk::<1>(u, c, u0, rows, cap),
+        })
+        .collect()
+}
+
+/// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
+/// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
+/// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
+/// last pair runs the last filter twice): the filters' count and their outputs at `rows`, per
+/// row the low-passes then the band-passes (`resonator_passes`). The samples between two rows
+/// are stepped without a test per sample, each row's outputs kept in one store. The rows are
+/// taken while they ascend within the input (the outputs end at the first that does not).
+#[inline(always)]
+pub(crate) fn resonator_walk<const P: usize>(
+    u: &[f64],
+    ca: &[[f64; 3]],
+    u0: f64,
+    rows: Option<&[usize]>,
+    cap: usize,
+) -> (usize, Vec<[f64; 8]>) {
+    let nf = ca.len().min(2 * P);
+    if nf == 0 {
+        return (0, Vec::new());
+    }
+    let coef =
+        |p: usize, c: usize| F64x2::new(ca[(2 * p).min(nf - 1)][c], ca[(2 * p + 1).min(nf - 1)][c]);
+    let a1: [F64x2; P] = std::array::from_fn(|p| coef(p, 0));
+    let a2: [F64x2; P] = std::array::from_fn(|p| coef(p, 1));
+    let a3: [F64x2; P] = std::array::from_fn(|p| coef(p, 2));
+    let two = F64x2::splat(2.0);
+    let mut ic1 = [F64x2::splat(0.0); P];
+    let mut ic2 = [F64x2::splat(u0); P];
+    // one sample of every filter: (low-pass, band-pass) lane pairs
+    let mut step = |xin: f64| -> ([F64x2; P], [F64x2; P]) {
+        let x = F64x2::splat(xin);
+        let mut lp = [F64x2::splat(0.0); P];
+        let mut bp = [F64x2::splat(0.0); P];
+        for p in 0..P {
+            let v3 = x - ic2[p];
+            let v1 = a1[p] * ic1[p] + a2[p] * v3;
+            let v2 = ic2[p] + a2[p] * ic1[p] + a3[p] * v3;
+            ic1[p] = two * v1 - ic1[p];
+            ic2[p] = two * v2 - ic2[p];
+            lp[p] = v2;
+            bp[p] = v1;
+        }
+        (lp, bp)
+    };
+    // a row's outputs: low-pass k at k, band-pass k at 4 + k
+    let flat = |(lp, bp): ([F64x2; P], [F64x2; P])| -> [f64; 8] {
+        let mut o = [0.0; 8];
+        for p in 0..P {
+            let (l, b) = (lp[p].lanes(), bp[p].lanes());
+            o[2 * p] = l[0];
+            o[2 * p + 1] = l[1];
+            o[4 + 2 * p] = b[0];
+            o[4 + 2 * p + 1] = b[1];
+        }
+        o
+    };
+    let mut kept: Vec<[f64; 8]> = Vec::with_capacity(cap);
+    match rows {
+        None => kept.extend(u.iter().map(|&xin| flat(step(xin)))),
+        Some(r) => {
+            // the next sample to step
+            let mut i = 0;
+            for &row in r {
+                let Some(seg) = u.get(i..=row) else {
+                    break;
+                };
+                let mut last = None;
+                for &xin in seg {
+                    last = Some(step(xin));
+                }
+                match last {
+                    Some(o) => kept.push(flat(o)),
+                    None => break,
+                }
+                i = row + 1;
+            }
+        }
+    }
+    (nf, kept)
+}
+
+/// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
+/// time): the `wide` crate's `f64x2` (SSE2's packed doubles on x86-64, each lane rounded as the
+/// scalar operation, no fused multiply-add; plain lanes elsewhere). Each lane's result is the
+/// scalar operation's bit for bit (`tests::lane_pairs_are_scalar_arithmetic`).
+#[derive(Clone, Copy)]
+pub(crate) struct F64x2(wide::f64x2);
+
+impl F64x2 {
+    #[inline(always)]
+    pub(crate) fn new(lo: f64, hi: f64) -> Self {
+        F64x2(wide::f64x2::new([lo, hi]))
+    }
+    #[inline(always)]
+    pub(crate) fn splat(v: f64) -> Self {
+        F64x2(wide::f64x2::splat(v))
+    }
+    /// The two lanes (low, high).
+    #[inline(always)]
+    pub(crate) fn lanes(self) -> [f64; 2] {
+        self.0.to_array()
+    }
+}
+
+macro_rules! f64x2_op {
+    ($tr:ident, $f:ident) => {
+        impl std::ops::$tr for F64x2 {
+            type Output = F64x2;
+            #[inline(always)]
+            fn $f(self, o: F64x2) -> F64x2 {
+                F64x2(std::ops::$tr::$f(self.0, o.0))
+            }
+        }
+    };
+}
+
+f64x2_op!(Add, add);
+f64x2_op!(Sub, sub);
+f64x2_op!(Mul, mul);
+
+/// The force a modal mass of 1 kg hung on the device through a spring-damper (resonance
+/// `f_hz`, damping ratio `zeta`) adds beyond its rigid-body inertia (which the baseline carries):
+/// the mass follows y = H·x with H = (2ζωs + ω²)/(s² + 2ζωs + ω²), the spring-damper carries
+/// m2·ÿ = m2·H·a, so the column is (H − 1)·a = LP + 2ζ·BP − a. `a` is the acceleration at
+/// every sample; the column is returned at `rows` (all when None).
+pub fn compliance_columns_at(
+    a: &[f64],
+    modes: &[(f64, f64)],
+    dt: f64,
+    rows: Option<&[usize]>,
+) -> Vec<Vec<f64>> {
+    // each filter's column formed from the pass's kept outputs (resonator_batch's lp, bp)
+    let mut out = Vec::with_capacity(modes.len());
+    let mut zs = modes.iter().map(|&(_, z)| z);
+    for (nf, kept) in resonator_passes(a, modes, dt, rows) {
+        for k in 0..nf {
+            let z = zs.next().unwrap_or(0.0);
+            out.push(
+                kept.iter()
+                    .enumerate()
+                    .map(|(j, o)| {
+                        let aj = match rows {
+                            None => a[j],
+                            Some(r) => a[r[j]],
+                        };
+                        o[k] + 2.0 * z * o[4 + k] - aj
+                    })
+                    .collect(),
+            );
+        }
+    }
+    out
+}
+
+impl Context<'_> {
+    /// The damping ratio of a mode at `f_hz` that the record shows: the profile of the
+    /// least-squares fit of the force by the baseline columns and m2·(H − 1)·a over
+    /// `COMPLIANCE_ZETAS`, on at most 4,000 training samples in motion (strided), refined by a
+    /// parabola in ln ζ through the best value and its neighbours (clamped to the grid's range).
+    /// Cached per frequency: the columns, the report and the stability check use one value.
+    /// None when the optimum is at the grid's upper end (no resonance peak: not a mode the
+    /// record identifies; the candidate then has a zero column and is not named).
+    pub fn compliance_zeta(&self, f_hz: f64) -> Option<f64> {
+        let z = self.compliance_zeta_profile(f_hz);
+        (z < COMPLIANCE_ZETAS[COMPLIANCE_ZETAS.len() - 1]).then_some(z)
+    }
+
+    pub(crate) fn compliance_zeta_profile(&self, f_hz: f64) -> f64 {
+        if let Ok(c) = self.zeta_cache.lock() {
+            if let Some(z) = c.get(&f_hz.to_bits()) {
+                return *z;
+            }
+        }
+        self.compliance_zetas_profiled(&[f_hz])
+            .first()
+            .copied()
+            .unwrap_or(COMPLIANCE_ZETAS[4])
+    }
+
+    /// `compliance_zeta` of each frequency of `fs` (None as it gives), those not cached yet
+    /// profiled together: the filters of all their damping ratios in one resonator pass (each
+    /// filter's outputs are those of the filter run alone, `resonator_batch`), so the values
+    /// are each frequency's own profile's.
+    pub fn compliance_zetas(&self, fs: &[f64]) -> Vec<Option<f64>> {
+        let mut todo: Vec<f64> = Vec::new();
+        if let Ok(c) = self.zeta_cache.lock() {
+            for &f in fs {
+                if !c.contains_key(&f.to_bits()) && !todo.iter().any(|t| t.to_bits() == f.to_bits())
+                {
+                    todo.push(f);
+                }
+            }
+        }
+        if !todo.is_empty() {
+            self.compliance_zetas_profiled(&todo);
+        }
+        fs.iter().map(|&f| self.compliance_zeta(f)).collect()
+    }
+
+    /// The damping-ratio profile (`compliance_zeta`) of each frequency of `fs`, its filters
+    /// over `COMPLIANCE_ZETAS` for every frequency in one resonator pass; each value cached.
+    pub(crate) fn compliance_zetas_profiled(&self, fs: &[f64]) -> Vec<f64> {
+        let n = self.rec.len();
+        let pr = self.profile_rows.get_or_init(|| {
+            let rows = self.training_rows(self.window.min(PROFILE_WINDOW), PROFILE_ROWS);
+            let cols: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
+                Vec::new()
+            } else {
+                base_columns(self)
+                    .into_iter()
+                    .map(|(_, c)| rows.iter().map(|&i| c[i]).collect())
+                    .collect()
+            };
+            let f = rows.iter().map(|&i| self.rec.f[i]).collect();
+            FitRows { rows, cols, f }
+        });
+        let (rows, base, f) = (&pr.rows, &pr.cols, &pr.f);
+        let zs: Vec<f64> = if rows.len() < 10 || self.base_pred.len() != n {
+            vec![COMPLIANCE_ZETAS[4]; fs.len()]
+        } else {
+            let modes: Vec<(f64, f64)> = fs
+                .iter()
+                .flat_map(|&f_hz| COMPLIANCE_ZETAS.iter().map(move |&z| (f_hz, z)))
+                .collect();
+            let all = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(rows));
+            all.chunks(COMPLIANCE_ZETAS.len())
+                .map(|cols| zeta_of_profile(base, f, cols))
+                .collect()
+        };
+        if let Ok(mut c) = self.zeta_cache.lock() {
+            for (f_hz, z) in fs.iter().zip(&zs) {
+                c.insert(f_hz.to_bits(), *z);
+            }
+        }
+        zs
+    }
+}
+
+/// The damping ratio of `compliance_zeta`'s profile from the mode's columns `cols` (one per
+/// value of `COMPLIANCE_ZETAS`, at the profile's rows) beside the baseline columns `base`,
+/// the force `f` at those rows.
+pub(crate) fn zeta_of_profile(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -> f64 {
+    // the joint fit of the baseline columns and the mode's column (what the selection fits),
+    // per damping ratio
+    let ff: f64 = f.iter().map(|v| v * v).sum();
+    let dot = |x: &[f64], y: &[f64]| -> f64 { x.iter().zip(y).map(|(x, y)| x * y).sum() };
+    // the baseline columns' products (the same for every damping ratio: once), then per
+    // damping ratio the mode column's row and column of the normal equations
+    let nb = base.len();
+    let m = nb + 1;
+    let mut g0 = vec![0.0; m * m];
+    let mut bb0 = vec![0.0; m];
+    for p in 0..nb {
+        for q in p..nb {
+            let d = dot(&base[p], &base[q]);
+            g0[p * m + q] = d;
+            g0[q * m + p] = d;
+        }
+        bb0[p] = dot(&base[p], f);
+    }
+    let rss: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let (mut g, mut bb) = (g0.clone(), bb0.clone());
+            for p in 0..nb {
+                let d = dot(&base[p], c);
+                g[p * m + nb] = d;
+                g[nb * m + p] = d;
+            }
+            g[nb * m + nb] = dot(c, c);
+            bb[nb] = dot(c, f);
+            let th = crate::solve_sym(&g, &bb, m).th;
+            let mut r = ff;
+            for p in 0..m {
+                r -= 2.0 * th[p] * bb[p];
+                for q in 0..m {
+                    r += th[p] * g[p * m + q] * th[q];
+                }
+            }
+            r
+        })
+        .collect();
+    let k = (0..rss.len())
+        .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
+        .unwrap_or(4);
+    if k == 0 || k + 1 == rss.len() {
+        COMPLIANCE_ZETAS[k]
+    } else {
+        // vertex of the parabola through (ln ζ, rss) at k−1, k, k+1 (equal spacing h)
+        let (y0, y1, y2) = (rss[k - 1], rss[k], rss[k + 1]);
+        let den = y0 - 2.0 * y1 + y2;
+        let h = (COMPLIANCE_ZETAS[k + 1] / COMPLIANCE_ZETAS[k]).ln();
+        let d = if den > 0.0 {
+            0.5 * (y0 - y2) / den
+        } else {
+            0.0
+        };
+        (COMPLIANCE_ZETAS[k].ln() + d.clamp(-1.0, 1.0) * h).exp()
+    }
+}
