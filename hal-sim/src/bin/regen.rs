@@ -38,6 +38,10 @@ enum Command {
     /// Send console commands (arguments or --script) to a serial port or `regen serve`'s
     /// pseudo-terminal and print the replies; exit status 1 on an error reply or a timeout.
     Client(cli::client::ClientArgs),
+    /// The browser UI: serves the page and bridges the simulated drive (--sim) or a board
+    /// (--port) over a WebSocket; prints the URL to open (with this run's token).
+    #[cfg(unix)]
+    Ui(cli::ui::UiArgs),
 }
 
 /// Parse the command line; a usage error is one line (clap's message and tip, without the
@@ -75,6 +79,8 @@ fn main() {
         #[cfg(unix)]
         Some(Command::Serve(a)) => cli::serve::run(&a),
         Some(Command::Client(a)) => cli::client::run(&a),
+        #[cfg(unix)]
+        Some(Command::Ui(a)) => cli::ui::run(&a),
         Some(Command::Diagnose(a)) => {
             hal_sim::diagnose::cli::cli_main(a).map_err(|e| e.to_string())
         }
