@@ -16,6 +16,12 @@
 //! Telemetry lines are CSV: a header `# tel t,<ch>,…` then `<t>,<v>,…` per sample (`t` in s
 //! since `tel` was started), readable by any CSV plotting tool after dropping `#` lines.
 //!
+//! Machine mode (`machine on`, `docs/console.md`, "Machine mode"): no echo, prompt, banner or
+//! line editing; every line sent starts with a one-letter tag (`R` final reply, `D` data line
+//! of a reply, `T` telemetry, `H` telemetry header, `N` notice) and replies carry the command's
+//! id (`#ID` in front of the command, `-` without one). A command's text is written once, for
+//! both modes: its data lines and its final line go through [`Out`], which tags them.
+//!
 //! Store rule: `save` is refused while the mode is `run` (a flash page erase stalls the core
 //! for ~20 ms on the G474, i.e. 400 current-loop periods); `load` and `defaults` are refused in
 //! `run` as well because they change non-runtime parameters.
@@ -33,6 +39,34 @@ pub const PROMPT: &str = "> ";
 
 /// Longest console line, bytes (the board's receive buffer).
 pub const LINE_MAX: usize = 128;
+// The editor's refusal names the figure as text.
+const _: () = assert!(LINE_MAX == 128);
+
+/// Longest command id (`#ID` in machine mode), ASCII letters and digits.
+pub const ID_MAX: usize = 8;
+
+/// The command id at the start of a machine-mode line: `#ID` followed by a space or the end,
+/// ID 1 to [`ID_MAX`] ASCII letters or digits. `None` when the line has no valid id.
+fn id_of(line: &[u8]) -> Option<&[u8]> {
+    let rest = line.strip_prefix(b"#")?;
+    let n = rest
+        .iter()
+        .position(|&b| b == b' ' || b == b'\t')
+        .unwrap_or(rest.len());
+    let id = rest.get(..n)?;
+    (!id.is_empty() && id.len() <= ID_MAX && id.iter().all(u8::is_ascii_alphanumeric)).then_some(id)
+}
+
+/// A command id as text (at most [`ID_MAX`] ASCII characters).
+type Id = heapless::String<ID_MAX>;
+
+fn id_text(b: &[u8]) -> Id {
+    let mut id = Id::new();
+    for &c in b {
+        let _ = id.push(char::from(c));
+    }
+    id
+}
 
 /// Every command: name, arguments, what it does (`help`, `help CMD`, and the usage line of a
 /// command given wrong arguments).
@@ -65,6 +99,11 @@ pub static COMMANDS: &[(&str, &str, &str)] = &[
         "idle, open: gates off; run: harvest; short: phases shorted; align: find the angle",
     ),
     ("tel", "CH[,CH..] HZ|off", "stream channels as CSV t,v1,.."),
+    (
+        "machine",
+        "on|off",
+        "machine-readable mode: tagged lines, #ID command ids",
+    ),
 ];
 
 /// A line from [`LineEditor::feed`].
@@ -86,6 +125,8 @@ pub struct LineEditor {
     /// The last line ended, as checked text (a `&str` without `core::str::from_utf8`, which
     /// with its 256-byte table is 0.6 KB of the board's flash).
     text: heapless::String<LINE_MAX>,
+    /// Machine mode ([`LineEditor::set_machine`]): no echo, no editing.
+    machine: bool,
 }
 
 impl Default for LineEditor {
@@ -97,6 +138,7 @@ impl Default for LineEditor {
             cr: false,
             esc: 0,
             text: heapless::String::new(),
+            machine: false,
         }
     }
 }
@@ -106,10 +148,30 @@ impl LineEditor {
         LineEditor::default()
     }
 
+    /// Machine mode (follow [`Console::machine`]): nothing is echoed and there is no editing:
+    /// CR, LF or CRLF end a line, other control characters are dropped, and the `error:` of
+    /// an overlong or non-UTF-8 line is a final reply `R <id> err …` (the id read from the
+    /// line's start, `-` without one).
+    pub fn set_machine(&mut self, on: bool) {
+        self.machine = on;
+    }
+
     /// One received byte; its echo goes to `out`. `Some(line)` when a line ended (empty for
     /// an empty line, or after an overlong / non-UTF-8 line, whose `error:` line is written).
     pub fn feed<W: Write>(&mut self, b: u8, out: &mut W) -> Option<Line<'_>> {
         let cr = core::mem::replace(&mut self.cr, b == b'\r');
+        if self.machine {
+            self.esc = 0;
+            return match b {
+                b'\n' if cr => None,
+                b'\r' | b'\n' => self.end(out),
+                0..=0x1f | 0x7f => None,
+                _ => {
+                    self.push(b);
+                    None
+                }
+            };
+        }
         if self.esc != 0 {
             // ESC X (two bytes) or ESC [ … final byte (0x40..=0x7e).
             self.esc =
@@ -124,24 +186,7 @@ impl LineEditor {
             b'\n' if cr => None, // the LF of a CRLF
             b'\r' | b'\n' => {
                 out.s("\r\n");
-                let n = core::mem::replace(&mut self.len, 0);
-                if core::mem::replace(&mut self.overlong, false) {
-                    out.s("error: line longer than ")
-                        .uint(LINE_MAX as u32)
-                        .s(" characters\r\n");
-                    return Some("");
-                }
-                self.text.clear();
-                let mut rest = self.buf.get(..n).unwrap_or(&[]);
-                while !rest.is_empty() {
-                    let Some((ch, k)) = utf8_first(rest) else {
-                        out.s("error: line is not UTF-8\r\n");
-                        return Some("");
-                    };
-                    let _ = self.text.push(ch);
-                    rest = rest.get(k..).unwrap_or(&[]);
-                }
-                Some(self.text.as_str())
+                self.end(out)
             }
             0x08 | 0x7f => {
                 self.erase(out);
@@ -160,12 +205,9 @@ impl LineEditor {
             }
             0..=0x1f => None,
             _ => {
-                if self.len == LINE_MAX {
-                    self.overlong = true;
+                if !self.push(b) {
                     return None;
                 }
-                self.buf[self.len] = b;
-                self.len += 1;
                 // Echo whole characters: an ASCII byte at once, a multi-byte one when complete.
                 let last = self.buf.get(self.char_start()..self.len).unwrap_or(&[]);
                 if let Some((ch, k)) = utf8_first(last) {
@@ -176,6 +218,49 @@ impl LineEditor {
                 None
             }
         }
+    }
+
+    /// Append a received byte; `false` (and the line marked overlong) when it is full.
+    fn push(&mut self, b: u8) -> bool {
+        if self.len == LINE_MAX {
+            self.overlong = true;
+            return false;
+        }
+        self.buf[self.len] = b;
+        self.len += 1;
+        true
+    }
+
+    /// A line ended: its text, or its `error:` line (an overlong or non-UTF-8 line) and an
+    /// empty line.
+    fn end<W: Write>(&mut self, out: &mut W) -> Option<Line<'_>> {
+        let n = core::mem::replace(&mut self.len, 0);
+        let raw = self.buf.get(..n).unwrap_or(&[]);
+        let why = if core::mem::replace(&mut self.overlong, false) {
+            "line longer than 128 characters"
+        } else {
+            self.text.clear();
+            let mut rest = raw;
+            loop {
+                if rest.is_empty() {
+                    return Some(self.text.as_str());
+                }
+                let Some((ch, k)) = utf8_first(rest) else {
+                    break "line is not UTF-8";
+                };
+                let _ = self.text.push(ch);
+                rest = rest.get(k..).unwrap_or(&[]);
+            }
+        };
+        if self.machine {
+            out.s("R ")
+                .s(id_text(id_of(raw).unwrap_or(b"-")).as_str())
+                .s(" err ");
+        } else {
+            out.s("error: ");
+        }
+        out.s(why).s("\r\n");
+        Some("")
     }
 
     /// Where the last character starts (its continuation bytes are `0b10xx_xxxx`).
@@ -233,14 +318,14 @@ pub enum Saved {
 }
 
 /// The reply to a `save`: `ok saved` or `error: save failed: …`, without the line end.
-pub fn save_reply<W: Write>(r: Result<(), &'static str>, out: &mut W) -> CmdResult {
+fn save_reply<W: Write>(r: Result<(), &'static str>, out: &mut Out<'_, W>) -> CmdResult {
     match r {
         Ok(()) => {
-            out.s("ok saved");
+            out.fin(true).s(" saved");
             Ok(())
         }
         Err(e) => {
-            out.s("error: save failed: ").s(e);
+            out.fin(false).s("save failed: ").s(e);
             Err(Refused)
         }
     }
@@ -256,6 +341,12 @@ pub trait ParamStore {
     /// other hardware (a wrong bus scaling makes the loop over-drive and motor the machine).
     fn factory(&self) -> Config {
         Config::default()
+    }
+    /// The configuration the store holds: written by the last successful `save`, or found
+    /// at boot (what `load` reads); `None` when it holds none (machine `list`'s `saved=`
+    /// then compares with [`ParamStore::factory`]).
+    fn held(&self) -> Option<Config> {
+        None
     }
 }
 
@@ -313,9 +404,14 @@ pub fn channel_value(t: &Telemetry, i: usize) -> f32 {
 
 const MAX_CH: usize = 8;
 
-/// Console state (telemetry selection, energy integrator).
+/// Console state (telemetry selection, energy integrator, machine mode).
 #[derive(Clone, Debug, Default)]
 pub struct Console {
+    /// Machine mode (`machine on`).
+    machine: bool,
+    /// The id of the command executed last (machine mode; `-` without one): a deferred
+    /// `save`'s reply carries it ([`Console::save_done`]).
+    id: Id,
     tel: [u8; MAX_CH],
     n_tel: usize,
     /// Periods between telemetry samples (0 = off).
@@ -395,6 +491,77 @@ pub type CmdResult = Result<(), Refused>;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Refused;
 
+/// A command's output. In the human console it is written as it is. In machine mode every
+/// line is tagged: a data line gets `D <id> ` in front, the final line starts `R <id> ok` or
+/// `R <id> err ` ([`Out::fin`]), and a line written with [`Out::raw`] set (the `H` header)
+/// goes untouched. So a command's arm writes its text once, for both modes.
+pub struct Out<'a, W> {
+    w: &'a mut W,
+    /// Machine mode.
+    pub machine: bool,
+    id: &'a str,
+    /// At the start of a line.
+    bol: bool,
+    /// Write lines untagged (the final line, the `H` header).
+    pub raw: bool,
+}
+
+impl<'a, W: Write> Out<'a, W> {
+    pub fn new(w: &'a mut W, machine: bool, id: &'a str) -> Self {
+        Out {
+            w,
+            machine,
+            id,
+            bol: true,
+            raw: false,
+        }
+    }
+
+    /// Start the final line: `ok` / `error: `, in machine mode `R <id> ok` / `R <id> err `
+    /// (on a line of its own). The command's text follows; the line end is written by
+    /// [`Console::execute`].
+    #[inline(never)]
+    pub fn fin(&mut self, ok: bool) -> &mut Self {
+        if self.machine {
+            if !self.bol {
+                self.s("\r\n");
+            }
+            self.raw = true;
+            let id = self.id;
+            self.s("R ").s(id).s(if ok { " ok" } else { " err " })
+        } else {
+            self.s(if ok { "ok" } else { "error: " })
+        }
+    }
+}
+
+impl<W: Write> Write for Out<'_, W> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        if !self.machine || self.raw {
+            self.bol = s.ends_with('\n');
+            return self.w.write_str(s);
+        }
+        // Each line that starts here gets its `D <id> ` (by bytes: no pattern search code).
+        let mut rest = s;
+        while !rest.is_empty() {
+            let end = rest
+                .bytes()
+                .position(|b| b == b'\n')
+                .map_or(rest.len(), |i| i + 1);
+            if self.bol {
+                self.w.write_str("D ")?;
+                self.w.write_str(self.id)?;
+                self.w.write_str(" ")?;
+            }
+            let (line, tail) = rest.split_at(end);
+            self.w.write_str(line)?;
+            self.bol = line.ends_with('\n');
+            rest = tail;
+        }
+        Ok(())
+    }
+}
+
 fn parse_f32(s: &str) -> Result<f32, NumError> {
     match s {
         "inf" | "+inf" => Ok(f32::INFINITY),
@@ -442,12 +609,22 @@ impl Console {
         self.tel_count += 1;
         if self.tel_count >= self.tel_every {
             self.tel_count = 0;
+            if self.machine {
+                out.s("T ");
+            }
             out.fixed(self.tel_periods as f32 * ts, 6);
             for &i in &self.tel[..self.n_tel] {
                 out.s(",").num(channel_value(&t, i as usize));
             }
             out.s("\r\n");
         }
+    }
+
+    /// The start of a line of an unsolicited notice: `N ` in machine mode, `# ` (a comment
+    /// for CSV readers) in the human console. A notice in the human console starts with a
+    /// line end (the prompt's line) and ends with the prompt ([`Console::prompt`]).
+    pub fn note<'w, W: Write>(&self, out: &'w mut W) -> &'w mut W {
+        out.s(if self.machine { "N " } else { "# " })
     }
 
     /// The greeting, on connection (board: at boot): version, drive state, how to get help,
@@ -475,11 +652,15 @@ impl Console {
         self.noticed = code;
         match f {
             Some(f) => {
-                write_fault(out, "\r\n# fault ", f);
-                out.s("# now in mode ")
+                if !self.machine {
+                    out.s("\r\n");
+                }
+                write_fault(self.note(out).s("fault "), "", f);
+                self.note(out)
+                    .s("now in mode ")
                     .s(ctl.mode().name())
                     .s(" (faults: details)\r\n")
-                    .s(PROMPT);
+                    .s(self.prompt());
                 true
             }
             None => false,
@@ -489,6 +670,8 @@ impl Console {
     /// Execute one line. Writes one or more lines to `out`, the last starting `ok` or `error:`.
     /// Never inlined: the board calls it from an async task, whose state machine would
     /// otherwise take a copy of the whole executor (measured: +3.8 KB of flash).
+    /// In machine mode a line may start with `#ID ` ([`ID_MAX`] letters or digits at most);
+    /// the reply's `D` and `R` lines carry ID (`-` without one).
     #[inline(never)]
     pub fn execute<W: Write, S: ParamStore>(
         &mut self,
@@ -497,13 +680,97 @@ impl Console {
         store: &mut S,
         out: &mut W,
     ) -> CmdResult {
-        match self.command(line, ctl, store, out) {
-            None => Ok(()), // empty line: nothing
+        let (id, line) = match self.split_id(line) {
+            Some(x) => x,
+            None => {
+                self.id = id_text(b"-");
+                self.final_line(
+                    false,
+                    "command id must be 1 to 8 ASCII letters or digits after #",
+                    out,
+                );
+                return Err(Refused);
+            }
+        };
+        self.id = id_text(id.as_bytes());
+        let id = self.id.clone();
+        let mut o = Out::new(out, self.machine, &id);
+        let r = match self.command(line, ctl, store, &mut o) {
+            // An empty line: nothing, in machine mode as well unless it carried an id.
+            None if line.trim().is_empty() && self.machine && id != "-" => {
+                o.fin(false).s("empty command");
+                Some(Err(Refused))
+            }
+            r => r,
+        };
+        match r {
+            None => Ok(()), // empty line, or a deferred save: nothing
             Some(r) => {
-                out.s("\r\n"); // the end of the `ok`/`error:` line, in one place (flash)
+                o.raw = true;
+                o.s("\r\n"); // the end of the `ok`/`error:` line, in one place (flash)
                 r
             }
         }
+    }
+
+    /// Machine mode: whether the console reads `#ID` command ids and tags its lines.
+    pub fn machine(&self) -> bool {
+        self.machine
+    }
+
+    /// Switch machine mode (a host that sees a new reader starts it in the human console).
+    pub fn set_machine(&mut self, on: bool) {
+        self.machine = on;
+    }
+
+    /// The prompt after a reply: [`PROMPT`], none in machine mode.
+    pub fn prompt(&self) -> &'static str {
+        if self.machine {
+            ""
+        } else {
+            PROMPT
+        }
+    }
+
+    /// A line's command id and the command: in machine mode `#ID CMD…` gives `(ID, CMD…)`,
+    /// a line without `#` `("-", line)`, a malformed id `None`; in the human console
+    /// `("-", line)`. For a host answering a command of its own in front of the console.
+    pub fn split_id<'l>(&self, line: &'l str) -> Option<(&'l str, &'l str)> {
+        let t = line.trim_start_matches([' ', '\t']);
+        if !self.machine || !t.starts_with('#') {
+            return Some(("-", line));
+        }
+        let id = id_of(t.as_bytes())?;
+        let n = id.len() + 1;
+        Some((t.get(1..n)?, t.get(n..)?))
+    }
+
+    /// A final reply line written by a host for a command of its own (`regen serve`'s
+    /// `sim`): `ok TEXT` / `error: TEXT`, in machine mode `R <id> ok TEXT` / `R <id> err
+    /// TEXT` with the id [`Console::split_id`] gave; `text` starts with a space after `ok`.
+    pub fn host_reply<W: Write>(&self, id: &str, ok: bool, text: &str, out: &mut W) {
+        let mut o = Out::new(out, self.machine, id);
+        o.fin(ok).s(text);
+        o.raw = true;
+        o.s("\r\n");
+    }
+
+    /// A final reply line for the command executed last (its id in machine mode): the
+    /// board's `reply truncated`.
+    pub fn final_line<W: Write>(&self, ok: bool, text: &str, out: &mut W) {
+        self.host_reply(self.id.as_str(), ok, text, out);
+    }
+
+    /// The reply to a deferred `save` ([`Saved::Deferred`]) once the caller has written the
+    /// flash: `ok saved` or `error: save failed: …` (tagged with the command's id in
+    /// machine mode) and its line end.
+    pub fn save_done<W: Write>(&self, r: Result<(), &'static str>, out: &mut W) -> CmdResult {
+        let id = self.id.clone();
+        let mut o = Out::new(out, self.machine, &id);
+        let res = save_reply(r, &mut o);
+        o.raw = true;
+        o.s("\r\n");
+        res
     }
 
     /// [`Console::execute`] but the last line's end; `None` for an empty line.
@@ -512,8 +779,9 @@ impl Console {
         line: &str,
         ctl: &mut Controller,
         store: &mut S,
-        out: &mut W,
+        out: &mut Out<'_, W>,
     ) -> Option<CmdResult> {
+        let machine = out.machine;
         let mut it = line.split_ascii_whitespace();
         let cmd = it.next()?;
         let a1 = it.next();
@@ -525,13 +793,13 @@ impl Console {
         // The text is written piece by piece (`Put`), not through `write!`.
         macro_rules! fail {
             ($($t:tt)*) => {{
-                out.s("error: ") $($t)*;
+                out.fin(false) $($t)*;
                 return Some(Err(Refused));
             }};
         }
         macro_rules! ok {
             ($($t:tt)*) => {{
-                out.s("ok") $($t)*;
+                out.fin(true) $($t)*;
                 return Some(Ok(()));
             }};
         }
@@ -570,6 +838,32 @@ impl Console {
                 let c = ctl.config();
                 // The default column is what `defaults` restores on this hardware.
                 let f = store.factory();
+                if machine {
+                    // `saved=`: against what the flash holds, or the factory configuration.
+                    let held = store.held().unwrap_or(f);
+                    for p in PARAMS.iter().filter(hit) {
+                        let u = p.unit();
+                        out.s("name=")
+                            .s(p.name)
+                            .s(" value=")
+                            .num(p.get(c))
+                            .s(" unit=")
+                            .s(if u.is_empty() { "-" } else { u })
+                            .s(" min=")
+                            .num(p.min)
+                            .s(" max=")
+                            .num(p.max)
+                            .s(" default=")
+                            .num(p.get(&f))
+                            .s(if p.runtime { " when=rt" } else { " when=idle" })
+                            .s(if p.get(c) != p.get(&held) {
+                                " saved=changed\r\n"
+                            } else {
+                                " saved=yes\r\n"
+                            });
+                    }
+                    ok!(.s(" ").uint(n as u32).s(" params"))
+                }
                 out.col("name", 19)
                     .col("value", 12)
                     .col("unit", 7)
@@ -642,7 +936,7 @@ impl Console {
                 }
                 match store.save(ctl.config()) {
                     Ok(Saved::Done) => Some(save_reply(Ok(()), out)),
-                    // The caller completes the write and the reply.
+                    // The caller completes the write and the reply (`save_done`).
                     Ok(Saved::Deferred) => None,
                     Err(e) => Some(save_reply(Err(e), out)),
                 }
@@ -663,6 +957,40 @@ impl Console {
                     Ok(()) => ok!(.s(" ").s(cmd)),
                     Err(e) => fail!(.s(e.field).s(": ").s(e.reason)),
                 }
+            }
+            "status" if want(0) && machine => {
+                let t = ctl.telemetry();
+                let run = running;
+                out.s("mode=")
+                    .s(ctl.mode().name())
+                    .s(" boot=")
+                    .s(ctl.boot().name())
+                    .s(" fault=")
+                    .s(ctl.fault().map_or("none", |f| f.name()));
+                let cycle = self.cycle.last.filter(|_| run);
+                for (key, v, power) in [
+                    ("vbus_v", Some(q_f32(t.v_bus)), false),
+                    ("speed_rad_s", Some(q_f32(t.omega_m)), false),
+                    ("travel_m", Some(q_f32(t.x)), false),
+                    ("id_a", Some(q_f32(t.i_dq.d)), false),
+                    ("iq_a", Some(q_f32(t.i_dq.q)), false),
+                    ("p_w", Some(q_f32(t.p_elec)), true),
+                    ("p_avg_w", Some(self.p_avg_w), true),
+                    ("p_cycle_w", cycle.map(|c| c.0), true),
+                    ("cycle_s", cycle.map(|c| c.1), true),
+                    ("energy_j", Some(self.energy_j), false),
+                ] {
+                    out.s(" ").s(key).s("=");
+                    // Power figures mean nothing outside `run` (no load emulated).
+                    match v {
+                        Some(v) if run || !power => out.num(v),
+                        _ => out.s("-"),
+                    };
+                }
+                out.s(" warnings=");
+                write_warnings(out, ctl.protection().warnings);
+                out.s("\r\n");
+                ok!()
             }
             "status" if want(0) => {
                 let t = ctl.telemetry();
@@ -820,14 +1148,29 @@ impl Console {
                 self.tel_every = (every as u32).max(1);
                 self.tel_count = 0;
                 self.tel_periods = 0;
-                out.s("# tel t");
+                // The header: a comment line, in machine mode an `H` line.
+                out.raw = true;
+                out.s(if machine { "H t" } else { "# tel t" });
                 for &i in &sel[..n] {
                     if let Some(ch) = CHANNELS.get(i as usize) {
                         out.s(",").s(ch.0);
                     }
                 }
                 out.s("\r\n");
+                out.raw = false;
                 ok!(.s(" tel ").num(pwm / self.tel_every as f32).s(" Hz"))
+            }
+            "machine" if want(1) => {
+                let on = match a1 {
+                    Some("on") => true,
+                    Some("off") => false,
+                    _ => fail!(.s("machine on|off")),
+                };
+                // Switched before the reply: `machine on` is answered in machine form,
+                // `machine off` in the human console's.
+                self.machine = on;
+                out.machine = on;
+                ok!(.s(if on { " machine on" } else { " machine off" }))
             }
             _ if COMMANDS.iter().any(|c| c.0 == cmd) => {
                 let c = COMMANDS.iter().find(|c| c.0 == cmd).unwrap_or(&COMMANDS[0]);
@@ -978,6 +1321,7 @@ mod tests {
     use super::*;
     use std::format;
     use std::string::{String, ToString};
+    use std::vec;
     use std::vec::Vec;
 
     /// The line editor's UTF-8 check against core's: every sequence of one to three bytes,
@@ -1545,6 +1889,345 @@ mod tests {
         // Current still high in the last telemetry: clear refused on the later fault.
         let (r, s) = run(&mut con, &mut ctl, "clear");
         assert!(r.is_err() && s.contains("i_trip_a"), "{s}");
+    }
+
+    /// One line the drive sends in machine mode, parsed by the grammar of
+    /// `docs/console.md` ("Machine mode"); `Err` names what is wrong.
+    #[derive(Debug, PartialEq)]
+    enum Tagged {
+        R(String, bool, String),
+        D(String, String),
+        T(Vec<f64>),
+        H(Vec<String>),
+        N(String),
+    }
+
+    fn is_id(id: &str) -> bool {
+        id == "-" || (1..=8).contains(&id.len()) && id.bytes().all(|b| b.is_ascii_alphanumeric())
+    }
+
+    fn parse_tagged(line: &str) -> Result<Tagged, String> {
+        let (tag, rest) = line
+            .split_once(' ')
+            .ok_or_else(|| format!("no tag: {line:?}"))?;
+        let id_text = |r: &str| -> Result<(String, String), String> {
+            let (id, text) = r.split_once(' ').unwrap_or((r, ""));
+            if !is_id(id) {
+                return Err(format!("bad id {id:?} in {line:?}"));
+            }
+            Ok((id.to_string(), text.to_string()))
+        };
+        match tag {
+            "R" => {
+                let (id, text) = id_text(rest)?;
+                let (verdict, text) = text.split_once(' ').unwrap_or((&text, ""));
+                match verdict {
+                    "ok" => Ok(Tagged::R(id, true, text.to_string())),
+                    "err" if !text.is_empty() => Ok(Tagged::R(id, false, text.to_string())),
+                    _ => Err(format!("bad verdict in {line:?}")),
+                }
+            }
+            "D" => {
+                let (id, text) = id_text(rest)?;
+                Ok(Tagged::D(id, text))
+            }
+            "T" => rest
+                .split(',')
+                .map(|v| v.parse::<f64>().map_err(|e| format!("{e}: {line:?}")))
+                .collect::<Result<Vec<_>, _>>()
+                .map(Tagged::T),
+            "H" if rest.starts_with("t,") || rest == "t" => {
+                Ok(Tagged::H(rest.split(',').map(str::to_string).collect()))
+            }
+            "N" if !rest.is_empty() => Ok(Tagged::N(rest.to_string())),
+            _ => Err(format!("unknown tag: {line:?}")),
+        }
+    }
+
+    /// Every line of `s` (each ending CRLF), parsed.
+    fn tagged(s: &str) -> Vec<Tagged> {
+        assert!(s.is_empty() || s.ends_with("\r\n"), "{s:?}");
+        s.split_terminator("\r\n")
+            .map(|l| {
+                assert!(!l.contains(['\r', '\n']), "{s:?}");
+                parse_tagged(l).unwrap()
+            })
+            .collect()
+    }
+
+    /// A store that holds what was saved last (none at first), saving at once or deferred.
+    struct Held {
+        held: Option<Config>,
+        factory: Config,
+        deferred: bool,
+    }
+    impl ParamStore for Held {
+        fn save(&mut self, c: &Config) -> Result<Saved, &'static str> {
+            self.held = Some(*c);
+            Ok(if self.deferred {
+                Saved::Deferred
+            } else {
+                Saved::Done
+            })
+        }
+        fn load(&mut self) -> Result<Config, &'static str> {
+            self.held.ok_or("empty")
+        }
+        fn factory(&self) -> Config {
+            self.factory
+        }
+        fn held(&self) -> Option<Config> {
+            self.held
+        }
+    }
+
+    /// Machine mode: every line type parses, replies carry their command's id, `list` has
+    /// one `key=value` line per parameter with `saved=`, `status` one line, the editor does
+    /// not echo, and `machine off` returns to the human console unchanged.
+    #[test]
+    fn machine_mode_lines_parse_and_carry_ids() {
+        let cfg = Config::default();
+        let mut ctl = Controller::new(&cfg).unwrap();
+        let mut con = Console::new();
+        let mut st = Held {
+            held: None,
+            factory: cfg,
+            deferred: false,
+        };
+        let ex = |con: &mut Console, ctl: &mut Controller, st: &mut Held, l: &str| {
+            let mut s = String::new();
+            let r = con.execute(l, ctl, st, &mut s);
+            (r, s)
+        };
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "machine on");
+        assert!(r.is_ok() && s == "R - ok machine on\r\n", "{s:?}");
+        assert_eq!(con.prompt(), "");
+        // A data reply: D lines with the id, then R.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#a1 help set");
+        let t = tagged(&s);
+        assert_eq!(t.len(), 2, "{s}");
+        assert!(matches!(&t[0], Tagged::D(id, x) if id == "a1" && x.starts_with("set ")));
+        assert_eq!(t[1], Tagged::R("a1".into(), true, "".into()));
+        // Refusals: R err with the human text; nothing changed.
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#7 set r_load_ohm -5");
+        assert!(r.is_err());
+        assert_eq!(
+            s,
+            "R 7 err r_load_ohm -5: value out of range; allowed 0 .. inf ohm, now 306\r\n"
+        );
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#toolong123 status");
+        assert!(r.is_err() && s.starts_with("R - err command id"), "{s}");
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#b-1 status");
+        assert!(r.is_err() && s.starts_with("R - err command id"), "{s}");
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#5");
+        assert!(r.is_err() && s == "R 5 err empty command\r\n", "{s}");
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "");
+        assert!(r.is_ok() && s.is_empty());
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "frob");
+        assert_eq!(
+            tagged(&s),
+            [Tagged::R(
+                "-".into(),
+                false,
+                "unknown command 'frob' (see help)".into()
+            )]
+        );
+        // list: every parameter, fields in the fixed order; saved= against the factory
+        // configuration before any save, then the flash.
+        let list = |con: &mut Console, ctl: &mut Controller, st: &mut Held| {
+            let (r, s) = ex(con, ctl, st, "#L list");
+            assert!(r.is_ok(), "{s}");
+            let t = tagged(&s);
+            assert_eq!(t.len(), PARAMS.len() + 1);
+            assert_eq!(
+                t[PARAMS.len()],
+                Tagged::R("L".into(), true, format!("{} params", PARAMS.len()))
+            );
+            let mut saved = std::collections::BTreeMap::new();
+            for (x, p) in t.iter().zip(PARAMS) {
+                let Tagged::D(id, text) = x else {
+                    panic!("{x:?}")
+                };
+                assert_eq!(id, "L");
+                let kv: Vec<(&str, &str)> = text
+                    .split(' ')
+                    .map(|f| f.split_once('=').unwrap())
+                    .collect();
+                let keys: Vec<&str> = kv.iter().map(|k| k.0).collect();
+                assert_eq!(
+                    keys,
+                    ["name", "value", "unit", "min", "max", "default", "when", "saved"]
+                );
+                assert_eq!(kv[0].1, p.name);
+                assert_eq!(kv[1].1.parse::<f32>().unwrap(), p.get(ctl.config()));
+                assert_eq!(kv[3].1.parse::<f32>().unwrap(), p.min);
+                assert_eq!(kv[4].1.parse::<f32>().unwrap(), p.max);
+                assert_eq!(kv[6].1, if p.runtime { "rt" } else { "idle" });
+                saved.insert(p.name, kv[7].1.to_string());
+            }
+            saved
+        };
+        // The longest reply the board's buffer must hold (`firmware/board/src/console.rs`,
+        // REPLY_MAX): `list` with an 8-character id, every value changed.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#12345678 list");
+        std::println!("machine list: {} bytes", s.len());
+        let s0 = list(&mut con, &mut ctl, &mut st);
+        assert!(s0.values().all(|v| v == "yes"), "{s0:?}");
+        assert!(ex(&mut con, &mut ctl, &mut st, "set r_load_ohm 100")
+            .0
+            .is_ok());
+        let s1 = list(&mut con, &mut ctl, &mut st);
+        for (k, v) in &s1 {
+            assert_eq!(v, if *k == "r_load_ohm" { "changed" } else { "yes" }, "{k}");
+        }
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#s save");
+        assert!(r.is_ok() && s == "R s ok saved\r\n", "{s}");
+        assert!(list(&mut con, &mut ctl, &mut st)
+            .values()
+            .all(|v| v == "yes"));
+        // `defaults` restores the factory's 306 Ω: changed against the flash's 100 Ω.
+        assert!(ex(&mut con, &mut ctl, &mut st, "defaults").0.is_ok());
+        assert_eq!(list(&mut con, &mut ctl, &mut st)["r_load_ohm"], "changed");
+        assert!(ex(&mut con, &mut ctl, &mut st, "load").0.is_ok());
+        assert!(list(&mut con, &mut ctl, &mut st)
+            .values()
+            .all(|v| v == "yes"));
+        // A deferred save (the board's): no reply until `save_done`, which carries the id.
+        st.deferred = true;
+        let (r, s) = ex(&mut con, &mut ctl, &mut st, "#q9 save");
+        assert!(r.is_ok() && s.is_empty(), "{s}");
+        let mut s = String::new();
+        assert!(con.save_done(Ok(()), &mut s).is_ok());
+        assert_eq!(s, "R q9 ok saved\r\n");
+        let mut s = String::new();
+        assert!(con.save_done(Err("flash"), &mut s).is_err());
+        assert_eq!(s, "R q9 err save failed: flash\r\n");
+        // status: one D line of key=value pairs.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#st status");
+        let t = tagged(&s);
+        let Tagged::D(_, text) = &t[0] else {
+            panic!("{s}")
+        };
+        let keys: Vec<&str> = text
+            .split(' ')
+            .map(|f| f.split_once('=').unwrap().0)
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "mode",
+                "boot",
+                "fault",
+                "vbus_v",
+                "speed_rad_s",
+                "travel_m",
+                "id_a",
+                "iq_a",
+                "p_w",
+                "p_avg_w",
+                "p_cycle_w",
+                "cycle_s",
+                "energy_j",
+                "warnings"
+            ]
+        );
+        assert!(
+            text.starts_with("mode=idle ") && text.contains(" fault=none "),
+            "{text}"
+        );
+        assert_eq!(t.len(), 2);
+        // tel: H line, R, then T lines.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#t tel iq,p 2000");
+        assert_eq!(
+            tagged(&s),
+            [
+                Tagged::H(vec!["t".into(), "iq".into(), "p".into()]),
+                Tagged::R("t".into(), true, "tel 2000 Hz".into())
+            ]
+        );
+        let mut out = String::new();
+        for _ in 0..100 {
+            con.tick(&ctl, &mut out);
+        }
+        let t = tagged(&out);
+        assert_eq!(t.len(), 10);
+        for (k, x) in t.iter().enumerate() {
+            let Tagged::T(v) = x else { panic!("{x:?}") };
+            assert_eq!(v.len(), 3);
+            assert!((v[0] - (k + 1) as f64 * 5e-4).abs() < 1e-9, "{v:?}");
+        }
+        // A notice: N lines, no prompt.
+        use crate::io::RawSample;
+        assert!(ex(&mut con, &mut ctl, &mut st, "mode run").0.is_ok());
+        let code = (100.0 / cfg.volts_per_count + 0.5) as u16;
+        ctl.step(&RawSample {
+            i_abc: [cfg.adc_zero_code; 3],
+            v_bus: code,
+            encoder: 0,
+        });
+        let mut out = String::new();
+        assert!(con.notice(&ctl, &mut out));
+        assert_eq!(
+            tagged(&out),
+            [
+                Tagged::N("fault 2 bus_over_voltage: bus voltage above v_bus_ov".into()),
+                Tagged::N("now in mode short (faults: details)".into())
+            ]
+        );
+        // faults: D lines then R.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#f faults");
+        let t = tagged(&s);
+        assert!(t[..t.len() - 1]
+            .iter()
+            .all(|x| matches!(x, Tagged::D(id, _) if id == "f")));
+        assert!(
+            matches!(t.last(), Some(Tagged::R(id, true, x)) if id == "f" && x.starts_with("fault bus_over_voltage"))
+        );
+        // Back to the human console: answered in its form.
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#z machine off");
+        assert_eq!(s, "ok machine off\r\n");
+        assert_eq!(con.prompt(), PROMPT);
+        let (_, s) = ex(&mut con, &mut ctl, &mut st, "#z status");
+        assert_eq!(s, "error: unknown command '#z' (see help)\r\n");
+    }
+
+    /// The line editor in machine mode: no echo, no editing, CR/LF/CRLF end lines, an
+    /// overlong or non-UTF-8 line is refused as a final reply with the line's id.
+    #[test]
+    fn line_editor_machine_mode() {
+        let mut ed = LineEditor::new();
+        ed.set_machine(true);
+        let mut feed = |bytes: &[u8]| {
+            let mut echo = String::new();
+            let mut lines = Vec::new();
+            for &b in bytes {
+                if let Some(l) = ed.feed(b, &mut echo) {
+                    lines.push(l.to_string());
+                }
+            }
+            (lines, echo)
+        };
+        assert_eq!(
+            feed(b"#1 status\r\n#2 get x\n#3 a\x7fb\r"),
+            (
+                vec!["#1 status".into(), "#2 get x".into(), "#3 ab".into()],
+                String::new()
+            )
+        );
+        let mut long = b"#k7 set x ".to_vec();
+        long.extend([b'9'; 200]);
+        long.push(b'\n');
+        assert_eq!(
+            feed(&long),
+            (
+                vec![String::new()],
+                "R k7 err line longer than 128 characters\r\n".into()
+            )
+        );
+        assert_eq!(
+            feed(b"\xff get\n"),
+            (vec![String::new()], "R - err line is not UTF-8\r\n".into())
+        );
     }
 
     proptest::proptest! {

@@ -25,7 +25,6 @@ use crate::Scenario;
 use regen_fw::config::Config;
 use regen_fw::console::{CmdResult, Console, ParamStore, Refused, Saved};
 use regen_fw::store::{MemFlash, Store};
-use std::fmt::Write;
 
 /// The simulated drive's store: the firmware's store (`regen_fw::store`) on a simulated flash
 /// of two 2 KiB pages, as the board's, run to completion (the host's flash takes no time); its
@@ -47,6 +46,12 @@ impl ParamStore for SimStore {
     }
     fn factory(&self) -> Config {
         self.factory
+    }
+    fn held(&self) -> Option<Config> {
+        match self.store.load() {
+            (c, None) => Some(c),
+            _ => None,
+        }
     }
 }
 
@@ -92,8 +97,13 @@ impl SimDrive {
         &self.console
     }
 
+    /// Switch the console's machine mode (a new reader starts in the human console).
+    pub fn set_machine(&mut self, on: bool) {
+        self.console.set_machine(on);
+    }
+
     /// One control period; telemetry lines due are appended to `out`.
-    pub fn step<W: Write>(&mut self, out: &mut W) {
+    pub fn step<W: std::fmt::Write>(&mut self, out: &mut W) {
         self.sim.step();
         self.console.tick(self.sim.controller(), out);
     }
@@ -107,13 +117,18 @@ impl SimDrive {
     /// Execute one console line (between two periods). Writes the reply, whose last line is
     /// `ok …` or `error: …`, to `out`.
     pub fn execute(&mut self, line: &str, out: &mut String) -> CmdResult {
-        let mut words = line.split_ascii_whitespace();
+        // In machine mode a line may carry a command id (`#ID sim`); a malformed one is the
+        // console's to refuse.
+        let (id, cmd) = self.console.split_id(line).unwrap_or(("-", ""));
+        let mut words = cmd.split_ascii_whitespace();
         if words.next() == Some("sim") {
             if words.next().is_some() {
-                out.push_str("error: wrong arguments for 'sim' (no arguments)\r\n");
+                self.console
+                    .host_reply(id, false, "wrong arguments for 'sim' (no arguments)", out);
                 return Err(Refused);
             }
-            self.sim_status(out);
+            let text = self.sim_status();
+            self.console.host_reply(id, true, &text, out);
             return Ok(());
         }
         let pwm = self.sim.controller().config().pwm_hz;
@@ -123,10 +138,10 @@ impl SimDrive {
         let mut reply = String::new();
         let r = con.execute(line, &mut ctl, &mut self.store, &mut reply);
         if ctl.config().pwm_hz != pwm {
-            let _ = write!(
-                out,
-                "error: pwm_hz is the simulated hardware's period, fixed at {pwm} Hz by the scenario\r\n"
+            let text = format!(
+                "pwm_hz is the simulated hardware's period, fixed at {pwm} Hz by the scenario"
             );
+            self.console.host_reply(id, false, &text, out);
             return Err(Refused);
         }
         *self.sim.controller_mut() = ctl;
@@ -138,7 +153,7 @@ impl SimDrive {
     /// `sim`: simulated time, the plant's harvested energy (into the inverter, the emulated
     /// load's energy) since start and its average since the previous `sim`, and the relative
     /// energy-balance residual.
-    fn sim_status(&mut self, out: &mut String) {
+    fn sim_status(&mut self) -> String {
         let e = self.sim.energy();
         let t = self.sim.time();
         let (t0, e0) = self.mark;
@@ -148,12 +163,11 @@ impl SimDrive {
             0.0
         };
         self.mark = (t, e.to_inverter);
-        let _ = write!(
-            out,
-            "ok t={t:.6}s e_load={:.6}J p_load_avg={p:.6}W since t={t0:.6}s residual={:.3e}\r\n",
+        format!(
+            " t={t:.6}s e_load={:.6}J p_load_avg={p:.6}W since t={t0:.6}s residual={:.3e}",
             e.to_inverter,
             e.relative_residual()
-        );
+        )
     }
 }
 

@@ -445,3 +445,256 @@ fn a_terminal_is_greeted_echoed_and_told_of_faults() {
     let (status, _) = srv.interrupt();
     assert!(status.success());
 }
+
+/// A line the drive sends in machine mode, by the grammar of `docs/console.md` ("Machine
+/// mode"), written here apart from the firmware's code.
+#[derive(Debug, PartialEq)]
+enum Tagged {
+    /// `R <id> ok|err <text>`
+    R(String, bool, String),
+    /// `D <id> <text>`
+    D(String, String),
+    /// `T <t>,<v1>,…`
+    T(Vec<f64>),
+    /// `H t,<ch>,…`
+    H(String),
+    /// `N <text>`
+    N(String),
+}
+
+fn parse_tagged(line: &str) -> Tagged {
+    let id_ok = |id: &str| {
+        id == "-" || (1..=8).contains(&id.len()) && id.bytes().all(|b| b.is_ascii_alphanumeric())
+    };
+    let (tag, rest) = line
+        .split_once(' ')
+        .unwrap_or_else(|| panic!("no tag: {line:?}"));
+    match tag {
+        "R" | "D" => {
+            let (id, text) = rest.split_once(' ').unwrap_or((rest, ""));
+            assert!(id_ok(id), "bad id in {line:?}");
+            if tag == "D" {
+                return Tagged::D(id.into(), text.into());
+            }
+            let (v, text) = text.split_once(' ').unwrap_or((text, ""));
+            assert!(v == "ok" || v == "err", "bad verdict in {line:?}");
+            Tagged::R(id.into(), v == "ok", text.into())
+        }
+        "T" => Tagged::T(
+            rest.split(',')
+                .map(|v| v.parse().unwrap_or_else(|e| panic!("{e}: {line:?}")))
+                .collect(),
+        ),
+        "H" => Tagged::H(rest.into()),
+        "N" => Tagged::N(rest.into()),
+        _ => panic!("unknown tag: {line:?}"),
+    }
+}
+
+/// Reads whole lines (CRLF-terminated) from a port.
+struct Lines {
+    port: Box<dyn serialport::SerialPort>,
+    buf: Vec<u8>,
+}
+
+impl Lines {
+    fn next(&mut self, deadline: Instant) -> String {
+        loop {
+            if let Some(i) = self.buf.windows(2).position(|w| w == b"\r\n") {
+                let l: Vec<u8> = self.buf.drain(..i + 2).collect();
+                let l = String::from_utf8(l).unwrap();
+                assert!(!l[..l.len() - 2].contains(['\r', '\n']), "{l:?}");
+                return l[..l.len() - 2].to_string();
+            }
+            assert!(
+                Instant::now() < deadline,
+                "timed out; pending {:?}",
+                self.buf
+            );
+            let mut b = [0u8; 8192];
+            match self.port.read(&mut b) {
+                Ok(k) => self.buf.extend_from_slice(&b[..k]),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+    }
+}
+
+/// Machine mode on `regen serve`: telemetry streams at the highest `tel` rate (2 kHz, four
+/// channels) while a writer pipelines 400 commands with ids; every reply arrives once, in
+/// order, with its command's id, and says what that command should (each `get` reads back
+/// the value the `set` before it wrote, so a reply given to the wrong command shows); no
+/// telemetry line is taken for a reply or breaks one; `list` says `saved=changed` after a
+/// `set` and `saved=yes` after `save`.
+#[test]
+fn machine_mode_matches_every_reply_while_telemetry_streams() {
+    let srv = Serve::start();
+    let mut port = serialport::new(&srv.path, 115_200)
+        .timeout(Duration::from_millis(20))
+        .open()
+        .unwrap();
+    read_until(&mut *port, "type help\r\n> ", 10.0);
+    let mut writer = port.try_clone().unwrap();
+    let mut rx = Lines {
+        port,
+        buf: Vec::new(),
+    };
+    let deadline = Instant::now() + Duration::from_secs(120);
+    writer.write_all(b"machine on\r\n").unwrap();
+    // The human console's echo, then the reply in machine form (and no prompt after it).
+    assert_eq!(rx.next(deadline), "machine on");
+    assert_eq!(rx.next(deadline), "R - ok machine on");
+    writer.write_all(b"#tel tel iq,p,w,vbus 2000\n").unwrap();
+    assert_eq!(
+        parse_tagged(&rx.next(deadline)),
+        Tagged::H("t,iq,p,w,vbus".into())
+    );
+    assert_eq!(
+        parse_tagged(&rx.next(deadline)),
+        Tagged::R("tel".into(), true, "tel 2000 Hz".into())
+    );
+
+    // The commands, their ids and what each reply must be: (id, line, ok, text, D lines).
+    type Want = (String, String, bool, String, Option<usize>);
+    let mut want: Vec<Want> = Vec::new();
+    let n_params = regen_fw::params::PARAMS.len();
+    for k in 0..100 {
+        let r = 100 + 7 * k;
+        let id = |s: &str| format!("{s}{k}");
+        want.push((
+            id("s"),
+            format!("set r_load_ohm {r}"),
+            true,
+            format!("r_load_ohm = {r} ohm"),
+            Some(0),
+        ));
+        want.push((
+            id("g"),
+            "get r_load_ohm".into(),
+            true,
+            format!("r_load_ohm = {r} ohm"),
+            Some(0),
+        ));
+        match k % 4 {
+            0 => want.push((
+                id("l"),
+                "list".into(),
+                true,
+                format!("{n_params} params"),
+                Some(n_params),
+            )),
+            1 => want.push((id("u"), "status".into(), true, String::new(), Some(1))),
+            2 => want.push((
+                id("b"),
+                "set r_load_ohm -1".into(),
+                false,
+                format!("r_load_ohm -1: value out of range; allowed 0 .. inf ohm, now {r}"),
+                Some(0),
+            )),
+            _ => want.push((id("h"), "help".into(), true, String::new(), None)),
+        }
+        // A command without an id.
+        want.push((
+            "-".into(),
+            "get law".into(),
+            true,
+            "law = 0 code".into(),
+            Some(0),
+        ));
+    }
+    let script: String = want
+        .iter()
+        .map(|(id, l, ..)| {
+            if id == "-" {
+                format!("{l}\r\n")
+            } else {
+                format!("#{id} {l}\r\n")
+            }
+        })
+        .collect();
+    let w = std::thread::spawn(move || {
+        // In pieces, as a program writes: the pty's input buffer is finite.
+        for chunk in script.as_bytes().chunks(256) {
+            writer.write_all(chunk).unwrap();
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        writer
+    });
+    let (mut tel, mut last_t, mut between) = (0usize, 0.0f64, 0usize);
+    let mut interleaved = 0usize;
+    for (id, line, ok, text, n_data) in &want {
+        let mut data = 0usize;
+        loop {
+            match parse_tagged(&rx.next(deadline)) {
+                Tagged::T(v) => {
+                    assert_eq!(v.len(), 5);
+                    // Each sample's time: the next multiple of 0.5 ms (a dropped line
+                    // leaves a gap, never a step back).
+                    assert!(v[0] > last_t, "{v:?} after {last_t}");
+                    last_t = v[0];
+                    tel += 1;
+                    between += 1;
+                    if data > 0 {
+                        interleaved += 1;
+                    }
+                }
+                Tagged::D(d, _) => {
+                    assert_eq!(&d, id, "data line of another command during '{line}'");
+                    data += 1;
+                }
+                Tagged::R(r, rok, rtext) => {
+                    assert_eq!(&r, id, "reply out of order at '{line}'");
+                    assert_eq!((rok, &rtext), (*ok, text), "'{line}'");
+                    if let Some(n) = n_data {
+                        assert_eq!(data, *n, "'{line}'");
+                    }
+                    break;
+                }
+                other => panic!("unexpected {other:?} during '{line}'"),
+            }
+        }
+    }
+    let mut writer = w.join().unwrap();
+    println!(
+        "{} commands answered in order with their ids; {tel} telemetry lines among them (t up to {last_t:.4} s), {interleaved} inside a reply's data lines",
+        want.len()
+    );
+    // Telemetry really streamed among the replies (≈ 100 lines per 50 ms of simulated time).
+    assert!(between > want.len(), "{between} telemetry lines");
+    assert_eq!(interleaved, 0, "a reply's data lines are sent together");
+
+    // saved=: changed after a set, yes after save (in idle), end to end with the simulated
+    // flash.
+    writer.write_all(b"#off tel off\n#i mode idle\n").unwrap();
+    let reply = |rx: &mut Lines, id: &str| -> (Vec<String>, String) {
+        let mut d = Vec::new();
+        loop {
+            match parse_tagged(&rx.next(deadline)) {
+                Tagged::D(i, t) if i == id => d.push(t),
+                Tagged::R(i, true, t) if i == id => return (d, t),
+                Tagged::T(_) | Tagged::N(_) => {}
+                o => panic!("{id}: {o:?}"),
+            }
+        }
+    };
+    reply(&mut rx, "off");
+    reply(&mut rx, "i");
+    let saved = |rx: &mut Lines, w: &mut Box<dyn serialport::SerialPort>| {
+        w.write_all(b"#ls list r_load_ohm\n").unwrap();
+        let (d, t) = reply(rx, "ls");
+        assert_eq!((d.len(), t.as_str()), (1, "1 params"), "{d:?}");
+        assert!(d[0].starts_with("name=r_load_ohm value="), "{}", d[0]);
+        d[0].rsplit_once(' ').unwrap().1.to_string()
+    };
+    assert_eq!(saved(&mut rx, &mut writer), "saved=changed");
+    writer.write_all(b"#sv save\n").unwrap();
+    assert_eq!(reply(&mut rx, "sv").1, "saved");
+    assert_eq!(saved(&mut rx, &mut writer), "saved=yes");
+    writer.write_all(b"#s2 set r_load_ohm 55\n").unwrap();
+    reply(&mut rx, "s2");
+    assert_eq!(saved(&mut rx, &mut writer), "saved=changed");
+    // `sim`, answered by the simulated drive in front of the console, in machine form too.
+    writer.write_all(b"#m sim\n").unwrap();
+    assert!(reply(&mut rx, "m").1.starts_with("t="));
+}

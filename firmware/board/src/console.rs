@@ -22,7 +22,7 @@ use embassy_futures::select::{select, Either};
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
 use embassy_time::{Duration, Ticker};
 use embedded_io_async::{Read, Write};
-use regen_fw::console::{save_reply, Console, LineEditor, PROMPT};
+use regen_fw::console::{Console, LineEditor};
 
 use crate::drive;
 use crate::store::BoardStore;
@@ -31,9 +31,11 @@ use regen_fw::period::{Pending, Slot};
 /// Telemetry lines dropped because the UART was busy.
 pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 
-/// `list` writes ≈ 3.6 KB (47 parameters in aligned columns, ≈ 75 bytes a row: the board's
-/// image carries no descriptions); room for a dozen more.
-const REPLY_MAX: usize = 4608;
+/// The longest reply is `list`'s: in machine mode ≈ 5.2 KB (one `key=value` line of ≈ 95
+/// bytes per parameter, with an 8-character id: `regen_fw::console` test
+/// `machine_mode_lines_parse_and_carry_ids` prints it), ≈ 3.6 KB in the human console (the
+/// board's image carries no descriptions); room for about ten more parameters.
+const REPLY_MAX: usize = 6144;
 
 /// A `fmt::Write` sink into a fixed buffer that records overflow instead of truncating
 /// silently.
@@ -160,6 +162,7 @@ pub async fn console_task(
                 // its reply, then the prompt, sent before the next line is read.
                 reply.clear();
                 for &c in &inbuf[..n] {
+                    ed.set_machine(con.machine());
                     let Some(text) = ed.feed(c, reply) else {
                         continue;
                     };
@@ -184,13 +187,14 @@ pub async fn console_task(
                     // A `save`: written here, awaited (the executor runs on), with no copy of
                     // the controller alive across the wait (the task's state stays small).
                     if let Some(r) = store.finish().await {
-                        let _ = save_reply(r, reply);
-                        let _ = reply.write_str("\r\n");
+                        let _ = con.save_done(r, reply);
                     }
-                    let _ = reply.write_str(PROMPT);
+                    let _ = reply.write_str(con.prompt());
                     if reply.overflow {
                         reply.b.truncate(REPLY_MAX - 40);
-                        let _ = reply.write_str("\r\nerror: reply truncated\r\n> ");
+                        let _ = reply.write_str("\r\n");
+                        con.final_line(false, "reply truncated", reply);
+                        let _ = reply.write_str(con.prompt());
                     }
                     let _ = tx.write_all(&reply.b).await;
                     reply.clear();

@@ -148,6 +148,9 @@ impl ParamStore for BoardStore {
             Some(f) => Err(f.message()),
         }
     }
+    fn held(&self) -> Option<Config> {
+        self.fault.is_none().then_some(self.held)
+    }
 }
 
 const ECC_MAGIC: u32 = 0xECC0_5AFE;

@@ -9,7 +9,8 @@
 //! Terminal side: the firmware's own [`LineEditor`] (echo, Backspace/DEL, Ctrl-U) assembles
 //! the lines, the console greets each new reader with [`Console::banner`], writes the prompt
 //! after every reply and announces a latched fault unasked ([`Console::notice`]), exactly as
-//! the board does over its UART.
+//! the board does over its UART. A new reader starts in the human console; `machine on`
+//! switches to the machine-readable mode (no echo, prompt or banner; tagged lines).
 //!
 //! Loop: read what arrived (non-blocking) and execute each complete line between two control
 //! periods, run a chunk of periods (0.5 ms of wall time at the requested speed, at most 2000
@@ -35,7 +36,7 @@
 use crate::drive::SimDrive;
 use crate::Scenario;
 use nix::errno::Errno;
-use regen_fw::console::{Console, LineEditor, PROMPT};
+use regen_fw::console::{Console, LineEditor};
 use serialport::SerialPort;
 use std::os::unix::io::{AsRawFd, RawFd};
 use std::path::PathBuf;
@@ -290,13 +291,14 @@ impl<L: Link> Server<L> {
     /// answered, then the prompt.
     fn byte(&mut self, b: u8) {
         let mut text = String::new();
+        self.ed.set_machine(self.drive.console().machine());
         if let Some(line) = self.ed.feed(b, &mut text) {
             if !line.is_empty() {
                 let line = line.to_string();
                 let _ = self.drive.execute(&line, &mut text);
                 self.lines += 1;
             }
-            text.push_str(PROMPT);
+            text.push_str(self.drive.console().prompt());
         }
         self.out.extend_from_slice(text.as_bytes());
     }
@@ -314,7 +316,9 @@ impl<L: Link> Server<L> {
     fn flush(&mut self) {
         let up = self.link.connected();
         if up && !self.connected {
-            // A new reader: the banner first, before anything queued.
+            // A new reader: the human console (as after a board's reset), the banner first,
+            // before anything queued.
+            self.drive.set_machine(false);
             let ctl = self.drive.sim().controller();
             let mut b = String::new();
             Console::banner(ctl.mode(), ctl.fault(), &mut b);
