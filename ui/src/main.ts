@@ -123,7 +123,7 @@ $("connect").addEventListener("click", () => void connect());
 $("stop").addEventListener("click", () => void send("mode idle", false).then(poll));
 
 // ---------- status ----------
-const STATUS_ORDER = ["mode", "boot", "fault", "vbus", "speed", "p", "p_avg", "p_cycle", "energy", "warnings"];
+const STATUS_ORDER = ["mode", "boot", "fault", "vbus_v", "speed_rad_s", "travel_m", "id_a", "iq_a", "p_w", "p_avg_w", "p_cycle_w", "cycle_s", "energy_j", "warnings"];
 let lastStatus: Record<string, string> = {};
 
 async function poll(): Promise<void> {
@@ -298,7 +298,7 @@ async function harvest(): Promise<void> {
   const j = await res.json();
   if (!j.available) { $("h-info").textContent = j.reason; return; }
   const r = Number(params.find((p) => p.name === "r_load_ohm")?.value ?? NaN);
-  const p = Number((lastStatus.p_cycle ?? "").replace(/[^0-9.eE+-].*$/, ""));
+  const p = Number((lastStatus.p_cycle_w ?? "").replace(/[^0-9.eE+-].*$/, ""));
   if (Number.isFinite(r) && Number.isFinite(p)) readings.push([r, p]);
   const xs: number[] = j.curve.map((c: number[]) => c[0]);
   const curve: number[] = j.curve.map((c: number[]) => c[1]);
