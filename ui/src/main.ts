@@ -344,4 +344,4 @@ $("c-send").addEventListener("click", async () => {
 
 renderSteps();
 if (!token) alarm("This page has no token: open the URL `regen ui` printed.");
-else void connect();
+else if (location.hash !== "#manual") void connect();

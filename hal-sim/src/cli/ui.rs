@@ -619,7 +619,9 @@ pub fn run(a: &UiArgs) -> Result<(), String> {
             .await
             .map_err(|e| format!("server: {e}"))
     })?;
-    println!("regen ui: stopped");
+    // The reader of stdout may be gone by now (a test that started us): not an error.
+    use std::io::Write;
+    let _ = writeln!(std::io::stdout(), "regen ui: stopped");
     Ok(())
 }
 
