@@ -42,6 +42,10 @@ enum Command {
     /// against the configuration (--apply, --save), and the load the device wants
     /// (--scenario, --model).
     Commission(cli::commission::CommissionArgs),
+    /// The browser UI: serves the page and bridges the simulated drive (--sim) or a board
+    /// (--port) over a WebSocket; prints the URL to open (with this run's token).
+    #[cfg(unix)]
+    Ui(cli::ui::UiArgs),
 }
 
 /// Parse the command line; a usage error is one line (clap's message and tip, without the
@@ -108,6 +112,8 @@ fn main() {
         Some(Command::Serve(a)) => cli::serve::run(&a),
         Some(Command::Client(a)) => cli::client::run(&a),
         Some(Command::Commission(a)) => cli::commission::run(&a),
+        #[cfg(unix)]
+        Some(Command::Ui(a)) => cli::ui::run(&a),
         Some(Command::Diagnose(a)) => {
             hal_sim::diagnose::cli::cli_main(a).map_err(|e| e.to_string())
         }

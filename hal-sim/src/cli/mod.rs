@@ -10,3 +10,5 @@ pub mod run;
 pub mod serve;
 pub mod sizing;
 pub mod sweep;
+#[cfg(unix)]
+pub mod ui;

@@ -23,6 +23,9 @@
 //! [`QUEUE_LIMIT`] bytes, i.e. when the reader does not keep up; while no one has the pty open
 //! the output is discarded (no stale backlog for the next reader).
 //!
+//! Link: the loop ([`Server`]) talks to its reader through a [`Link`]: the pseudo-terminal
+//! here ([`Pty`]), the WebSocket bridge of `regen ui` (`super::ui`). Both run this one loop.
+//!
 //! PTY choice: `serialport::TTYPort::pair()` (posix_openpt, grantpt, unlockpt, ptsname and raw
 //! mode on the slave, without unsafe code, on Linux, macOS and the BSDs; the same crate as
 //! the client). The slave end is closed at once, so the pty's buffer only fills when someone
@@ -92,30 +95,31 @@ pub struct Summary {
     pub dropped_tel_lines: u64,
 }
 
-/// A simulated drive served on a pseudo-terminal.
-pub struct Server {
-    drive: SimDrive,
+/// The byte link between a served drive and its reader, read and written without blocking.
+pub trait Link {
+    /// Bytes received since the last call, into `buf`; 0 when none is pending.
+    fn read(&mut self, buf: &mut [u8]) -> usize;
+    /// Whether a reader is there now (a new one gets the banner; without one, output is
+    /// discarded).
+    fn connected(&mut self) -> bool;
+    /// Write from `bytes` what the link takes now; the count taken (all of them when the
+    /// reader is gone: the bytes go nowhere, as on an unplugged UART).
+    fn write(&mut self, bytes: &[u8]) -> usize;
+    /// Drop what the link still holds for a reader that left (no stale backlog for the next).
+    fn discard(&mut self) {}
+}
+
+/// The master end of a pseudo-terminal, non-blocking.
+pub struct Pty {
     /// Owns the master end (closed on drop).
     _master: serialport::TTYPort,
     fd: RawFd,
     path: String,
-    speed: f64,
-    ed: LineEditor,
-    /// Whether a reader had the pty open at the last look (a new one gets the banner).
-    connected: bool,
-    out: Vec<u8>,
-    out_pos: usize,
-    lines: u64,
-    dropped: u64,
 }
 
-impl Server {
-    /// Open a pseudo-terminal for `drive`, run at `speed` (simulated s per wall s; infinite =
-    /// as fast as possible).
-    pub fn open(drive: SimDrive, speed: f64) -> Result<Server, String> {
-        if speed.is_nan() || speed <= 0.0 {
-            return Err(format!("speed = {speed}: must be > 0"));
-        }
+impl Pty {
+    /// Open a pseudo-terminal; its slave end is closed at once.
+    pub fn open() -> Result<Pty, String> {
         let (master, slave) =
             serialport::TTYPort::pair().map_err(|e| format!("pseudo-terminal: {e}"))?;
         let path = slave
@@ -128,11 +132,82 @@ impl Server {
             nix::fcntl::FcntlArg::F_SETFL(nix::fcntl::OFlag::O_NONBLOCK),
         )
         .map_err(|e| format!("pseudo-terminal: {e}"))?;
-        Ok(Server {
-            drive,
+        Ok(Pty {
             _master: master,
             fd,
             path,
+        })
+    }
+
+    /// The pseudo-terminal to connect to.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+}
+
+impl Link for Pty {
+    fn read(&mut self, buf: &mut [u8]) -> usize {
+        loop {
+            match nix::unistd::read(self.fd, buf) {
+                Ok(k) => return k,
+                Err(Errno::EINTR) => continue,
+                // EAGAIN: nothing pending; EIO: no one has the slave open.
+                Err(_) => return 0,
+            }
+        }
+    }
+
+    /// Whether someone has the slave end open (the master reports no hang-up).
+    fn connected(&mut self) -> bool {
+        use nix::poll::{poll, PollFd, PollFlags};
+        let mut p = [PollFd::new(self.fd, PollFlags::POLLOUT)];
+        !(matches!(poll(&mut p, 0), Ok(n) if n > 0)
+            && p[0]
+                .revents()
+                .is_some_and(|r| r.contains(PollFlags::POLLHUP)))
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> usize {
+        loop {
+            match nix::unistd::write(self.fd, bytes) {
+                Ok(k) => return k,
+                Err(Errno::EINTR) => continue,
+                Err(Errno::EAGAIN) => return 0,
+                // EIO: no one has the slave open.
+                Err(_) => return bytes.len(),
+            }
+        }
+    }
+
+    fn discard(&mut self) {
+        let _ = nix::sys::termios::tcflush(self.fd, nix::sys::termios::FlushArg::TCOFLUSH);
+    }
+}
+
+/// A simulated drive served over a [`Link`].
+pub struct Server<L: Link> {
+    drive: SimDrive,
+    link: L,
+    speed: f64,
+    ed: LineEditor,
+    /// Whether a reader was there at the last look (a new one gets the banner).
+    connected: bool,
+    out: Vec<u8>,
+    out_pos: usize,
+    lines: u64,
+    dropped: u64,
+}
+
+impl<L: Link> Server<L> {
+    /// Serve `drive` over `link` at `speed` (simulated s per wall s; infinite = as fast as
+    /// possible).
+    pub fn new(drive: SimDrive, link: L, speed: f64) -> Result<Server<L>, String> {
+        if speed.is_nan() || speed <= 0.0 {
+            return Err(format!("speed = {speed}: must be > 0"));
+        }
+        Ok(Server {
+            drive,
+            link,
             speed,
             ed: LineEditor::new(),
             connected: false,
@@ -143,9 +218,8 @@ impl Server {
         })
     }
 
-    /// The pseudo-terminal to connect to.
-    pub fn path(&self) -> &str {
-        &self.path
+    pub fn link(&self) -> &L {
+        &self.link
     }
 
     pub fn drive(&self) -> &SimDrive {
@@ -203,16 +277,12 @@ impl Server {
     fn poll_input(&mut self) {
         let mut buf = [0u8; 512];
         loop {
-            match nix::unistd::read(self.fd, &mut buf) {
-                Ok(0) => return,
-                Ok(k) => {
-                    for &b in &buf[..k] {
-                        self.byte(b);
-                    }
-                }
-                // EAGAIN: nothing pending; EIO: no one has the slave open.
-                Err(Errno::EINTR) => continue,
-                Err(_) => return,
+            let k = self.link.read(&mut buf);
+            if k == 0 {
+                return;
+            }
+            for &b in &buf[..k] {
+                self.byte(b);
             }
         }
     }
@@ -243,18 +313,8 @@ impl Server {
         }
     }
 
-    /// Whether no one has the slave end open (the master reports a hang-up).
-    fn hung_up(&self) -> bool {
-        use nix::poll::{poll, PollFd, PollFlags};
-        let mut p = [PollFd::new(self.fd, PollFlags::POLLOUT)];
-        matches!(poll(&mut p, 0), Ok(n) if n > 0)
-            && p[0]
-                .revents()
-                .is_some_and(|r| r.contains(PollFlags::POLLHUP))
-    }
-
     fn flush(&mut self) {
-        let up = !self.hung_up();
+        let up = self.link.connected();
         if up && !self.connected {
             // A new reader: the human console (as after a board's reset), the banner first,
             // before anything queued.
@@ -266,23 +326,19 @@ impl Server {
         }
         self.connected = up;
         if self.out_pos < self.out.len() && !up {
-            // No reader: the output goes nowhere, as on an unplugged UART, and what the pty
-            // still holds for the slave is dropped so the next reader gets no stale backlog.
-            let _ = nix::sys::termios::tcflush(self.fd, nix::sys::termios::FlushArg::TCOFLUSH);
+            // No reader: the output goes nowhere, as on an unplugged UART, and what the link
+            // still holds is dropped so the next reader gets no stale backlog.
+            self.link.discard();
             self.out.clear();
             self.out_pos = 0;
             return;
         }
         while self.out_pos < self.out.len() {
-            match nix::unistd::write(self.fd, &self.out[self.out_pos..]) {
-                Ok(k) => self.out_pos += k,
-                Err(Errno::EINTR) => continue,
-                Err(Errno::EAGAIN) => break,
-                // EIO: no one has the slave open: the bytes go nowhere, as on an unplugged UART.
-                Err(_) => {
-                    self.out_pos = self.out.len();
-                }
+            let k = self.link.write(&self.out[self.out_pos..]);
+            if k == 0 {
+                break;
             }
+            self.out_pos += k;
         }
         if self.out_pos == self.out.len() {
             self.out.clear();
@@ -294,7 +350,7 @@ impl Server {
     }
 }
 
-static STOP: AtomicBool = AtomicBool::new(false);
+pub(crate) static STOP: AtomicBool = AtomicBool::new(false);
 
 extern "C" fn on_signal(_: nix::libc::c_int) {
     STOP.store(true, Ordering::Relaxed);
@@ -302,7 +358,7 @@ extern "C" fn on_signal(_: nix::libc::c_int) {
 
 /// Ctrl-C (SIGINT) and SIGTERM set [`STOP`] instead of killing the process, so the run ends
 /// with its summary and the link is removed.
-fn catch_signals() -> Result<(), String> {
+pub(crate) fn catch_signals() -> Result<(), String> {
     use nix::sys::signal::{sigaction, SaFlags, SigAction, SigHandler, SigSet, Signal};
     let act = SigAction::new(
         SigHandler::Handler(on_signal),
@@ -316,6 +372,19 @@ fn catch_signals() -> Result<(), String> {
     Ok(())
 }
 
+/// The scenario file at `path`, or the reference TMD at 306 Ω (as
+/// hal-sim/scenarios/tmd-306.toml).
+pub fn scenario(path: Option<&std::path::Path>) -> Result<Scenario, String> {
+    match path {
+        Some(p) => Scenario::from_file(p),
+        None => {
+            let mut s = Scenario::tmd(306.0);
+            s.name = "tmd-306".into();
+            Ok(s)
+        }
+    }
+}
+
 pub fn run(a: &ServeArgs) -> Result<(), String> {
     let speed = parse_speed(&a.speed)?;
     if let Some(d) = a.duration {
@@ -325,20 +394,13 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
             ));
         }
     }
-    let sc = match &a.scenario {
-        Some(p) => Scenario::from_file(p)?,
-        None => {
-            let mut s = Scenario::tmd(306.0);
-            s.name = "tmd-306".into();
-            s
-        }
-    };
+    let sc = scenario(a.scenario.as_deref())?;
     let drive = SimDrive::from_scenario(&sc)?;
-    let mut srv = Server::open(drive, speed)?;
+    let mut srv = Server::new(drive, Pty::open()?, speed)?;
     catch_signals()?;
     if let Some(l) = &a.link {
         let _ = std::fs::remove_file(l);
-        std::os::unix::fs::symlink(srv.path(), l)
+        std::os::unix::fs::symlink(srv.link().path(), l)
             .map_err(|e| format!("--link {}: {e}", l.display()))?;
     }
     let speed = if speed.is_finite() {
@@ -349,13 +411,13 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
     println!(
         "regen serve: scenario {} at {speed}, console on {}",
         sc.name,
-        srv.path()
+        srv.link().path()
     );
     println!(
         "connect with: picocom {} (or screen, minicom, regen client); Ctrl-C stops",
         a.link
             .as_deref()
-            .map_or(srv.path().into(), |l| l.display().to_string())
+            .map_or(srv.link().path().into(), |l| l.display().to_string())
     );
     use std::io::Write;
     let _ = std::io::stdout().flush();
