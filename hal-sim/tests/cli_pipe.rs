@@ -80,10 +80,10 @@ fn client_into_head_ends_quietly() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
+    // Kept open to the end: `serve` writes a second line, and a closed pipe ends it.
+    let mut serve_out = BufReader::new(serve.stdout.take().unwrap());
     let mut first = String::new();
-    BufReader::new(serve.stdout.take().unwrap())
-        .read_line(&mut first)
-        .unwrap();
+    serve_out.read_line(&mut first).unwrap();
     let path = first
         .split("console on ")
         .nth(1)
@@ -112,6 +112,7 @@ fn client_into_head_ends_quietly() {
     }
     let _ = serve.kill();
     let _ = serve.wait();
+    drop(serve_out);
     let st = st.unwrap_or_else(|| {
         let _ = client.kill();
         panic!("client still running 10 s after its reader closed")
