@@ -241,11 +241,11 @@ fn measure_path(cfg: &Config) {
         let a = i[0] * cs - i[1] * sn;
         let b = i[0] * sn + i[1] * cs;
         let ph = [a, -0.5 * a + 0.866_025_4 * b, -0.5 * a - 0.866_025_4 * b];
-        for k in 0..3 {
-            s.i_abc[k] = (z + ph[k] / cfg.amps_per_count + 0.5) as u16;
+        for (code, p) in s.i_abc.iter_mut().zip(ph) {
+            *code = (z + p / cfg.amps_per_count + 0.5) as u16;
         }
         n += 1;
-        if n % 20 == 0 {
+        if n.is_multiple_of(20) {
             ctl.supervise();
         }
     }
