@@ -208,6 +208,9 @@ function renderParams(): void {
     inp.dataset.name = p.name;
     inp.addEventListener("keydown", async (e) => {
       if (e.key !== "Enter") return;
+      // The Enter's own default (its keypress) would otherwise press the dialog's focused
+      // Cancel button the moment `send` opens the confirmation.
+      e.preventDefault();
       const err = tr.querySelector(".ferr")!;
       const r = await send(`set ${p.name} ${inp.value.trim()}`);
       err.textContent = r.ok ? "" : r.text;
@@ -332,7 +335,11 @@ async function harvest(): Promise<void> {
 $("h-refresh").addEventListener("click", async () => { await loadParams(); await poll(); await harvest(); });
 
 // ---------- console ----------
-$("c-line").addEventListener("keydown", (e) => { if (e.key === "Enter") $("c-send").click(); });
+$("c-line").addEventListener("keydown", (e) => {
+  if (e.key !== "Enter") return;
+  e.preventDefault(); // as in the parameter table: the Enter must not press the dialog's Cancel
+  $("c-send").click();
+});
 $("c-send").addEventListener("click", async () => {
   const i = $<HTMLInputElement>("c-line");
   const l = i.value.trim();
