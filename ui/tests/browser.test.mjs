@@ -100,7 +100,7 @@ test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault
     await confirmIfAsked(page);
     const ferr = await ff.locator("xpath=following-sibling::div").textContent();
     assert.match(ferr, /f_filter_s -1/);
-    await page.screenshot({ path: join(FIG, "ui-params.png") });
+    await page.screenshot({ path: join(FIG, "ui-params.png"), fullPage: true });
     // Power-up sequence: idle, align, run.
     await page.click("#stop");
     await tab(page, "commission");
