@@ -302,7 +302,11 @@ async function harvest(): Promise<void> {
   if (!j.available) { $("h-info").textContent = j.reason; return; }
   const r = Number(params.find((p) => p.name === "r_load_ohm")?.value ?? NaN);
   const p = Number((lastStatus.p_cycle_w ?? "").replace(/[^0-9.eE+-].*$/, ""));
-  if (Number.isFinite(r) && Number.isFinite(p)) readings.push([r, p]);
+  // A new reading at the same R_L replaces the previous one (else "earlier" hides "now").
+  if (Number.isFinite(r) && Number.isFinite(p)) {
+    if (readings.length && readings[readings.length - 1][0] === r) readings.pop();
+    readings.push([r, p]);
+  }
   const xs: number[] = j.curve.map((c: number[]) => c[0]);
   const curve: number[] = j.curve.map((c: number[]) => c[1]);
   const nearest = (x: number) => xs.reduce((b, v, i) => (Math.abs(Math.log(v / x)) < Math.abs(Math.log(xs[b] / x)) ? i : b), 0);
