@@ -208,6 +208,9 @@ function renderParams(): void {
     inp.dataset.name = p.name;
     inp.addEventListener("keydown", async (e) => {
       if (e.key !== "Enter") return;
+      // The Enter's own default (its keypress) would otherwise press the dialog's focused
+      // Cancel button the moment `send` opens the confirmation.
+      e.preventDefault();
       const err = tr.querySelector(".ferr")!;
       const r = await send(`set ${p.name} ${inp.value.trim()}`);
       err.textContent = r.ok ? "" : r.text;
@@ -299,7 +302,11 @@ async function harvest(): Promise<void> {
   if (!j.available) { $("h-info").textContent = j.reason; return; }
   const r = Number(params.find((p) => p.name === "r_load_ohm")?.value ?? NaN);
   const p = Number((lastStatus.p_cycle_w ?? "").replace(/[^0-9.eE+-].*$/, ""));
-  if (Number.isFinite(r) && Number.isFinite(p)) readings.push([r, p]);
+  // A new reading at the same R_L replaces the previous one (else "earlier" hides "now").
+  if (Number.isFinite(r) && Number.isFinite(p)) {
+    if (readings.length && readings[readings.length - 1][0] === r) readings.pop();
+    readings.push([r, p]);
+  }
   const xs: number[] = j.curve.map((c: number[]) => c[0]);
   const curve: number[] = j.curve.map((c: number[]) => c[1]);
   const nearest = (x: number) => xs.reduce((b, v, i) => (Math.abs(Math.log(v / x)) < Math.abs(Math.log(xs[b] / x)) ? i : b), 0);
@@ -332,7 +339,11 @@ async function harvest(): Promise<void> {
 $("h-refresh").addEventListener("click", async () => { await loadParams(); await poll(); await harvest(); });
 
 // ---------- console ----------
-$("c-line").addEventListener("keydown", (e) => { if (e.key === "Enter") $("c-send").click(); });
+$("c-line").addEventListener("keydown", (e) => {
+  if (e.key !== "Enter") return;
+  e.preventDefault(); // as in the parameter table: the Enter must not press the dialog's Cancel
+  $("c-send").click();
+});
 $("c-send").addEventListener("click", async () => {
   const i = $<HTMLInputElement>("c-line");
   const l = i.value.trim();

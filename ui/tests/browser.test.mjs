@@ -75,9 +75,7 @@ async function confirmYes(page) {
   await page.click("#q-yes");
 }
 
-// todo: the parameter table's first `set` does not reach the changed state in this suite yet
-// (see docs/ui.md, "Status"); run with --test-todo to see it.
-test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault, CSV", { todo: "the first set from the parameter table is not confirmed in time; not yet passing" }, async () => {
+test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault, CSV", async () => {
   const ui = await startUi(10);
   try {
     const page = await openPage(ui, RECORD_WS);
@@ -102,13 +100,14 @@ test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault
     await confirmIfAsked(page);
     const ferr = await ff.locator("xpath=following-sibling::div").textContent();
     assert.match(ferr, /f_filter_s -1/);
-    await page.screenshot({ path: join(FIG, "ui-params.png") });
+    await page.screenshot({ path: join(FIG, "ui-params.png"), fullPage: true });
     // Power-up sequence: idle, align, run.
     await page.click("#stop");
     await tab(page, "commission");
     await page.click('button:text("mode align")');
     await confirmYes(page);
-    await page.waitForFunction(() => document.querySelector('#status [data-k="boot"]')?.textContent === "aligned" || document.querySelector('#status [data-k="boot"]')?.textContent === "stored", null, { timeout: 30000 }).catch(() => {});
+    // The scenario boots with a stored angle (`boot stored`); a finished align reads `aligned`.
+    await page.waitForFunction(() => document.querySelector('#status [data-k="boot"]')?.textContent === "aligned", null, { timeout: 30000 });
     await page.click('button:text("mode run")');
     await confirmYes(page);
     await page.waitForFunction(() => document.querySelector('#status [data-k="mode"]')?.textContent === "run", null, { timeout: 10000 });
@@ -118,14 +117,17 @@ test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault
     await page.waitForTimeout(2500); // 25 simulated s at --speed 10
     const hb = await (await fetch(`${ui.base}api/harvest?token=${ui.token}&r=200`)).json();
     const pHb = hb.at[0][1];
+    // Bound 0.4 % (inside the required 1 %): the drive's p_cycle reads +0.11 to +0.12 % above
+    // the harmonic balance in repeated runs; the bound is about 3x that.
+    const TOL = 0.004;
     let pDrive = NaN;
     for (let k = 0; k < 20; k++) {
       pDrive = parseFloat(await statusOf(page, "p_cycle_w"));
-      if (Math.abs(pDrive / pHb - 1) < 0.01) break;
+      if (Math.abs(pDrive / pHb - 1) < TOL) break;
       await page.waitForTimeout(500);
     }
     console.log(`mean power at R_L = 200 ohm: drive p_cycle ${pDrive} W, harmonic balance ${pHb.toFixed(4)} W, ${(100 * (pDrive / pHb - 1)).toFixed(3)} %`);
-    assert.ok(Math.abs(pDrive / pHb - 1) < 0.01, `p_cycle ${pDrive} W vs ${pHb} W`);
+    assert.ok(Math.abs(pDrive / pHb - 1) < TOL, `p_cycle ${pDrive} W vs ${pHb} W`);
     await tab(page, "harvest");
     await page.click("#h-refresh");
     await page.waitForTimeout(500);
@@ -202,14 +204,16 @@ test("a foreign Origin and a missing token are refused", async () => {
   }
 });
 
-test("Web Serial path: navigator.serial stubbed onto the simulated drive", { todo: "the stub's port does not reach the status read yet; not yet passing" }, async () => {
+test("Web Serial path: navigator.serial stubbed onto the simulated drive", async () => {
   const ui = await startUi(1);
   try {
     // A stub port whose byte streams go to the server's bridge (the same console the board's
     // UART would carry).
     const stub = ({ token }) => {
       const enc = new TextEncoder();
-      navigator.serial = {
+      // Chromium has its own navigator.serial (a getter on Navigator.prototype): a plain
+      // assignment is silently ignored, so the stub is defined on the instance.
+      Object.defineProperty(navigator, "serial", { configurable: true, value: {
         requestPort: async () => {
           const ws = new WebSocket(`ws://${location.host}/ws?token=${token}`);
           await new Promise((r) => (ws.onopen = r));
@@ -221,7 +225,7 @@ test("Web Serial path: navigator.serial stubbed onto the simulated drive", { tod
             writable: new WritableStream({ write(chunk) { ws.send(new TextDecoder().decode(chunk)); } }),
           };
         },
-      };
+      } });
     };
     const ctx = await browser.newContext();
     const page = await ctx.newPage();
