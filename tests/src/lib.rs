@@ -65,3 +65,20 @@ pub fn emps_file(name: &str) -> std::path::PathBuf {
     );
     p
 }
+
+/// Prints a distribution (n, min, p10, median, p90, max) under `name`; returns (min, max).
+pub fn stats(name: &str, v: &[f64]) -> (f64, f64) {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
+    println!(
+        "{name}: n={} min {:.4} p10 {:.4} median {:.4} p90 {:.4} max {:.4}",
+        s.len(),
+        s[0],
+        q(0.1),
+        q(0.5),
+        q(0.9),
+        s[s.len() - 1]
+    );
+    (s[0], s[s.len() - 1])
+}

@@ -10,6 +10,7 @@ use hal_sim::powerup::PowerUp;
 use hal_sim::{Channel, Scenario, Sim};
 use regen_fw::control::Fault;
 use regen_fw::{Boot, Mode};
+use regen_tests::stats;
 
 /// The board's power-up conditions (hal_sim::powerup's suggested tolerances).
 fn board_powerup(seed: u64) -> PowerUp {
@@ -52,22 +53,6 @@ fn average_power(sim: &mut Sim) -> f64 {
     let e0 = sim.energy().to_inverter;
     sim.run_for(4.0);
     (sim.energy().to_inverter - e0) / 4.0
-}
-
-fn stats(name: &str, v: &[f64]) -> (f64, f64) {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
-    println!(
-        "{name}: n={} min {:.4} p10 {:.4} median {:.4} p90 {:.4} max {:.4}",
-        s.len(),
-        s[0],
-        q(0.1),
-        q(0.5),
-        q(0.9),
-        s[s.len() - 1]
-    );
-    (s[0], s[s.len() - 1])
 }
 
 #[test]

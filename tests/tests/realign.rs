@@ -14,6 +14,7 @@ use hal_sim::{Channel, Scenario, Sim};
 use regen_fw::align::{post, AlignRetry, Retry};
 use regen_fw::control::{AlignMethod, Fault};
 use regen_fw::{Boot, Mode};
+use regen_tests::stats;
 
 fn powerup(seed: u64) -> PowerUp {
     PowerUp {
@@ -47,22 +48,6 @@ fn rating(sc: &Scenario) -> f64 {
 
 fn lead() -> f64 {
     hal_sim::plant::Screw::default().lead_m_per_rad
-}
-
-fn stats(name: &str, v: &[f64]) -> (f64, f64) {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let q = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
-    println!(
-        "{name}: n={} min {:.4} p10 {:.4} median {:.4} p90 {:.4} max {:.4}",
-        s.len(),
-        s[0],
-        q(0.1),
-        q(0.5),
-        q(0.9),
-        s[s.len() - 1]
-    );
-    (s[0], s[s.len() - 1])
 }
 
 /// `mode align` now, then periods until aligned, with the board's retry (`regen_fw::align`,
