@@ -81,15 +81,8 @@ impl SynthSpec {
     pub fn random_hidden(seed: u64, samples: usize, n: usize) -> Self {
         let mut s = Self::clean(seed, samples);
         let mut rng = Rng::new(seed.wrapping_mul(7919).wrapping_add(13));
-        let pool = [
-            EffectKind::DirectionAsymmetricFriction,
-            EffectKind::PositionDependentFriction,
-            EffectKind::PositionPeriodicFriction,
-            EffectKind::Cogging,
-            EffectKind::Stribeck,
-            EffectKind::ScrewEfficiency,
-            EffectKind::Lag,
-        ];
+        // The friction effects and the lag: the first seven of the catalogue.
+        let pool = &EffectKind::ALL[..7];
         let mut kinds: Vec<EffectKind> = Vec::new();
         while kinds.len() < n {
             let k = pool[(rng.next_u64() % pool.len() as u64) as usize];
