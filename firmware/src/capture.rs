@@ -150,8 +150,9 @@ pub struct Status {
 /// The console's way to a capture.
 pub trait CapPort {
     fn status(&self) -> Status;
-    /// Start a capture with `set` at `ts` s per period (any samples held are discarded).
-    fn arm(&mut self, set: &Settings, ts: f32);
+    /// Start a capture with `set`, `dt_s` s between its samples (`div` periods; any samples
+    /// held are discarded).
+    fn arm(&mut self, set: &Settings, dt_s: f32);
     /// Trigger an armed capture (at its next sample once the pre-trigger share is held);
     /// `false` unless armed.
     fn trigger_now(&mut self) -> bool;
@@ -333,7 +334,7 @@ impl<const N: usize> CapPort for Capture<N> {
         }
     }
 
-    fn arm(&mut self, set: &Settings, ts: f32) {
+    fn arm(&mut self, set: &Settings, dt_s: f32) {
         self.set = *set;
         self.set.div = set.div.clamp(1, DIV_MAX);
         self.n_ch = set.n_ch.min(CH_MAX as u8);
@@ -348,7 +349,7 @@ impl<const N: usize> CapPort for Capture<N> {
         self.now = false;
         self.fault_prev = false;
         self.k_trig = 0;
-        self.dt_s = ts * self.set.div as f32;
+        self.dt_s = dt_s;
         match set.trig {
             Trigger::Fault => self.kind = K_FAULT,
             Trigger::Cmd => self.kind = K_CMD,

@@ -1523,7 +1523,7 @@ impl Console {
                 };
             }
             "arm" => {
-                cap.arm(&self.cap, ctl.config().ts());
+                cap.arm(&self.cap, self.cap.div as f32 / ctl.config().pwm_hz);
                 self.cap_seen = State::Armed;
             }
             // (`trigger_now` arms the command trigger when the capture is armed.)
@@ -1567,7 +1567,7 @@ impl Console {
         // The status line, then `ok`.
         let st = cap.status();
         let (shown, dt) = if st.state == State::Idle {
-            (self.cap, self.cap.div as f32 * ctl.config().ts())
+            (self.cap, self.cap.div as f32 / ctl.config().pwm_hz)
         } else {
             (st.set, st.dt_s)
         };
@@ -1587,7 +1587,9 @@ impl Console {
             .s(" trig=")
             .trig(&shown.trig);
         if let Some(k) = st.k_trig {
-            out.s(" t_trig_s=").num(k as f32 * st.dt_s);
+            // (Periods over the PWM rate: one rounding, 0.4 not 0.39999998.)
+            let p = k as f32 * st.set.div as f32;
+            out.s(" t_trig_s=").num(p / ctl.config().pwm_hz);
         }
         out.s("\r\n");
         out.fin(true);
@@ -2489,6 +2491,79 @@ mod tests {
         }
         std::println!("{n} examples of docs/console.md checked");
         assert!(n >= 10, "{n}");
+    }
+
+    /// `cap dump` in the pieces the board's reply buffer takes ([`REPLY_MAX`]): each piece
+    /// fits, every line is whole, and the pieces together are the reply written in one piece,
+    /// in both modes.
+    #[test]
+    fn cap_dump_pieces_reassemble_to_the_whole_reply() {
+        let mut ctl = Controller::new(&Config::default()).unwrap();
+        ctl.set_mode(Mode::Run).unwrap();
+        let mut cap = Capture::<{ crate::capture::SAMPLES }>::new();
+        let mut con = Console::new();
+        let exec = |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, l: &str| {
+            let mut s = String::new();
+            let r = con.execute_cap(l, ctl, &mut NoStore, Some(cap), &mut s);
+            assert!(r.is_ok(), "{s}");
+            s
+        };
+        exec(&mut con, &mut ctl, &mut cap, "cap ch ia,vq,x,p");
+        exec(&mut con, &mut ctl, &mut cap, "cap arm");
+        let z = ctl.config().adc_zero_code;
+        for k in 0..1500u16 {
+            // Codes that vary, so the lines differ in length.
+            let s = crate::io::RawSample {
+                i_abc: [z + k % 37, z - k % 11, z],
+                v_bus: 2400 + k % 50,
+                encoder: k.wrapping_mul(7),
+            };
+            ctl.step_outputs(&s);
+            if k == 300 {
+                exec(&mut con, &mut ctl, &mut cap, "cap now");
+            }
+            cap.record(&ctl);
+        }
+        assert_eq!(cap.state(), State::Ready);
+        for machine in [false, true] {
+            con.set_machine(machine);
+            let whole =
+                |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, budget| {
+                    let line = if con.machine() {
+                        "#x1 cap dump"
+                    } else {
+                        "cap dump"
+                    };
+                    let mut pieces = std::vec![exec(con, ctl, cap, line)];
+                    loop {
+                        let mut p = String::new();
+                        let more = con.dump_more(cap, budget, &mut p);
+                        pieces.push(p);
+                        if !more {
+                            return pieces;
+                        }
+                    }
+                };
+            let one = whole(&mut con, &mut ctl, &mut cap, usize::MAX);
+            let parts = whole(&mut con, &mut ctl, &mut cap, REPLY_MAX);
+            assert_eq!(one.len(), 2);
+            assert!(parts.len() >= 6, "{} pieces", parts.len());
+            assert!(parts
+                .iter()
+                .all(|p| p.len() <= REPLY_MAX && p.ends_with("\r\n")));
+            assert_eq!(parts.concat(), one.concat());
+            let text = one.concat();
+            std::println!(
+                "machine {machine}: {} bytes in {} pieces",
+                text.len(),
+                parts.len()
+            );
+            assert_eq!(text.lines().count(), 1000 + 3);
+            if machine {
+                assert!(text.ends_with("R x1 ok 1000 samples\r\n"));
+                assert!(text.lines().rev().skip(1).all(|l| l.starts_with("D x1 ")));
+            }
+        }
     }
 
     /// Refusals name the real range and reason: the laws by code and name, a near name

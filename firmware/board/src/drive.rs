@@ -128,8 +128,8 @@ impl CapPort for BoardCap {
     fn status(&self) -> Status {
         critical_section::with(|cs| CAP.borrow_ref(cs).status())
     }
-    fn arm(&mut self, set: &Settings, ts: f32) {
-        critical_section::with(|cs| CAP.borrow_ref_mut(cs).arm(set, ts))
+    fn arm(&mut self, set: &Settings, dt_s: f32) {
+        critical_section::with(|cs| CAP.borrow_ref_mut(cs).arm(set, dt_s))
     }
     fn trigger_now(&mut self) -> bool {
         critical_section::with(|cs| CAP.borrow_ref_mut(cs).trigger_now())
