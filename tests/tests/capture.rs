@@ -160,6 +160,7 @@ fn rise_overshoot(y: &[f64]) -> (f64, f64) {
 #[test]
 fn load_step_current_response_matches_the_loop_model() {
     let (mut rise, mut over) = (Vec::new(), Vec::new());
+    let mut clipped = 0;
     for seed in 1..=16u64 {
         let mut sc = Scenario::tmd(306.0);
         sc.plant_draw = PlantDraw {
@@ -248,6 +249,18 @@ fn load_step_current_response_matches_the_loop_model() {
         // The step is where `cap now` put it: within the law's refresh (4 periods) of the
         // trigger sample.
         assert!((dump.pre..dump.pre + 5).contains(&k0), "k0 {k0}");
+        // Where the law's reference is clipped at i_max_a, the captured value is i_max_a
+        // within the capture's step (2⁻¹⁰ A).
+        if rf[k0 + 20].abs() >= cfg.i_max_a as f64 - 1.0 / 1024.0 {
+            clipped += 1;
+            let e = rf[k0 + 20].abs() - cfg.i_max_a as f64;
+            assert!(
+                e.abs() <= 1.0 / 1024.0,
+                "clipped reference {} vs i_max_a {}",
+                rf[k0 + 20],
+                cfg.i_max_a
+            );
+        }
         assert!(
             notes.contains("# cap triggered") && notes.contains("# cap ready"),
             "{notes}"
@@ -255,6 +268,7 @@ fn load_step_current_response_matches_the_loop_model() {
         rise.push(tr - trm);
         over.push(100.0 * (os - osm));
     }
+    assert!(clipped >= 4, "{clipped} steps clipped at i_max_a");
     let (r0, r1) = stats("rise time − model's, periods", &rise);
     let (o0, o1) = stats("overshoot − model's, % of the step", &over);
     // Measured over the 16 plants: rise within ±0.045 periods of the model's (≈ 2 µs), the
@@ -351,7 +365,14 @@ fn fault_capture_holds_the_samples_before_the_latch() {
         // Phase a reads the rail from the latch's period on, not before it.
         let ia: Vec<f64> = d.rows.iter().map(|r| r[1]).collect();
         let rail = ia[d.pre];
-        assert!(rail > 20.0, "ia at the latch {rail}");
+        // The open line's reading from the sensor's scaling alone (code 4095), within the
+        // capture's step (2⁻¹⁰ A) and the saturation of its code at ±32 A.
+        let c = sc.config().unwrap();
+        let want = ((4095 - c.adc_zero_code as i32) as f64 * c.amps_per_count as f64).min(32.0);
+        assert!(
+            (rail - want).abs() <= 1.0 / 1024.0,
+            "ia at the latch {rail}, the rail reads {want}"
+        );
         assert!(
             ia[..d.pre].iter().all(|&v| v.abs() < 5.0),
             "pre {pre}: {:?}",
