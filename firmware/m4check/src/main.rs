@@ -269,7 +269,11 @@ fn measure_path(cfg: &Config) {
 /// worst case: four channels, the level trigger's channel read and compared every sample).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_step_cap(ctl: &mut Controller, s: &RawSample, cap: &mut Capture<SAMPLES>) -> Actuation {
+pub fn regen_step_cap(
+    ctl: &mut Controller,
+    s: &RawSample,
+    cap: &mut Capture<SAMPLES>,
+) -> Actuation {
     let a = ctl.step_outputs(s);
     cap.record(ctl);
     a
