@@ -1439,7 +1439,7 @@ impl Console {
         if n != want {
             let u = CAP_HELP
                 .iter()
-                .find(|h| h.0.starts_with(sub))
+                .find(|h| h.0.trim_start_matches('[').starts_with(sub))
                 .map_or("", |h| h.0);
             fail!(.s("usage: cap ").s(u))
         }
