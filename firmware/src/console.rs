@@ -1361,7 +1361,7 @@ impl Console {
 
 /// `help cap`: the `cap` commands.
 static CAP_HELP: &[(&str, &str)] = &[
-    ("[show]", "the capture's state and settings, one line"),
+    ("show", "the state and settings, one line (also: cap)"),
     (
         "ch CH[,CH..]",
         "1 to 4 channels (not while armed or triggered)",
@@ -1439,7 +1439,7 @@ impl Console {
         if n != want {
             let u = CAP_HELP
                 .iter()
-                .find(|h| h.0.trim_start_matches('[').starts_with(sub))
+                .find(|h| h.0.starts_with(sub))
                 .map_or("", |h| h.0);
             fail!(.s("usage: cap ").s(u))
         }

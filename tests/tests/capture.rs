@@ -442,7 +442,7 @@ fn refusals_name_key_value_range_and_change_nothing() {
         ("cap dump", "error: cap dump refused: capture idle; allowed only when ready (cap arm, then wait for ready)"),
         ("cap now", "error: cap now refused: capture idle; allowed only when armed (cap arm)"),
         ("cap sideways", "error: usage: cap [show|ch|div|pre|trig|arm|now|stop|dump]"),
-        ("cap show x", "error: usage: cap [show]"),
+        ("cap show x", "error: usage: cap show"),
         ("cap div", "error: usage: cap div N"),
     ] {
         assert_eq!(refused(&mut d, line), format!("{want}\r\n"));
