@@ -30,6 +30,7 @@
 
 use core::fmt::Write;
 
+use crate::capture::{self, CapPort, Capture, Edge, Settings, State, Trigger};
 use crate::config::Config;
 use crate::control::{Controller, Mode, ModeError, Telemetry};
 use crate::numtext::{self, q_f32, Fixed, Num, NumError};
@@ -43,6 +44,10 @@ pub const PROMPT: &str = "> ";
 pub const LINE_MAX: usize = 128;
 // The editor's refusal names the figure as text.
 const _: () = assert!(LINE_MAX == 128);
+
+/// The board's reply buffer, bytes: a reply longer than this (`cap dump`) is written in
+/// pieces of at most this size ([`Console::dump_more`]).
+pub const REPLY_MAX: usize = 6144;
 
 /// Longest command id (`#ID` in machine mode), ASCII letters and digits.
 pub const ID_MAX: usize = 8;
@@ -105,6 +110,11 @@ pub static COMMANDS: &[(&str, &str, &str)] = &[
         "measure",
         "[show|apply]",
         "measure R, L_d, L_q, K_e (idle, calibrated); show them; put them in RAM",
+    ),
+    (
+        "cap",
+        "[show|ch|div|pre|trig|arm|now|stop|dump]",
+        "capture at the loop rate (help cap)",
     ),
     (
         "machine",
@@ -499,7 +509,28 @@ pub struct Console {
     noticed: u8,
     /// The alignment state last announced by [`Console::notice`].
     boot_seen: crate::control::Boot,
+    /// The capture's settings (`cap ch|div|pre|trig`), put in force by `cap arm`.
+    cap: Settings,
+    /// The capture state last announced ([`Console::notice_cap`]).
+    cap_seen: State,
+    /// A `cap dump` under way ([`Console::dump_more`]).
+    dump: Option<Dump>,
 }
+
+/// A `cap dump` under way: the next sample, and what its lines need.
+#[derive(Clone, Copy, Debug)]
+struct Dump {
+    next: u32,
+    len: u32,
+    pre_n: u32,
+    dt_s: f32,
+    set: Settings,
+}
+
+/// The longest line of a `cap dump` (a machine-mode `D` line with an 8-character id, the
+/// time and four values is under 100 bytes): [`Console::dump_more`] starts a line only with
+/// this much room left in its piece.
+pub const DUMP_LINE_MAX: usize = 128;
 
 /// Mean power over whole motion cycles: from one upward zero crossing of the shaft speed to
 /// the next (with a hysteresis of ±[`CycleMean::ARM_RAD_S`], so that noise near standstill
@@ -786,12 +817,26 @@ impl Console {
     /// otherwise take a copy of the whole executor (measured: +3.8 KB of flash).
     /// In machine mode a line may start with `#ID ` ([`ID_MAX`] letters or digits at most);
     /// the reply's `D` and `R` lines carry ID (`-` without one).
-    #[inline(never)]
     pub fn execute<W: Write, S: ParamStore>(
         &mut self,
         line: &str,
         ctl: &mut Controller,
         store: &mut S,
+        out: &mut W,
+    ) -> CmdResult {
+        self.execute_cap(line, ctl, store, None::<&mut Capture<1>>, out)
+    }
+
+    /// [`Console::execute`] on a drive with a capture (`cap`; without one `cap` is refused).
+    /// A `cap dump` writes its header here and returns without its final line:
+    /// [`Console::dump_more`] writes the samples and the final line in pieces.
+    #[inline(never)]
+    pub fn execute_cap<W: Write, S: ParamStore, C: CapPort>(
+        &mut self,
+        line: &str,
+        ctl: &mut Controller,
+        store: &mut S,
+        cap: Option<&mut C>,
         out: &mut W,
     ) -> CmdResult {
         let (id, line) = match self.split_id(line) {
@@ -809,7 +854,7 @@ impl Console {
         self.id = id_text(id.as_bytes());
         let id = self.id.clone();
         let mut o = Out::new(out, self.machine, &id);
-        let r = match self.command(line, ctl, store, &mut o) {
+        let r = match self.command(line, ctl, store, cap, &mut o) {
             // An empty line: nothing, in machine mode as well unless it carried an id.
             None if line.trim().is_empty() && self.machine && id != "-" => {
                 o.fin(false).s("empty command");
@@ -818,7 +863,7 @@ impl Console {
             r => r,
         };
         match r {
-            None => Ok(()), // empty line, or a deferred save: nothing
+            None => Ok(()), // empty line, a deferred save or a dump: nothing yet
             Some(r) => {
                 o.raw = true;
                 o.s("\r\n"); // the end of the `ok`/`error:` line, in one place (flash)
@@ -888,11 +933,12 @@ impl Console {
     }
 
     /// [`Console::execute`] but the last line's end; `None` for an empty line.
-    fn command<W: Write, S: ParamStore>(
+    fn command<W: Write, S: ParamStore, C: CapPort>(
         &mut self,
         line: &str,
         ctl: &mut Controller,
         store: &mut S,
+        cap: Option<&mut C>,
         out: &mut Out<'_, W>,
     ) -> Option<CmdResult> {
         let machine = out.machine;
@@ -934,7 +980,12 @@ impl Console {
                 if n == 0 {
                     fail!(.s("no command '").clip(a1.unwrap_or("")).s("' (help lists them)"))
                 }
-                if a1.is_none_or(|a| a == "tel") {
+                if a1 == Some("cap") {
+                    for (c, what) in CAP_HELP {
+                        out.s("  cap ").col(c, 24).s(what).s("\r\n");
+                    }
+                }
+                if a1.is_none_or(|a| a == "tel" || a == "cap") {
                     out.s("tel channels:");
                     for ch in CHANNELS {
                         out.s(" ").s(ch.0).s("[").s(ch.1).s("]");
@@ -1229,6 +1280,10 @@ impl Console {
                 }
             }
             "measure" if nargs <= 1 => Some(crate::commission::command(ctl, a1, out)),
+            "cap" => match cap {
+                Some(cap) => self.cap_command(line, ctl, cap, out),
+                None => fail!(.s("cap: this drive has no capture")),
+            },
             "tel" if want(1) && a1 == Some("off") => {
                 self.tel_every = 0;
                 ok!(.s(" tel off"))
@@ -1304,6 +1359,306 @@ impl Console {
     }
 }
 
+/// `help cap`: the `cap` commands.
+static CAP_HELP: &[(&str, &str)] = &[
+    ("[show]", "the capture's state and settings, one line"),
+    (
+        "ch CH[,CH..]",
+        "1 to 4 channels (not while armed or triggered)",
+    ),
+    ("div N", "a sample every N-th period, 1 .. 1000"),
+    ("pre PCT", "share kept from before the trigger, 0 .. 100 %"),
+    (
+        "trig fault|cmd",
+        "trigger on a fault latching, or on cap now only",
+    ),
+    (
+        "trig CH rise|fall|both L",
+        "trigger on CH crossing level L (its unit)",
+    ),
+    ("arm", "start recording (discards what is held)"),
+    ("now", "trigger an armed capture now"),
+    ("stop", "back to idle, samples discarded"),
+    (
+        "dump",
+        "a ready capture as CSV: t (s from the trigger), the channels",
+    ),
+];
+
+/// A `fmt::Write` sink that counts what passes through it.
+struct Counted<'a, W> {
+    w: &'a mut W,
+    n: usize,
+}
+
+impl<W: Write> Write for Counted<'_, W> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        self.n += s.len();
+        self.w.write_str(s)
+    }
+}
+
+/// A channel's index into [`CHANNELS`] by its name.
+fn channel_of(name: &str) -> Option<u8> {
+    CHANNELS.iter().position(|c| c.0 == name).map(|i| i as u8)
+}
+
+impl Console {
+    /// `cap …` (the words after `cap` read again from `line`: `cap trig` takes three).
+    fn cap_command<W: Write, C: CapPort>(
+        &mut self,
+        line: &str,
+        ctl: &Controller,
+        cap: &mut C,
+        out: &mut Out<'_, W>,
+    ) -> Option<CmdResult> {
+        let mut w = line.split_ascii_whitespace();
+        let _ = w.next();
+        let sub = w.next().unwrap_or("show");
+        let args = [w.next(), w.next(), w.next()];
+        let extra = w.next().is_some();
+        let n = args.iter().filter(|a| a.is_some()).count() + extra as usize;
+        let st = cap.status();
+        let busy = st.state == State::Armed || st.state == State::Triggered;
+        macro_rules! fail {
+            ($($t:tt)*) => {{
+                out.fin(false) $($t)*;
+                return Some(Err(Refused));
+            }};
+        }
+        let a = args[0].unwrap_or("");
+        let want = match sub {
+            "show" | "arm" | "now" | "stop" | "dump" => 0,
+            "ch" | "div" | "pre" => 1,
+            "trig" if matches!(a, "fault" | "cmd") => 1,
+            "trig" => 3,
+            _ => {
+                fail!(.s("usage: cap [show|ch|div|pre|trig|arm|now|stop|dump]"))
+            }
+        };
+        if n != want {
+            let u = CAP_HELP
+                .iter()
+                .find(|h| h.0.starts_with(sub))
+                .map_or("", |h| h.0);
+            fail!(.s("usage: cap ").s(u))
+        }
+        if busy && matches!(sub, "ch" | "div" | "pre" | "trig") {
+            fail!(.s("cap ").s(sub).s(" ").clip(a).s(" refused: capture ").s(st.state.name()).s(" (cap stop first)"))
+        }
+        let mut set = self.cap;
+        match sub {
+            "ch" => {
+                let mut k = 0;
+                let mut rest = Some(a);
+                while let Some(list) = rest {
+                    let comma = list.bytes().position(|b| b == b',');
+                    let name = list.get(..comma.unwrap_or(list.len())).unwrap_or("");
+                    rest = comma.and_then(|c| list.get(c + 1..));
+                    let Some(i) = channel_of(name) else {
+                        fail!(.s("cap ch ").clip(a).s(": unknown channel '").clip(name).s("'; allowed 1 to 4 of").chans())
+                    };
+                    if k == capture::CH_MAX {
+                        fail!(.s("cap ch ").clip(a).s(": more than 4 channels; allowed 1 to 4 of").chans())
+                    }
+                    set.ch[k] = i;
+                    k += 1;
+                }
+                set.n_ch = k as u8;
+            }
+            "div" | "pre" => {
+                let (max, now) = if sub == "div" {
+                    (capture::DIV_MAX as u32, set.div as u32)
+                } else {
+                    (100, set.pre_pct as u32)
+                };
+                let min = (sub == "div") as u32;
+                let v = match numtext::parse_f32(a) {
+                    Ok(v)
+                        if v.is_finite()
+                            && v >= min as f32
+                            && v <= max as f32
+                            && v == (v as u32) as f32 =>
+                    {
+                        v as u32
+                    }
+                    _ => {
+                        fail!(.s("cap ").s(sub).s(" ").clip(a).s(": not an integer in range; allowed ").uint(min).s(" .. ").uint(max).s(if sub == "pre" { " %" } else { "" }).s(", now ").uint(now))
+                    }
+                };
+                if sub == "div" {
+                    set.div = v as u16;
+                } else {
+                    set.pre_pct = v as u8;
+                }
+            }
+            "trig" => {
+                set.trig = match (a, args[1], args[2]) {
+                    ("fault", None, None) => Trigger::Fault,
+                    ("cmd", None, None) => Trigger::Cmd,
+                    (name, Some(e), Some(l)) => {
+                        let Some(ch) = channel_of(name) else {
+                            fail!(.s("cap trig ").clip(name).s(": unknown channel; allowed fault, cmd, or CH rise|fall|both LEVEL with CH one of").chans())
+                        };
+                        let edge = match e {
+                            "rise" => Edge::Rise,
+                            "fall" => Edge::Fall,
+                            "both" => Edge::Both,
+                            _ => {
+                                fail!(.s("cap trig ").s(name).s(" ").clip(e).s(": unknown edge; allowed rise, fall, both"))
+                            }
+                        };
+                        let m = capture::level_max(ch);
+                        let unit = CHANNELS.get(ch as usize).map_or("", |c| c.1);
+                        match numtext::parse_f32(l) {
+                            Ok(v) if v.is_finite() && v.abs() <= m => {
+                                Trigger::Level { ch, edge, level: v }
+                            }
+                            _ => {
+                                fail!(.s("cap trig ").s(name).s(" ").s(e).s(" ").clip(l).s(": level out of range; allowed -").num(m).s(" .. ").num(m).s(" ").s(unit))
+                            }
+                        }
+                    }
+                    _ => fail!(.s("usage: cap trig fault|cmd|CH rise|fall|both LEVEL")),
+                };
+            }
+            "arm" => {
+                cap.arm(&self.cap, self.cap.div as f32 / ctl.config().pwm_hz);
+                self.cap_seen = State::Armed;
+            }
+            // (`trigger_now` arms the command trigger when the capture is armed.)
+            "now" if !cap.trigger_now() => {
+                fail!(.s("cap now refused: capture ").s(st.state.name()).s("; allowed only when armed (cap arm)"))
+            }
+            "stop" => {
+                cap.stop();
+                self.cap_seen = State::Idle;
+            }
+            "dump" => {
+                if st.state != State::Ready {
+                    fail!(.s("cap dump refused: capture ").s(st.state.name()).s("; allowed only when ready (cap arm, then wait for ready)"))
+                }
+                let d = Dump {
+                    next: 0,
+                    len: st.len,
+                    pre_n: st.pre_n,
+                    dt_s: st.dt_s,
+                    set: st.set,
+                };
+                out.s("# cap dt_s=")
+                    .num(d.dt_s)
+                    .s(" n=")
+                    .uint(d.len)
+                    .s(" pre=")
+                    .uint(d.pre_n)
+                    .s(" trig=")
+                    .trig(&d.set.trig)
+                    .s("\r\nt");
+                for &c in d.set.channels() {
+                    out.s(",").s(CHANNELS.get(c as usize).map_or("?", |c| c.0));
+                }
+                out.s("\r\n");
+                self.dump = Some(d);
+                return None;
+            }
+            _ => {}
+        }
+        self.cap = set;
+        // The status line, then `ok`.
+        let st = cap.status();
+        let (shown, dt) = if st.state == State::Idle {
+            (self.cap, self.cap.div as f32 / ctl.config().pwm_hz)
+        } else {
+            (st.set, st.dt_s)
+        };
+        out.s("cap ").s(st.state.name()).s(" ch=");
+        for (k, &c) in shown.channels().iter().enumerate() {
+            out.s(if k == 0 { "" } else { "," })
+                .s(CHANNELS.get(c as usize).map_or("?", |c| c.0));
+        }
+        out.s(" div=")
+            .uint(shown.div as u32)
+            .s(" dt_s=")
+            .num(dt)
+            .s(" n=")
+            .uint(st.held)
+            .s(" pre=")
+            .uint(shown.pre_pct as u32)
+            .s(" trig=")
+            .trig(&shown.trig);
+        if let Some(k) = st.k_trig {
+            // (Periods over the PWM rate: one rounding, 0.4 not 0.39999998.)
+            let p = k as f32 * st.set.div as f32;
+            out.s(" t_trig_s=").num(p / ctl.config().pwm_hz);
+        }
+        out.s("\r\n");
+        out.fin(true);
+        Some(Ok(()))
+    }
+
+    /// Whether a `cap dump` is under way ([`Console::dump_more`] has more to write).
+    pub fn dumping(&self) -> bool {
+        self.dump.is_some()
+    }
+
+    /// The next piece of a `cap dump`: whole sample lines (`D <id>` lines in machine mode)
+    /// while a line of [`DUMP_LINE_MAX`] bytes still fits in `budget` bytes, and after the
+    /// last sample the final line (`ok N samples`). `true` while more is to come; the pieces
+    /// written one after the other are the whole reply, whatever the budget.
+    pub fn dump_more<W: Write, C: CapPort>(&mut self, cap: &C, budget: usize, out: &mut W) -> bool {
+        let Some(mut d) = self.dump else {
+            return false;
+        };
+        let id = self.id.clone();
+        let mut c = Counted { w: out, n: 0 };
+        let mut o = Out::new(&mut c, self.machine, &id);
+        let lsb = d.set.ch.map(capture::lsb);
+        while d.next < d.len {
+            if o.w.n + DUMP_LINE_MAX > budget {
+                self.dump = Some(d);
+                return true;
+            }
+            let row = cap.sample(d.next);
+            o.fixed((d.next as f32 - d.pre_n as f32) * d.dt_s, 7);
+            for (k, v) in row.iter().take(d.set.n_ch as usize).enumerate() {
+                o.s(",").num(*v as f32 * lsb[k]);
+            }
+            o.s("\r\n");
+            d.next += 1;
+        }
+        if o.w.n + DUMP_LINE_MAX > budget {
+            self.dump = Some(d);
+            return true;
+        }
+        o.fin(true).s(" ").uint(d.len).s(" samples");
+        o.raw = true;
+        o.s("\r\n");
+        self.dump = None;
+        false
+    }
+
+    /// Announce the capture's progress since the last call (`# cap triggered`, `# cap
+    /// ready`; `N cap …` in machine mode), each once per capture, in order; `st` is the
+    /// capture's state now. `true` when something was written (then the prompt too).
+    pub fn notice_cap<W: Write>(&mut self, st: State, out: &mut W) -> bool {
+        let was = core::mem::replace(&mut self.cap_seen, st);
+        if st <= was {
+            return false;
+        }
+        if !self.machine {
+            out.s("\r\n");
+        }
+        if was < State::Triggered && st >= State::Triggered {
+            self.note(out).s("cap triggered\r\n");
+        }
+        if st == State::Ready {
+            self.note(out).s("cap ready\r\n");
+        }
+        out.s(self.prompt());
+        true
+    }
+}
+
 /// Text output without `core::fmt`'s formatting machinery (`write!` would link `fmt::write`,
 /// `Formatter` and its padding, ≈ 3 KB on the board, and spill every argument list on the
 /// stack): strings written as they are, numbers through `numtext`. Errors of the sink are
@@ -1327,6 +1682,10 @@ trait Put {
     fn hint(&mut self, name: Option<&str>) -> &mut Self;
     /// When `on`: the command laws by code and name, ` (0 resistor, 1 impedance, …)`.
     fn laws(&mut self, on: bool) -> &mut Self;
+    /// The channel names, each after a space.
+    fn chans(&mut self) -> &mut Self;
+    /// A capture trigger as one word: `fault`, `cmd`, `CH,EDGE,LEVEL`.
+    fn trig(&mut self, t: &Trigger) -> &mut Self;
 }
 
 impl<W: Write> Put for W {
@@ -1387,6 +1746,24 @@ impl<W: Write> Put for W {
             self.s(" (did you mean ").s(n).s("?)");
         }
         self
+    }
+    fn chans(&mut self) -> &mut Self {
+        for ch in CHANNELS {
+            self.s(" ").s(ch.0);
+        }
+        self
+    }
+    fn trig(&mut self, t: &Trigger) -> &mut Self {
+        match *t {
+            Trigger::Fault => self.s("fault"),
+            Trigger::Cmd => self.s("cmd"),
+            Trigger::Level { ch, edge, level } => self
+                .s(CHANNELS.get(ch as usize).map_or("?", |c| c.0))
+                .s(",")
+                .s(edge.name())
+                .s(",")
+                .num(level),
+        }
     }
     #[inline(never)]
     fn laws(&mut self, on: bool) -> &mut Self {
@@ -1547,7 +1924,13 @@ mod tests {
 
     fn run(con: &mut Console, ctl: &mut Controller, line: &str) -> (CmdResult, String) {
         let mut s = String::new();
-        let r = con.execute(line, ctl, &mut NoStore, &mut s);
+        let r = con.execute_cap(
+            line,
+            ctl,
+            &mut NoStore,
+            Some(&mut Capture::<16>::new()),
+            &mut s,
+        );
         (r, s)
     }
 
@@ -2108,6 +2491,79 @@ mod tests {
         }
         std::println!("{n} examples of docs/console.md checked");
         assert!(n >= 10, "{n}");
+    }
+
+    /// `cap dump` in the pieces the board's reply buffer takes ([`REPLY_MAX`]): each piece
+    /// fits, every line is whole, and the pieces together are the reply written in one piece,
+    /// in both modes.
+    #[test]
+    fn cap_dump_pieces_reassemble_to_the_whole_reply() {
+        let mut ctl = Controller::new(&Config::default()).unwrap();
+        ctl.set_mode(Mode::Run).unwrap();
+        let mut cap = Capture::<{ crate::capture::SAMPLES }>::new();
+        let mut con = Console::new();
+        let exec = |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, l: &str| {
+            let mut s = String::new();
+            let r = con.execute_cap(l, ctl, &mut NoStore, Some(cap), &mut s);
+            assert!(r.is_ok(), "{s}");
+            s
+        };
+        exec(&mut con, &mut ctl, &mut cap, "cap ch ia,vq,x,p");
+        exec(&mut con, &mut ctl, &mut cap, "cap arm");
+        let z = ctl.config().adc_zero_code;
+        for k in 0..1500u16 {
+            // Codes that vary, so the lines differ in length.
+            let s = crate::io::RawSample {
+                i_abc: [z + k % 37, z - k % 11, z],
+                v_bus: 2400 + k % 50,
+                encoder: k.wrapping_mul(7),
+            };
+            ctl.step_outputs(&s);
+            if k == 300 {
+                exec(&mut con, &mut ctl, &mut cap, "cap now");
+            }
+            cap.record(&ctl);
+        }
+        assert_eq!(cap.state(), State::Ready);
+        for machine in [false, true] {
+            con.set_machine(machine);
+            let whole =
+                |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, budget| {
+                    let line = if con.machine() {
+                        "#x1 cap dump"
+                    } else {
+                        "cap dump"
+                    };
+                    let mut pieces = std::vec![exec(con, ctl, cap, line)];
+                    loop {
+                        let mut p = String::new();
+                        let more = con.dump_more(cap, budget, &mut p);
+                        pieces.push(p);
+                        if !more {
+                            return pieces;
+                        }
+                    }
+                };
+            let one = whole(&mut con, &mut ctl, &mut cap, usize::MAX);
+            let parts = whole(&mut con, &mut ctl, &mut cap, REPLY_MAX);
+            assert_eq!(one.len(), 2);
+            assert!(parts.len() >= 6, "{} pieces", parts.len());
+            assert!(parts
+                .iter()
+                .all(|p| p.len() <= REPLY_MAX && p.ends_with("\r\n")));
+            assert_eq!(parts.concat(), one.concat());
+            let text = one.concat();
+            std::println!(
+                "machine {machine}: {} bytes in {} pieces",
+                text.len(),
+                parts.len()
+            );
+            assert_eq!(text.lines().count(), 1000 + 3);
+            if machine {
+                assert!(text.ends_with("R x1 ok 1000 samples\r\n"));
+                assert!(text.lines().rev().skip(1).all(|l| l.starts_with("D x1 ")));
+            }
+        }
     }
 
     /// Refusals name the real range and reason: the laws by code and name, a near name

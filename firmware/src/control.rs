@@ -890,6 +890,30 @@ impl Controller {
         p.saturating_add(p / 2).saturating_neg()
     }
 
+    /// The Q16.16 bits of telemetry channel `ch` (an index into
+    /// [`crate::console::CHANNELS`]) of the last period, computed alone: the capture's read
+    /// ([`crate::capture::Capture::record`]), one channel without the whole [`Telemetry`].
+    #[inline]
+    pub fn channel_bits(&self, ch: u8) -> i32 {
+        let (g, r) = (&self.g, &self.rec);
+        let v = match ch {
+            0 => amps_of_code(g, r.sample.i_abc[0]),
+            1 => amps_of_code(g, r.sample.i_abc[1]),
+            2 => amps_of_code(g, r.sample.i_abc[2]),
+            3 => r.i_dq.d,
+            4 => r.i_dq.q,
+            5 => r.i_ref.d,
+            6 => r.i_ref.q,
+            7 => r.v_dq.d,
+            8 => r.v_dq.q,
+            9 => volts_of_code(g, r.sample.v_bus),
+            10 => self.enc.omega_m(&g.enc),
+            11 => self.enc.x(&g.enc),
+            _ => self.p_elec(),
+        };
+        v.to_bits()
+    }
+
     /// Telemetry of the last period (derived here from what the step stored).
     pub fn telemetry(&self) -> Telemetry {
         let (g, r) = (&self.g, &self.rec);

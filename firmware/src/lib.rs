@@ -28,6 +28,7 @@
 extern crate std;
 
 pub mod align;
+pub mod capture;
 pub mod commission;
 pub mod config;
 pub mod console;

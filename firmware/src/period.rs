@@ -8,7 +8,8 @@
 //! 3. [`Period::finish`]: a fault latch the step began finished ([`Controller::complete_latch`]:
 //!    its record and slow terms; the outputs just written are already the safe state's), a
 //!    hardware trip latched as a fault ([`PeriodHw::tripped`]), protection supervision on
-//!    every `supervise_every()`-th period (the first period included), the period count, and
+//!    every `supervise_every()`-th period (the first period included), the capture's sample
+//!    ([`crate::capture`]), the period count, and
 //!    the overrun check last ([`PeriodHw::overran`]: the next sample was ready before this
 //!    period's work was done), which the controller counts against `overrun_max` and trips on
 //!    at its next supervision.
@@ -23,6 +24,7 @@
 //! hooks on the sample and the actuation in between; a test in `hal-sim` (`sim.rs`,
 //! `split_step_is_exactly_one_step`) pins that sequence to [`Period::run`].
 
+use crate::capture::Capture;
 use crate::config::Config;
 use crate::control::{Compiled, Controller, Fault, Mode};
 use crate::io::{Actuation, DriveIo, RawSample};
@@ -147,11 +149,16 @@ impl Period {
 
     /// One whole period against the hardware (the board's interrupt body).
     #[inline(always)]
-    pub fn run<IO: DriveIo + PeriodHw>(&mut self, ctl: &mut Controller, io: &mut IO) -> Actuation {
+    pub fn run<IO: DriveIo + PeriodHw, const N: usize>(
+        &mut self,
+        ctl: &mut Controller,
+        io: &mut IO,
+        cap: &mut Capture<N>,
+    ) -> Actuation {
         let s = io.sample();
         let a = self.step(ctl, &s);
         io.apply(&a);
-        self.finish(ctl, io);
+        self.finish(ctl, io, cap);
         a
     }
 
@@ -174,10 +181,16 @@ impl Period {
         self.energy = self.energy_bits(ctl);
     }
 
-    /// After the actuation: the step's latch finished, hardware trip, supervision, counters,
-    /// overrun.
+    /// After the actuation: the step's latch finished, hardware trip, supervision, the
+    /// capture's sample ([`Capture::record`]: after the latches, so a fault latched in this
+    /// period is in this period's sample), counters, overrun.
     #[inline(always)]
-    pub fn finish<H: PeriodHw>(&mut self, ctl: &mut Controller, hw: &mut H) {
+    pub fn finish<H: PeriodHw, const N: usize>(
+        &mut self,
+        ctl: &mut Controller,
+        hw: &mut H,
+        cap: &mut Capture<N>,
+    ) {
         ctl.complete_latch();
         if let Some(f) = hw.tripped() {
             ctl.hardware_trip(f);
@@ -188,6 +201,7 @@ impl Period {
         } else {
             self.countdown -= 1;
         }
+        cap.record(ctl);
         self.periods = self.periods.wrapping_add(1);
         if hw.overran() {
             self.overruns = self.overruns.wrapping_add(1);
@@ -327,7 +341,7 @@ mod tests {
     /// One period, then the mailbox applied between it and the next, as the board's console
     /// task and the simulator do.
     fn run(per: &mut Period, ctl: &mut Controller, mail: &mut Pending, io: &mut Mock) {
-        per.run(ctl, io);
+        per.run(ctl, io, &mut crate::capture::Capture::<4>::new());
         per.apply(ctl, mail, io);
     }
 
@@ -513,7 +527,7 @@ mod tests {
             "the record is written after the actuation"
         );
         io.apply(&a);
-        per.finish(&mut ctl, &mut io);
+        per.finish(&mut ctl, &mut io, &mut crate::capture::Capture::<4>::new());
         let r = ctl
             .protection()
             .record()

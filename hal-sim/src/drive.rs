@@ -118,7 +118,8 @@ impl SimDrive {
     /// Announce a fault latched since the last call ([`Console::notice`]); `true` when
     /// something was written.
     pub fn notice(&mut self, out: &mut String) -> bool {
-        self.console.notice(self.sim.controller(), out)
+        let f = self.console.notice(self.sim.controller(), out);
+        self.console.notice_cap(self.sim.capture().state(), out) | f
     }
 
     /// Execute one console line (between two periods). Writes the reply, whose last line is
@@ -143,7 +144,15 @@ impl SimDrive {
         let mut ctl = self.sim.controller().clone();
         let mut con = self.console.clone();
         let mut reply = String::new();
-        let r = con.execute(line, &mut ctl, &mut self.store, &mut reply);
+        let r = con.execute_cap(
+            line,
+            &mut ctl,
+            &mut self.store,
+            Some(self.sim.capture_mut()),
+            &mut reply,
+        );
+        // A `cap dump`: the rest of its reply in the pieces the board's reply buffer takes.
+        while con.dump_more(self.sim.capture(), regen_fw::console::REPLY_MAX, &mut reply) {}
         if ctl.config().pwm_hz != pwm {
             let text = format!(
                 "pwm_hz is the simulated hardware's period, fixed at {pwm} Hz by the scenario"

@@ -21,6 +21,7 @@ use crate::plant::{
 };
 use crate::powerup::IndexPulse;
 use crate::sampling::ShuntPre;
+use regen_fw::capture::Capture;
 use regen_fw::fx::Duty;
 use regen_fw::io::{Actuation, DriveIo, RawSample};
 use regen_fw::{Config, Controller, Mode, Pending, Period, PeriodHw};
@@ -409,6 +410,8 @@ pub struct Sim {
     /// periods, as the board's console task does.
     per: Period,
     mail: Pending,
+    /// The capture the period records into (`regen_fw::capture`, the board's size).
+    cap: Box<Capture<{ regen_fw::capture::SAMPLES }>>,
     /// The power-up models were applied ([`Sim::power_up`]): a reboot calibrates and aligns.
     powered_up: bool,
     /// A break the stage model latched, not yet read by the period (the timer's break flag,
@@ -489,6 +492,7 @@ impl Sim {
             ts,
             per: Period::NEW,
             mail: Pending::EMPTY,
+            cap: Box::new(Capture::new()),
             powered_up: false,
             break_flag: None,
             index: IndexPulse::default(),
@@ -614,6 +618,13 @@ impl Sim {
     }
     pub fn controller_mut(&mut self) -> &mut Controller {
         &mut self.ctl
+    }
+    /// The capture the period records into (`cap` on the console).
+    pub fn capture(&self) -> &Capture<{ regen_fw::capture::SAMPLES }> {
+        &self.cap
+    }
+    pub fn capture_mut(&mut self) -> &mut Capture<{ regen_fw::capture::SAMPLES }> {
+        &mut self.cap
     }
     pub fn rig(&self) -> &Rig {
         &self.rig
@@ -890,7 +901,7 @@ impl Sim {
         on_actuation(&mut out);
         PlantIo(self).apply(&out);
         let mut hw = SimTimer(self.break_flag.take());
-        self.per.finish(&mut self.ctl, &mut hw);
+        self.per.finish(&mut self.ctl, &mut hw, &mut self.cap);
         // The console's changes between this period and the next, as the board's console
         // task applies them right after a period (`Period::apply`).
         self.per.apply(&mut self.ctl, &mut self.mail, &mut hw);
@@ -2099,7 +2110,11 @@ mod tests {
         let mut per = regen_fw::Period::NEW;
         for _ in 0..20_000 {
             a.step();
-            per.run(&mut ctl, &mut Split(&mut b));
+            per.run(
+                &mut ctl,
+                &mut Split(&mut b),
+                &mut regen_fw::capture::Capture::<4>::new(),
+            );
         }
         assert_eq!(a.loop_period(), &per);
         assert_eq!(a.ctl.fault(), ctl.fault());

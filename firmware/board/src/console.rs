@@ -35,7 +35,9 @@ pub static TEL_DROPPED: AtomicU32 = AtomicU32::new(0);
 /// bytes per parameter, with an 8-character id: `regen_fw::console` test
 /// `machine_mode_lines_parse_and_carry_ids` prints it), ≈ 3.6 KB in the human console (the
 /// board's image carries no descriptions); room for about ten more parameters.
-const REPLY_MAX: usize = 6144;
+/// A longer reply (`cap dump`, ≈ 40 KB) goes out in pieces of this size
+/// (`Console::dump_more`).
+const REPLY_MAX: usize = regen_fw::console::REPLY_MAX;
 
 /// A `fmt::Write` sink into a fixed buffer that records overflow instead of truncating
 /// silently.
@@ -176,7 +178,13 @@ pub async fn console_task(
                                     fault: ctl.fault(),
                                     mode: ctl.mode(),
                                 };
-                                let _ = con.execute(text, &mut ctl, &mut store, reply);
+                                let _ = con.execute_cap(
+                                    text,
+                                    &mut ctl,
+                                    &mut store,
+                                    Some(&mut drive::BoardCap),
+                                    reply,
+                                );
                                 post(&before, &ctl);
                             }
                             None => {
@@ -188,6 +196,13 @@ pub async fn console_task(
                     // the controller alive across the wait (the task's state stays small).
                     if let Some(r) = store.finish().await {
                         let _ = con.save_done(r, reply);
+                    }
+                    // A `cap dump`: its header is in the reply; the samples and the final
+                    // line follow piece by piece, each sent before the next is written.
+                    while con.dumping() {
+                        let _ = tx.write_all(&reply.b).await;
+                        reply.clear();
+                        con.dump_more(&drive::BoardCap, REPLY_MAX, reply);
                     }
                     let _ = reply.write_str(con.prompt());
                     if reply.overflow {
@@ -224,7 +239,8 @@ pub async fn console_task(
                 con.energy_j = c.energy_j(&ctl, ctl.config().ts());
                 // A fault latched since the last batch: announced at once, never dropped.
                 reply.clear();
-                if con.notice(&ctl, reply) {
+                let cap = critical_section::with(|cs| drive::CAP.borrow_ref(cs).state());
+                if con.notice(&ctl, reply) | con.notice_cap(cap, reply) {
                     let _ = tx.write_all(&reply.b).await;
                 }
                 if tel.lines > 0 {

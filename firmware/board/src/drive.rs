@@ -24,6 +24,7 @@ use embassy_stm32::peripherals::TIM2;
 use embassy_stm32::peripherals::{ADC1, ADC2};
 use embassy_stm32::timer::qei::Qei;
 use embassy_time::{Duration, Instant};
+use regen_fw::capture::{CapPort, Capture, Settings, Status};
 use regen_fw::config::Config;
 use regen_fw::control::{Controller, Fault};
 use regen_fw::io::{Actuation, DriveIo, HwThresholds, RawSample};
@@ -110,6 +111,37 @@ pub struct LoopState {
 
 pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot::Empty));
 
+/// Samples of the board's capture ring (`regen_fw::capture`): 1,000 × 4 channels × 2 bytes.
+pub const CAP_SAMPLES: usize = regen_fw::capture::SAMPLES;
+
+/// The capture the period records into (zero-initialised, in `.bss`). The console task
+/// reaches it through [`BoardCap`], locking the loop for each call.
+pub static CAP: Mutex<RefCell<Capture<CAP_SAMPLES>>> = Mutex::new(RefCell::new(Capture::new()));
+
+/// The console's way to [`CAP`] (`regen_fw::capture::CapPort`): each call in a critical
+/// section of its own (a sample's four codes or the settings: a few dozen cycles), so a
+/// `cap dump` reads the ready ring line by line while the loop runs (a ready capture is not
+/// written).
+pub struct BoardCap;
+
+impl CapPort for BoardCap {
+    fn status(&self) -> Status {
+        critical_section::with(|cs| CAP.borrow_ref(cs).status())
+    }
+    fn arm(&mut self, set: &Settings, dt_s: f32) {
+        critical_section::with(|cs| CAP.borrow_ref_mut(cs).arm(set, dt_s))
+    }
+    fn trigger_now(&mut self) -> bool {
+        critical_section::with(|cs| CAP.borrow_ref_mut(cs).trigger_now())
+    }
+    fn stop(&mut self) {
+        critical_section::with(|cs| CAP.borrow_ref_mut(cs).stop())
+    }
+    fn sample(&self, k: u32) -> [i16; regen_fw::capture::CH_MAX] {
+        critical_section::with(|cs| CAP.borrow_ref(cs).sample(k))
+    }
+}
+
 /// Periods the loop has run; `None` before it starts.
 fn periods() -> Option<u32> {
     critical_section::with(|cs| LOOP.borrow_ref(cs).get().map(|s| s.per.periods))
@@ -156,7 +188,7 @@ pub fn on_sample() {
         let Some(st) = guard.get_mut() else {
             return;
         };
-        st.per.run(&mut st.ctl, &mut st.io);
+        st.per.run(&mut st.ctl, &mut st.io, &mut CAP.borrow_ref_mut(cs));
         // Calibrated offsets are removed by the converters, as the simulator's sample does
         // (`Sim::set_adc_offsets`): written here, right after a sample, the period the
         // calibration ends (the next trigger is a period away).

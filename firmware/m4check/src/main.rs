@@ -9,6 +9,7 @@
 use core::hint::black_box;
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprintln};
+use regen_fw::capture::{CapPort, Capture, Edge, Settings, State, Trigger, SAMPLES};
 use regen_fw::control::{Boot, Fault};
 use regen_fw::encoder::{Encoder, EncoderGains};
 use regen_fw::frames::{inverse_park_bounded, park_bounded, AlphaBeta, Dq, Rotation};
@@ -200,7 +201,10 @@ fn boot_paths(cfg: &Config) {
 /// running step, counted on its own (`measure_path`): not in the digest.
 #[no_mangle]
 #[inline(never)]
-pub fn regen_step_measure(ctl: &mut Controller, s: RawSample) -> Actuation {
+pub fn regen_step_measure(ctl: &mut Controller, s: RawSample, n: u32) -> Actuation {
+    // (The period's number through `black_box`: a body of its own, so the linker does not
+    // fold this function with `regen_step_boot`, whose count would then include these.)
+    black_box(n);
     ctl.step_outputs(black_box(&s))
 }
 
@@ -230,7 +234,7 @@ fn measure_path(cfg: &Config) {
     };
     let mut n = 0u32;
     while ctl.mode() == Mode::Measure && n < 100_000 {
-        black_box(regen_step_measure(&mut ctl, s));
+        black_box(regen_step_measure(&mut ctl, s, n));
         let t = ctl.telemetry();
         let v = [t.v_dq.d.to_num::<f32>(), t.v_dq.q.to_num::<f32>()];
         for k in 0..2 {
@@ -257,6 +261,43 @@ fn measure_path(cfg: &Config) {
     if !(rel > -0.05 && rel < 0.05) {
         exit(12);
     }
+}
+
+/// The running step with a capture armed: the step to its outputs, then the capture's
+/// sample as the period takes it after the outputs (`Period::finish` → `Capture::record`),
+/// counted together on a copy of the controller every step of the replay (the capture's
+/// worst case: four channels, the level trigger's channel read and compared every sample).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_step_cap(ctl: &mut Controller, s: &RawSample, cap: &mut Capture<SAMPLES>) -> Actuation {
+    let a = ctl.step_outputs(s);
+    cap.record(ctl);
+    a
+}
+
+/// The capture's sample alone (`Capture::record` with the capture armed as above).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>) {
+    cap.record(ctl)
+}
+
+/// A capture armed with its most expensive sample: power, speed, travel and phase a (the
+/// channels read through products), a level trigger on the bus voltage at 500 V (never
+/// reached: armed for the whole replay, the ring wrapping).
+fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32) {
+    let set = Settings {
+        ch: [12, 10, 11, 0],
+        n_ch: 4,
+        div: 1,
+        pre_pct: 50,
+        trig: Trigger::Level {
+            ch: 9,
+            edge: Edge::Both,
+            level: 500.0,
+        },
+    };
+    cap.arm(&set, dt_s);
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -363,6 +404,8 @@ fn main() -> ! {
     let mut bad_cfg = false;
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
+    let mut cap = Capture::<SAMPLES>::new();
+    armed_capture(&mut cap, cfg.ts());
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half {
             let new = Config {
@@ -416,6 +459,13 @@ fn main() -> ! {
                     bad_cfg = true;
                 }
             }
+        }
+        // The step with the capture armed, on a copy (the same step as the one below), and
+        // the capture's sample alone.
+        black_box(regen_step_cap(&mut c.clone(), s, &mut cap));
+        regen_cap_record(c, &mut cap);
+        if cap.state() != State::Armed {
+            bad_cfg = true;
         }
         k += 1;
         let a = regen_step(c, s);
