@@ -270,11 +270,18 @@ impl<const N: usize> Capture<N> {
     /// above).
     #[inline(never)]
     fn take(&mut self, ctl: &Controller) {
+        // All four slots, unrolled (a loop over `n_ch` costs more than the unused reads; the
+        // slots past `n_ch` are never shown).
+        let (c, sh) = (&self.set.ch, &self.shift);
+        let row = [
+            code(ctl.channel_bits(c[0]), sh[0]) as i16,
+            code(ctl.channel_bits(c[1]), sh[1]) as i16,
+            code(ctl.channel_bits(c[2]), sh[2]) as i16,
+            code(ctl.channel_bits(c[3]), sh[3]) as i16,
+        ];
         let w = self.w as usize;
-        if let Some(row) = self.buf.get_mut(w) {
-            for (j, v) in row.iter_mut().enumerate().take(self.n_ch as usize) {
-                *v = code(ctl.channel_bits(self.set.ch[j]), self.shift[j]) as i16;
-            }
+        if let Some(r) = self.buf.get_mut(w) {
+            *r = row;
         }
         self.w = if w + 1 >= N { 0 } else { w as u32 + 1 };
         let k = self.k;
@@ -338,6 +345,10 @@ impl<const N: usize> CapPort for Capture<N> {
         self.set = *set;
         self.set.div = set.div.clamp(1, DIV_MAX);
         self.n_ch = set.n_ch.min(CH_MAX as u8);
+        // The slots past `n_ch` read `id` (one load: [`Capture::take`] reads all four).
+        for c in self.set.ch.iter_mut().skip(self.n_ch as usize) {
+            *c = 3;
+        }
         for (s, &c) in self.shift.iter_mut().zip(set.ch.iter()) {
             *s = SHIFT.get(c as usize).copied().unwrap_or(0);
         }

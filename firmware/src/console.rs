@@ -3064,6 +3064,39 @@ mod tests {
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(2000))]
         #[test]
+        /// `cap` lines in any order on one capture recording between them: nothing panics,
+        /// a refusal is one `error:` line and changes neither the settings nor the capture.
+        #[test]
+        fn fuzz_cap_never_panics_and_refusals_change_nothing(lines in proptest::collection::vec(
+            "cap( (ch|div|pre|trig|arm|now|stop|dump|show|[a-z]{0,3}))?( (ia|iq,vq|w,x,p,ib|iq_ref|fault|cmd|[a-z_,]{0,8}|[-0-9.e]{0,5}))?( (rise|fall|both|[a-z]{0,3}))?( [-0-9.einf]{0,6})?( x)?",
+            1..12,
+        )) {
+            let mut ctl = Controller::new(&Config::default()).unwrap();
+            ctl.set_mode(Mode::Run).unwrap();
+            let mut cap = Capture::<16>::new();
+            let mut con = Console::new();
+            let s0 = crate::io::RawSample { i_abc: [2048; 3], v_bus: 2457, encoder: 0 };
+            for line in &lines {
+                let status = |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<16>| {
+                    let mut s = String::new();
+                    let _ = con.execute_cap("cap", ctl, &mut NoStore, Some(cap), &mut s);
+                    s
+                };
+                let before = (status(&mut con, &mut ctl, &mut cap), cap.status());
+                let mut s = String::new();
+                let r = con.execute_cap(line, &mut ctl, &mut NoStore, Some(&mut cap), &mut s);
+                while con.dump_more(&cap, REPLY_MAX, &mut s) {}
+                if r.is_err() {
+                    proptest::prop_assert!(s.starts_with("error: ") && s.matches('\n').count() == 1, "{}", s);
+                    proptest::prop_assert_eq!(&(status(&mut con, &mut ctl, &mut cap), cap.status()), &before);
+                }
+                for _ in 0..7 {
+                    ctl.step_outputs(&s0);
+                    cap.record(&ctl);
+                }
+            }
+        }
+
         fn fuzz_never_panics_and_errors_change_nothing(line in "(set|get|mode|tel|save|load|list|status|[a-z]{0,4})( [a-z_,]{0,14})?( [-+0-9.eEinfa]{0,10})?( x)?|\\PC{0,40}") {
             let mut ctl = Controller::new(&Config::default()).unwrap();
             let mut con = Console::new();

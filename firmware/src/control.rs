@@ -893,7 +893,7 @@ impl Controller {
     /// The Q16.16 bits of telemetry channel `ch` (an index into
     /// [`crate::console::CHANNELS`]) of the last period, computed alone: the capture's read
     /// ([`crate::capture::Capture::record`]), one channel without the whole [`Telemetry`].
-    #[inline]
+    #[inline(always)]
     pub fn channel_bits(&self, ch: u8) -> i32 {
         let (g, r) = (&self.g, &self.rec);
         let v = match ch {

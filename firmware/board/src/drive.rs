@@ -188,7 +188,8 @@ pub fn on_sample() {
         let Some(st) = guard.get_mut() else {
             return;
         };
-        st.per.run(&mut st.ctl, &mut st.io, &mut CAP.borrow_ref_mut(cs));
+        st.per
+            .run(&mut st.ctl, &mut st.io, &mut CAP.borrow_ref_mut(cs));
         // Calibrated offsets are removed by the converters, as the simulator's sample does
         // (`Sim::set_adc_offsets`): written here, right after a sample, the period the
         // calibration ends (the next trigger is a period away).

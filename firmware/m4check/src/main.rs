@@ -269,7 +269,11 @@ fn measure_path(cfg: &Config) {
 /// worst case: four channels, the level trigger's channel read and compared every sample).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_step_cap(ctl: &mut Controller, s: &RawSample, cap: &mut Capture<SAMPLES>) -> Actuation {
+pub fn regen_step_cap(
+    ctl: &mut Controller,
+    s: &RawSample,
+    cap: &mut Capture<SAMPLES>,
+) -> Actuation {
     let a = ctl.step_outputs(s);
     cap.record(ctl);
     a
@@ -279,6 +283,15 @@ pub fn regen_step_cap(ctl: &mut Controller, s: &RawSample, cap: &mut Capture<SAM
 #[no_mangle]
 #[inline(never)]
 pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>) {
+    cap.record(ctl)
+}
+
+/// The capture's sample for the load step's channels (`iq,iq_ref`, trigger `cmd`, never
+/// given: armed for the whole replay).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, _k: u32) {
+    // (A third argument: a body of its own.)
     cap.record(ctl)
 }
 
@@ -406,6 +419,17 @@ fn main() -> ! {
     let mut pi = CurrentPi::default();
     let mut cap = Capture::<SAMPLES>::new();
     armed_capture(&mut cap, cfg.ts());
+    let mut cap_iq = Capture::<SAMPLES>::new();
+    cap_iq.arm(
+        &Settings {
+            ch: [4, 6, 0, 0],
+            n_ch: 2,
+            div: 1,
+            pre_pct: 20,
+            trig: Trigger::Cmd,
+        },
+        cfg.ts(),
+    );
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half {
             let new = Config {
@@ -464,7 +488,8 @@ fn main() -> ! {
         // the capture's sample alone.
         black_box(regen_step_cap(&mut c.clone(), s, &mut cap));
         regen_cap_record(c, &mut cap);
-        if cap.state() != State::Armed {
+        regen_cap_record_iq(c, &mut cap_iq, k as u32);
+        if cap.state() != State::Armed || cap_iq.state() != State::Armed {
             bad_cfg = true;
         }
         k += 1;
