@@ -324,7 +324,8 @@ async function capShow(): Promise<void> {
 async function capSend(lines: string[]): Promise<boolean> {
   for (const l of lines) {
     const r = await send(l, false);
-    if (!r.ok) { showReply("cap-msg", { ...r, text: `${l}: ${r.text}` }); return false; }
+    // The refusal with the command it answers (the drive's own text names it mostly).
+    if (!r.ok) { showReply("cap-msg", { ...r, text: r.text.startsWith(l) ? r.text : `${l}: ${r.text}` }); return false; }
   }
   $("cap-msg").textContent = "ok " + lines.join("; ");
   $("cap-msg").classList.remove("err");
