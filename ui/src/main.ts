@@ -4,6 +4,8 @@ import uPlot from "uplot";
 import { Console, fields, type Reply } from "./protocol";
 import { SerialTransport, WsTransport, type Transport } from "./transport";
 import { LivePlot, TelStore } from "./telemetry";
+import { fmtField, fmtQty, splitKey, unitOf } from "./units";
+import { CapPlot, parseCapStatus, parseDump, trigText, type CapDump, type CapStatus } from "./capture";
 
 const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
 const token = new URLSearchParams(location.search).get("token") ?? "";
@@ -17,7 +19,7 @@ store.onHeader = () => plot.rebuild();
 
 // Figures the browser suite reads (window.__regen).
 const stats = { telReceived: () => store.n, telGaps: () => store.gaps, plotted: () => plot.drawnUpTo, frames: () => plot.frames, rtt: [] as number[], log: [] as string[] };
-(window as unknown as { __regen: unknown }).__regen = { stats, store, cmd: (l: string) => send(l) };
+(window as unknown as { __regen: unknown }).__regen = { stats, store, plot, cap: () => capDump, capPlot: () => capPlot, cmd: (l: string) => send(l) };
 
 // ---------- tabs, modal confirmation, log ----------
 document.querySelectorAll<HTMLButtonElement>("#tabs button").forEach((b) =>
@@ -26,6 +28,7 @@ document.querySelectorAll<HTMLButtonElement>("#tabs button").forEach((b) =>
     b.classList.add("on");
     $(b.dataset.tab!).classList.add("on");
     if (b.dataset.tab === "harvest") void harvest();
+    if (b.dataset.tab === "capture" && con) void capShow();
   }),
 );
 
@@ -37,12 +40,19 @@ function ask(title: string, text: string): Promise<boolean> {
   return new Promise((res) => d.addEventListener("close", () => res(d.returnValue === "yes"), { once: true }));
 }
 
+/** The console log: kept in `stats.log`, shown (last 400 lines) once per frame at most. */
+let logShown = true;
 function log(l: string): void {
   stats.log.push(l);
-  if (stats.log.length > 2000) stats.log.splice(0, 1000);
-  const el = $("c-log");
-  el.textContent = stats.log.slice(-400).join("\n");
-  el.scrollTop = el.scrollHeight;
+  if (stats.log.length > 4000) stats.log.splice(0, 2000);
+  if (!logShown) return;
+  logShown = false;
+  requestAnimationFrame(() => {
+    logShown = true;
+    const el = $("c-log");
+    el.textContent = stats.log.slice(-400).join("\n");
+    el.scrollTop = el.scrollHeight;
+  });
 }
 
 function alarm(text: string | null): void {
@@ -85,7 +95,11 @@ async function connect(): Promise<void> {
   con = c;
   c.tel = store;
   c.onLine = log;
-  c.onNotice = (t) => { void poll(); if (/fault/i.test(t)) { alarm(`Drive: ${t}`); void readFaults(); } };
+  c.onNotice = (t) => {
+    if (t.startsWith("cap ")) { capNotice(t); return; }
+    void poll();
+    if (/fault/i.test(t)) { alarm(`Drive: ${t}`); void readFaults(); }
+  };
   c.onBridge = (t) => alarm(`Bridge: ${t}`);
   link.onText = (t) => c.feed(t);
   link.onClose = (why) => {
@@ -137,12 +151,21 @@ async function poll(): Promise<void> {
   const keys = [...STATUS_ORDER.filter((k) => k in f), ...Object.keys(f).filter((k) => !STATUS_ORDER.includes(k))];
   $("status").innerHTML = "";
   for (const k of keys) {
+    // Shown with its unit and 4 significant digits; the drive's own text in data-v and the title.
     const s = document.createElement("span");
     s.className = "kv" + (k === "fault" && f[k] !== "none" ? " bad" : "") + (k === "mode" ? " mode-" + f[k] : "");
-    s.innerHTML = `<b>${k}</b> <span data-k="${k}">${f[k]}</span>`;
+    s.title = `${k}=${f[k]}`;
+    const name = document.createElement("b");
+    name.textContent = splitKey(k)[0];
+    const v = document.createElement("span");
+    v.dataset.k = k;
+    v.dataset.v = f[k];
+    v.textContent = fmtField(k, f[k]);
+    s.append(name, " ", v);
     $("status").append(s);
   }
   renderSteps();
+  if (capState === "armed" || capState === "triggered" || $("capture").classList.contains("on")) await capShow();
 }
 setInterval(() => void poll(), 500);
 
@@ -264,18 +287,84 @@ const origTel = store.sample.bind(store);
 store.sample = (t, v) => { origTel(t, v); plot.changed(); };
 
 // ---------- capture ----------
-let capLines: string[] = [];
+const capPlot = new CapPlot($("cap-plot"));
+let capDump: CapDump | null = null;
+let capState = "";
+const capV = (id: string) => $<HTMLInputElement>(id).value.trim();
+function capKindShown(): void {
+  $("cap-levelset").hidden = $<HTMLSelectElement>("cap-kind").value !== "level";
+  $("cap-unit").textContent = unitOf($<HTMLSelectElement>("cap-tch").value);
+}
+$("cap-kind").addEventListener("change", capKindShown);
+$("cap-tch").addEventListener("change", capKindShown);
+capKindShown();
+
+function showCapState(st: CapStatus | null, text?: string): void {
+  const pill = $("cap-state");
+  if (!st) { pill.className = "pill bad"; pill.textContent = text ?? "?"; return; }
+  capState = st.state;
+  pill.className = "pill cap-" + st.state;
+  pill.textContent = st.state;
+  const f = st.f;
+  const dt = Number(f.dt_s);
+  const n = Number(f.n);
+  const parts = [`ch ${f.ch ?? "?"}`, Number.isFinite(dt) ? `every ${fmtQty(dt, "s")}` : "", Number.isFinite(n) && Number.isFinite(dt) ? `${n} samples = ${fmtQty(n * dt, "s")}` : "", `pre-trigger ${f.pre ?? "?"} %`, `trigger: ${trigText(f.trig ?? "?")}`];
+  if (f.t_trig_s) parts.push(`triggered ${fmtQty(Number(f.t_trig_s), "s")} after arming`);
+  $("cap-info").textContent = parts.filter(Boolean).join(" · ");
+}
+
+/** `cap show`: the capture's state (also polled with the status while armed or triggered). */
+async function capShow(): Promise<void> {
+  const r = await send("cap show", false);
+  if (!r.ok) { showCapState(null, "no cap"); showReply("cap-msg", r); return; }
+  showCapState(parseCapStatus([...r.data, r.text]));
+}
+
+/** Send the set-up, one command at a time; the first refusal stops it and is shown. */
+async function capSend(lines: string[]): Promise<boolean> {
+  for (const l of lines) {
+    const r = await send(l, false);
+    // The refusal with the command it answers (the drive's own text names it mostly).
+    if (!r.ok) { showReply("cap-msg", { ...r, text: r.text.startsWith(l) ? r.text : `${l}: ${r.text}` }); return false; }
+  }
+  $("cap-msg").textContent = "ok " + lines.join("; ");
+  $("cap-msg").classList.remove("err");
+  return true;
+}
+
 $("cap-arm").addEventListener("click", async () => {
-  const v = (id: string) => $<HTMLInputElement>(id).value.trim();
-  const r = await send(`cap ${v("cap-ch")} ${v("cap-trig")} ${$<HTMLSelectElement>("cap-edge").value} ${v("cap-level")} ${v("cap-pre")}`);
-  showReply("cap-msg", r);
+  const kind = $<HTMLSelectElement>("cap-kind").value;
+  const trig = kind === "level" ? `cap trig ${$<HTMLSelectElement>("cap-tch").value} ${$<HTMLSelectElement>("cap-edge").value} ${capV("cap-level")}` : `cap trig ${kind}`;
+  const pre = capState === "armed" || capState === "triggered" ? ["cap stop"] : [];
+  await capSend([...pre, `cap ch ${capV("cap-ch").replace(/\s/g, "")}`, `cap div ${capV("cap-div")}`, `cap pre ${capV("cap-pre")}`, trig, "cap arm"]);
+  await capShow();
 });
-$("cap-dump").addEventListener("click", async () => {
+$("cap-now").addEventListener("click", async () => { await capSend(["cap now"]); await capShow(); });
+$("cap-stop").addEventListener("click", async () => { await capSend(["cap stop"]); await capShow(); });
+
+async function capRead(): Promise<void> {
   const r = await send("cap dump", false);
-  showReply("cap-msg", r);
-  capLines = r.data.filter((l) => l.startsWith("C ")).map((l) => l.slice(2));
-});
-$("cap-csv").addEventListener("click", () => download("regen-capture.csv", capLines.join("\n") + "\n"));
+  if (!r.ok) { showReply("cap-msg", r); return; }
+  try {
+    capDump = parseDump(r.data);
+  } catch (e) {
+    showReply("cap-msg", { ...r, ok: false, text: (e as Error).message });
+    return;
+  }
+  const d = capDump;
+  $("cap-msg").textContent = `read ${d.t.length} samples of ${d.channels.join(", ")}, ${d.pre} before the trigger, every ${fmtQty(Number(d.head.dt_s), "s")}`;
+  $("cap-msg").classList.remove("err");
+  capPlot.show(d);
+}
+$("cap-dump").addEventListener("click", () => void capRead());
+$("cap-csv").addEventListener("click", () => { if (capDump) download("regen-capture.csv", capDump.lines.join("\n") + "\n"); });
+
+/** `N cap triggered` / `N cap ready`: the state at once; a ready capture is read. */
+function capNotice(t: string): void {
+  const m = /^cap (\w+)/.exec(t);
+  if (!m) return;
+  void capShow().then(() => (m[1] === "ready" ? capRead() : undefined));
+}
 
 function showReply(id: string, r: Reply): void {
   const el = $(id);
@@ -288,6 +377,10 @@ async function readFaults(): Promise<void> {
   const r = await send("faults", false);
   $("f-text").textContent = r.data.join("\n");
   showReply("f-msg", r);
+  // The alarm in words: the fault's name and meaning, and the safe state the drive took.
+  const f = r.data.map((l) => /^fault \d+ (\S+): (.*)$/.exec(l)).find((m) => m);
+  const safe = r.data.find((l) => l.startsWith("safe state:"));
+  if (f) alarm(`FAULT ${f[1]}: ${f[2]}.${safe ? " " + safe[0].toUpperCase() + safe.slice(1) + "." : ""} Details on the Faults tab; Clear there once the cause is gone.`);
 }
 $("f-read").addEventListener("click", () => void readFaults());
 $("f-clear").addEventListener("click", async () => { showReply("f-msg", await send("clear", false)); await poll(); });
@@ -315,7 +408,7 @@ async function harvest(): Promise<void> {
   const now = new Array<number | null>(xs.length).fill(null);
   const past = new Array<number | null>(xs.length).fill(null);
   readings.forEach(([rr, pp], k) => ((k === readings.length - 1 ? now : past)[nearest(rr)] = pp));
-  $("h-info").textContent = `${j.scenario}: optimum R_L = ${j.optimum.r_ohm.toFixed(1)} Ω, ${j.optimum.p_w.toFixed(3)} W` + (readings.length ? `; drive now ${r} Ω, p_cycle ${p} W` : "");
+  $("h-info").textContent = `${j.scenario}: optimum R_L = ${fmtQty(j.optimum.r_ohm, "Ω")}, ${fmtQty(j.optimum.p_w, "W")}` + (readings.length ? `; the drive now at ${fmtQty(r, "Ω")}: p_cycle ${fmtQty(p, "W")}` : "");
   hplot?.destroy();
   const el = $("h-plot");
   el.textContent = "";
@@ -323,6 +416,7 @@ async function harvest(): Promise<void> {
     {
       width: Math.max(400, el.clientWidth), height: 380,
       scales: { x: { time: false, distr: 3 } },
+      legend: { live: false },
       axes: [{ label: "R_L (Ω per phase)" }, { label: "mean load power (W)", size: 60 }],
       series: [
         { label: "R_L" },

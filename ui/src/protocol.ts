@@ -49,14 +49,14 @@ export class Console {
 
   /** Text from the transport. */
   feed(text: string): void {
-    this.buf += text;
-    let i: number;
-    while ((i = this.buf.indexOf("\n")) >= 0) {
-      let line = this.buf.slice(0, i);
-      this.buf = this.buf.slice(i + 1);
-      if (line.endsWith("\r")) line = line.slice(0, -1);
+    const b = this.buf + text;
+    let from = 0, i: number;
+    while ((i = b.indexOf("\n", from)) >= 0) {
+      const line = b.slice(from, i > from && b.charCodeAt(i - 1) === 13 ? i - 1 : i);
+      from = i + 1;
       if (line.length) this.line(line);
     }
+    this.buf = b.slice(from);
   }
 
   private line(l: string): void {

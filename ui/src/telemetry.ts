@@ -2,6 +2,7 @@
 
 import uPlot from "uplot";
 import type { TelSink } from "./protocol";
+import { fmtQty, unitOf } from "./units";
 
 /** Samples kept per channel: over two minutes at the firmware's highest rate (2 kHz). */
 export const CAPACITY = 1 << 18;
@@ -55,7 +56,42 @@ export class TelStore implements TelSink {
   }
 }
 
-const COLORS = ["#1f6fd1", "#d1461f", "#2c9a4b", "#8d44c9", "#c28a00", "#0b9aa6", "#b8336a", "#5c6670"];
+export const COLORS = ["#1f6fd1", "#d1461f", "#2c9a4b", "#8d44c9", "#c28a00", "#0b9aa6", "#b8336a", "#5c6670"];
+
+/**
+ * Series, scales and y axes for channels on one time axis: one scale per unit (currents in A
+ * share one, voltages another, …), its axis labelled with the unit, alternating left and right
+ * and drawn in its first channel's colour; values in the legend with their unit.
+ */
+export function unitAxes(channels: string[]): { series: uPlot.Series[]; scales: uPlot.Scales; axes: uPlot.Axis[] } {
+  const units: string[] = [];
+  const series: uPlot.Series[] = [];
+  const axes: uPlot.Axis[] = [];
+  const scales: uPlot.Scales = {};
+  channels.forEach((c, k) => {
+    const unit = unitOf(c);
+    const scale = unit ? "u:" + unit : "c:" + c;
+    const stroke = COLORS[k % COLORS.length];
+    if (!(scale in scales)) {
+      scales[scale] = { auto: true };
+      const side = units.length % 2 === 0 ? 3 : 1;
+      units.push(scale);
+      axes.push({ scale, side, label: unit || c, stroke, size: 62, grid: { show: units.length === 1 }, values: (_u, v) => v.map((x) => fmtTick(x)) });
+    }
+    series.push({ label: c, scale, stroke, width: 1, points: { show: false }, value: (_u, v) => (v == null ? "–" : fmtQty(v, unit)) });
+  });
+  return { series, scales, axes };
+}
+
+/** An axis tick: short, no prefix (the axis label carries the unit). */
+function fmtTick(x: number): string {
+  const a = Math.abs(x);
+  if (a !== 0 && (a >= 1e5 || a < 1e-3)) return x.toExponential(1);
+  return String(Number(x.toPrecision(6)));
+}
+
+/** Height of the plots' drawing area (the legend goes below it, inside the panel). */
+export const PLOT_HEIGHT = 400;
 
 /** Several channels on one time axis, redrawn once per frame from min/max per pixel column. */
 export class LivePlot {
@@ -76,11 +112,14 @@ export class LivePlot {
       requestAnimationFrame(tick);
     };
     requestAnimationFrame(tick);
-    new ResizeObserver(() => this.u?.setSize(this.size())).observe(el);
+    let w = 0;
+    new ResizeObserver(() => {
+      if (this.el.clientWidth !== w) { w = this.el.clientWidth; this.u?.setSize(this.size()); }
+    }).observe(el);
   }
 
   private size() {
-    return { width: Math.max(300, this.el.clientWidth), height: Math.max(220, this.el.clientHeight - 8) };
+    return { width: Math.max(300, this.el.clientWidth - 8), height: PLOT_HEIGHT };
   }
 
   rebuild(): void {
@@ -88,14 +127,13 @@ export class LivePlot {
     this.el.textContent = "";
     const s = this.store;
     this.shown = s.channels.map(() => true);
-    const series: uPlot.Series[] = [{ label: "t (s)" }];
-    s.channels.forEach((c, k) => series.push({ label: c, stroke: COLORS[k % COLORS.length], width: 1, points: { show: false } }));
+    const ua = unitAxes(s.channels);
     this.u = new uPlot(
       {
         ...this.size(),
-        series,
-        scales: { x: { time: false } },
-        axes: [{ label: "t since tel (s)" }, { size: 60 }],
+        series: [{ label: "t", value: (_u, v) => (v == null ? "–" : v.toFixed(4) + " s") }, ...ua.series],
+        scales: { x: { time: false }, ...ua.scales },
+        axes: [{ label: "t since tel (s)" }, ...ua.axes],
         cursor: { drag: { x: true, y: false, setScale: true } },
         legend: { live: true },
       },

@@ -239,6 +239,9 @@ impl<L: Link> Server<L> {
         let mut n: u64 = 0;
         let mut tel = String::new();
         while !stop.load(Ordering::Relaxed) && n_max.is_none_or(|m| n < m) {
+            // A new reader is greeted before anything it sent is read: its first command
+            // (`machine on`) must not be undone by the greeting's reset of the console.
+            self.look_for_reader();
             self.poll_input();
             let k = n_max.map_or(chunk, |m| chunk.min(m - n));
             tel.clear();
@@ -313,11 +316,11 @@ impl<L: Link> Server<L> {
         }
     }
 
-    fn flush(&mut self) {
+    /// Whether a reader is there; a new one gets the human console (as after a board's reset)
+    /// and the banner first, before anything queued.
+    fn look_for_reader(&mut self) {
         let up = self.link.connected();
         if up && !self.connected {
-            // A new reader: the human console (as after a board's reset), the banner first,
-            // before anything queued.
             self.drive.set_machine(false);
             let ctl = self.drive.sim().controller();
             let mut b = String::new();
@@ -325,6 +328,11 @@ impl<L: Link> Server<L> {
             self.out.splice(self.out_pos..self.out_pos, b.bytes());
         }
         self.connected = up;
+    }
+
+    /// Write what is queued to the reader found by the last [`Self::look_for_reader`].
+    fn flush(&mut self) {
+        let up = self.connected;
         if self.out_pos < self.out.len() && !up {
             // No reader: the output goes nowhere, as on an unplugged UART, and what the link
             // still holds is dropped so the next reader gets no stale backlog.
@@ -444,4 +452,52 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
         println!("firmware fault latched: {}", f.name());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reader that is there from the start and whose first line is already waiting.
+    struct EagerReader {
+        input: Vec<u8>,
+        output: Vec<u8>,
+    }
+
+    impl Link for EagerReader {
+        fn read(&mut self, buf: &mut [u8]) -> usize {
+            let k = self.input.len().min(buf.len());
+            buf[..k].copy_from_slice(&self.input[..k]);
+            self.input.drain(..k);
+            k
+        }
+        fn connected(&mut self) -> bool {
+            true
+        }
+        fn write(&mut self, bytes: &[u8]) -> usize {
+            self.output.extend_from_slice(bytes);
+            bytes.len()
+        }
+    }
+
+    #[test]
+    fn a_new_readers_first_command_is_not_undone_by_its_greeting() {
+        let sc = scenario(None).unwrap();
+        let link = EagerReader {
+            input: b"machine on\n#1 status\n".to_vec(),
+            output: Vec::new(),
+        };
+        let mut srv =
+            Server::new(SimDrive::from_scenario(&sc).unwrap(), link, f64::INFINITY).unwrap();
+        srv.run(&AtomicBool::new(false), Some(1e-3));
+        let out = String::from_utf8_lossy(&srv.link().output).into_owned();
+        assert!(srv.drive().console().machine(), "{out}");
+        let banner = out.find("console.").expect("the banner");
+        let ok = out.find("R - ok").expect("machine on answered");
+        assert!(banner < ok, "{out}");
+        assert!(
+            out.contains("R 1 ok"),
+            "status answered in machine form: {out}"
+        );
+    }
 }

@@ -379,15 +379,34 @@ async fn ws(
         .on_upgrade(move |s| session(s, to_tx, from_rx))
 }
 
+/// Longest a telemetry-only message is held for more to join it (a frame at 60 Hz is 16.7
+/// ms): a 2 kHz stream arrives as about 125 messages a second, not one per simulation pass,
+/// and the page's main thread handles that many fewer events. A message with any other line
+/// (a reply, a notice) goes at once with everything held before it.
+const TEL_HOLD: Duration = Duration::from_millis(8);
+
+/// Whether every line of `text` is a telemetry sample (`T …` in machine mode).
+fn telemetry_only(text: &str) -> bool {
+    text.split_terminator('\n').all(|l| l.starts_with("T "))
+}
+
 /// One page: its lines to the drive (checked), the drive's lines to it (what waits sent as
-/// one message).
+/// one message; telemetry alone held up to [`TEL_HOLD`]).
 async fn session(
     mut s: WebSocket,
     to: mpsc::UnboundedSender<Vec<u8>>,
     mut from: mpsc::Receiver<String>,
 ) {
+    let mut held = String::new();
+    let mut since = tokio::time::Instant::now();
     loop {
+        let due = since + TEL_HOLD;
         tokio::select! {
+            _ = tokio::time::sleep_until(due), if !held.is_empty() => {
+                if s.send(Message::Text(std::mem::take(&mut held).into())).await.is_err() {
+                    break;
+                }
+            }
             m = s.recv() => match m {
                 Some(Ok(Message::Text(t))) => {
                     match check_message(t.as_str()) {
@@ -417,14 +436,23 @@ async fn session(
                 Some(Ok(_)) => {}
             },
             o = from.recv() => {
-                let Some(mut text) = o else { break };
-                while text.len() < 256 * 1024 {
+                let Some(text) = o else { break };
+                if held.is_empty() {
+                    since = tokio::time::Instant::now();
+                }
+                let mut urgent = !telemetry_only(&text);
+                held.push_str(&text);
+                while held.len() < 256 * 1024 {
                     match from.try_recv() {
-                        Ok(more) => text.push_str(&more),
+                        Ok(more) => {
+                            urgent |= !telemetry_only(&more);
+                            held.push_str(&more);
+                        }
                         Err(_) => break,
                     }
                 }
-                if s.send(Message::Text(text.into())).await.is_err() {
+                let due_now = urgent || held.len() >= 256 * 1024 || since.elapsed() >= TEL_HOLD;
+                if due_now && s.send(Message::Text(std::mem::take(&mut held).into())).await.is_err() {
                     break;
                 }
             }
@@ -642,6 +670,17 @@ mod tests {
         assert!(e.contains("line 2") && e.contains("129 bytes"), "{e}");
         let e = check_message(&"status\n".repeat(600)).unwrap_err();
         assert!(e.contains("4200 bytes"), "{e}");
+    }
+
+    #[test]
+    fn only_telemetry_is_held() {
+        assert!(telemetry_only("T 0.1,2\r\nT 0.2,3\r\n"));
+        assert!(!telemetry_only("T 0.1,2\r\nR 4 ok\r\n"));
+        assert!(!telemetry_only("N cap ready\r\n"));
+        assert!(
+            !telemetry_only("0.1,2\r\n"),
+            "the human console's telemetry goes at once"
+        );
     }
 
     #[test]
