@@ -315,6 +315,9 @@ pub struct Protection {
     omega_raw: f32,
     /// The largest |ω_m| of the current window and of the one before ([`PEAK_TICKS`]), rad/s.
     peak: [f32; 2],
+    /// The speed when the latched record was taken: the larger of the loop's estimate and
+    /// the 1 ms count difference (the estimate lags a motion that starts at speed), rad/s.
+    trip_speed: f32,
     /// I²t state: per-unit winding temperature rise, settles at (|i|/i2t_cont_a)².
     i2t: f32,
     emf_count: u16,
@@ -344,6 +347,7 @@ impl Default for Protection {
             primed: false,
             omega_raw: 0.0,
             peak: [0.0; 2],
+            trip_speed: 0.0,
             i2t: 0.0,
             emf_count: 0,
             angle_count: 0,
@@ -526,6 +530,9 @@ impl Protection {
                 }
             }
             None => {
+                let w = abs(q_f32(t.omega_m));
+                let raw = abs(self.omega_raw);
+                self.trip_speed = if raw > w { raw } else { w };
                 self.record = Some(Record {
                     fault: f,
                     snap: Snapshot {
@@ -738,6 +745,15 @@ impl Protection {
         cfg.ke_v_s_per_rad * self.speed_peak() > cfg.m_max * v_bus * (1.0 / 1.732_050_8)
     }
 
+    /// The latched trip's speed beyond the rating: `K_e·|ω|` above the voltage circle of
+    /// the snapshot's bus.
+    fn tripped_beyond_rating(&self, cfg: &Config) -> bool {
+        self.record.is_some_and(|r| {
+            cfg.ke_v_s_per_rad * self.trip_speed
+                > cfg.m_max * q_f32(r.snap.v_bus) * (1.0 / 1.732_050_8)
+        })
+    }
+
     pub fn cause_present(
         &self,
         f: Fault,
@@ -759,9 +775,12 @@ impl Protection {
             Fault::EncoderImplausible => encoder_implausible.then_some("encoder still jumping"),
             // Three causes: the currents still flowing (the open bridge's diodes above the
             // onset); a current limit whose force passes the clear level (the law would
-            // command it again in `run` once the speed asks for it); a motion whose back-emf
-            // passed the voltage circle within the last 2.5–5 s (the loop cannot hold the
-            // current there: it follows the emf, and its force with it).
+            // command it again in `run` once the speed asks for it); for a trip at a speed
+            // beyond the rating, a motion whose back-emf passed the voltage circle within the
+            // last 2.5–5 s (the loop could not hold the current there: it followed the emf,
+            // and its force with it). A trip within the rating leaves the motion out: a
+            // resistor-law drive runs with its peaks past the circle (the reference TMD at
+            // 306 Ω: 198 rad/s against 186) without such a trip.
             Fault::OverForce => {
                 if abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n {
                     Some("filtered force still above 0.9 f_trip_n")
@@ -770,7 +789,7 @@ impl Protection {
                         "i_max_a's force 3/2·K_e·i_max_a/lead is above 0.9 f_trip_n: run would \
                          trip again; lower i_max_a or raise f_trip_n",
                     )
-                } else if self.above_circle(cfg, v) {
+                } else if self.tripped_beyond_rating(cfg) && self.above_circle(cfg, v) {
                     Some(
                         "the speed passed the rating K_e·|w| = m_max·vbus/√3 in the last 2.5 s: \
                          run would trip again; wait until it moves slower",
