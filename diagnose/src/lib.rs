@@ -156,6 +156,31 @@ pub struct Diagnosis {
 }
 
 impl Diagnosis {
+    /// The force the model of stage `k` predicts on `rec` (0: the baseline; k: the baseline
+    /// with the first k findings' effects), each column with that stage's coefficients
+    /// (fitted on the whole diagnosed record); `None` when there is no such stage or `rec`
+    /// cannot be evaluated. The cross-check evaluates a second record through it, the plots
+    /// the diagnosed one (before: stage 0).
+    pub fn stage_prediction(&self, rec: &Record, k: usize) -> Option<Vec<f64>> {
+        if k > self.effects.len()
+            || self.stage_models.len() != self.effects.len() + 1
+            || try_diagnose_shape(rec).is_err()
+        {
+            return None;
+        }
+        let ctx = effects::Context::new(rec);
+        let cols = effects::build_columns(&ctx, &self.effects[..k]);
+        let mut pred = vec![0.0; rec.len()];
+        for (name, c) in &cols {
+            if let Some((_, th)) = self.stage_models[k].iter().find(|(n, _)| n == name) {
+                for (p, v) in pred.iter_mut().zip(c) {
+                    *p += th * v;
+                }
+            }
+        }
+        Some(pred)
+    }
+
     /// The catalogue names among the findings, in order (`unexplained` left out).
     pub fn catalogue_names(&self) -> Vec<&str> {
         self.findings

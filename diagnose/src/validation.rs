@@ -98,24 +98,15 @@ pub fn baseline_verdicts(th: &[f64]) -> Vec<String> {
 /// Evaluate the diagnosed model on a second record: refit nothing, use the coefficients of
 /// the whole-record fit, effects in order of discovery.
 pub fn cross_check(d: &mut Diagnosis, other: &Record) {
-    if d.stage_models.len() != d.effects.len() + 1 || try_diagnose_shape(other).is_err() {
+    if d.stage_prediction(other, 0).is_none() {
         // nothing was fitted, or the second record cannot be evaluated
         d.cross = None;
         return;
     }
-    let ctx = effects::Context::new(other);
     let ffo: f64 = other.f.iter().map(|v| v * v).sum();
+    // baseline + first k effects, with that stage's coefficients (whole first record)
     let err_of = |k: usize| -> f64 {
-        // baseline + first k effects, with that stage's coefficients (whole first record)
-        let cols = effects::build_columns(&ctx, &d.effects[..k]);
-        let mut pred = vec![0.0; other.len()];
-        for (name, c) in &cols {
-            if let Some((_, th)) = d.stage_models[k].iter().find(|(n, _)| n == name) {
-                for (p, v) in pred.iter_mut().zip(c) {
-                    *p += th * v;
-                }
-            }
-        }
+        let pred = d.stage_prediction(other, k).unwrap_or_default();
         let rss: f64 = other
             .f
             .iter()

@@ -1032,22 +1032,42 @@ impl Console {
                     }
                     ok!(.s(" ").uint(n as u32).s(" params"))
                 }
-                out.col("name", 19)
-                    .col("value", 12)
-                    .col("unit", 7)
-                    .col("range", 18)
-                    .col("default", 11)
-                    .s("set  description\r\n");
-                for p in PARAMS.iter().filter(hit) {
+                // Each column as wide as its widest text among the rows shown, then two
+                // spaces (a first pass measures them).
+                let range_of = |p: &params::Param| {
                     let mut range = heapless::String::<40>::new();
                     let _ = range.push_str(Num(p.min).text().as_str());
                     let _ = range.push_str(" .. ");
                     let _ = range.push_str(Num(p.max).text().as_str());
-                    out.col(p.name, 19)
-                        .col(Num(p.get(c)).text().as_str(), 12)
-                        .col(p.unit(), 7)
-                        .col(range.as_str(), 18)
-                        .col(Num(p.get(&f)).text().as_str(), 11)
+                    range
+                };
+                let mut w = [4, 5, 4, 5, 7]; // the headers' lengths
+                for p in PARAMS.iter().filter(hit) {
+                    for (k, n) in [
+                        p.name.len(),
+                        Num(p.get(c)).text().as_str().len(),
+                        p.unit().len(),
+                        range_of(p).len(),
+                        Num(p.get(&f)).text().as_str().len(),
+                    ]
+                    .into_iter()
+                    .enumerate()
+                    {
+                        w[k] = w[k].max(n + 2);
+                    }
+                }
+                out.col("name", w[0])
+                    .col("value", w[1])
+                    .col("unit", w[2])
+                    .col("range", w[3])
+                    .col("default", w[4])
+                    .s("set  description\r\n");
+                for p in PARAMS.iter().filter(hit) {
+                    out.col(p.name, w[0])
+                        .col(Num(p.get(c)).text().as_str(), w[1])
+                        .col(p.unit(), w[2])
+                        .col(range_of(p).as_str(), w[3])
+                        .col(Num(p.get(&f)).text().as_str(), w[4])
                         .s(if p.runtime { "rt   " } else { "idle " })
                         .s(p.desc())
                         .s("\r\n");
@@ -2094,6 +2114,20 @@ mod tests {
         assert!(r.is_ok());
         // A header, one line per parameter, the `ok` line.
         assert_eq!(s.lines().count(), PARAMS.len() + 2);
+        // Aligned: every column (`set`'s included) starts where the header's does, each
+        // after a space.
+        let lines: Vec<&str> = s.lines().collect();
+        let head = lines[0];
+        for h in ["value", "unit", "range", "default", "set"] {
+            let at = head.find(&format!(" {h}")).unwrap() + 1;
+            for l in &lines[1..lines.len() - 1] {
+                let b = l.as_bytes();
+                assert!(
+                    b[at - 1] == b' ' && b[at] != b' ',
+                    "column {h} at {at} misaligned:\n{head}\n{l}"
+                );
+            }
+        }
         let (r, s) = run(&mut con, &mut ctl, "help");
         assert!(r.is_ok() && s.ends_with("\r\nok\r\n"), "{s}");
         assert_eq!(s.lines().count(), COMMANDS.len() + 2, "{s}");

@@ -40,6 +40,11 @@ pub const ANGLE_TICKS: u16 = 20;
 pub const I2T_CLEAR: f32 = 0.8;
 /// The filtered force must fall below this fraction of `f_trip_n` to clear an over-force trip.
 pub const FORCE_CLEAR: f32 = 0.9;
+/// Supervision ticks of each of the two windows whose larger speed maximum is the recent
+/// peak speed ([`Protection::speed_peak`]): the last 2.5 s to 5 s. |ω| peaks twice per
+/// motion period, so the windows hold the peak of any motion whose period is at most 5 s
+/// (0.2 Hz and up).
+pub const PEAK_TICKS: u32 = 2_500;
 
 /// A latched fault. The discriminant is its code (console, logs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -308,6 +313,11 @@ pub struct Protection {
     last_pos: i32,
     primed: bool,
     omega_raw: f32,
+    /// The largest |ω_m| of the current window and of the one before ([`PEAK_TICKS`]), rad/s.
+    peak: [f32; 2],
+    /// The speed when the latched record was taken: the larger of the loop's estimate and
+    /// the 1 ms count difference (the estimate lags a motion that starts at speed), rad/s.
+    trip_speed: f32,
     /// I²t state: per-unit winding temperature rise, settles at (|i|/i2t_cont_a)².
     i2t: f32,
     emf_count: u16,
@@ -336,6 +346,8 @@ impl Default for Protection {
             last_pos: 0,
             primed: false,
             omega_raw: 0.0,
+            peak: [0.0; 2],
+            trip_speed: 0.0,
             i2t: 0.0,
             emf_count: 0,
             angle_count: 0,
@@ -518,6 +530,9 @@ impl Protection {
                 }
             }
             None => {
+                let w = abs(q_f32(t.omega_m));
+                let raw = abs(self.omega_raw);
+                self.trip_speed = if raw > w { raw } else { w };
                 self.record = Some(Record {
                     fault: f,
                     snap: Snapshot {
@@ -560,6 +575,11 @@ impl Protection {
         let i_d: f32 = q_f32(t.i_dq.d);
         let i_q: f32 = q_f32(t.i_dq.q);
         let controlled = matches!(mode, Mode::Run | Mode::Open);
+        if self.ticks.is_multiple_of(PEAK_TICKS) {
+            self.peak = [abs(omega), self.peak[0]];
+        } else if abs(omega) > self.peak[0] {
+            self.peak[0] = abs(omega);
+        }
         // Faults found this tick (bit per code); the reported one is chosen by cause
         // priority at the end: a sensor that lies (current sum, encoder) before what is
         // computed from it (force, I²t), so that a fault is named by its cause.
@@ -709,6 +729,31 @@ impl Protection {
 
     /// Why `f` may not be cleared yet (None: its cause is gone), judged on the last
     /// telemetry and the supervision state.
+    /// The recent peak speed ([`PEAK_TICKS`]): the largest |ω_m| of the last 2.5 s to 5 s,
+    /// rad/s.
+    pub fn speed_peak(&self) -> f32 {
+        if self.peak[0] > self.peak[1] {
+            self.peak[0]
+        } else {
+            self.peak[1]
+        }
+    }
+
+    /// The recent peak speed's back-emf `K_e·ω` above the voltage circle `m_max·v_bus/√3`
+    /// at the bus `v_bus`: beyond it the current loop cannot hold the current.
+    fn above_circle(&self, cfg: &Config, v_bus: f32) -> bool {
+        cfg.ke_v_s_per_rad * self.speed_peak() > cfg.m_max * v_bus * (1.0 / 1.732_050_8)
+    }
+
+    /// The latched trip's speed beyond the rating: `K_e·|ω|` above the voltage circle of
+    /// the snapshot's bus.
+    fn tripped_beyond_rating(&self, cfg: &Config) -> bool {
+        self.record.is_some_and(|r| {
+            cfg.ke_v_s_per_rad * self.trip_speed
+                > cfg.m_max * q_f32(r.snap.v_bus) * (1.0 / 1.732_050_8)
+        })
+    }
+
     pub fn cause_present(
         &self,
         f: Fault,
@@ -728,8 +773,31 @@ impl Protection {
             }
             Fault::BusUnderVoltage => (v < cfg.v_bus_uv).then_some("bus still below v_bus_uv"),
             Fault::EncoderImplausible => encoder_implausible.then_some("encoder still jumping"),
-            Fault::OverForce => (abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n)
-                .then_some("filtered force still above 0.9 f_trip_n"),
+            // Three causes: the currents still flowing (the open bridge's diodes above the
+            // onset); a current limit whose force passes the clear level (the law would
+            // command it again in `run` once the speed asks for it); for a trip at a speed
+            // beyond the rating, a motion whose back-emf passed the voltage circle within the
+            // last 2.5–5 s (the loop could not hold the current there: it followed the emf,
+            // and its force with it). A trip within the rating leaves the motion out: a
+            // resistor-law drive runs with its peaks past the circle (the reference TMD at
+            // 306 Ω: 198 rad/s against 186) without such a trip.
+            Fault::OverForce => {
+                if abs(self.force_filt) > FORCE_CLEAR * cfg.f_trip_n {
+                    Some("filtered force still above 0.9 f_trip_n")
+                } else if force_of(cfg, cfg.i_max_a) > FORCE_CLEAR * cfg.f_trip_n {
+                    Some(
+                        "i_max_a's force 3/2·K_e·i_max_a/lead is above 0.9 f_trip_n: run would \
+                         trip again; lower i_max_a or raise f_trip_n",
+                    )
+                } else if self.tripped_beyond_rating(cfg) && self.above_circle(cfg, v) {
+                    Some(
+                        "the speed passed the rating K_e·|w| = m_max·vbus/√3 in the last 2.5 s: \
+                         run would trip again; wait until it moves slower",
+                    )
+                } else {
+                    None
+                }
+            }
             Fault::MachineI2t => {
                 (self.i2t > I2T_CLEAR).then_some("machine still hot (I2t above 0.8)")
             }

@@ -17,6 +17,7 @@
 
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::{Path, PathBuf};
 
 /// How a series is drawn.
@@ -79,8 +80,20 @@ pub struct Cells {
 /// settle time), or a star at a point (an optimum).
 #[derive(Clone, Debug)]
 pub enum Mark {
-    VLine { x: f64, label: String },
-    Star { at: (f64, f64), label: String },
+    VLine {
+        x: f64,
+        label: String,
+    },
+    Star {
+        at: (f64, f64),
+        label: String,
+    },
+    /// A labelled point (a spectral peak a report names): a small triangle over it and its
+    /// label above; every peak of a plot shares one legend entry, [`Plot::peak_legend`].
+    Peak {
+        at: (f64, f64),
+        label: String,
+    },
 }
 
 /// A plot: title, axis labels (with units), axes, series, and an optional x window.
@@ -106,6 +119,8 @@ pub struct Plot {
     pub fault_label: String,
     /// Marks drawn over the series ([`Mark`]).
     pub marks: Vec<Mark>,
+    /// Legend text of the [`Mark::Peak`]s.
+    pub peak_legend: String,
 }
 
 const COLOURS: [RGBColor; 6] = [
@@ -139,6 +154,7 @@ impl Plot {
             colours: Vec::new(),
             fault_label: "fault latched".into(),
             marks: Vec::new(),
+            peak_legend: "peak named by the report".into(),
         }
     }
 
@@ -196,6 +212,22 @@ impl Plot {
             None if !self.cells.is_empty() => bounds(&ys),
             None => robust_range(&ys, self.ylog),
         };
+        // Room for the peaks' labels above the highest peak.
+        let top = self
+            .marks
+            .iter()
+            .filter_map(|m| match m {
+                Mark::Peak { at, .. } if at.1.is_finite() => Some(at.1),
+                _ => None,
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
+        if self.y_range.is_none() && top.is_finite() {
+            if self.ylog && top > 0.0 && y0 > 0.0 {
+                y1 = y1.max(top * (top / y0).powf(0.15));
+            } else if !self.ylog {
+                y1 = y1.max(top + 0.15 * (top - y0));
+            }
+        }
         // When every corner the legend could take holds data, room is made for it above the
         // data (a linear y axis whose range the data set).
         if self.y_range.is_none() && self.cells.is_empty() && !self.ylog && !self.series.is_empty()
@@ -421,7 +453,42 @@ impl Plot {
                     });
                 }
                 Mark::VLine { .. } => {}
+                Mark::Peak { .. } => {}
             }
+        }
+        // The peaks, ordered by x, their labels over three heights in turn so that
+        // neighbours' labels do not overlap; one legend entry for all.
+        let mut peaks: Vec<(&(f64, f64), &String)> = self
+            .marks
+            .iter()
+            .filter_map(|m| match m {
+                Mark::Peak { at, label } => Some((at, label)),
+                _ => None,
+            })
+            .filter(|(at, _)| at.0 >= xlo && at.0 <= xhi && at.1 >= ylo && at.1 <= yhi)
+            .collect();
+        peaks.sort_by(|a, b| a.0 .0.total_cmp(&b.0 .0));
+        if !peaks.is_empty() {
+            let font = ("sans-serif", 12)
+                .into_font()
+                .color(&MARK)
+                .pos(Pos::new(HPos::Center, VPos::Bottom));
+            ch.draw_series(peaks.iter().enumerate().map(|(k, (at, label))| {
+                let up = 12 + 16 * (k % 3) as i32;
+                // A light box under the text (about 6.6 px per character at 12 px) keeps it
+                // legible over the curves.
+                let half = (3.3 * label.chars().count() as f64) as i32 + 2;
+                EmptyElement::at(**at)
+                    + TriangleMarker::new((0, -7), 4, MARK.filled())
+                    + Rectangle::new(
+                        [(-half, -up - 13), (half, -up + 1)],
+                        WHITE.mix(0.8).filled(),
+                    )
+                    + Text::new((*label).clone(), (0, -up), font.clone())
+            }))
+            .map_err(e)?
+            .label(&self.peak_legend)
+            .legend(|(x, y)| TriangleMarker::new((x + 12, y), 4, MARK.filled()));
         }
         if !self.series.is_empty() || !self.cells.is_empty() {
             ch.configure_series_labels()
@@ -440,9 +507,15 @@ impl Plot {
     /// The fraction of the plot's height the legend takes (its rows at 19 px, the frame's
     /// height about 110 px less than the picture's).
     fn legend_fraction(&self) -> f64 {
+        let peak = self.marks.iter().any(|m| matches!(m, Mark::Peak { .. }));
         let rows = self.series.len()
             + self.cells.len()
-            + self.marks.len()
+            + self
+                .marks
+                .iter()
+                .filter(|m| !matches!(m, Mark::Peak { .. }))
+                .count()
+            + peak as usize
             + self.series.iter().any(|s| s.faulted.contains(&true)) as usize;
         ((rows * 19 + 16) as f64 / (self.size.1 as f64 - 110.0)).clamp(0.1, 0.6)
     }

@@ -326,7 +326,7 @@ impl Scenario {
     /// and the firmware configuration it implies; the error names the key, the value and
     /// the allowed range.
     pub fn check(&self) -> Result<(), String> {
-        in_range("duration_s", self.duration_s, Lo::Open(0.0), 1e5, "s")?;
+        key_in_range("duration_s", self.duration_s)?;
         in_range(
             "settle_s",
             self.settle_s,
@@ -445,66 +445,29 @@ impl Scenario {
         Ok(c)
     }
 
-    /// The plant's values against their physical ranges. The ranges are wide (a 10 MN
-    /// structure, a 10 g excitation) and only refuse what cannot be a device: a NaN, a
-    /// negative mass, a frequency ≤ 0, an efficiency above 1.
+    /// The plant's values against their physical ranges ([`RANGES`]: each key's range and
+    /// why the model holds there).
     pub fn physics(&self) -> Result<(), String> {
-        use Lo::{Closed, Open};
+        use Lo::Closed;
         let m = &self.machine;
-        in_range("machine.r_ohm", m.r_ohm, Open(0.0), 1e3, "Ω")?;
-        in_range("machine.l_h", m.l_h, Open(0.0), 10.0, "H")?;
-        in_range(
-            "machine.ke_v_s_per_rad",
-            m.ke_v_s_per_rad,
-            Open(0.0),
-            100.0,
-            "V·s/rad",
-        )?;
-        in_range(
-            "machine.pole_pairs",
-            m.pole_pairs as f64,
-            Closed(1.0),
-            255.0,
-            "",
-        )?;
-        in_range(
-            "machine.angle_offset_rad",
-            m.angle_offset_rad,
-            Closed(-1e3),
-            1e3,
-            "rad",
-        )?;
+        key_in_range("machine.r_ohm", m.r_ohm)?;
+        key_in_range("machine.l_h", m.l_h)?;
+        key_in_range("machine.ke_v_s_per_rad", m.ke_v_s_per_rad)?;
+        key_in_range("machine.pole_pairs", m.pole_pairs as f64)?;
+        key_in_range("machine.angle_offset_rad", m.angle_offset_rad)?;
         let s = &self.screw;
-        in_range(
-            "screw.lead_m_per_rad",
-            s.lead_m_per_rad,
-            Open(0.0),
-            1.0,
-            "m/rad",
-        )?;
-        in_range("screw.j_kg_m2", s.j_kg_m2, Open(0.0), 10.0, "kg·m²")?;
-        in_range("screw.b_nms", s.b_nms, Closed(0.0), 1e3, "N·m·s/rad")?;
-        in_range("screw.efficiency", s.efficiency, Open(0.0), 1.0, "")?;
-        in_range("screw.coulomb_n", s.coulomb_n, Closed(0.0), 1e6, "N")?;
-        in_range(
-            "screw.viscous_n_s_per_m",
-            s.viscous_n_s_per_m,
-            Closed(0.0),
-            1e8,
-            "N·s/m",
-        )?;
-        in_range("screw.p3", s.p3, Closed(-1.0), 1.0, "")?;
-        in_range("screw.p5", s.p5, Closed(-1.0), 1.0, "")?;
-        in_range("screw.p4", s.p4, Closed(-1e3), 1e3, "rad")?;
-        in_range("screw.p6", s.p6, Closed(-1e3), 1e3, "rad")?;
-        in_range("screw.ball_m", s.ball_m, Open(0.0), 1.0, "m")?;
-        in_range(
-            "screw.stick_velocity",
-            s.stick_velocity,
-            Open(0.0),
-            1.0,
-            "m/s",
-        )?;
+        key_in_range("screw.lead_m_per_rad", s.lead_m_per_rad)?;
+        key_in_range("screw.j_kg_m2", s.j_kg_m2)?;
+        key_in_range("screw.b_nms", s.b_nms)?;
+        key_in_range("screw.efficiency", s.efficiency)?;
+        key_in_range("screw.coulomb_n", s.coulomb_n)?;
+        key_in_range("screw.viscous_n_s_per_m", s.viscous_n_s_per_m)?;
+        key_in_range("screw.p3", s.p3)?;
+        key_in_range("screw.p5", s.p5)?;
+        key_in_range("screw.p4", s.p4)?;
+        key_in_range("screw.p6", s.p6)?;
+        key_in_range("screw.ball_m", s.ball_m)?;
+        key_in_range("screw.stick_velocity", s.stick_velocity)?;
         match &self.drive {
             Drive::Imposed { motion } => {
                 match motion {
@@ -516,14 +479,8 @@ impl Scenario {
                         amplitude_m,
                         freq_hz,
                     } => {
-                        in_range(
-                            "drive.motion.amplitude_m",
-                            *amplitude_m,
-                            Closed(0.0),
-                            10.0,
-                            "m",
-                        )?;
-                        in_range("drive.motion.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
+                        key_in_range("drive.motion.amplitude_m", *amplitude_m)?;
+                        key_in_range("drive.motion.freq_hz", *freq_hz)?;
                     }
                     Motion::Recorded {
                         t_s,
@@ -548,7 +505,7 @@ impl Scenario {
                             return Err("drive.motion.path = \"\": a record file (CSV t_s,x_m,f_N) is needed".into());
                         }
                         if let Some(fc) = cutoff_hz {
-                            in_range("drive.motion.cutoff_hz", *fc, Open(0.0), 1e6, "Hz")?;
+                            key_in_range("drive.motion.cutoff_hz", *fc)?;
                         }
                     }
                 }
@@ -557,42 +514,20 @@ impl Scenario {
                 structure,
                 excitation,
             } => {
-                in_range(
-                    "drive.structure.mass_kg",
-                    structure.mass_kg,
-                    Open(0.0),
-                    1e9,
-                    "kg",
-                )?;
-                in_range(
+                key_in_range("drive.structure.mass_kg", structure.mass_kg)?;
+                key_in_range(
                     "drive.structure.stiffness_n_per_m",
                     structure.stiffness_n_per_m,
-                    Closed(0.0),
-                    1e12,
-                    "N/m",
                 )?;
-                in_range(
+                key_in_range(
                     "drive.structure.damping_n_s_per_m",
                     structure.damping_n_s_per_m,
-                    Closed(0.0),
-                    1e12,
-                    "N·s/m",
                 )?;
                 match excitation {
                     Excitation::Sine { a0_m_s2, freq_hz }
                     | Excitation::Triangle { a0_m_s2, freq_hz } => {
-                        // Up to 100 m/s² (10 g): far beyond any device's rating, so the
-                        // drive's own protection answers it (an over-force fault, an invalid
-                        // run), not the reader; beyond it the excitation is a shock, not a
-                        // vibration the averaged model integrates.
-                        in_range(
-                            "drive.excitation.a0_m_s2",
-                            *a0_m_s2,
-                            Closed(0.0),
-                            100.0,
-                            "m/s²",
-                        )?;
-                        in_range("drive.excitation.freq_hz", *freq_hz, Open(0.0), 1e3, "Hz")?;
+                        key_in_range("drive.excitation.a0_m_s2", *a0_m_s2)?;
+                        key_in_range("drive.excitation.freq_hz", *freq_hz)?;
                     }
                     Excitation::KanaiTajimi {
                         s0,
@@ -600,21 +535,9 @@ impl Scenario {
                         zeta_g,
                         ..
                     } => {
-                        in_range(
-                            "drive.excitation.s0",
-                            *s0,
-                            Closed(0.0),
-                            1e6,
-                            "(m/s²)²/(rad/s)",
-                        )?;
-                        in_range(
-                            "drive.excitation.omega_g",
-                            *omega_g,
-                            Open(0.0),
-                            1e4,
-                            "rad/s",
-                        )?;
-                        in_range("drive.excitation.zeta_g", *zeta_g, Open(0.0), 10.0, "")?;
+                        key_in_range("drive.excitation.s0", *s0)?;
+                        key_in_range("drive.excitation.omega_g", *omega_g)?;
+                        key_in_range("drive.excitation.zeta_g", *zeta_g)?;
                     }
                     Excitation::Recorded { t_s, a_m_s2 } => {
                         series("drive.excitation", t_s, "a_m_s2", a_m_s2, 1e4)?;
@@ -630,13 +553,13 @@ impl Scenario {
             }
         }
         let b = &self.bus;
-        in_range("bus.capacitance_f", b.capacitance_f, Open(0.0), 10.0, "F")?;
-        in_range("bus.initial_v", b.initial_v, Closed(0.0), 2000.0, "V")?;
+        key_in_range("bus.capacitance_f", b.capacitance_f)?;
+        key_in_range("bus.initial_v", b.initial_v)?;
         if let Some(v) = b.source_v {
-            in_range("bus.source_v", v, Closed(0.0), 2000.0, "V")?;
+            key_in_range("bus.source_v", v)?;
         }
-        in_range("bus.source_r_ohm", b.source_r_ohm, Open(0.0), 1e6, "Ω")?;
-        in_range("bus.brake_r_ohm", b.brake_r_ohm, Open(0.0), 1e6, "Ω")?;
+        key_in_range("bus.source_r_ohm", b.source_r_ohm)?;
+        key_in_range("bus.brake_r_ohm", b.brake_r_ohm)?;
         let period = 1.0 / self.firmware.pwm_hz as f64;
         in_range(
             "inverter.dead_time_s",
@@ -646,49 +569,19 @@ impl Scenario {
             "s (a tenth of the PWM period)",
         )?;
         let l = &self.losses;
-        in_range("losses.k_sw_s", l.k_sw_s, Closed(0.0), 1e-5, "s")?;
-        in_range("losses.r_on_ohm", l.r_on_ohm, Closed(0.0), 10.0, "Ω")?;
-        in_range("losses.logic_w", l.logic_w, Closed(0.0), 1e3, "W")?;
-        in_range("losses.logic_min_v", l.logic_min_v, Closed(0.0), 1e4, "V")?;
+        key_in_range("losses.k_sw_s", l.k_sw_s)?;
+        key_in_range("losses.r_on_ohm", l.r_on_ohm)?;
+        key_in_range("losses.logic_w", l.logic_w)?;
+        key_in_range("losses.logic_min_v", l.logic_min_v)?;
         let n = &self.sensors;
         for (k, o) in n.current_offset_a.iter().enumerate() {
-            in_range(
-                &format!("sensors.current_offset_a[{k}]"),
-                *o,
-                Closed(-1e3),
-                1e3,
-                "A",
-            )?;
+            key_in_range(&format!("sensors.current_offset_a[{k}]"), *o)?;
         }
-        in_range(
-            "sensors.current_noise_a",
-            n.current_noise_a,
-            Closed(0.0),
-            1e3,
-            "A",
-        )?;
-        in_range(
-            "sensors.vbus_offset_v",
-            n.vbus_offset_v,
-            Closed(-1e3),
-            1e3,
-            "V",
-        )?;
-        in_range(
-            "sensors.vbus_noise_v",
-            n.vbus_noise_v,
-            Closed(0.0),
-            1e3,
-            "V",
-        )?;
+        key_in_range("sensors.current_noise_a", n.current_noise_a)?;
+        key_in_range("sensors.vbus_offset_v", n.vbus_offset_v)?;
+        key_in_range("sensors.vbus_noise_v", n.vbus_noise_v)?;
         if self.law.r_load_ohm != f64::INFINITY {
-            in_range(
-                "law.r_load_ohm",
-                self.law.r_load_ohm,
-                Closed(0.0),
-                1e9,
-                "Ω (or inf = open)",
-            )?;
+            key_in_range("law.r_load_ohm", self.law.r_load_ohm)?;
             f32_value("law.r_load_ohm", self.law.r_load_ohm)?;
         }
         if self.record.every == 0 {
@@ -783,10 +676,120 @@ fn toml_error(text: &str, e: &toml::de::Error) -> String {
 }
 
 /// The lower end of an allowed range.
-#[derive(Clone, Copy)]
-enum Lo {
+#[derive(Clone, Copy, Debug)]
+pub enum Lo {
     Open(f64),
     Closed(f64),
+}
+
+/// A scenario key's allowed range, its unit, and why the model holds there and not beyond.
+#[derive(Clone, Copy, Debug)]
+pub struct KeyRange {
+    pub key: &'static str,
+    pub lo: Lo,
+    pub hi: f64,
+    pub unit: &'static str,
+    pub why: &'static str,
+}
+
+const fn kr(key: &'static str, lo: Lo, hi: f64, unit: &'static str, why: &'static str) -> KeyRange {
+    KeyRange {
+        key,
+        lo,
+        hi,
+        unit,
+        why,
+    }
+}
+
+/// Every scenario key with a fixed range, checked by [`Scenario::check`]; the table of
+/// `docs/simulator.md` ("Scenario ranges") is [`ranges_markdown`] of it (a test compares).
+/// Two ranges depend on another key and are checked beside it: `settle_s` < `duration_s`,
+/// `inverter.dead_time_s` ≤ a tenth of the PWM period.
+pub const RANGES: &[KeyRange] = {
+    use Lo::{Closed, Open};
+    &[
+        kr("duration_s", Open(0.0), 1e5, "s", "a day of simulated time (2·10⁹ periods at 20 kHz): the ledger's sums keep 1e-8 of the largest flow; longer runs are limited by time and memory, not the model"),
+        kr("machine.r_ohm", Open(0.0), 1e3, "Ω", "the per-period solution is exact for any R; 1 kΩ is beyond any machine of this class"),
+        kr("machine.l_h", Closed(1e-4), 10.0, "H", "the averaged inverter books the mean current, not the PWM ripple V_bus/(4·L·f_pwm): 40 A peak to peak at 320 V, 20 kHz and 0.1 mH, whose copper loss then goes unbooked (`inverter.switched` books it)"),
+        kr("machine.ke_v_s_per_rad", Open(0.0), 100.0, "V·s/rad", "per-phase peak; the firmware's fixed point holds K_e·ω up to its bus range"),
+        kr("machine.pole_pairs", Closed(1.0), 50.0, "", "the firmware's `pole_pairs` range (params.rs); the electrical angle per PWM period is judged by the run's verdict"),
+        kr("machine.angle_offset_rad", Closed(-1e3), 1e3, "rad", "an angle: any value, wrapped"),
+        kr("screw.lead_m_per_rad", Closed(1e-4), 0.05, "m/rad", "ballscrew leads, 0.6 … 314 mm per turn (reference 16 mm): beyond them the device is not a ballscrew, whose efficiency and eq. 13 friction the model carries"),
+        kr("screw.j_kg_m2", Open(0.0), 10.0, "kg·m²", "rotor and screw inertia; the screw is rigid (no axial compliance in the model)"),
+        kr("screw.b_nms", Closed(0.0), 1e3, "N·m·s/rad", "rotary viscosity, linear in the speed"),
+        kr("screw.efficiency", Closed(0.5), 1.0, "", "below 0.5 a screw is self-locking (friction angle above the lead angle): it cannot be back-driven, while the model's h = 1/η would still pass power both ways"),
+        kr("screw.coulomb_n", Closed(0.0), 1e6, "N", "eq. 13's Coulomb level; the regularised sign keeps the step finite at any level"),
+        kr("screw.viscous_n_s_per_m", Closed(0.0), 1e8, "N·s/m", "eq. 13's viscous term, linear in the speed"),
+        kr("screw.p3", Closed(-1.0), 1.0, "", "relative depth of eq. 13's first ripple: beyond ±1 the friction would change sign with the position, which Coulomb friction does not"),
+        kr("screw.p5", Closed(-1.0), 1.0, "", "relative depth of eq. 13's second ripple (as p3)"),
+        kr("screw.p4", Closed(-1e3), 1e3, "rad", "a phase: any value"),
+        kr("screw.p6", Closed(-1e3), 1e3, "rad", "a phase: any value"),
+        kr("screw.ball_m", Open(0.0), 1.0, "m", "the ball pitch of the second ripple"),
+        kr("screw.stick_velocity", Open(0.0), 0.01, "m/s", "the Coulomb sign is regularised below it; above 1 cm/s the regularisation would turn Coulomb friction into viscous friction over the structure's own motion (reference TMD: 0.2 m/s peak)"),
+        kr("drive.motion.amplitude_m", Closed(0.0), 10.0, "m", "a ballscrew's stroke (the firmware's stroke limits trip first)"),
+        kr("drive.motion.freq_hz", Open(0.0), 50.0, "Hz", "the machine's per-period solution holds the speed over a PWM period: at f the speed moves by up to 2π·f/f_pwm of its amplitude within one, 1.6 % at 50 Hz and 20 kHz; structures vibrate below a few Hz"),
+        kr("drive.motion.cutoff_hz", Open(0.0), 1e6, "Hz", "the record reader's derivative filter, checked against the record's Nyquist frequency when read"),
+        kr("drive.structure.mass_kg", Open(0.0), 1e9, "kg", "a single degree of freedom of any mass"),
+        kr("drive.structure.stiffness_n_per_m", Closed(0.0), 1e12, "N/m", "linear spring; the natural frequency is bounded by the excitation's band, not here"),
+        kr("drive.structure.damping_n_s_per_m", Closed(0.0), 1e12, "N·s/m", "linear damper"),
+        kr("drive.excitation.a0_m_s2", Closed(0.0), 100.0, "m/s²", "10 g: far beyond any device's rating, so the drive's protection answers it (an invalid run); beyond it the excitation is a shock, not a vibration the averaged model integrates"),
+        kr("drive.excitation.freq_hz", Open(0.0), 50.0, "Hz", "as drive.motion.freq_hz: the speed held over a PWM period"),
+        kr("drive.excitation.s0", Closed(0.0), 1e6, "(m/s²)²/(rad/s)", "the ground's spectral intensity; a0's limit is met through the protection"),
+        kr("drive.excitation.omega_g", Open(0.0), 314.0, "rad/s", "the ground filter's corner, 50 Hz at most (as drive.excitation.freq_hz)"),
+        kr("drive.excitation.zeta_g", Open(0.0), 10.0, "", "the ground filter's damping"),
+        kr("bus.capacitance_f", Open(0.0), 10.0, "F", "the bus is solved exactly per period for any capacitance"),
+        kr("bus.initial_v", Closed(0.0), 2000.0, "V", "a 1,200 V-class stage's bus; the firmware's bus ADC and trips are set beside it in [firmware]"),
+        kr("bus.source_v", Closed(0.0), 2000.0, "V", "as bus.initial_v"),
+        kr("bus.source_r_ohm", Open(0.0), 1e6, "Ω", "the source's resistance: 1 MΩ is no source"),
+        kr("bus.brake_r_ohm", Open(0.0), 1e6, "Ω", "the brake resistor"),
+        kr("losses.k_sw_s", Closed(0.0), 1e-5, "s", "switching energy per volt-ampere: 10 µs is a fifth of a 20 kHz period, beyond any switch"),
+        kr("losses.r_on_ohm", Closed(0.0), 10.0, "Ω", "a switch's on-resistance"),
+        kr("losses.logic_w", Closed(0.0), 1e3, "W", "the logic supply's draw"),
+        kr("losses.logic_min_v", Closed(0.0), 1e4, "V", "the logic supply's under-voltage lockout"),
+        kr("sensors.current_offset_a", Closed(-1e3), 1e3, "A", "per phase; the ADC's codes saturate where the firmware's scaling ends"),
+        kr("sensors.current_noise_a", Closed(0.0), 1e3, "A", "Gaussian, per sample; the codes saturate as above"),
+        kr("sensors.vbus_offset_v", Closed(-1e3), 1e3, "V", "on the bus reading"),
+        kr("sensors.vbus_noise_v", Closed(0.0), 1e3, "V", "Gaussian, per sample"),
+        kr("law.r_load_ohm", Closed(0.0), 1e9, "Ω (or inf = open)", "the emulated load per phase; also refused where the firmware's f32 underflows"),
+    ]
+};
+
+/// `key`'s range in [`RANGES`] (a `[k]` index on the key is ignored for the look-up).
+pub fn key_range(key: &str) -> Option<&'static KeyRange> {
+    let base = key.split('[').next().unwrap_or(key);
+    RANGES.iter().find(|r| r.key == base)
+}
+
+/// [`in_range`] with `key`'s range from [`RANGES`].
+fn key_in_range(key: &str, v: f64) -> Result<(), String> {
+    let r = key_range(key).ok_or_else(|| format!("{key}: no range (internal)"))?;
+    in_range(key, v, r.lo, r.hi, r.unit)
+}
+
+/// The range as the refusal states it: `(lo, hi] unit`.
+fn range_text(r: &KeyRange) -> String {
+    let (b, l) = match r.lo {
+        Lo::Open(l) => ('(', l),
+        Lo::Closed(l) => ('[', l),
+    };
+    format!("{b}{}, {}]", shown(l), shown(r.hi))
+}
+
+/// The Markdown table of [`RANGES`] (key, range, unit, why) that `docs/simulator.md` shows.
+pub fn ranges_markdown() -> String {
+    let mut t =
+        String::from("| key | allowed | unit | why this range |\n| --- | --- | --- | --- |\n");
+    for r in RANGES {
+        t += &format!(
+            "| `{}` | {} | {} | {} |\n",
+            r.key,
+            range_text(r),
+            r.unit,
+            r.why.replace('|', "\\|")
+        );
+    }
+    t
 }
 
 /// `key = value: must be a finite number in (lo, hi] unit` unless `value` lies there.
@@ -804,8 +807,10 @@ fn in_range(key: &str, v: f64, lo: Lo, hi: f64, unit: &str) -> Result<(), String
         format!(" {unit}")
     };
     Err(format!(
-        "{key} = {}: must be a finite number in {bracket}{l}, {hi}]{unit}",
-        shown(v)
+        "{key} = {}: must be a finite number in {bracket}{}, {}]{unit}",
+        shown(v),
+        shown(l),
+        shown(hi)
     ))
 }
 
@@ -903,6 +908,142 @@ mod tests {
             .and_then(|s| s.config())
             .unwrap_err()
             .contains("law.opt.a"));
+    }
+
+    /// `docs/simulator.md`'s table of the scenario ranges is [`ranges_markdown`], between its
+    /// two markers; `REGEN_WRITE_DOCS=1` writes it there.
+    #[test]
+    fn docs_ranges_table_is_the_code() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/simulator.md");
+        let doc = std::fs::read_to_string(path).unwrap();
+        let (a, b) = (
+            "<!-- scenario ranges: hal_sim::scenario::ranges_markdown -->\n",
+            "<!-- end scenario ranges -->",
+        );
+        let i = doc.find(a).expect("start marker") + a.len();
+        let j = doc[i..].find(b).expect("end marker") + i;
+        let want = ranges_markdown();
+        if std::env::var("REGEN_WRITE_DOCS").is_ok() {
+            std::fs::write(path, format!("{}{want}{}", &doc[..i], &doc[j..])).unwrap();
+            return;
+        }
+        assert_eq!(
+            &doc[i..j],
+            want,
+            "docs/simulator.md's ranges differ from RANGES: REGEN_WRITE_DOCS=1 cargo test -p hal-sim --lib docs_ranges"
+        );
+    }
+
+    /// Every key of [`RANGES`] is checked: a value just outside its range is refused naming
+    /// the key and the range, one inside is accepted (on the reference TMD, or an imposed
+    /// motion for the motion's keys).
+    #[test]
+    fn every_range_is_enforced() {
+        for r in RANGES {
+            let below = match r.lo {
+                Lo::Open(l) => l,
+                Lo::Closed(l) => l - (l.abs() * 1e-3).max(1e-9),
+            };
+            let mut above = r.hi + (r.hi.abs() * 1e-3).max(1e-9);
+            let mut below = below;
+            if r.key == "machine.pole_pairs" {
+                (below, above) = (0.0, r.hi + 1.0); // an integer
+            }
+            for (v, ok) in [(below, false), (above, false), (r.hi, true)] {
+                let mut sc = if r.key.starts_with("drive.motion") {
+                    Scenario::imposed(
+                        crate::plant::Motion::Sine {
+                            amplitude_m: 0.05,
+                            freq_hz: 0.5,
+                        },
+                        306.0,
+                        1.0,
+                    )
+                } else {
+                    Scenario::tmd(306.0)
+                };
+                if !set_key(&mut sc, r.key, v) {
+                    continue;
+                }
+                let e = if r.key == "duration_s" {
+                    sc.check()
+                } else {
+                    sc.physics()
+                };
+                if ok {
+                    assert!(e.is_ok(), "{} = {v}: {e:?}", r.key);
+                } else {
+                    let e = e.expect_err(r.key);
+                    assert!(e.starts_with(&format!("{} = ", r.key)), "{e}");
+                    assert!(e.contains(&range_text(r)), "{e}");
+                }
+            }
+        }
+    }
+
+    /// Set one key of a scenario by its name; false for the keys set otherwise (the record
+    /// reader's cutoff, the Kanai–Tajimi keys, the current offsets).
+    fn set_key(sc: &mut Scenario, key: &str, v: f64) -> bool {
+        use crate::plant::{Drive, Excitation, Motion};
+        match key {
+            "duration_s" => sc.duration_s = v,
+            "machine.r_ohm" => sc.machine.r_ohm = v,
+            "machine.l_h" => sc.machine.l_h = v,
+            "machine.ke_v_s_per_rad" => sc.machine.ke_v_s_per_rad = v,
+            "machine.pole_pairs" => sc.machine.pole_pairs = v as u32,
+            "machine.angle_offset_rad" => sc.machine.angle_offset_rad = v,
+            "screw.lead_m_per_rad" => sc.screw.lead_m_per_rad = v,
+            "screw.j_kg_m2" => sc.screw.j_kg_m2 = v,
+            "screw.b_nms" => sc.screw.b_nms = v,
+            "screw.efficiency" => sc.screw.efficiency = v,
+            "screw.coulomb_n" => sc.screw.coulomb_n = v,
+            "screw.viscous_n_s_per_m" => sc.screw.viscous_n_s_per_m = v,
+            "screw.p3" => sc.screw.p3 = v,
+            "screw.p5" => sc.screw.p5 = v,
+            "screw.p4" => sc.screw.p4 = v,
+            "screw.p6" => sc.screw.p6 = v,
+            "screw.ball_m" => sc.screw.ball_m = v,
+            "screw.stick_velocity" => sc.screw.stick_velocity = v,
+            "bus.capacitance_f" => sc.bus.capacitance_f = v,
+            "bus.initial_v" => sc.bus.initial_v = v,
+            "bus.source_v" => sc.bus.source_v = Some(v),
+            "bus.source_r_ohm" => sc.bus.source_r_ohm = v,
+            "bus.brake_r_ohm" => sc.bus.brake_r_ohm = v,
+            "losses.k_sw_s" => sc.losses.k_sw_s = v,
+            "losses.r_on_ohm" => sc.losses.r_on_ohm = v,
+            "losses.logic_w" => sc.losses.logic_w = v,
+            "losses.logic_min_v" => sc.losses.logic_min_v = v,
+            "sensors.current_noise_a" => sc.sensors.current_noise_a = v,
+            "sensors.vbus_offset_v" => sc.sensors.vbus_offset_v = v,
+            "sensors.vbus_noise_v" => sc.sensors.vbus_noise_v = v,
+            "law.r_load_ohm" => sc.law.r_load_ohm = v,
+            _ => match &mut sc.drive {
+                Drive::Imposed {
+                    motion:
+                        Motion::Sine {
+                            amplitude_m,
+                            freq_hz,
+                        },
+                } => match key {
+                    "drive.motion.amplitude_m" => *amplitude_m = v,
+                    "drive.motion.freq_hz" => *freq_hz = v,
+                    _ => return false,
+                },
+                Drive::Structure {
+                    structure,
+                    excitation: Excitation::Sine { a0_m_s2, freq_hz },
+                } => match key {
+                    "drive.structure.mass_kg" => structure.mass_kg = v,
+                    "drive.structure.stiffness_n_per_m" => structure.stiffness_n_per_m = v,
+                    "drive.structure.damping_n_s_per_m" => structure.damping_n_s_per_m = v,
+                    "drive.excitation.a0_m_s2" => *a0_m_s2 = v,
+                    "drive.excitation.freq_hz" => *freq_hz = v,
+                    _ => return false,
+                },
+                _ => return false,
+            },
+        }
+        true
     }
 
     #[test]

@@ -210,7 +210,7 @@ fn every_plot_has_round_ticks_and_data() {
     }
     let n = check_dir(&run, &keep, "run-")
         + check_dir(&sweep, &keep, "")
-        + check_dir(&diag, &keep, "diagnose-")
+        + check_dir(&diag, &None, "")
         + check_dir(&study, &keep, "study-");
     assert!(n >= 10, "{n} plots checked");
 }
@@ -245,4 +245,119 @@ fn docs_figures_from_the_real_commands() {
     ]);
     let n = check_dir(&d.join("regen-out"), &keep, "") + check_dir(&study, &keep, "study-");
     assert_eq!(n, 2, "{n} plots checked");
+}
+
+/// The x axis's tick labels: (x position px, value, characters), from the numeric `<text>`
+/// elements centred on their position (the y axis's are right-aligned).
+fn x_ticks(svg: &str) -> Vec<(f64, f64, usize)> {
+    svg.split("<text")
+        .skip(1)
+        .filter_map(|t| {
+            let (tag, body) = t.split_once('>')?;
+            if !tag.contains("text-anchor=\"middle\"") {
+                return None;
+            }
+            let x: f64 = tag.split("x=\"").nth(1)?.split('"').next()?.parse().ok()?;
+            let text = body.split("</text>").next()?.trim();
+            let v: f64 = text.replace('−', "-").parse().ok()?;
+            Some((x, v, text.chars().count()))
+        })
+        .collect()
+}
+
+/// The diagnosis's plots, before (the baseline model) and after (the extended one), on a
+/// simulated record (`regen run --record-diagnose` of an imposed 0.5 Hz stroke with eq. 13's
+/// first ripple, 30 % deep, at one screw revolution) and on the EMPS record
+/// (`data/emps/emps_estimation.csv`): each rendered and checked as every plot is (round ticks,
+/// data drawn), and: drawn as lines (no dots), each curve once in the legend, the spectra on
+/// log axes (frequency over at least two decades), the peaks and wavelengths the report
+/// names labelled. `REGEN_FIGURES=DIR` keeps the PNGs as `diagnose-sim-*.png` and
+/// `diagnose-emps-*.png` (docs/diagnose.md shows them).
+#[test]
+fn diagnosis_plots_before_and_after() {
+    let d = std::env::temp_dir().join(format!("regen-diag-plots-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let keep = std::env::var_os("REGEN_FIGURES").map(PathBuf::from);
+    if let Some(k) = &keep {
+        std::fs::create_dir_all(k).unwrap();
+    }
+    let sc = d.join("bench.toml");
+    std::fs::write(&sc, "name = \"bench\"\nduration_s = 20.0\n[screw]\np3 = 0.3\n[law]\nkind = \"resistor\"\nr_load_ohm = 50.0\n[drive]\nkind = \"imposed\"\n[drive.motion]\nkind = \"sine\"\namplitude_m = 0.05\nfreq_hz = 0.5\n[record]\nchannels = [\"t\", \"x\", \"v\", \"force\"]\nevery = 20\n").unwrap();
+    let rec = d.join("sim.csv");
+    regen(&[
+        "run",
+        sc.to_str().unwrap(),
+        "-q",
+        "--out",
+        d.join("run").to_str().unwrap(),
+        "--record-diagnose",
+        rec.to_str().unwrap(),
+    ]);
+    let emps = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../data/emps/emps_estimation.csv"
+    );
+    for (name, record, labels) in [
+        (
+            "sim",
+            rec.to_str().unwrap(),
+            &["position_periodic_friction λ 16 mm"][..],
+        ),
+        (
+            "emps",
+            emps,
+            &["cogging λ 2.5 mm", "λ 5.39 mm, unexplained", "1.71 Hz"][..],
+        ),
+    ] {
+        let out = d.join(name);
+        regen(&["diagnose", record, "--plots", out.to_str().unwrap()]);
+        let n = check_dir(&out, &keep, &format!("diagnose-{name}-"));
+        assert_eq!(n, 6, "{name}: {n} plots");
+        let mut all = Vec::new();
+        for e in std::fs::read_dir(&out).unwrap() {
+            let p = e.unwrap().path();
+            let svg = std::fs::read_to_string(&p).unwrap();
+            let t = texts(&svg);
+            // Lines: no dot of a scatter (plotters draws dots and circle markers as
+            // <circle>).
+            assert!(!svg.contains("<circle"), "{}: dots", p.display());
+            // Each curve once in the legend.
+            for who in ["baseline model (before)", "extended model (after)"] {
+                let k = t.iter().filter(|x| *x == who).count();
+                assert!(k <= 1, "{}: `{who}` {k} times", p.display());
+            }
+            let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+            // No two x tick labels overdrawn: centres at least their half-widths apart (about
+            // 7 px per character at the tick font), plus 4 px.
+            let mut xt = x_ticks(&svg);
+            xt.sort_by(|a, b| a.0.total_cmp(&b.0));
+            for w in xt.windows(2) {
+                let need = 3.5 * (w[0].2 + w[1].2) as f64 + 4.0;
+                assert!(
+                    w[1].0 - w[0].0 >= need,
+                    "{}: x ticks {w:?} overdrawn",
+                    p.display()
+                );
+            }
+            if stem.starts_with("residual_spectrum") {
+                let pos: Vec<f64> = xt.iter().map(|t| t.1).filter(|v| *v > 0.0).collect();
+                let span = pos.iter().fold(0.0f64, |m, v| m.max(*v))
+                    / pos.iter().fold(f64::INFINITY, |m, v| m.min(*v));
+                assert!(span >= 100.0, "{}: x ticks {xt:?}", p.display());
+                assert!(t.iter().any(|x| x.contains("log scale")), "{}", p.display());
+            } else {
+                let k = t
+                    .iter()
+                    .filter(|x| x.as_str() == "extended model (after)" || x.starts_with("after"))
+                    .count();
+                assert!(k >= 1, "{}: no after curve in {t:?}", p.display());
+            }
+            all.extend(t);
+        }
+        for l in labels {
+            assert!(all.iter().any(|t| t == l), "{name}: `{l}` not labelled");
+        }
+        println!("{name}: 6 plots rendered; labels {labels:?}");
+    }
 }
