@@ -152,10 +152,7 @@ fn bad_command_line_values_are_refused() {
         &regen(&[
             "sweep", &sc, "--out", o, "--param", "freq_hz", "--values", "0.5,nan",
         ]),
-        &[
-            "--values nan: drive.excitation.freq_hz = NaN",
-            "(0, 50] Hz",
-        ],
+        &["--values nan: drive.excitation.freq_hz = NaN", "(0, 50] Hz"],
     );
     refused(
         &regen(&[
