@@ -450,9 +450,10 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     // loaded machine (frames late by up to about 2 frames); bound 200 (100 ms), about 2x that.
     assert.ok(Math.max(...lags) < 200, `the plot keeps up with the stream (lags ${lags.join(", ")})`);
     assert.ok(fps >= 50, `${fps} frames/s`);
-    // Required: under 25 %. Not met yet (measured 45-70 % of wall time on this 2-core machine
-    // shared with builds, renderer CPU 40-50 % of a core; docs/ui.md, Status): run and printed
-    // as a todo, so its figure shows in every run without failing the suite.
+    // Required: under 25 %. Not met reliably yet (20 s runs on this 2-core machine shared with
+    // builds: 23.5-41 % of wall time, best 23.5; the page with the plot not drawn 5 %; renderer
+    // CPU 26-33 % of a core; docs/ui.md, Status): run and printed as a todo, so its figure shows
+    // in every run without failing the suite.
     await t.test("the page's main thread busy under 25 % of the time", { todo: "not met yet: docs/ui.md, Status" }, () => {
       assert.ok(busy < 0.25, `main thread busy ${pct(busy)}`);
     });
