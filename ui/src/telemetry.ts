@@ -108,7 +108,8 @@ export function tracePlugin(): uPlot.Plugin {
   let cv: HTMLCanvasElement | null = null;
   const paths: uPlot.Series.PathBuilder = (u, si, i0, i1) => {
     const { width: W, height: H } = u.bbox;
-    if (i1 - i0 + 1 < W || !img) return linear(u, si, i0, i1);
+    // Fewer points than CSS pixel columns (the plot is handed two per column): a line.
+    if (i1 - i0 + 1 < W / devicePixelRatio || !img) return linear(u, si, i0, i1);
     const xs = u.data[0], ys = u.data[si];
     const s = u.series[si];
     const sx = u.scales.x, sy = u.scales[s.scale!];
