@@ -201,11 +201,11 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             opt.min_holdout_gain
         ));
     }
-    if opt.max_effects > EffectKind::ALL.len() {
+    if opt.max_effects > EffectKind::all().len() {
         return Err(format!(
             "option max_effects = {}: allowed range 0 ..= {}",
             opt.max_effects,
-            EffectKind::ALL.len()
+            EffectKind::all().len()
         ));
     }
     if !(100..=10_000_000).contains(&opt.screen_samples) {

@@ -53,14 +53,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let sub_hold: Vec<u8> = sub.rows.iter().map(|&i| screen_hold[i]).collect();
     let sub_w = HoldWeights::new(&sub_hold);
     let mut full_w = HoldWeights::new(&hold);
-    // A set holding a `lag` τ makes the force the device's at t − τ: its fits leave out the
+    // A set holding a delay τ of the force (`EffectModel::force_delay`) makes the force the device's at t − τ: its fits leave out the
     // samples whose delayed motion is at rest (`Context::lag_rest_rows`), and so does every fit
     // it is compared with (the same rows on both sides of a comparison).
-    let lag_of = |set: &[Effect]| {
-        set.iter()
-            .find(|e| e.kind == EffectKind::Lag)
-            .map(|e| e.param)
-    };
+    let lag_of = |set: &[Effect]| set.iter().find_map(|e| e.kind.force_delay(e));
     // (the same rows every time a τ comes back: kept per τ)
     let lag_rest_kept = std::cell::RefCell::new(std::collections::HashMap::new());
     let lag_rest_sub = |tau: f64| -> Vec<usize> {
@@ -186,7 +182,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         c
     };
     // training and held-out normals of the fixed terms and a set of effects, on the rows of a
-    // lag τ when given
+    // delay τ when given
     let set_normals_on =
         |set: &[Effect], tau: Option<f64>, cache: &mut Cache| -> (Normal, Normal) {
             let c = set_cols(set, cache);
@@ -207,7 +203,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 .entry(e.key())
                 .or_insert_with(|| effects::columns_on(&ctx, &sig, e))
                 .len();
-            ids.extend((0..k as u64).map(|j| (((e.kind as u64) << 32) | j, e.key().1)));
+            ids.extend((0..k as u64).map(|j| (((e.kind.index() as u64) << 32) | j, e.key().1)));
         }
         ids
     };
@@ -242,7 +238,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         };
     // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
     // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
-    // margin, on the screening rows without the lag's `rows`.
+    // margin, on the screening rows without the delay's `rows`.
     let carries_beyond_switch =
         |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
             let k = tau / ctx.dt;
@@ -291,7 +287,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let base_ids = set_ids(set, cache);
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
         // the set's columns with the exact sign in the Coulomb column (the third), their
-        // identities and normal equations, once per set (the Stribeck band rule below extends
+        // identities and normal equations, once per set (the sign band rule below extends
         // them by each candidate's columns, the candidate's products with the other columns
         // kept in its Gram cache)
         let es_base = exact_sign.as_ref().map(|es| {
@@ -315,7 +311,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let k0 = base_refs.len() + set.iter().filter(|e| e.kind.scanned()).count();
         // where each effect of the set sits among the base columns (after the fixed terms)
         let set_spans = effect_spans(set, n_fixed, &*cache);
-        // the rows the longest delay scanned leaves out (`lag`'s τ are ranked on common rows)
+        // the rows the longest delay scanned leaves out (the delays are ranked on common rows)
         let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
@@ -325,11 +321,11 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64, f64) {
-                // one cause, one name: a wavelength already named (cogging or periodic
+                // one cause, one name: a wavelength already named (by a periodic
                 // friction, within 3 %) is not named again under the other periodic name; a
-                // Stribeck bump inside the presliding build-up is the build-up's shape
+                // low-speed bump inside a friction build-up is the build-up's shape
                 if effects::same_wavelength(eff, set)
-                    || effects::stribeck_within_presliding(eff, set, &ctx)
+                    || effects::bump_within_buildup(eff, set, &ctx)
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
@@ -342,15 +338,15 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 let mut nn =
                     extend_normals_cached(&base, &base_refs, &base_ids, &zr, &sub_f, &sub_w, gc);
                 let nb = base_refs.len();
-                // the rows of the set's lag, or of the candidate lag: the set is compared with
+                // the rows of the set's delay, or of the candidate delay: the set is compared with
                 // it on the candidate's rows and its gain there carried to the set's rows
                 let (mut scale, mut t0) = (1.0, rss_t0);
-                let rows_c = match (tau_s, eff.kind) {
+                let rows_c = match (tau_s, eff.kind.force_delay(eff)) {
                     (Some(_), _) => rows_s.clone(),
-                    (None, EffectKind::Lag) => lag_rest_sub(eff.param),
+                    (None, Some(tau)) => lag_rest_sub(tau),
                     _ => Vec::new(),
                 };
-                let lag_cand = tau_s.is_none() && eff.kind == EffectKind::Lag;
+                let lag_cand = tau_s.is_none() && eff.kind.force_delay(eff).is_some();
                 let all: Vec<&[f64]> = if rows_c.is_empty() && !lag_cand {
                     Vec::new()
                 } else {
@@ -370,7 +366,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                         (scale, t0) = ratio(&nn);
                     }
                 }
-                // `lag`'s τ are ranked against each other on the same rows: those every τ
+                // the delays τ are ranked against each other on the same rows: those every τ
                 // scanned can fit (the rows the longest τ leaves out as well). Each τ leaves
                 // out the samples whose motion τ earlier is at rest, the first τ of each move,
                 // where the force is the dwell's and an undelayed baseline is furthest from
@@ -393,7 +389,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 if !set_physical(set, &set_spans, &t) {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
-                // `lag`: its gain's range and its τ are judged on the fit corrected for the
+                // a delay: its gain's range and its τ are judged on the fit corrected for the
                 // derived signals' noise (`lag_corrected`); the held-out rss it is compared
                 // with the other candidates by is the least-squares fit's, as theirs
                 let mut key = None;
@@ -402,8 +398,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 // every candidate; one whose gain only the correction brings into the range
                 // ranks after all of those, by the corrected gain's distance from 1; a τ whose
                 // column is more than half noise is not resolved by either fit
-                if eff.kind == EffectKind::Lag {
-                    if let Some(sn) = ctx.lag_noise(eff.param) {
+                let noise = eff.kind.derived_noise(&ctx, eff);
+                if let Some((effects::NoiseUse::RankCorrected, sn)) = noise {
+                    {
                         match lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) {
                             Some(_) if effects::plausible(eff, &t[nb..], &t[..nb.min(4)]) => {}
                             Some((c, _)) => {
@@ -414,8 +411,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                         }
                     }
                 }
-                // `compliance`: a mode whose column is more than half the derived
-                // acceleration's noise on the training rows is not resolved (as a `lag` τ):
+                // a resonance: a mode whose column is more than half the derived
+                // acceleration's noise on the training rows is not resolved (as a delay τ):
                 // its fit would low-pass the inertia's noisy column, not draw a mode. A mode
                 // resolved must carry the margin on error-free columns: the fits with and
                 // without it corrected for that noise (`eiv_fit`, the covariance of the
@@ -424,8 +421,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 // derivative cutoff is the inertia column's noise (H − 1 ≈ −1 there), so least
                 // squares credits a modal mass near the inertia with the noise it cancels on
                 // the held-out rows as on the training rows; the corrected fit does not.
-                if eff.kind == EffectKind::Compliance {
-                    if let Some(sn) = ctx.compliance_noise(eff.param) {
+                if let Some((effects::NoiseUse::MarginCorrected, sn)) = noise {
+                    {
                         let Some((_, r1)) = lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) else {
                             return (f64::INFINITY, 0.0, f64::INFINITY);
                         };
@@ -442,49 +439,42 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 }
                 let tp = tc.as_deref().unwrap_or(&t);
                 if !effects::plausible(eff, &tp[nb..], &tp[..nb.min(4)])
-                    || (eff.kind == EffectKind::CurrentLimit
-                        && !effects::clip_consistent(
-                            &ctx,
-                            eff,
-                            &t[nb..],
-                            &t[..nb.min(4)],
-                            &sub.bp,
-                            &sub.v,
-                            &sub_f,
-                            ctx.base_resid_rms,
-                        ))
+                    || !eff.kind.consistent_with_force(
+                        &ctx,
+                        eff,
+                        &t[nb..],
+                        &t[..nb.min(4)],
+                        &sub.bp,
+                        &sub.v,
+                        &sub_f,
+                        ctx.base_resid_rms,
+                    )
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
-                // a presliding transition beside a lag: the delay shifts the Coulomb switch
-                // by τ, and the lag's one gain (set by its inertial and viscous parts too,
+                // a friction build-up beside a delay: the delay shifts the Coulomb switch
+                // by τ, and the delay's one gain (set by its inertial and viscous parts too,
                 // whose derived signals' noise biases it low) can leave part of that switch,
                 // a transition after each reversal that a Dahl state also draws; the
                 // presliding must carry the margin on top of the delayed switch given an
-                // amplitude of its own (`effects::delayed_switch`), on the lag's rows.
-                // Likewise a resonance beside a lag: the mode's column (H − 1)·a, a
+                // amplitude of its own (`effects::delayed_switch`), on the delay's rows.
+                // Likewise a resonance beside a delay: the mode's column (H − 1)·a, a
                 // frequency-dependent inertia, draws what the one gain leaves of the delayed
                 // inertial and viscous parts, M·(a(t − τ) − a(t)) and Fv·(v(t − τ) − v(t)),
                 // so it must carry the margin on top of the three parts given amplitudes of
                 // their own
-                if let (EffectKind::PreslidingHysteresis | EffectKind::Compliance, Some(tau)) =
-                    (eff.kind, tau_s)
-                {
+                if let (true, Some(tau)) = (eff.kind.draws_delay_remainder(), tau_s) {
                     if !carries_beyond_switch(&base_refs, &zr, tau, &rows_s) {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
                 }
-                // a Stribeck bump where the motion slides inside the Coulomb sign's linear
+                // a low-speed bump where the motion slides inside the Coulomb sign's linear
                 // band: the part of the Coulomb force the band leaves out (sign(v) − v/v_eps,
                 // a friction above the baseline's column at the lowest speeds) is a bump too;
                 // a Dahl state that has reached the direction of sliding draws it exactly
                 // (z − sgn v = sign v − v/v_eps there); either must carry the margin against
                 // the baseline with the exact sign (its Coulomb column, the third, replaced)
-                if let (
-                    EffectKind::Stribeck | EffectKind::PreslidingHysteresis,
-                    Some((b, ids, nw)),
-                ) = (eff.kind, &es_base)
-                {
+                if let (true, Some((b, ids, nw))) = (eff.kind.draws_sign_band(), &es_base) {
                     let mut nw = extend_normals_cached(nw, b, ids, &zr, &sub_f, &sub_w, gc);
                     if !rows_s.is_empty() {
                         let all: Vec<&[f64]> = b.iter().chain(&zr).copied().collect();
@@ -507,12 +497,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             // fill the cache for a list of values in one pass over the record (the effects
             // whose columns walk the record's history: resonators, Dahl states, play)
             let prefill = |effs: &[Effect], cache: &mut Cache| {
-                if !matches!(
-                    cand.kind,
-                    EffectKind::Compliance
-                        | EffectKind::PreslidingHysteresis
-                        | EffectKind::Backlash
-                ) {
+                if !cand.kind.walks_history() {
                     return;
                 }
                 let missing: Vec<Effect> = effs
@@ -532,7 +517,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             // fit over the parameter still falls beyond the range the record resolves), so the
             // parameter is not identified and the effect is not named
             // the values `effs` evaluated (their columns filled in one pass) and the best so
-            // far kept, ranked by each value's key: its held-out rss, for `lag` the corrected
+            // far kept, ranked by each value's key: its held-out rss, for a delay the corrected
             // fit's
             let scan = |effs: &[Effect],
                         cache: &mut Cache,
@@ -552,12 +537,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             scan(&coarse, cache, &mut cb, &mut cb_key);
             if cand.kind.scanned() {
                 // a resonance's residual is sharp in frequency: one more level for it
-                let widths: &[f64] = if cand.kind == EffectKind::Compliance {
-                    &[0.15, 0.03, 0.006]
-                } else {
-                    &[0.15, 0.03]
-                };
-                for &width in widths {
+                for &width in cand.kind.refine_widths() {
                     let Some(centre) = cb.as_ref().map(|c| c.2.clone()) else {
                         break;
                     };
@@ -565,48 +545,30 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                     scan(&fine, cache, &mut cb, &mut cb_key);
                 }
             }
-            if cand.kind == EffectKind::Backlash {
-                // the contact's restitution at the width found (`effects::PLAY_RESTITUTIONS`),
-                // ranked by the held-out key as the width is; the width refined once more at
-                // a restitution other than 0 (a rebounding device's contacts move with it)
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    let alt: Vec<Effect> = effects::PLAY_RESTITUTIONS
-                        .iter()
-                        .filter(|&&e| e != centre.param2)
-                        .map(|&e| Effect {
-                            param2: e,
-                            ..centre.clone()
-                        })
-                        .collect();
-                    scan(&alt, cache, &mut cb, &mut cb_key);
-                }
-                // a compliant, plastic flank (`effects::PLAY_CONTACT_FRACTIONS`) when the
-                // rigid, plastic one is the best restitution and itself passes the selection
-                // (the flank's stiffness refines a play the record shows; on a record without
-                // one it is not walked); the spring is one parameter more, so it must cut the
-                // rigid flank's held-out rss by the selection's margin, as an added effect must
-                let rigid_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    if centre.param2 == 0.0 && rigid_passes {
-                        let alt: Vec<Effect> = effects::PLAY_CONTACT_FRACTIONS
-                            .iter()
-                            .map(|&q| Effect {
-                                param2: -q / ctx.dt,
-                                ..centre.clone()
-                            })
-                            .collect();
-                        let (mut sb, mut sb_key) = (None, f64::INFINITY);
-                        scan(&alt, cache, &mut sb, &mut sb_key);
-                        if sb_key <= (1.0 - opt.min_holdout_gain) * cb_key {
-                            (cb, cb_key) = (sb, sb_key);
-                        }
+            // a second parameter at the best first one, ranked by the held-out key as the
+            // first is (`EffectModel::variants`); a further one when that value itself passes
+            // the selection, one parameter more, so it must cut the held-out rss by the
+            // selection's margin, as an added effect must (`EffectModel::extended_variants`);
+            // then the first refined once more at the variant chosen
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                let alt = cand.kind.variants(&ctx, &centre);
+                scan(&alt, cache, &mut cb, &mut cb_key);
+            }
+            let best_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                let alt = cand.kind.extended_variants(&ctx, &centre);
+                if best_passes && !alt.is_empty() {
+                    let (mut sb, mut sb_key) = (None, f64::INFINITY);
+                    scan(&alt, cache, &mut sb, &mut sb_key);
+                    if sb_key <= (1.0 - opt.min_holdout_gain) * cb_key {
+                        (cb, cb_key) = (sb, sb_key);
                     }
                 }
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    if centre.param2 != 0.0 {
-                        let fine = effects::refine(&ctx, &centre, 0.03);
-                        scan(&fine, cache, &mut cb, &mut cb_key);
-                    }
+            }
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                if let Some(width) = cand.kind.variant_refine(&centre) {
+                    let fine = effects::refine(&ctx, &centre, width);
+                    scan(&fine, cache, &mut cb, &mut cb_key);
                 }
             }
             if cand.kind.scanned()
@@ -661,8 +623,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 .map(|(_, e)| e.clone())
                 .collect();
             let (h0, best) = scan(&others, &mut cache);
-            if chosen[k].kind == EffectKind::Lag {
-                // the lag's gain on its own rows, carried to the others' rows (as `scan` does)
+            if chosen[k].kind.force_delay(&chosen[k]).is_some() {
+                // the delay's gain on its own rows, carried to the others' rows (as `scan` does)
                 let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
                 cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
             }
@@ -706,9 +668,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         n.1.rss(&n.0.solve())
     };
     for k in 0..chosen.len() {
-        if chosen[k].kind == EffectKind::Backlash && chosen[k].param2 < 0.0 {
+        if let Some(simpler) = chosen[k].kind.simpler(&chosen[k]) {
             let mut rigid = chosen.clone();
-            rigid[k].param2 = 0.0;
+            rigid[k] = simpler;
             if whole_holdout(&rigid) <= whole_holdout(&chosen) {
                 chosen = rigid;
             }
@@ -719,7 +681,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
     let mut stage_models = vec![whole_fit(&full, &cols)];
-    // the whole record's samples left out with the lag (once it is in the model)
+    // the whole record's samples left out with a delay (once it is in the model)
     let mut lag_rows_full: Vec<usize> = Vec::new();
     for i in 0..chosen.len() {
         let (t0, h0) = set_normals_on(&chosen[..i], lag_of(&chosen[..=i]), &mut cache);
@@ -735,8 +697,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         }
         cols.extend(z);
-        if eff.kind == EffectKind::Lag {
-            lag_rows_full = ctx.lag_rest_rows(eff.param, None);
+        if let Some(tau) = eff.kind.force_delay(&eff) {
+            lag_rows_full = ctx.lag_rest_rows(tau, None);
             full = change_rows(&full, &refs(&cols), &rec.f, &hold, &lag_rows_full, -1.0);
             let mut part = hold.clone();
             for &j in &lag_rows_full {
@@ -782,11 +744,11 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let mut signs = vec![(0usize, 0usize); chosen.len()];
     let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
     let mut seg_held: Vec<Vec<bool>> = vec![Vec::new(); chosen.len()];
-    // A lag's rows whose delayed motion is at rest (or inside the Coulomb sign's band) are left
+    // A delay's rows whose delayed motion is at rest (or inside the Coulomb sign's band) are left
     // out of the segments' fits, as of its other fits, except where a play is chosen: those
     // rows, right after the reversals, are where its contacts lie, and a play tested without
-    // them holds nowhere (its impact taps fit to zero). A play, and a lag beside it, are
-    // tested on every row in motion; every other finding beside a lag on the lag's rows (a
+    // them holds nowhere (its impact taps fit to zero). A play, and a delay beside it, are
+    // tested on every row in motion; every other finding beside a delay on the delay's rows (a
     // presliding's build-up there would take the delayed device's).
     let lag_rest: Vec<usize> = lag_of(&chosen)
         .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
@@ -795,9 +757,11 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     for &j in &lag_rest {
         lag_hold[j] = AT_REST;
     }
-    let with_play = chosen.iter().any(|e| e.kind == EffectKind::Backlash);
-    let on_every_row = |k: EffectKind| {
-        with_play && !lag_rest.is_empty() && matches!(k, EffectKind::Backlash | EffectKind::Lag)
+    let with_play = chosen.iter().any(|e| e.kind.tested_at_reversals());
+    let on_every_row = |e: &Effect| {
+        with_play
+            && !lag_rest.is_empty()
+            && (e.kind.tested_at_reversals() || e.kind.force_delay(e).is_some())
     };
     let segment_fit = |hold: &[u8], sgi: usize| {
         let part: Vec<u8> = (0..n_sub)
@@ -819,11 +783,11 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let on_lag_rows = segment_fit(&lag_hold, sgi);
         let on_all_rows = chosen
             .iter()
-            .any(|e| on_every_row(e.kind))
+            .any(on_every_row)
             .then(|| segment_fit(&spread_hold, sgi));
         for (k, &(a, b)) in spans.iter().enumerate() {
             let (tr, ho, th) = match &on_all_rows {
-                Some(f) if on_every_row(chosen[k].kind) => f,
+                Some(f) if on_every_row(&chosen[k]) => f,
                 _ => &on_lag_rows,
             };
             if ho.n < 10 {
@@ -833,12 +797,12 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
             let (t2, h2) = (tr.select(&keep), ho.select(&keep));
             let rss_without = h2.rss(&t2.solve());
-            // (`lag`'s range on its least-squares fit or, failing that, on its fit corrected for
+            // (a delay's range on its least-squares fit or, failing that, on its fit corrected for
             // the derived signals' noise, as in the scan)
-            let corrected = match chosen[k].kind {
-                EffectKind::Lag => ctx
-                    .lag_noise(chosen[k].param)
-                    .map(|sn| lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0)),
+            let corrected = match chosen[k].kind.derived_noise(&ctx, &chosen[k]) {
+                Some((effects::NoiseUse::RankCorrected, sn)) => {
+                    Some(lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0))
+                }
                 _ => None,
             };
             let phys = match &corrected {
@@ -872,13 +836,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         .iter()
         .zip(&seg_held)
         .zip(&chosen)
-        .map(|((c, h), e)| {
-            if e.kind == EffectKind::Backlash {
-                play_agreement(c, h)
-            } else {
-                jackknife_t(c)
-            }
-        })
+        .map(|((c, h), e)| e.kind.agreement(c, h))
         .collect();
     // A periodic finding names a ripple: the residual it explains (the whole-record residual
     // with its own contribution added back) must show that ripple as a peak of the spectrum
@@ -886,14 +844,11 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // `same_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
     // peaks there (fewer than 3 periods) and are not checked.
     let ripple_shows: Vec<bool> = {
-        let periodic = |k: EffectKind| {
-            matches!(
-                k,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )
-        };
         let th_now = full.0.plus(&full.1).solve();
-        let resid_now = if chosen.iter().any(|e| periodic(e.kind)) {
+        let resid_now = if chosen
+            .iter()
+            .any(|e| e.kind.spatial_wavelength(e).is_some())
+        {
             resid_of(&cols, &th_now)
         } else {
             Vec::new()
@@ -902,7 +857,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             .iter()
             .enumerate()
             .map(|(k, e)| {
-                if !periodic(e.kind) || e.param > 2.0 * ctx.x_half / 3.0 {
+                let Some(lambda) = e.kind.spatial_wavelength(e) else {
+                    return true;
+                };
+                if lambda > 2.0 * ctx.x_half / 3.0 {
                     return true;
                 }
                 let (a, b) = spans[k];
@@ -914,14 +872,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                         }
                     }
                 }
-                report::position_spectrum(rec, &r).peaks.iter().any(|p| {
-                    let probe = Effect {
-                        kind: e.kind,
-                        param: p.wavelength_m,
-                        param2: 0.0,
-                    };
-                    effects::same_wavelength(&probe, std::slice::from_ref(e))
-                })
+                report::position_spectrum(rec, &r)
+                    .peaks
+                    .iter()
+                    .any(|p| effects::at_wavelength(p.wavelength_m, e))
             })
             .collect()
     };
@@ -932,25 +886,20 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // force the record does not measure; inside it that artefact vanishes and a force ripple
     // does not. The in-band part of its columns must stand AGREEMENT_T standard errors out of
     // the noise (Wald statistic ≥ AGREEMENT_T²: χ² with 2 degrees of freedom, 1 %).
-    let ripple_measured: Vec<Option<effects::RippleInBand>> = chosen
+    let ripple_measured: Vec<Option<(effects::RippleInBand, effects::InBandWords)>> = chosen
         .iter()
         .enumerate()
         .map(|(k, e)| {
             // a friction building up with speed likewise: carried by the samples where its
             // column changes within that band (`effects::buildup_in_band`), with one rise there
             // and at the stops the motion passes faster
-            let mask = match e.kind {
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction => {
-                    effects::ripple_in_band(&ctx, e.param)
-                }
-                EffectKind::VelocityStrengthening => effects::buildup_in_band(&ctx, e.param),
-                _ => None,
-            };
-            mask.map(|mask| effects::in_band_ripple(&ctx, &cols, spans[k], &mask))
+            e.kind
+                .in_band(&ctx, e)
+                .map(|(mask, words)| (effects::in_band_ripple(&ctx, &cols, spans[k], &mask), words))
         })
         .collect();
     for (k, r) in ripple_measured.iter().enumerate() {
-        if let (Some(r), Some(f)) = (r, findings.get_mut(k)) {
+        if let (Some((r, _)), Some(f)) = (r, findings.get_mut(k)) {
             let above = if r.amp_above > 0.0 {
                 format!(
                     "above it {:.3} N (differing by {:.0} %, Wald {:.1})",
@@ -969,7 +918,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     }
     let ripple_locked: Vec<bool> = ripple_measured
         .iter()
-        .map(|r| r.is_none_or(|r| r.locked_to_position(AGREEMENT_T)))
+        .map(|r| r.is_none_or(|(r, _)| r.locked_to_position(AGREEMENT_T)))
         .collect();
     // A periodic finding names a force locked to position, not to the reversals: beside a
     // ripple locked to the last reversal whose sign follows the direction of motion (what a
@@ -981,11 +930,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         .iter()
         .enumerate()
         .map(|(k, e)| {
-            matches!(
-                e.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )
-            .then(|| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], e.param))
+            e.kind
+                .spatial_wavelength(e)
+                .map(|l| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], l))
         })
         .collect();
     for (k, w) in ripple_reversal.iter().enumerate() {
@@ -1004,19 +951,13 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // of the residual (`effects::hum_in_residual`: a hum of the supply, a machine nearby),
     // the finding's columns must stand AGREEMENT_T standard errors out of the noise beside
     // that sinusoid (`effects::finding_apart_from_hum`).
-    let hum_kind = |k: EffectKind| {
-        matches!(
-            k,
-            EffectKind::Stribeck | EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-        )
-    };
     // The hum is sought in the residual of the fixed terms and the finding alone: another
     // finding of the set (a resonance at the hum's frequency) may carry it until it is dropped.
     let hum: Vec<Option<(f64, f64)>> = chosen
         .iter()
         .enumerate()
         .map(|(k, e)| {
-            if !hum_kind(e.kind) {
+            if !e.kind.apart_from_hum() {
                 return None;
             }
             let idx: Vec<usize> = (0..n_fixed).chain(spans[k].0..spans[k].1).collect();
@@ -1052,7 +993,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
     let modes: Vec<Effect> = kept
         .iter()
-        .filter(|&&k| chosen[k].kind == EffectKind::Compliance)
+        .filter(|&&k| chosen[k].kind.time_band(&ctx, &chosen[k]).is_some())
         .map(|&k| chosen[k].clone())
         .collect();
     let at_mode: Vec<bool> = chosen
@@ -1063,22 +1004,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
-            if let (false, Some(r)) = (ripple_locked[k], ripple_measured[k]) {
+            if let (false, Some((r, words))) = (ripple_locked[k], ripple_measured[k]) {
                 // a friction of the speed is tested where its build-up is followed, a ripple
                 // where its time frequency is: the same split, worded for each
-                let (not, band, outside) = if chosen[k].kind == EffectKind::VelocityStrengthening {
-                    (
-                        "a friction of the speed",
-                        "where its build-up is slow enough for the derived signals (e^(−|v|/v_b)·|a|/v_b ≤ π·fc)",
-                        "at the stops the motion passes faster",
-                    )
-                } else {
-                    (
-                        "a force locked to position",
-                        "inside the derived acceleration's band (|v|/λ ≤ half its cutoff)",
-                        "above it",
-                    )
-                };
+                let effects::InBandWords { not, band, outside } = words;
                 dropped_notes.push(format!(
                     "{} ({}) selected, but it is not {not}: {band} {:.3} N (Wald {:.1}, at least {:.0} needed), {outside}, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
                     chosen[k].kind.name(),
@@ -1138,8 +1067,12 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 agreement[k]
             ));
         }
-        // a lag not kept gives its left-out samples back to the fits
-        if !lag_rows_full.is_empty() && kept.iter().all(|&k| chosen[k].kind != EffectKind::Lag) {
+        // a delay not kept gives its left-out samples back to the fits
+        if !lag_rows_full.is_empty()
+            && kept
+                .iter()
+                .all(|&k| chosen[k].kind.force_delay(&chosen[k]).is_none())
+        {
             full = change_rows(&full, &refs(&cols), &rec.f, &hold, &lag_rows_full, 1.0);
             lag_rows_full.clear();
         }
@@ -1189,7 +1122,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let pred = effects::predict(&cols, &th_full);
     // samples at rest are in no fit (static friction is anywhere within its breakaway
     // level): they carry no residual, so they cannot show as a spectral peak either; with a
-    // lag, neither do those whose delayed motion is at rest
+    // delay, neither do those whose delayed motion is at rest
     let mut rest_final = ctx.rest.clone();
     for &j in &lag_rows_full {
         rest_final[j] = true;
@@ -1258,17 +1191,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         // a residual peak at a wavelength already named is that finding's remainder (a ripple
         // not purely sinusoidal, or whose amplitude varies along the stroke), not a second
         // cause: stated on the finding, not named again
-        let probe = Effect {
-            kind: EffectKind::Cogging,
-            param: pk.wavelength_m,
-            param2: 0.0,
-        };
-        if let Some(k) = chosen.iter().position(|c| {
-            matches!(
-                c.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            ) && effects::same_wavelength(&probe, std::slice::from_ref(c))
-        }) {
+        if let Some(k) = chosen
+            .iter()
+            .position(|c| effects::at_wavelength(pk.wavelength_m, c))
+        {
             let name = chosen[k].kind.name();
             if let Some(f) = findings.iter_mut().find(|f| f.effect == name) {
                 f.note.push_str(&format!(
@@ -1310,7 +1236,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     }
     if let (Some(tau), false) = (lag_of(&chosen), lag_rows_full.is_empty()) {
         verdicts.push(format!(
-            "{} samples in motion whose motion {tau:.4} s earlier (the lag) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the lag and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
+            "{} samples in motion whose motion {tau:.4} s earlier (the delay) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the delay and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
             lag_rows_full.len()
         ));
     }
@@ -1369,8 +1295,8 @@ pub(crate) fn effect_spans(
 
 /// Every effect of `set` (at `spans` in the coefficients `th`, the baseline's first) inside its
 /// physical range (`effects::plausible`): an effect added beside others can move their fit out
-/// of it (on the rig's clipped multisine 100051 a `screw_efficiency` beside the drive's clip
-/// took part of the viscous force and left the clip's damping above the viscous coefficient).
+/// of it (an efficiency beside a drive's clip can take part of the viscous force and leave the
+/// clip's damping above the viscous coefficient).
 pub fn set_physical(set: &[Effect], spans: &[(usize, usize)], th: &[f64]) -> bool {
     set.iter().zip(spans).all(|(e, &(a, b))| {
         b <= th.len() && effects::plausible(e, &th[a..b], &th[..4.min(th.len())])

@@ -8,7 +8,7 @@
 //! with the diagnosis.
 
 use hal_sim::diagnose::effects::{
-    build_columns, finding_apart_from_hum, hum_in_residual, Context, Effect, EffectKind,
+    self, build_columns, finding_apart_from_hum, hum_in_residual, Context, Effect,
 };
 use hal_sim::diagnose::synth::Rng;
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
@@ -55,7 +55,7 @@ type Columns = Vec<(String, Vec<f64>)>;
 /// The Stribeck candidate's columns on a record and the span they take.
 fn stribeck_columns(ctx: &Context) -> (Columns, (usize, usize)) {
     let e = Effect {
-        kind: EffectKind::Stribeck,
+        kind: effects::STRIBECK,
         param: V_S,
         param2: 0.0,
     };

@@ -2,37 +2,40 @@
 
 use super::*;
 
-/// True when `kind` times the force channel against the motion (`lag`: the recorded force
-/// behind it; `actuator_lag`: ahead of it, a command the force follows) and `chosen` already
-/// holds the other: the channel has one net delay, so a record is not given both (one cause,
-/// one name; a `lag` fitted a little off its delay is otherwise topped up by an
-/// `actuator_lag` of the difference).
+/// True when `kind` times the force channel against the motion
+/// (`EffectModel::times_the_channel`: the recorded force behind it, or ahead of it, a command
+/// the force follows) and `chosen` already holds another such effect: the channel has one net
+/// delay, so a record is not given both (one cause, one name; a delay fitted a little off is
+/// otherwise topped up by a second of the difference).
 pub fn same_channel_timing(kind: EffectKind, chosen: &[Effect]) -> bool {
-    let timing = |k: EffectKind| matches!(k, EffectKind::Lag | EffectKind::ActuatorLag);
-    timing(kind) && chosen.iter().any(|c| timing(c.kind) && c.kind != kind)
+    kind.times_the_channel()
+        && chosen
+            .iter()
+            .any(|c| c.kind.times_the_channel() && c.kind != kind)
 }
 
-/// True when `e` and `chosen` would hold both a `stribeck` (speed v_s) and a
-/// `presliding_hysteresis` (displacement x_c) and more than half of the Stribeck column's
-/// energy on the samples in motion lies within x_c of a reversal (the one before or after).
+/// True when `e` and `chosen` would hold both a low-speed friction bump (speed scale v_s,
+/// `EffectModel::low_speed_scale`) and a friction build-up over a displacement after reversals
+/// (x_c, `EffectModel::buildup_displacement`) and more than half of the bump column's energy
+/// on the samples in motion lies within x_c of a reversal (the one before or after).
 /// Friction reaches its steady level (the Stribeck curve's, static friction above Coulomb at
-/// low speed) only after the bristles' relaxation displacement, the presliding x_c (LuGre: z
-/// relaxes to g(v)/σ₀ over |dx| ≈ g/σ₀): where the speed stays below v_s only within x_c of
-/// a reversal (on the approach or after it), the friction does not follow the Stribeck
-/// curve's rise there, and a bump fitted there is the build-up's shape, not a Stribeck
-/// force. One of the two is named (the first selected).
-pub fn stribeck_within_presliding(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
-    let other = |k: EffectKind| chosen.iter().find(|c| c.kind == k).map(|c| c.param);
-    let (vs, xc) = match e.kind {
-        EffectKind::Stribeck => match other(EffectKind::PreslidingHysteresis) {
-            Some(xc) => (e.param, xc),
+/// low speed) only after the bristles' relaxation displacement x_c (LuGre: z relaxes to
+/// g(v)/σ₀ over |dx| ≈ g/σ₀): where the speed stays below v_s only within x_c of a reversal
+/// (on the approach or after it), the friction does not follow the bump's rise there, and a
+/// bump fitted there is the build-up's shape. One of the two is named (the first selected).
+pub fn bump_within_buildup(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
+    let (vs, xc) = if let Some(vs) = e.kind.low_speed_scale(e) {
+        match chosen.iter().find_map(|c| c.kind.buildup_displacement(c)) {
+            Some(xc) => (vs, xc),
             None => return false,
-        },
-        EffectKind::PreslidingHysteresis => match other(EffectKind::Stribeck) {
-            Some(vs) => (vs, e.param),
+        }
+    } else if let Some(xc) = e.kind.buildup_displacement(e) {
+        match chosen.iter().find_map(|c| c.kind.low_speed_scale(c)) {
+            Some(vs) => (vs, xc),
             None => return false,
-        },
-        _ => return false,
+        }
+    } else {
+        return false;
     };
     let (x, v) = (&ctx.rec.x, &ctx.rec.v);
     let n = x.len().min(v.len());
@@ -74,32 +77,24 @@ pub fn stribeck_within_presliding(e: &Effect, chosen: &[Effect], ctx: &Context) 
     all > 0.0 && inside > 0.5 * all
 }
 
-/// True when `e` is a position ripple (`cogging` or `position_periodic_friction`, wavelength
-/// λ), `chosen` holds a `compliance` (resonance f_r, damping ratio ζ from
-/// `Context::compliance_zeta`), and on more than half of the samples in motion the
-/// ripple's time frequency |v|/λ lies within the mode's half-power band f_r·(1 ± ζ). Where the
-/// motion moves at such speeds (a rounded triangle's constant-speed flanks) a ripple of λ is a
-/// force at f_r in time, and a mode's ringing after each turn, locked to the turn, is locked
-/// to the turn's position too: the two columns draw the same force, and what the mode's fit
-/// leaves of its own ringing a ripple takes. The mode is named: a ripple beside a mode kept is not kept (`diagnose`'s verdicts).
+/// True when `e` is a force periodic in position (wavelength λ,
+/// `EffectModel::spatial_wavelength`), `chosen` holds a resonance (its half-power band
+/// `EffectModel::time_band`), and on more than half of the samples in motion the ripple's time
+/// frequency |v|/λ lies within that band. Where the motion moves at such speeds (a rounded
+/// triangle's constant-speed flanks) a ripple of λ is a force at the mode's frequency in time,
+/// and a mode's ringing after each turn, locked to the turn, is locked to the turn's position
+/// too: the two columns draw the same force, and what the mode's fit leaves of its own ringing
+/// a ripple takes. The mode is named: a ripple beside a mode kept is not kept.
 pub fn ripple_at_mode(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
-    if !matches!(
-        e.kind,
-        EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-    ) {
-        return false;
-    }
-    let Some(mode) = chosen.iter().find(|c| c.kind == EffectKind::Compliance) else {
+    let Some(lambda) = e.kind.spatial_wavelength(e) else {
         return false;
     };
-    let (lambda, fr) = (e.param, mode.param);
-    let Some(z) = ctx.compliance_zeta(fr) else {
+    let Some((lo, hi)) = chosen.iter().find_map(|c| c.kind.time_band(ctx, c)) else {
         return false;
     };
-    if !(lambda > 0.0 && fr > 0.0) {
+    if !(lambda > 0.0 && hi > 0.0) {
         return false;
     }
-    let (lo, hi) = (fr * (1.0 - z), fr * (1.0 + z));
     let (mut inside, mut all) = (0usize, 0usize);
     for (i, v) in ctx.rec.v.iter().enumerate() {
         if ctx.rest.get(i).copied().unwrap_or(true) {
@@ -114,19 +109,23 @@ pub fn ripple_at_mode(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
     2 * inside > all
 }
 
-/// True when `e` is a periodic effect (cogging or position-periodic friction) whose wavelength
-/// lies within 3 % of a periodic effect in `chosen` (the same spatial cause: one name).
+/// True when `e` is periodic in position and its wavelength lies within 3 % of a periodic
+/// effect in `chosen` (the same spatial cause: one name).
 pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
-    let periodic = |k: EffectKind| {
-        matches!(
-            k,
-            EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-        )
+    let Some(l) = e.kind.spatial_wavelength(e) else {
+        return false;
     };
-    periodic(e.kind)
-        && chosen
-            .iter()
-            .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
+    chosen
+        .iter()
+        .filter_map(|c| c.kind.spatial_wavelength(c))
+        .any(|lc| (l / lc - 1.0).abs() < 0.03)
+}
+
+/// True when `wavelength` lies within 3 % of the wavelength of the periodic effect `c`.
+pub fn at_wavelength(wavelength: f64, c: &Effect) -> bool {
+    c.kind
+        .spatial_wavelength(c)
+        .is_some_and(|lc| (wavelength / lc - 1.0).abs() < 0.03)
 }
 
 /// The samples (true) at which a position ripple of wavelength `lambda` lies well inside the

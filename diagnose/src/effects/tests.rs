@@ -472,7 +472,7 @@ fn impact_momentum_rule() {
     assert!(!impact_consistent(&[40.0], -1.0));
     let base = [m, 300.0, 30.0, 0.0];
     let e = Effect {
-        kind: EffectKind::Backlash,
+        kind: BACKLASH,
         param: 1e-3,
         param2: 0.0,
     };
@@ -494,12 +494,12 @@ fn impact_momentum_rule() {
 #[test]
 fn channel_timing_is_named_once() {
     let e = |kind| Effect::new(kind, 1.0);
-    let (lag, act) = (EffectKind::Lag, EffectKind::ActuatorLag);
+    let (lag, act) = (LAG, ACTUATOR_LAG);
     assert!(same_channel_timing(act, &[e(lag)]));
-    assert!(same_channel_timing(lag, &[e(EffectKind::Cogging), e(act)]));
+    assert!(same_channel_timing(lag, &[e(COGGING), e(act)]));
     assert!(!same_channel_timing(lag, &[e(lag)]));
-    assert!(!same_channel_timing(lag, &[e(EffectKind::Cogging)]));
-    assert!(!same_channel_timing(EffectKind::Cogging, &[e(lag), e(act)]));
+    assert!(!same_channel_timing(lag, &[e(COGGING)]));
+    assert!(!same_channel_timing(COGGING, &[e(lag), e(act)]));
 }
 
 /// `compliance_zetas` (the profiles of several frequencies in one resonator pass) gives
@@ -548,7 +548,7 @@ fn batched_zeta_profiles_match_single_ones() {
     assert_ne!(single[0], single[1], "{single:?}");
 }
 
-/// `stribeck_within_presliding` on a closed-form sinusoid, x = A·cos(ωt), A 20 mm, period
+/// `bump_within_buildup` on a closed-form sinusoid, x = A·cos(ωt), A 20 mm, period
 /// 2 s (the speed at a displacement d from a reversal is √(2·Aω²·d): 19.9 mm/s at 1 mm,
 /// 0.89 mm/s at 2 µm). A Stribeck bump of v_s 5 mm/s lies within 0.06 mm of the reversals
 /// (d = v_s²/(2Aω²)): inside a 1 mm presliding build-up (refused, either order); most of it
@@ -575,20 +575,16 @@ fn stribeck_inside_the_presliding_build_up() {
     }
     let ctx = Context::new(&rec);
     let e = |kind, param| Effect::new(kind, param);
-    let st = e(EffectKind::Stribeck, 5e-3);
-    let pre = |xc| e(EffectKind::PreslidingHysteresis, xc);
-    assert!(stribeck_within_presliding(&st, &[pre(1e-3)], &ctx));
-    assert!(stribeck_within_presliding(
+    let st = e(STRIBECK, 5e-3);
+    let pre = |xc| e(PRESLIDING_HYSTERESIS, xc);
+    assert!(bump_within_buildup(&st, &[pre(1e-3)], &ctx));
+    assert!(bump_within_buildup(
         &pre(1e-3),
         std::slice::from_ref(&st),
         &ctx
     ));
-    assert!(!stribeck_within_presliding(&st, &[pre(2e-6)], &ctx));
-    assert!(!stribeck_within_presliding(
-        &st,
-        &[e(EffectKind::Cogging, 0.01)],
-        &ctx
-    ));
+    assert!(!bump_within_buildup(&st, &[pre(2e-6)], &ctx));
+    assert!(!bump_within_buildup(&st, &[e(COGGING, 0.01)], &ctx));
 }
 
 /// The rotated sinusoid of `sinusoid_energy` against the same projection summed with a

@@ -2,7 +2,7 @@
 //! baseline and each kept finding with exactly the parameters the report gives, as the
 //! simulator's plant physics ([`crate::device_model`]), loaded by `regen run --model`.
 
-use super::{effects, Diagnosis, EffectKind, Record};
+use super::{effects, Diagnosis, Record};
 use crate::device_model::{DeviceModel, Fragment, ModelEffect};
 
 /// The extended model of a diagnosis as plant physics, or why it cannot be one (nothing
@@ -23,24 +23,25 @@ pub fn device_model(rec: &Record, d: &Diagnosis) -> Result<DeviceModel, String> 
             // a finding the second record contradicts is not a device model
             continue;
         }
-        if e.kind == EffectKind::ActuatorLag {
-            // the recording's force channel (a drive's command ahead of the force), not the
-            // device: the plant carries the force the motion needs
+        // the effect's own entries beside the report's parameters, or why the plant does not
+        // express it (the record's channel, not the device: left out)
+        let Ok(extra) = e.kind.fragment(e, &d.model, rec.dt()) else {
             continue;
-        }
+        };
         // the report's parameters, by their report names, read as the plant's effect
         let mut t = toml::Table::new();
         t.insert("name".into(), toml::Value::String(e.kind.name().into()));
         for (k, v) in &f.parameters {
             t.insert(k.clone(), toml::Value::Float(*v));
         }
-        if e.kind == EffectKind::Backlash {
-            // the impact's force pulse as fitted (whole-record coefficients), per tap
-            let taps: Vec<toml::Value> = (0..effects::IMPACT_TAPS)
-                .map(|k| toml::Value::Float(get(&format!("backlash.impact_{k}")).unwrap_or(0.0)))
-                .collect();
-            t.insert("impact_pulse_kg".into(), toml::Value::Array(taps));
-            t.insert("impact_tap_s".into(), toml::Value::Float(rec.dt()));
+        for (k, v) in extra {
+            let v = match v {
+                effects::FragmentValue::Number(x) => toml::Value::Float(x),
+                effects::FragmentValue::List(xs) => {
+                    toml::Value::Array(xs.into_iter().map(toml::Value::Float).collect())
+                }
+            };
+            t.insert(k, v);
         }
         let eff: ModelEffect = toml::Value::Table(t)
             .try_into()
@@ -82,10 +83,14 @@ pub fn fragment_toml(rec: &Record, d: &Diagnosis) -> String {
         }
     }
     for (i, f) in d.findings.iter().enumerate() {
-        let why = match f.effect.as_str() {
-            "actuator_lag" => "the record's force channel leads the device's force, not simulated",
-            "unexplained" => "no catalogue effect, not simulated",
-            _ if i < d.effects.len() && worsens_cross_check(d, i) => {
+        let not_plant = d
+            .effects
+            .get(i)
+            .and_then(|e| e.kind.fragment(e, &d.model, rec.dt()).err());
+        let why = match (not_plant, f.effect.as_str()) {
+            (Some(why), _) => why,
+            (None, "unexplained") => "no catalogue effect, not simulated",
+            (None, _) if i < d.effects.len() && worsens_cross_check(d, i) => {
                 "worsens the cross-check's second record, left out"
             }
             _ => continue,
@@ -194,7 +199,7 @@ mod cross_check_tests {
         ];
         let d = Diagnosis {
             model: base.iter().map(|(n, v)| (n.to_string(), *v)).collect(),
-            effects: vec![Effect::new(EffectKind::Cogging, 0.004)],
+            effects: vec![Effect::new(effects::COGGING, 0.004)],
             findings: vec![Finding {
                 effect: "cogging".into(),
                 parameters: vec![
