@@ -6,6 +6,7 @@
 // Numerical kernels index several arrays in step; iterator rewrites would obscure them.
 #![allow(clippy::needless_range_loop)]
 
+mod conclusion;
 pub mod effects;
 mod fit;
 pub mod record;
@@ -14,6 +15,7 @@ mod selection;
 pub mod synth;
 mod validation;
 
+pub(crate) use conclusion::*;
 pub use fit::*;
 pub use selection::*;
 pub use validation::*;

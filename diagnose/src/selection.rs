@@ -56,7 +56,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // A set holding a delay τ of the force (`EffectModel::force_delay`) makes the force the device's at t − τ: its fits leave out the
     // samples whose delayed motion is at rest (`Context::lag_rest_rows`), and so does every fit
     // it is compared with (the same rows on both sides of a comparison).
-    let lag_of = |set: &[Effect]| set.iter().find_map(|e| e.kind.force_delay(e));
+    let lag_of = delay_of;
     // (the same rows every time a τ comes back: kept per τ)
     let lag_rest_kept = std::cell::RefCell::new(std::collections::HashMap::new());
     let lag_rest_sub = |tau: f64| -> Vec<usize> {
@@ -107,15 +107,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // time as Legendre polynomials of degree 1 and 2 on [−1, 1]), so that no catalogue effect
     // takes it (a drift correlates with whatever the motion does slowly: a position, a
     // direction, a dwell) and the effects are fitted on the rest.
-    let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| -> Vec<f64> {
-        let p = effects::predict(cols, th);
-        rec.f
-            .iter()
-            .zip(&p)
-            .zip(&ctx.rest)
-            .map(|((a, b), &r)| if r { 0.0 } else { a - b })
-            .collect()
-    };
+    let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| resid_of(&ctx, cols, th);
     let (t0, t1) = (rec.t[0], rec.t[n - 1]);
     let tn: Vec<f64> = rec
         .t
@@ -164,10 +156,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // and their Gram entries against the base columns, extended as the base grows
     let grams =
         std::cell::RefCell::new(std::collections::HashMap::<(usize, u64), GramCache>::new());
-    let whole_fit = |full: &(Normal, Normal), cols: &[(String, Vec<f64>)]| {
-        let t = full.0.plus(&full.1).solve();
-        cols.iter().map(|c| c.0.clone()).zip(t).collect::<Vec<_>>()
-    };
+    let whole_fit = whole_fit;
     let catalogue = effects::catalogue(&ctx);
     let n_fixed = sub_cols.len();
     // the screening columns of the fixed terms and of a set of effects (from the cache)
@@ -727,7 +716,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // by at least half the selection margin and its fit there is physical; it is kept when it
     // holds on STABILITY_MIN segments and its leading coefficient keeps its sign on all of
     // them. Its columns are the whole-record columns (`cols`) at those rows.
-    let n_sub = spread_f.len();
     let mut spans = Vec::new();
     let mut at = n_fixed;
     for e in &chosen {
@@ -738,539 +726,91 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         spans.push((at, at + k));
         at += k;
     }
-    let sub_all: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&spread_rows, v)).collect();
-    let sub_refs: Vec<&[f64]> = sub_all.iter().map(|v| v.as_slice()).collect();
-    let mut holds = vec![0usize; chosen.len()];
-    let mut signs = vec![(0usize, 0usize); chosen.len()];
-    let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
-    let mut seg_held: Vec<Vec<bool>> = vec![Vec::new(); chosen.len()];
-    // A delay's rows whose delayed motion is at rest (or inside the Coulomb sign's band) are left
-    // out of the segments' fits, as of its other fits, except where a play is chosen: those
-    // rows, right after the reversals, are where its contacts lie, and a play tested without
-    // them holds nowhere (its impact taps fit to zero). A play, and a delay beside it, are
-    // tested on every row in motion; every other finding beside a delay on the delay's rows (a
-    // presliding's build-up there would take the delayed device's).
-    let lag_rest: Vec<usize> = lag_of(&chosen)
-        .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
-        .unwrap_or_default();
-    let mut lag_hold = spread_hold.clone();
-    for &j in &lag_rest {
-        lag_hold[j] = AT_REST;
-    }
-    let with_play = chosen.iter().any(|e| e.kind.tested_at_reversals());
-    let on_every_row = |e: &Effect| {
-        with_play
-            && !lag_rest.is_empty()
-            && (e.kind.tested_at_reversals() || e.kind.force_delay(e).is_some())
+    let selected = Selected {
+        chosen,
+        findings,
+        cols,
+        full,
+        stage_models,
+        lag_rows_full,
+        ho_rel,
     };
-    let segment_fit = |hold: &[u8], sgi: usize| {
-        let part: Vec<u8> = (0..n_sub)
-            .map(|j| {
-                if hold[j] == AT_REST {
-                    AT_REST
-                } else if j * STABILITY_SEGMENTS / n_sub == sgi {
-                    HELD_OUT
-                } else {
-                    TRAIN
-                }
-            })
-            .collect();
-        let (tr, ho) = normals(&sub_refs, &spread_f, &part, 1);
-        let th = tr.solve();
-        (tr, ho, th)
+    let spread = Spread {
+        rows: &spread_rows,
+        f: &spread_f,
+        hold: &spread_hold,
     };
-    for sgi in 0..STABILITY_SEGMENTS {
-        let on_lag_rows = segment_fit(&lag_hold, sgi);
-        let on_all_rows = chosen
-            .iter()
-            .any(on_every_row)
-            .then(|| segment_fit(&spread_hold, sgi));
-        for (k, &(a, b)) in spans.iter().enumerate() {
-            let (tr, ho, th) = match &on_all_rows {
-                Some(f) if on_every_row(&chosen[k]) => f,
-                _ => &on_lag_rows,
-            };
-            if ho.n < 10 {
-                continue;
-            }
-            let rss_with = ho.rss(th);
-            let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
-            let (t2, h2) = (tr.select(&keep), ho.select(&keep));
-            let rss_without = h2.rss(&t2.solve());
-            // (a delay's range on its least-squares fit or, failing that, on its fit corrected for
-            // the derived signals' noise, as in the scan)
-            let corrected = match chosen[k].kind.derived_noise(&ctx, &chosen[k]) {
-                Some((effects::NoiseUse::RankCorrected, sn)) => {
-                    Some(lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0))
-                }
-                _ => None,
-            };
-            let phys = match &corrected {
-                Some(None) => false,
-                Some(Some(tc)) => {
-                    effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)])
-                        || effects::plausible(&chosen[k], &tc[a..b], &tc[..4.min(n_base)])
-                }
-                None => effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)]),
-            };
-            let held = phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain);
-            if held {
-                holds[k] += 1;
-            }
-            seg_held[k].push(held);
-            seg_coefs[k].push(th[a..b].to_vec());
-            if th[a] > 0.0 {
-                signs[k].0 += 1;
-            } else {
-                signs[k].1 += 1;
-            }
-        }
-    }
-    // A play's impact taps are the contact pulse's shape, resolved only by the contacts on the
-    // fitted rows: on a record with few reversals a fit without them leaves the taps in their
-    // null space (alternating ±10³ kg, their sum off the impact's momentum) and that segment
-    // does not hold (its impact outside the momentum rule or its held-out rss not lowered).
-    // The play's agreement is asked of the segments where it holds (`agreement_of_held`), at
-    // least STABILITY_MIN of them; every other effect's of all five.
-    let agreement: Vec<f64> = seg_coefs
-        .iter()
-        .zip(&seg_held)
-        .zip(&chosen)
-        .map(|((c, h), e)| e.kind.agreement(c, h))
-        .collect();
-    // A periodic finding names a ripple: the residual it explains (the whole-record residual
-    // with its own contribution added back) must show that ripple as a peak of the spectrum
-    // over position (30× the median level, the `unexplained` criterion) within the 3 % of
-    // `same_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
-    // peaks there (fewer than 3 periods) and are not checked.
-    let ripple_shows: Vec<bool> = {
-        let th_now = full.0.plus(&full.1).solve();
-        let resid_now = if chosen
-            .iter()
-            .any(|e| e.kind.spatial_wavelength(e).is_some())
-        {
-            resid_of(&cols, &th_now)
-        } else {
-            Vec::new()
-        };
-        chosen
-            .iter()
-            .enumerate()
-            .map(|(k, e)| {
-                let Some(lambda) = e.kind.spatial_wavelength(e) else {
-                    return true;
-                };
-                if lambda > 2.0 * ctx.x_half / 3.0 {
-                    return true;
-                }
-                let (a, b) = spans[k];
-                let mut r = resid_now.clone();
-                for j in a..b {
-                    for ((ri, c), &rest) in r.iter_mut().zip(&cols[j].1).zip(&ctx.rest) {
-                        if !rest {
-                            *ri += th_now[j] * c;
-                        }
-                    }
-                }
-                report::position_spectrum(rec, &r)
-                    .peaks
-                    .iter()
-                    .any(|p| effects::at_wavelength(p.wavelength_m, e))
-            })
-            .collect()
-    };
-    // A periodic finding names a force locked to position: it must be carried by the samples
-    // where its time frequency |v|/λ lies inside the band where the derived acceleration
-    // follows the motion (`effects::ripple_in_band`). Above that band a ripple of the motion
-    // itself leaves M·(a − a_derived) in the residual at the same wavelength, an inertial
-    // force the record does not measure; inside it that artefact vanishes and a force ripple
-    // does not. The in-band part of its columns must stand AGREEMENT_T standard errors out of
-    // the noise (Wald statistic ≥ AGREEMENT_T²: χ² with 2 degrees of freedom, 1 %).
-    let ripple_measured: Vec<Option<(effects::RippleInBand, effects::InBandWords)>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            // a friction building up with speed likewise: carried by the samples where its
-            // column changes within that band (`effects::buildup_in_band`), with one rise there
-            // and at the stops the motion passes faster
-            e.kind
-                .in_band(&ctx, e)
-                .map(|(mask, words)| (effects::in_band_ripple(&ctx, &cols, spans[k], &mask), words))
-        })
-        .collect();
-    for (k, r) in ripple_measured.iter().enumerate() {
-        if let (Some((r, _)), Some(f)) = (r, findings.get_mut(k)) {
-            let above = if r.amp_above > 0.0 {
-                format!(
-                    "above it {:.3} N (differing by {:.0} %, Wald {:.1})",
-                    r.amp_above,
-                    100.0 * r.rel_diff,
-                    r.wald_diff
-                )
-            } else {
-                "no sample above it".to_string()
-            };
-            f.note.push_str(&format!(
-                "; inside the derived acceleration's band {:.3} N (Wald {:.1}), {above}",
-                r.amp_in, r.wald
-            ));
-        }
-    }
-    let ripple_locked: Vec<bool> = ripple_measured
-        .iter()
-        .map(|r| r.is_none_or(|(r, _)| r.locked_to_position(AGREEMENT_T)))
-        .collect();
-    // A periodic finding names a force locked to position, not to the reversals: beside a
-    // ripple locked to the last reversal whose sign follows the direction of motion (what a
-    // reversal excites: a mode's ringing, a friction transient; on a motion that turns at the
-    // same positions it is the position ripple's part odd about the stroke's centre) its
-    // columns must stand AGREEMENT_T standard errors out of the noise
-    // (`effects::ripple_apart_from_reversals`).
-    let ripple_reversal: Vec<Option<f64>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            e.kind
-                .spatial_wavelength(e)
-                .map(|l| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], l))
-        })
-        .collect();
-    for (k, w) in ripple_reversal.iter().enumerate() {
-        if let (Some(w), Some(f)) = (w, findings.get_mut(k)) {
-            f.note.push_str(&format!(
-                "; beside a ripple locked to the last reversal Wald {w:.1}"
-            ));
-        }
-    }
-    let ripple_apart: Vec<bool> = ripple_reversal
-        .iter()
-        .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
-        .collect();
-    // A friction of the speed or a ripple of the position names a force of the motion, not
-    // one at a fixed time frequency: where the residual's spectrum holds a peak standing out
-    // of the residual (`effects::hum_in_residual`: a hum of the supply, a machine nearby),
-    // the finding's columns must stand AGREEMENT_T standard errors out of the noise beside
-    // that sinusoid (`effects::finding_apart_from_hum`).
-    // The hum is sought in the residual of the fixed terms and the finding alone: another
-    // finding of the set (a resonance at the hum's frequency) may carry it until it is dropped.
-    let hum: Vec<Option<(f64, f64)>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            if !e.kind.apart_from_hum() {
-                return None;
-            }
-            let idx: Vec<usize> = (0..n_fixed).chain(spans[k].0..spans[k].1).collect();
-            let own: Vec<(String, Vec<f64>)> = idx.iter().map(|&j| cols[j].clone()).collect();
-            let th = full.0.plus(&full.1).select(&idx).solve();
-            let f = effects::hum_in_residual(&ctx, &resid_of(&own, &th))?;
-            Some((f, effects::finding_apart_from_hum(&ctx, &cols, spans[k], f)))
-        })
-        .collect();
-    for (k, h) in hum.iter().enumerate() {
-        if let (Some((hz, w)), Some(f)) = (h, findings.get_mut(k)) {
-            f.note.push_str(&format!(
-                "; beside the residual's force at {hz:.3} Hz Wald {w:.1}"
-            ));
-        }
-    }
-    let hum_apart: Vec<bool> = hum
-        .iter()
-        .map(|h| h.is_none_or(|(_, w)| w >= AGREEMENT_T * AGREEMENT_T))
-        .collect();
-    let kept: Vec<usize> = (0..chosen.len())
-        .filter(|&k| {
-            holds[k] >= STABILITY_MIN
-                && (signs[k].0 == 0 || signs[k].1 == 0)
-                && agreement[k] >= AGREEMENT_T
-                && ripple_shows[k]
-                && ripple_locked[k]
-                && ripple_apart[k]
-                && hum_apart[k]
-        })
-        .collect();
-    // one cause, one name: a position ripple whose time frequency on the motion lies in the
-    // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
-    let modes: Vec<Effect> = kept
-        .iter()
-        .filter(|&&k| chosen[k].kind.time_band(&ctx, &chosen[k]).is_some())
-        .map(|&k| chosen[k].clone())
-        .collect();
-    let at_mode: Vec<bool> = chosen
-        .iter()
-        .map(|e| effects::ripple_at_mode(e, &modes, &ctx))
-        .collect();
-    let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
-    let mut dropped_notes = Vec::new();
-    if kept.len() < chosen.len() {
-        for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
-            if let (false, Some((r, words))) = (ripple_locked[k], ripple_measured[k]) {
-                // a friction of the speed is tested where its build-up is followed, a ripple
-                // where its time frequency is: the same split, worded for each
-                let effects::InBandWords { not, band, outside } = words;
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not {not}: {band} {:.3} N (Wald {:.1}, at least {:.0} needed), {outside}, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    r.amp_in,
-                    r.wald,
-                    AGREEMENT_T * AGREEMENT_T,
-                    r.amp_above,
-                    100.0 * r.rel_diff,
-                    r.wald_diff,
-                    100.0 / AGREEMENT_T,
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if at_mode[k] {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but on most of the motion its time frequency lies in the band of the resonance named (a ripple at the speed the motion keeps and the mode's ringing after each turn, locked to the turn's position, are the same force): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                ));
-                continue;
-            }
-            if let (false, Some(wald)) = (ripple_apart[k], ripple_reversal[k]) {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if let (false, Some((hz, wald))) = (hum_apart[k], hum[k]) {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not apart from the residual's force at {hz:.3} Hz (a force at one time frequency, which no function of the motion is): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if !ripple_shows[k] {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but the residual it explains shows no peak at its wavelength in the spectrum over position (no ripple stands 30× above the spectrum's median within 3 %): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                ));
-                continue;
-            }
-            dropped_notes.push(format!(
-                "{} ({}) selected on the whole record, held on {}/{} independent segments (at least {STABILITY_MIN} needed){}, its coefficients agreeing across them to t = {:.1} (at least {AGREEMENT_T} needed): not kept",
-                chosen[k].kind.name(),
-                effects::describe(&ctx, &chosen[k]),
-                holds[k],
-                STABILITY_SEGMENTS,
-                if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" },
-                agreement[k]
-            ));
-        }
-        // a delay not kept gives its left-out samples back to the fits
-        if !lag_rows_full.is_empty()
-            && kept
-                .iter()
-                .all(|&k| chosen[k].kind.force_delay(&chosen[k]).is_none())
-        {
-            full = change_rows(&full, &refs(&cols), &rec.f, &hold, &lag_rows_full, 1.0);
-            lag_rows_full.clear();
-        }
-        // rebuild the model from the kept findings (sub-blocks of the accumulated normals)
-        let mut idx: Vec<usize> = (0..n_fixed).collect();
-        let mut new_chosen = Vec::new();
-        let mut new_findings = Vec::new();
-        let mut new_stages = vec![stage_models[0].clone()];
-        let mut new_cols: Vec<(String, Vec<f64>)> = cols[..n_fixed].to_vec();
-        for &k in &kept {
-            let (a, b) = spans[k];
-            idx.extend(a..b);
-            new_cols.extend(cols[a..b].iter().cloned());
-            new_chosen.push(chosen[k].clone());
-            let (t, h) = (full.0.select(&idx), full.1.select(&idx));
-            new_stages.push(whole_fit(&(t.clone(), h.clone()), &new_cols));
-            let th_cur = t.solve();
-            let mut fnd = findings[k].clone();
-            fnd.holdout_rel_error_after = rel(h.rss(&th_cur), h.ff);
-            fnd.parameters =
-                effects::parameters(&ctx, &new_chosen, &new_cols, &th_cur, new_chosen.len() - 1);
-            new_findings.push(fnd);
-        }
-        full = (full.0.select(&idx), full.1.select(&idx));
-        cols = new_cols;
-        chosen = new_chosen;
-        findings = new_findings;
-        stage_models = new_stages;
-        ho_rel = findings
-            .last()
-            .map_or(baseline_holdout, |f| f.holdout_rel_error_after);
-        holds = kept.iter().map(|&k| holds[k]).collect();
-    }
-    for (f, h) in findings.iter_mut().zip(&holds) {
-        f.consistency = *h as f64 / STABILITY_SEGMENTS as f64;
-    }
-    // Final model refitted on the whole record.
-    let tf = full.0.plus(&full.1);
-    let sol = tf.solve_full();
-    let (fit_rank, fit_condition) = (sol.rank, sol.condition);
-    let th_full = sol.th;
-    // Each finding's parameters are those of the final model (the coefficients `--model`
-    // writes), not of the stage at which it was selected.
-    for (k, f) in findings.iter_mut().enumerate().take(chosen.len()) {
-        f.parameters = effects::parameters(&ctx, &chosen, &cols, &th_full, k);
-    }
-    let pred = effects::predict(&cols, &th_full);
-    // samples at rest are in no fit (static friction is anywhere within its breakaway
-    // level): they carry no residual, so they cannot show as a spectral peak either; with a
-    // delay, neither do those whose delayed motion is at rest
-    let mut rest_final = ctx.rest.clone();
-    for &j in &lag_rows_full {
-        rest_final[j] = true;
-    }
-    let residual: Vec<f64> = rec
+    let (selected, dropped_notes) = validate(
+        &ctx,
+        opt,
+        selected,
+        &spans,
+        n_fixed,
+        n_base,
+        &spread,
+        baseline_holdout,
+    );
+    let Selected {
+        chosen,
+        findings,
+        cols,
+        full,
+        stage_models,
+        lag_rows_full,
+        ho_rel,
+    } = selected;
+    conclude(
+        &ctx,
+        opt,
+        Selected {
+            chosen,
+            findings,
+            cols,
+            full,
+            stage_models,
+            lag_rows_full,
+            ho_rel,
+        },
+        Baseline {
+            terms: baseline_terms,
+            confounded,
+            holdout: baseline_holdout,
+            train: baseline_train,
+            full: base_full,
+        },
+        drift,
+        dropped_notes,
+    )
+}
+
+/// The force less the model `cols` with coefficients `th`, 0 at rest.
+pub(crate) fn resid_of(
+    ctx: &effects::Context,
+    cols: &[(String, Vec<f64>)],
+    th: &[f64],
+) -> Vec<f64> {
+    let p = effects::predict(cols, th);
+    ctx.rec
         .f
         .iter()
-        .zip(&pred)
-        .zip(&rest_final)
+        .zip(&p)
+        .zip(&ctx.rest)
         .map(|((a, b), &r)| if r { 0.0 } else { a - b })
-        .collect();
-    let final_full = rel(tf.rss(&th_full), tf.ff);
-    let tb = base_full.0.plus(&base_full.1);
-    let baseline_full = rel(tb.rss(&tb.solve()), tb.ff);
-    let whiteness = report::whiteness(&residual);
-    let spectrum_peaks = report::spectral_peaks(&residual, rec.dt());
-    for pk in spectrum_peaks.iter().filter(|p| p.unexplained) {
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![("frequency_Hz".into(), pk.freq_hz), ("amplitude_N".into(), pk.amplitude)],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "residual spectral peak at {:.3} Hz ({:.1}x the median spectral level) that no catalogue effect explains",
-                pk.freq_hz, pk.ratio
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    // the slow change found on the baseline residual, or one the final residual still shows
-    let drift_carried = drift.is_some();
-    let slow =
-        drift.or_else(|| report::slow_change(&rec.t, &residual, &rest_final, opt.min_holdout_gain));
-    if let Some(sc) = slow {
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![
-                ("slope_N_per_s".into(), sc.slope_n_per_s),
-                ("change_N".into(), sc.change_n),
-                ("largest_departure_N".into(), sc.worst_n),
-                ("largest_departure_from_s".into(), sc.worst_from_s),
-                ("largest_departure_to_s".into(), sc.worst_to_s),
-            ],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "the residual's mean changes over time (a drift of the force offset: temperature, a load cell's zero, wear): {:+.3} N/s, {:+.3} N over the record, furthest from its mean by {:+.3} N over {:.2}–{:.2} s (a trend over {} blocks, F = {:.0} against the block means' scatter, bound {:.0}; {:.1} % of the residual power){}; no catalogue effect explains it",
-                sc.slope_n_per_s,
-                sc.change_n,
-                sc.worst_n,
-                sc.worst_from_s,
-                sc.worst_to_s,
-                sc.blocks.len(),
-                sc.f_stat,
-                sc.f_bound,
-                100.0 * sc.power_fraction,
-                if drift_carried { "; carried by a trend in time during the search and in the model" } else { "" }
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    let position_spectrum = report::position_spectrum(rec, &residual);
-    for pk in position_spectrum.peaks.iter().filter(|p| p.unexplained) {
-        // a residual peak at a wavelength already named is that finding's remainder (a ripple
-        // not purely sinusoidal, or whose amplitude varies along the stroke), not a second
-        // cause: stated on the finding, not named again
-        if let Some(k) = chosen
-            .iter()
-            .position(|c| effects::at_wavelength(pk.wavelength_m, c))
-        {
-            let name = chosen[k].kind.name();
-            if let Some(f) = findings.iter_mut().find(|f| f.effect == name) {
-                f.note.push_str(&format!(
-                    "; the residual still shows {:.3} N at {:.4e} m (a ripple not purely sinusoidal or varying along the stroke)",
-                    pk.amplitude, pk.wavelength_m
-                ));
-            }
-            continue;
-        }
-        let matches = if pk.matches.is_empty() {
-            String::new()
-        } else {
-            format!("; its wavelength matches {}", pk.matches)
-        };
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![
-                ("wavelength_m".into(), pk.wavelength_m),
-                ("cycles_per_m".into(), pk.cycles_per_m),
-                ("amplitude_N".into(), pk.amplitude),
-            ],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "residual periodic in position, wavelength {:.4e} m ({:.1}x the median level of the position spectrum){matches}, that no catalogue effect explains",
-                pk.wavelength_m, pk.ratio
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    let mut verdicts = baseline_verdicts(&ctx.base_th);
-    let n_rest = ctx.rest.iter().filter(|r| **r).count();
-    if n_rest > 0 {
-        verdicts.push(format!(
-            "{n_rest} of {n} samples at rest (position still within its noise over ±{} samples), within that window of rest or at the record's ends: left out of every fit (friction at rest is static, anywhere within its breakaway level)",
-            effects::REST_HALF_WINDOW
-        ));
-    }
-    if let (Some(tau), false) = (lag_of(&chosen), lag_rows_full.is_empty()) {
-        verdicts.push(format!(
-            "{} samples in motion whose motion {tau:.4} s earlier (the delay) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the delay and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
-            lag_rows_full.len()
-        ));
-    }
-    verdicts.extend(dropped_notes);
-    if fit_rank < cols.len() {
-        verdicts.push(format!(
-            "RANK-DEFICIENT FIT: the final model's {} columns have numerical rank {fit_rank} (condition number {fit_condition:.3e}): some coefficients are not determined by this record (the minimum-norm solution is reported); the motion does not separate those terms",
-            cols.len()
-        ));
-    }
-    Diagnosis {
-        n,
-        verdicts,
-        derivative_method: rec.derivative_method.clone(),
-        baseline_terms,
-        confounded,
-        baseline_holdout_rel_error: baseline_holdout,
-        baseline_train_rel_error: baseline_train,
-        baseline_full_rel_error: baseline_full,
-        findings,
-        final_holdout_rel_error: ho_rel,
-        final_full_rel_error: final_full,
-        model: cols.iter().map(|c| c.0.clone()).zip(th_full).collect(),
-        stage_models,
-        effects: chosen,
-        residual,
-        prediction: pred,
-        whiteness,
-        spectrum_peaks,
-        position_spectrum,
-        cross: None,
-        fit_rank,
-        fit_condition,
-    }
+        .collect()
+}
+
+/// The model `cols` fitted on the whole record (training and held-out normals together).
+pub(crate) fn whole_fit(
+    full: &(Normal, Normal),
+    cols: &[(String, Vec<f64>)],
+) -> Vec<(String, f64)> {
+    let t = full.0.plus(&full.1).solve();
+    cols.iter().map(|c| c.0.clone()).zip(t).collect()
+}
+
+/// The delay of the force a set of effects holds (`EffectModel::force_delay`).
+pub(crate) fn delay_of(set: &[Effect]) -> Option<f64> {
+    set.iter().find_map(|e| e.kind.force_delay(e))
 }
 
 /// The screening columns of each candidate value, keyed by its kind and parameter's bits.

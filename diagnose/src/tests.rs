@@ -877,7 +877,8 @@ fn a_current_that_follows_speed_is_not_told_from_viscous_friction() {
     }
 }
 
-/// The method's parts that judge and report (the selection, the validation, the report) name
+/// The method's parts that judge and report (the selection, the validation, the conclusion,
+/// the report) name
 /// no effect: every registered effect's name (whole word, any case) and its type name
 /// (CamelCase) are absent from their sources (tests excluded), so that an effect is added by
 /// its file and its registry line alone. Break: `EffectKind::from_name("lag")` written into
@@ -904,7 +905,7 @@ fn method_names_no_effect() {
     }
     let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
-    for part in ["selection", "validation", "report"] {
+    for part in ["selection", "validation", "conclusion", "report"] {
         let dir = src.join(part);
         let file = src.join(format!("{part}.rs"));
         assert!(dir.exists() || file.exists(), "no source for {part}");
