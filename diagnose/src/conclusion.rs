@@ -51,7 +51,7 @@ pub(crate) fn conclude(
     // Each finding's parameters are those of the final model (the coefficients `--model`
     // writes), not of the stage at which it was selected.
     for (k, f) in findings.iter_mut().enumerate().take(chosen.len()) {
-        f.parameters = effects::parameters(&ctx, &chosen, &cols, &th_full, k);
+        f.parameters = effects::parameters(ctx, &chosen, &cols, &th_full, k);
     }
     let pred = effects::predict(&cols, &th_full);
     // samples at rest are in no fit (static friction is anywhere within its breakaway

@@ -121,7 +121,7 @@ pub(crate) fn validate(
         }
         h
     };
-    let sub_all: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&spread_rows, v)).collect();
+    let sub_all: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(spread_rows, v)).collect();
     let sub_refs: Vec<&[f64]> = sub_all.iter().map(|v| v.as_slice()).collect();
     let mut holds = vec![0usize; chosen.len()];
     let mut signs = vec![(0usize, 0usize); chosen.len()];
@@ -134,7 +134,7 @@ pub(crate) fn validate(
     // tested on every row in motion; every other finding beside a delay on the delay's rows (a
     // presliding's build-up there would take the delayed device's).
     let lag_rest: Vec<usize> = lag_of(&chosen)
-        .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
+        .map(|t| ctx.lag_rest_rows(t, Some(spread_rows)))
         .unwrap_or_default();
     let mut lag_hold = spread_hold.to_vec();
     for &j in &lag_rest {
@@ -158,7 +158,7 @@ pub(crate) fn validate(
                 }
             })
             .collect();
-        let (tr, ho) = normals(&sub_refs, &spread_f, &part, 1);
+        let (tr, ho) = normals(&sub_refs, spread_f, &part, 1);
         let th = tr.solve();
         (tr, ho, th)
     };
@@ -167,7 +167,7 @@ pub(crate) fn validate(
         let on_all_rows = chosen
             .iter()
             .any(on_every_row)
-            .then(|| segment_fit(&spread_hold, sgi));
+            .then(|| segment_fit(spread_hold, sgi));
         for (k, &(a, b)) in spans.iter().enumerate() {
             let (tr, ho, th) = match &on_all_rows {
                 Some(f) if on_every_row(&chosen[k]) => f,
@@ -182,7 +182,7 @@ pub(crate) fn validate(
             let rss_without = h2.rss(&t2.solve());
             // (a delay's range on its least-squares fit or, failing that, on its fit corrected for
             // the derived signals' noise, as in the scan)
-            let corrected = match chosen[k].kind.derived_noise(&ctx, &chosen[k]) {
+            let corrected = match chosen[k].kind.derived_noise(ctx, &chosen[k]) {
                 Some((effects::NoiseUse::RankCorrected, sn)) => {
                     Some(lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0))
                 }
@@ -277,8 +277,8 @@ pub(crate) fn validate(
             // column changes within that band (`effects::buildup_in_band`), with one rise there
             // and at the stops the motion passes faster
             e.kind
-                .in_band(&ctx, e)
-                .map(|(mask, words)| (effects::in_band_ripple(&ctx, &cols, spans[k], &mask), words))
+                .in_band(ctx, e)
+                .map(|(mask, words)| (effects::in_band_ripple(ctx, &cols, spans[k], &mask), words))
         })
         .collect();
     for (k, r) in ripple_measured.iter().enumerate() {
@@ -315,7 +315,7 @@ pub(crate) fn validate(
         .map(|(k, e)| {
             e.kind
                 .spatial_wavelength(e)
-                .map(|l| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], l))
+                .map(|l| effects::ripple_apart_from_reversals(ctx, &cols, spans[k], l))
         })
         .collect();
     for (k, w) in ripple_reversal.iter().enumerate() {
@@ -346,8 +346,8 @@ pub(crate) fn validate(
             let idx: Vec<usize> = (0..n_fixed).chain(spans[k].0..spans[k].1).collect();
             let own: Vec<(String, Vec<f64>)> = idx.iter().map(|&j| cols[j].clone()).collect();
             let th = full.0.plus(&full.1).select(&idx).solve();
-            let f = effects::hum_in_residual(&ctx, &resid_of(&own, &th))?;
-            Some((f, effects::finding_apart_from_hum(&ctx, &cols, spans[k], f)))
+            let f = effects::hum_in_residual(ctx, &resid_of(&own, &th))?;
+            Some((f, effects::finding_apart_from_hum(ctx, &cols, spans[k], f)))
         })
         .collect();
     for (k, h) in hum.iter().enumerate() {
@@ -376,12 +376,12 @@ pub(crate) fn validate(
     // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
     let modes: Vec<Effect> = kept
         .iter()
-        .filter(|&&k| chosen[k].kind.time_band(&ctx, &chosen[k]).is_some())
+        .filter(|&&k| chosen[k].kind.time_band(ctx, &chosen[k]).is_some())
         .map(|&k| chosen[k].clone())
         .collect();
     let at_mode: Vec<bool> = chosen
         .iter()
-        .map(|e| effects::ripple_at_mode(e, &modes, &ctx))
+        .map(|e| effects::ripple_at_mode(e, &modes, ctx))
         .collect();
     let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
     let mut dropped_notes = Vec::new();
@@ -394,7 +394,7 @@ pub(crate) fn validate(
                 dropped_notes.push(format!(
                     "{} ({}) selected, but it is not {not}: {band} {:.3} N (Wald {:.1}, at least {:.0} needed), {outside}, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
                     chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
+                    effects::describe(ctx, &chosen[k]),
                     r.amp_in,
                     r.wald,
                     AGREEMENT_T * AGREEMENT_T,
@@ -410,7 +410,7 @@ pub(crate) fn validate(
                 dropped_notes.push(format!(
                     "{} ({}) selected, but on most of the motion its time frequency lies in the band of the resonance named (a ripple at the speed the motion keeps and the mode's ringing after each turn, locked to the turn's position, are the same force): not kept",
                     chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
+                    effects::describe(ctx, &chosen[k]),
                 ));
                 continue;
             }
@@ -418,7 +418,7 @@ pub(crate) fn validate(
                 dropped_notes.push(format!(
                     "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
                     chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
+                    effects::describe(ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
                 ));
                 continue;
@@ -427,7 +427,7 @@ pub(crate) fn validate(
                 dropped_notes.push(format!(
                     "{} ({}) selected, but it is not apart from the residual's force at {hz:.3} Hz (a force at one time frequency, which no function of the motion is): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
                     chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
+                    effects::describe(ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
                 ));
                 continue;
@@ -436,14 +436,14 @@ pub(crate) fn validate(
                 dropped_notes.push(format!(
                     "{} ({}) selected, but the residual it explains shows no peak at its wavelength in the spectrum over position (no ripple stands 30× above the spectrum's median within 3 %): not kept",
                     chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
+                    effects::describe(ctx, &chosen[k]),
                 ));
                 continue;
             }
             dropped_notes.push(format!(
                 "{} ({}) selected on the whole record, held on {}/{} independent segments (at least {STABILITY_MIN} needed){}, its coefficients agreeing across them to t = {:.1} (at least {AGREEMENT_T} needed): not kept",
                 chosen[k].kind.name(),
-                effects::describe(&ctx, &chosen[k]),
+                effects::describe(ctx, &chosen[k]),
                 holds[k],
                 STABILITY_SEGMENTS,
                 if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" },
@@ -476,7 +476,7 @@ pub(crate) fn validate(
             let mut fnd = findings[k].clone();
             fnd.holdout_rel_error_after = rel(h.rss(&th_cur), h.ff);
             fnd.parameters =
-                effects::parameters(&ctx, &new_chosen, &new_cols, &th_cur, new_chosen.len() - 1);
+                effects::parameters(ctx, &new_chosen, &new_cols, &th_cur, new_chosen.len() - 1);
             new_findings.push(fnd);
         }
         full = (full.0.select(&idx), full.1.select(&idx));
