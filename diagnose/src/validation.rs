@@ -525,7 +525,7 @@ pub fn baseline_verdicts(th: &[f64]) -> Vec<String> {
     let get = |i: usize| th.get(i).copied().unwrap_or(0.0);
     if get(0) < 0.0 {
         v.push(format!(
-            "NON-PHYSICAL BASELINE: inertia {:.4e} kg < 0. The force falls with acceleration: on periodic motion a stiffness (force ∝ x, in antiphase with a) fits as a negative mass, so a spring, a resonance above the motion band or a position-dependent force dominates; the catalogue's names are not reliable on this record",
+            "NON-PHYSICAL BASELINE: inertia {:.4e} kg < 0. The force falls with acceleration: on periodic motion a stiffness (force ∝ x, in antiphase with a) fits as a negative mass, so a stiffness, a resonance above the motion band or a position-dependent force dominates; the catalogue's names are not reliable on this record",
             get(0)
         ));
     }

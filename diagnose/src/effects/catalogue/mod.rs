@@ -19,6 +19,7 @@ mod position_periodic_friction;
 mod presliding_hysteresis;
 mod reflected_inertia;
 mod screw_efficiency;
+mod spring;
 mod stribeck;
 mod velocity_strengthening_friction;
 
@@ -34,11 +35,12 @@ pub use position_periodic_friction::POSITION_PERIODIC_FRICTION;
 pub use presliding_hysteresis::PRESLIDING_HYSTERESIS;
 pub use reflected_inertia::REFLECTED_INERTIA;
 pub use screw_efficiency::SCREW_EFFICIENCY;
+pub use spring::SPRING;
 pub use stribeck::STRIBECK;
 pub use velocity_strengthening_friction::VELOCITY_STRENGTHENING;
 
 /// Every effect of the library, in the order the selection screens them.
-pub static REGISTRY: [EffectKind; 14] = [
+pub static REGISTRY: [EffectKind; 15] = [
     DIRECTION_ASYMMETRIC_FRICTION,
     POSITION_DEPENDENT_FRICTION,
     POSITION_PERIODIC_FRICTION,
@@ -53,6 +55,7 @@ pub static REGISTRY: [EffectKind; 14] = [
     PRESLIDING_HYSTERESIS,
     ACTUATOR_LAG,
     VELOCITY_STRENGTHENING,
+    SPRING,
 ];
 
 /// `g` at `0..n`.
