@@ -138,6 +138,61 @@ pub fn summary(d: &Diagnosis) -> String {
     s
 }
 
+/// The statistics the report prints, each with a test that finds it in the report's text and
+/// its explanation in plain words (`statistics`).
+pub const STATISTICS: [(&str, &str); 6] = [
+    (
+        "held-out",
+        "held-out error: the record is cut into 10 blocks and blocks 2, 5 and 8 are never fitted; the error is the residual's energy over the force's energy on those blocks. A finding is worth its place only if it lowers this error, which a model that merely memorises the fitted blocks does not.",
+    ),
+    (
+        "rss drop",
+        "rss drop: by how much a finding cuts the held-out residual sum of squares (the held-out error squared, before the division); the selection asks at least 2 % (--min-gain).",
+    ),
+    (
+        "dBIC",
+        "dBIC: the change of the Bayesian information criterion, n·ln(rss/n) + k·ln(n) on the fitted samples (k the parameters, a scanned one included). Negative means the fit improves by more than its extra parameters cost; the selection asks dBIC < 0 as well as the held-out drop.",
+    ),
+    (
+        "segments",
+        "held on % of segments: the record is cut into 5 consecutive segments and each is held out in turn with the model fitted on the others; a finding holds on a segment when removing it raises that segment's error by half the selection's margin and its fit there is physical. It is kept when it holds on 4 of 5 with its coefficients agreeing (jackknife t ≥ 3: determined to within a third of their value by every part of the record).",
+    ),
+    (
+        "Wald",
+        "Wald: the rise of the residual sum of squares when a finding's columns are removed from a fit, over the residual variance. For columns that carry nothing it is χ²-distributed with as many degrees of freedom as columns; the diagnosis asks at least 9 (three standard errors).",
+    ),
+    (
+        "derived acceleration's band",
+        "the derived acceleration's band: velocity and acceleration are derived from the position by a zero-phase low-pass filter (cutoff fs/20 unless stated); above about half that cutoff the derived acceleration loses more than 6 %, so an inertial force M·a there is not measured and may look like an effect. A finding tested 'inside the band' is measured where the derived signals follow the motion.",
+    ),
+];
+
+/// The plain-words explanation of each statistic in `STATISTICS` that `text` (a report)
+/// uses, once each, in the order of their first use (empty when it uses none).
+pub fn statistics(text: &str) -> String {
+    let mut used: Vec<(usize, &str)> = STATISTICS
+        .iter()
+        .filter_map(|(key, words)| text.find(key).map(|at| (at, *words)))
+        .collect();
+    used.sort_by_key(|u| u.0);
+    let mut s = String::new();
+    if !used.is_empty() {
+        let _ = writeln!(s, "How to read the statistics:");
+        for (_, words) in used {
+            let _ = writeln!(s, "  - {words}");
+        }
+    }
+    s
+}
+
+/// `text` followed by the explanation of the statistics it uses (`statistics`).
+pub fn text_explained(rec: &Record, d: &Diagnosis) -> String {
+    let mut s = text(rec, d);
+    let words = statistics(&s);
+    s.push_str(&words);
+    s
+}
+
 /// Human-readable report: the summary's sentences, then the details.
 pub fn text(rec: &Record, d: &Diagnosis) -> String {
     let mut s = String::new();
@@ -311,7 +366,7 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
 }
 
 /// Machine-readable report (serde_json; a non-finite number is written as `null`). Keys:
-/// docs/diagnose.md, "Output".
+/// docs/diagnose.md, "The conclusion and the report".
 pub fn json(d: &Diagnosis) -> String {
     use serde_json::{json, Map, Value};
     let num = |v: f64| Value::from(v); // NaN and ±inf become null

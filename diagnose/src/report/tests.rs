@@ -196,4 +196,36 @@ mod summary_tests {
         assert!(s.contains("does not identify viscous_friction"), "{s}");
         assert!(s.contains("lag makes it worse"), "{s}");
     }
+
+    /// Each statistic the report uses is explained once, in the order of first use, and one it
+    /// does not use is not explained. Break: the Wald entry removed from `STATISTICS` leaves
+    /// it unexplained and fails the first assertion.
+    #[test]
+    fn statistics_are_explained_once_where_used() {
+        let text = "held-out error 2 %; rss drop 5 %, dBIC -40; inside the derived acceleration's band 3 N (Wald 12.0); Wald 15";
+        let s = statistics(text);
+        println!("{s}");
+        for key in [
+            "Wald:",
+            "dBIC:",
+            "held-out error:",
+            "rss drop:",
+            "derived acceleration's band:",
+        ] {
+            assert_eq!(s.matches(key).count(), 1, "{key} in {s}");
+        }
+        assert!(!s.contains("segments"), "{s}");
+        let order: Vec<usize> = [
+            "held-out error:",
+            "rss drop:",
+            "dBIC:",
+            "the derived acceleration's band:",
+            "Wald:",
+        ]
+        .iter()
+        .map(|k| s.find(k).unwrap_or(usize::MAX))
+        .collect();
+        assert!(order.windows(2).all(|w| w[0] < w[1]), "{order:?}: {s}");
+        assert_eq!(statistics("no statistic here"), "");
+    }
 }
