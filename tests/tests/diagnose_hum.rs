@@ -1,5 +1,5 @@
 //! A force at one time frequency (a hum: the supply, a machine nearby) beside a friction of
-//! the speed (docs/diagnose.md, "Stability as evidence": a finding apart from the residual's
+//! the speed (docs/diagnose.md, "The validation": a finding apart from the residual's
 //! hum). On a motion that reverses every second with a hum at 6.5 Hz, the hum has the same
 //! value, with the sign of the new direction, at every reversal: a Stribeck column, which
 //! lives at the low speeds around the reversals, sees it as a friction falling with speed.

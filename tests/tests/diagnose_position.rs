@@ -1,4 +1,4 @@
-//! The residual's spectrum over position (docs/diagnose.md, "Spectrum over position"): a force
+//! The residual's spectrum over position (docs/diagnose.md, "The conclusion and the report"): a force
 //! periodic in position hidden in a synthetic record and left in the residual must show as an
 //! `unexplained` spatial peak at its wavelength; clean records must show no spatial peak.
 

@@ -11,7 +11,7 @@ pub(crate) fn columns(name: &str, s: &Sig, lambda: f64, friction: bool) -> Vec<(
     let mut cs_c = Vec::with_capacity(n);
     for i in 0..n {
         // `libm`'s port of fdlibm's `sincos`: with the release build's fat LTO it costs the
-        // same as a hand-inlined fdlibm kernel (docs/diagnose.md, "Speed")
+        // same as a hand-inlined fdlibm kernel
         let (sn, cs) = libm::sincos(k * s.x[i]);
         let g = if friction { s.sgn[i] } else { 1.0 };
         sn_c.push(sn * g);
