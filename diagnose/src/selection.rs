@@ -200,70 +200,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let set_k = |set: &[Effect], cache: &mut Cache| -> usize {
         set_cols(set, cache).len() + set.iter().filter(|e| e.kind.scanned()).count()
     };
-    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
-    // with `companions` beside them (their own coefficients) by the margin, on the screening
-    // rows without `rows`.
-    // (the comparison itself, on normal equations `nw` whose first `nb` columns are the set's
-    // with its companions)
-    let carries_over = |nw: &(Normal, Normal), nb: usize| -> bool {
-        let idx: Vec<usize> = (0..nb).collect();
-        let (st, sh) = (nw.0.select(&idx), nw.1.select(&idx));
-        let with = nw.1.rss(&nw.0.solve());
-        1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
-    };
-    let carries_beyond =
-        |base_refs: &[&[f64]], companions: &[&[f64]], zr: &[&[f64]], rows: &[usize]| -> bool {
-            let all: Vec<&[f64]> = base_refs
-                .iter()
-                .chain(companions)
-                .chain(zr)
-                .copied()
-                .collect();
-            let mut nw = normals(&all, &sub_f, &sub_hold, 1);
-            if !rows.is_empty() {
-                nw = change_rows(&nw, &all, &sub_f, &sub_hold, rows, -1.0);
-            }
-            carries_over(&nw, base_refs.len() + companions.len())
-        };
-    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
-    // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
-    // margin, on the screening rows without the delay's `rows`.
-    let carries_beyond_switch =
-        |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
-            let k = tau / ctx.dt;
-            let parts: Vec<Vec<f64>> = [&rec.a, &rec.v]
-                .iter()
-                .map(|s| {
-                    sub.rows
-                        .iter()
-                        .map(|&i| effects::delayed(s, i, k) - s[i])
-                        .collect()
-                })
-                .chain([sub
-                    .rows
-                    .iter()
-                    .map(|&i| effects::delayed_switch(&rec.v, &ctx.sgn, i, k))
-                    .collect()])
-                .collect();
-            let parts: Vec<&[f64]> = parts.iter().map(|c| c.as_slice()).collect();
-            carries_beyond(base_refs, &parts, zr, rows)
-        };
-    // The Coulomb column with the exact sign of the velocity on the screening rows (0 at
-    // v = 0), when a sample in motion slides inside the sign's linear band
-    // (`effects::sign_band`): there the device's Coulomb force is whole while the baseline's
-    // column, linear in v, draws only part of it.
-    let exact_sign: Option<Vec<f64>> = {
-        let z: Vec<f64> = sub
-            .v
-            .iter()
-            .map(|&v| if v == 0.0 { 0.0 } else { v.signum() })
-            .collect();
-        z.iter()
-            .zip(&sub.sgn)
-            .zip(&sub_hold)
-            .any(|((&e, &s), &h)| e != s && h != AT_REST)
-            .then_some(z)
-    };
     // a candidate is added when it cuts the held-out rss by the margin and lowers the BIC
     let passes = |rh: f64, rss_h0: f64, dbic: f64| {
         1.0 - rh / rss_h0.max(1e-300) >= opt.min_holdout_gain && dbic < 0.0
@@ -275,18 +211,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let base_refs: Vec<&[f64]> = base_cols.iter().map(|v| v.as_slice()).collect();
         let base_ids = set_ids(set, cache);
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
-        // the set's columns with the exact sign in the Coulomb column (the third), their
-        // identities and normal equations, once per set (the sign band rule below extends
-        // them by each candidate's columns, the candidate's products with the other columns
-        // kept in its Gram cache)
-        let es_base = exact_sign.as_ref().map(|es| {
-            let mut b = base_refs.clone();
-            b[2] = es.as_slice();
-            let mut ids = base_ids.clone();
-            ids[2] = (u64::MAX - 1, 2);
-            let nw = normals(&b, &sub_f, &sub_hold, 1);
-            (b, ids, nw)
-        });
         let tau_s = lag_of(set);
         let rows_s = tau_s.map(lag_rest_sub).unwrap_or_default();
         let base_fit = if rows_s.is_empty() {
@@ -304,20 +228,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
-            if set.iter().any(|c| c.kind == cand.kind)
-                || effects::same_channel_timing(cand.kind, set)
-            {
+            if set.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64, f64) {
-                // one cause, one name: a wavelength already named (by a periodic
-                // friction, within 3 %) is not named again under the other periodic name; a
-                // low-speed bump inside a friction build-up is the build-up's shape
-                if effects::same_wavelength(eff, set)
-                    || effects::bump_within_buildup(eff, set, &ctx)
-                {
-                    return (f64::INFINITY, 0.0, f64::INFINITY);
-                }
                 let z = cache
                     .entry(eff.key())
                     .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
@@ -440,38 +354,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                     )
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
-                }
-                // a friction build-up beside a delay: the delay shifts the Coulomb switch
-                // by τ, and the delay's one gain (set by its inertial and viscous parts too,
-                // whose derived signals' noise biases it low) can leave part of that switch,
-                // a transition after each reversal that a Dahl state also draws; the
-                // presliding must carry the margin on top of the delayed switch given an
-                // amplitude of its own (`effects::delayed_switch`), on the delay's rows.
-                // Likewise a resonance beside a delay: the mode's column (H − 1)·a, a
-                // frequency-dependent inertia, draws what the one gain leaves of the delayed
-                // inertial and viscous parts, M·(a(t − τ) − a(t)) and Fv·(v(t − τ) − v(t)),
-                // so it must carry the margin on top of the three parts given amplitudes of
-                // their own
-                if let (true, Some(tau)) = (eff.kind.draws_delay_remainder(), tau_s) {
-                    if !carries_beyond_switch(&base_refs, &zr, tau, &rows_s) {
-                        return (f64::INFINITY, 0.0, f64::INFINITY);
-                    }
-                }
-                // a low-speed bump where the motion slides inside the Coulomb sign's linear
-                // band: the part of the Coulomb force the band leaves out (sign(v) − v/v_eps,
-                // a friction above the baseline's column at the lowest speeds) is a bump too;
-                // a Dahl state that has reached the direction of sliding draws it exactly
-                // (z − sgn v = sign v − v/v_eps there); either must carry the margin against
-                // the baseline with the exact sign (its Coulomb column, the third, replaced)
-                if let (true, Some((b, ids, nw))) = (eff.kind.draws_sign_band(), &es_base) {
-                    let mut nw = extend_normals_cached(nw, b, ids, &zr, &sub_f, &sub_w, gc);
-                    if !rows_s.is_empty() {
-                        let all: Vec<&[f64]> = b.iter().chain(&zr).copied().collect();
-                        nw = change_rows(&nw, &all, &sub_f, &sub_hold, &rows_s, -1.0);
-                    }
-                    if !carries_over(&nw, b.len()) {
-                        return (f64::INFINITY, 0.0, f64::INFINITY);
-                    }
                 }
                 let rt = nn.0.rss(&t);
                 let k_extra = z.len() + eff.kind.scanned() as usize;

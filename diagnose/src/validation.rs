@@ -81,7 +81,7 @@ pub(crate) struct Spread<'a> {
 /// The validation of the findings selected: stability across independent segments, agreement
 /// of their coefficients, and the evidence every finding must carry for what it names (a force
 /// locked to position inside the band the derived signals follow, apart from the reversals
-/// and from a force at one time frequency; a ripple at a resonance kept is that resonance).
+/// and from a force at one time frequency).
 /// Findings that fail are removed and the model rebuilt without them; returns the model and
 /// the verdicts on the findings not kept. `spans` are each finding's columns in `cols`, after
 /// the `n_fixed` fixed terms (the first `n_base` the baseline's).
@@ -224,7 +224,7 @@ pub(crate) fn validate(
     // A periodic finding names a ripple: the residual it explains (the whole-record residual
     // with its own contribution added back) must show that ripple as a peak of the spectrum
     // over position (30× the median level, the `unexplained` criterion) within the 3 % of
-    // `same_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
+    // `effects::at_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
     // peaks there (fewer than 3 periods) and are not checked.
     let ripple_shows: Vec<bool> = {
         let th_now = full.0.plus(&full.1).solve();
@@ -372,18 +372,6 @@ pub(crate) fn validate(
                 && hum_apart[k]
         })
         .collect();
-    // one cause, one name: a position ripple whose time frequency on the motion lies in the
-    // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
-    let modes: Vec<Effect> = kept
-        .iter()
-        .filter(|&&k| chosen[k].kind.time_band(ctx, &chosen[k]).is_some())
-        .map(|&k| chosen[k].clone())
-        .collect();
-    let at_mode: Vec<bool> = chosen
-        .iter()
-        .map(|e| effects::ripple_at_mode(e, &modes, ctx))
-        .collect();
-    let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
     let mut dropped_notes = Vec::new();
     if kept.len() < chosen.len() {
         for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
@@ -403,14 +391,6 @@ pub(crate) fn validate(
                     r.wald_diff,
                     100.0 / AGREEMENT_T,
                     AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if at_mode[k] {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but on most of the motion its time frequency lies in the band of the resonance named (a ripple at the speed the motion keeps and the mode's ringing after each turn, locked to the turn's position, are the same force): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(ctx, &chosen[k]),
                 ));
                 continue;
             }

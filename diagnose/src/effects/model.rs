@@ -10,7 +10,7 @@ use super::*;
 /// Required: its name, its columns over the record, its physical admissibility, its parameters
 /// in words and units and its one-line reading. The rest has defaults that fit an effect of
 /// fixed columns without a scanned parameter; the evidence methods (`force_delay` …
-/// `time_band`) state which of the method's shared tests apply to it.
+/// `apart_from_hum`) state which of the method's shared tests apply to it.
 pub trait EffectModel: Sync {
     /// The catalogue name (the report's and the `--model` fragment's).
     fn name(&self) -> &'static str;
@@ -134,29 +134,10 @@ pub trait EffectModel: Sync {
         None
     }
 
-    /// True when the effect times the force channel against the motion: a record has one net
-    /// delay, so two such effects are not given together.
-    fn times_the_channel(&self) -> bool {
-        false
-    }
-
     /// The covariance of the derived signals' noise in its column with the inertia's and the
     /// viscous columns, and how the scan uses it, when its column carries that noise.
     fn derived_noise(&self, _ctx: &Context, _e: &Effect) -> Option<(NoiseUse, [[f64; 3]; 3])> {
         None
-    }
-
-    /// True when beside a delay the effect must carry the selection's margin on top of the
-    /// delay's parts (inertial, viscous, Coulomb switch) given amplitudes of their own: its
-    /// column can draw what the delay's one gain leaves of them.
-    fn draws_delay_remainder(&self) -> bool {
-        false
-    }
-
-    /// True when its column can draw the Coulomb force the sign's linear band leaves out at
-    /// the lowest speeds: it must carry the margin against the baseline with the exact sign.
-    fn draws_sign_band(&self) -> bool {
-        false
     }
 
     /// True when its evidence lies at the contacts right after reversals: its stability is
@@ -186,21 +167,6 @@ pub trait EffectModel: Sync {
     /// time frequency in the residual.
     fn apart_from_hum(&self) -> bool {
         false
-    }
-
-    /// The band of time frequencies (Hz) where it rings when it is a resonance.
-    fn time_band(&self, _ctx: &Context, _e: &Effect) -> Option<(f64, f64)> {
-        None
-    }
-
-    /// The speed below which it adds friction (a low-speed bump), when it is one.
-    fn low_speed_scale(&self, _e: &Effect) -> Option<f64> {
-        None
-    }
-
-    /// The displacement after a reversal over which it builds the friction up, when it does.
-    fn buildup_displacement(&self, _e: &Effect) -> Option<f64> {
-        None
     }
 }
 

@@ -488,20 +488,6 @@ fn impact_momentum_rule() {
     assert!(!plausible(&e, &coef, &base));
 }
 
-/// The force channel's timing has one name: `lag` (force behind the motion) and
-/// `actuator_lag` (force ahead of it) exclude each other, either order; neither excludes
-/// itself (its own kind is the scan's rule) nor another kind.
-#[test]
-fn channel_timing_is_named_once() {
-    let e = |kind| Effect::new(kind, 1.0);
-    let (lag, act) = (LAG, ACTUATOR_LAG);
-    assert!(same_channel_timing(act, &[e(lag)]));
-    assert!(same_channel_timing(lag, &[e(COGGING), e(act)]));
-    assert!(!same_channel_timing(lag, &[e(lag)]));
-    assert!(!same_channel_timing(lag, &[e(COGGING)]));
-    assert!(!same_channel_timing(COGGING, &[e(lag), e(act)]));
-}
-
 /// `compliance_zetas` (the profiles of several frequencies in one resonator pass) gives
 /// each frequency's `compliance_zeta` profiled alone on a fresh context, bit for bit, a
 /// repeated frequency included. The record: a chirp (0.5 to 40 Hz over 20 s, 1 kHz) with a
@@ -546,45 +532,6 @@ fn batched_zeta_profiles_match_single_ones() {
     // profiled, not the fallback: distinct values, a mode identified at 12 Hz
     assert!(single[0].is_some(), "{single:?}");
     assert_ne!(single[0], single[1], "{single:?}");
-}
-
-/// `bump_within_buildup` on a closed-form sinusoid, x = A·cos(ωt), A 20 mm, period
-/// 2 s (the speed at a displacement d from a reversal is √(2·Aω²·d): 19.9 mm/s at 1 mm,
-/// 0.89 mm/s at 2 µm). A Stribeck bump of v_s 5 mm/s lies within 0.06 mm of the reversals
-/// (d = v_s²/(2Aω²)): inside a 1 mm presliding build-up (refused, either order); most of it
-/// lies outside a 2 µm one (kept: below 0.89 mm/s lies erf(√2·0.89/5) = 28 % of its
-/// energy, less on the samples `at_rest` keeps); with no presliding named nothing is
-/// refused. Breaks: the rule removed (always false) fails the first assertion; refusing
-/// whenever both are named fails the third.
-#[test]
-fn stribeck_inside_the_presliding_build_up() {
-    let (fs, amp, w) = (1000.0, 0.02, std::f64::consts::PI);
-    let mut rec = Record::default();
-    for i in 0..12_000 {
-        let t = i as f64 / fs;
-        let (x, v, a) = (
-            amp * (w * t).cos(),
-            -amp * w * (w * t).sin(),
-            -amp * w * w * (w * t).cos(),
-        );
-        rec.t.push(t);
-        rec.x.push(x);
-        rec.v.push(v);
-        rec.a.push(a);
-        rec.f.push(40.0 * a + 300.0 * v + 20.0 * v.signum());
-    }
-    let ctx = Context::new(&rec);
-    let e = |kind, param| Effect::new(kind, param);
-    let st = e(STRIBECK, 5e-3);
-    let pre = |xc| e(PRESLIDING_HYSTERESIS, xc);
-    assert!(bump_within_buildup(&st, &[pre(1e-3)], &ctx));
-    assert!(bump_within_buildup(
-        &pre(1e-3),
-        std::slice::from_ref(&st),
-        &ctx
-    ));
-    assert!(!bump_within_buildup(&st, &[pre(2e-6)], &ctx));
-    assert!(!bump_within_buildup(&st, &[e(COGGING, 0.01)], &ctx));
 }
 
 /// The rotated sinusoid of `sinusoid_energy` against the same projection summed with a

@@ -61,9 +61,6 @@ impl EffectModel for ActuatorLag {
     ) -> Result<Vec<(String, FragmentValue)>, &'static str> {
         Err("the record's force channel leads the device's force, not simulated")
     }
-    fn times_the_channel(&self) -> bool {
-        true
-    }
 }
 
 /// The time constant τ_c = 1/ω_c of the derivative filter's cutoff (the record's

@@ -95,16 +95,6 @@ impl EffectModel for Compliance {
         ctx.compliance_noise(e.param)
             .map(|c| (NoiseUse::MarginCorrected, c))
     }
-    /// Its column (H − 1)·a, a frequency-dependent inertia, draws what a delay's one gain
-    /// leaves of the delayed inertial and viscous parts.
-    fn draws_delay_remainder(&self) -> bool {
-        true
-    }
-    /// The half-power band f_r·(1 ± ζ).
-    fn time_band(&self, ctx: &Context, e: &Effect) -> Option<(f64, f64)> {
-        let z = ctx.compliance_zeta(e.param)?;
-        Some((e.param * (1.0 - z), e.param * (1.0 + z)))
-    }
 }
 
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one

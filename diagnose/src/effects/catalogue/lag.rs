@@ -70,9 +70,6 @@ impl EffectModel for Lag {
     fn force_delay(&self, e: &Effect) -> Option<f64> {
         Some(e.param)
     }
-    fn times_the_channel(&self) -> bool {
-        true
-    }
     /// Its gain's range and its τ are judged on the fit corrected for the derived signals'
     /// noise (`Context::lag_noise`).
     fn derived_noise(&self, ctx: &Context, e: &Effect) -> Option<(NoiseUse, [[f64; 3]; 3])> {

@@ -72,15 +72,6 @@ impl EffectModel for PreslidingHysteresis {
             e.param
         )
     }
-    fn draws_delay_remainder(&self) -> bool {
-        true
-    }
-    fn draws_sign_band(&self) -> bool {
-        true
-    }
-    fn buildup_displacement(&self, e: &Effect) -> Option<f64> {
-        Some(e.param)
-    }
 }
 
 /// `presliding_hysteresis` column `z − sgn v` (coefficient: the Coulomb force Fc·z carries).

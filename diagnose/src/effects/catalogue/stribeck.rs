@@ -46,13 +46,7 @@ impl EffectModel for Stribeck {
     fn describe(&self, _ctx: &Context, e: &Effect) -> String {
         format!("Stribeck velocity {:.3e} m/s", e.param)
     }
-    fn draws_sign_band(&self) -> bool {
-        true
-    }
     fn apart_from_hum(&self) -> bool {
         true
-    }
-    fn low_speed_scale(&self, e: &Effect) -> Option<f64> {
-        Some(e.param)
     }
 }
