@@ -6,6 +6,7 @@
 // Numerical kernels index several arrays in step; iterator rewrites would obscure them.
 #![allow(clippy::needless_range_loop)]
 
+mod conclusion;
 pub mod effects;
 mod fit;
 pub mod record;
@@ -14,6 +15,7 @@ mod selection;
 pub mod synth;
 mod validation;
 
+pub(crate) use conclusion::*;
 pub use fit::*;
 pub use selection::*;
 pub use validation::*;
@@ -226,11 +228,11 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             opt.min_holdout_gain
         ));
     }
-    if opt.max_effects > EffectKind::ALL.len() {
+    if opt.max_effects > EffectKind::all().len() {
         return Err(format!(
             "option max_effects = {}: allowed range 0 ..= {}",
             opt.max_effects,
-            EffectKind::ALL.len()
+            EffectKind::all().len()
         ));
     }
     if !(100..=10_000_000).contains(&opt.screen_samples) {

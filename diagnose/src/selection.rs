@@ -53,14 +53,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let sub_hold: Vec<u8> = sub.rows.iter().map(|&i| screen_hold[i]).collect();
     let sub_w = HoldWeights::new(&sub_hold);
     let mut full_w = HoldWeights::new(&hold);
-    // A set holding a `lag` τ makes the force the device's at t − τ: its fits leave out the
+    // A set holding a delay τ of the force (`EffectModel::force_delay`) makes the force the device's at t − τ: its fits leave out the
     // samples whose delayed motion is at rest (`Context::lag_rest_rows`), and so does every fit
     // it is compared with (the same rows on both sides of a comparison).
-    let lag_of = |set: &[Effect]| {
-        set.iter()
-            .find(|e| e.kind == EffectKind::Lag)
-            .map(|e| e.param)
-    };
+    let lag_of = delay_of;
     // (the same rows every time a τ comes back: kept per τ)
     let lag_rest_kept = std::cell::RefCell::new(std::collections::HashMap::new());
     let lag_rest_sub = |tau: f64| -> Vec<usize> {
@@ -111,15 +107,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // time as Legendre polynomials of degree 1 and 2 on [−1, 1]), so that no catalogue effect
     // takes it (a drift correlates with whatever the motion does slowly: a position, a
     // direction, a dwell) and the effects are fitted on the rest.
-    let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| -> Vec<f64> {
-        let p = effects::predict(cols, th);
-        rec.f
-            .iter()
-            .zip(&p)
-            .zip(&ctx.rest)
-            .map(|((a, b), &r)| if r { 0.0 } else { a - b })
-            .collect()
-    };
+    let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| resid_of(&ctx, cols, th);
     let (t0, t1) = (rec.t[0], rec.t[n - 1]);
     let tn: Vec<f64> = rec
         .t
@@ -168,10 +156,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // and their Gram entries against the base columns, extended as the base grows
     let grams =
         std::cell::RefCell::new(std::collections::HashMap::<(usize, u64), GramCache>::new());
-    let whole_fit = |full: &(Normal, Normal), cols: &[(String, Vec<f64>)]| {
-        let t = full.0.plus(&full.1).solve();
-        cols.iter().map(|c| c.0.clone()).zip(t).collect::<Vec<_>>()
-    };
+    let whole_fit = whole_fit;
     let catalogue = effects::catalogue(&ctx);
     let n_fixed = sub_cols.len();
     // the screening columns of the fixed terms and of a set of effects (from the cache)
@@ -186,7 +171,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         c
     };
     // training and held-out normals of the fixed terms and a set of effects, on the rows of a
-    // lag τ when given
+    // delay τ when given
     let set_normals_on =
         |set: &[Effect], tau: Option<f64>, cache: &mut Cache| -> (Normal, Normal) {
             let c = set_cols(set, cache);
@@ -207,77 +192,13 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 .entry(e.key())
                 .or_insert_with(|| effects::columns_on(&ctx, &sig, e))
                 .len();
-            ids.extend((0..k as u64).map(|j| (((e.kind as u64) << 32) | j, e.key().1)));
+            ids.extend((0..k as u64).map(|j| (((e.kind.index() as u64) << 32) | j, e.key().1)));
         }
         ids
     };
     // parameters a set of effects adds (its columns and each scanned parameter)
     let set_k = |set: &[Effect], cache: &mut Cache| -> usize {
         set_cols(set, cache).len() + set.iter().filter(|e| e.kind.scanned()).count()
-    };
-    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
-    // with `companions` beside them (their own coefficients) by the margin, on the screening
-    // rows without `rows`.
-    // (the comparison itself, on normal equations `nw` whose first `nb` columns are the set's
-    // with its companions)
-    let carries_over = |nw: &(Normal, Normal), nb: usize| -> bool {
-        let idx: Vec<usize> = (0..nb).collect();
-        let (st, sh) = (nw.0.select(&idx), nw.1.select(&idx));
-        let with = nw.1.rss(&nw.0.solve());
-        1.0 - with / sh.rss(&st.solve()).max(1e-300) >= opt.min_holdout_gain
-    };
-    let carries_beyond =
-        |base_refs: &[&[f64]], companions: &[&[f64]], zr: &[&[f64]], rows: &[usize]| -> bool {
-            let all: Vec<&[f64]> = base_refs
-                .iter()
-                .chain(companions)
-                .chain(zr)
-                .copied()
-                .collect();
-            let mut nw = normals(&all, &sub_f, &sub_hold, 1);
-            if !rows.is_empty() {
-                nw = change_rows(&nw, &all, &sub_f, &sub_hold, rows, -1.0);
-            }
-            carries_over(&nw, base_refs.len() + companions.len())
-        };
-    // Whether candidate columns `zr` cut the held-out rss of the set's columns `base_refs`
-    // with the Coulomb switch of a delay `tau` beside them (its own coefficient) by the
-    // margin, on the screening rows without the lag's `rows`.
-    let carries_beyond_switch =
-        |base_refs: &[&[f64]], zr: &[&[f64]], tau: f64, rows: &[usize]| -> bool {
-            let k = tau / ctx.dt;
-            let parts: Vec<Vec<f64>> = [&rec.a, &rec.v]
-                .iter()
-                .map(|s| {
-                    sub.rows
-                        .iter()
-                        .map(|&i| effects::delayed(s, i, k) - s[i])
-                        .collect()
-                })
-                .chain([sub
-                    .rows
-                    .iter()
-                    .map(|&i| effects::delayed_switch(&rec.v, &ctx.sgn, i, k))
-                    .collect()])
-                .collect();
-            let parts: Vec<&[f64]> = parts.iter().map(|c| c.as_slice()).collect();
-            carries_beyond(base_refs, &parts, zr, rows)
-        };
-    // The Coulomb column with the exact sign of the velocity on the screening rows (0 at
-    // v = 0), when a sample in motion slides inside the sign's linear band
-    // (`effects::sign_band`): there the device's Coulomb force is whole while the baseline's
-    // column, linear in v, draws only part of it.
-    let exact_sign: Option<Vec<f64>> = {
-        let z: Vec<f64> = sub
-            .v
-            .iter()
-            .map(|&v| if v == 0.0 { 0.0 } else { v.signum() })
-            .collect();
-        z.iter()
-            .zip(&sub.sgn)
-            .zip(&sub_hold)
-            .any(|((&e, &s), &h)| e != s && h != AT_REST)
-            .then_some(z)
     };
     // a candidate is added when it cuts the held-out rss by the margin and lowers the BIC
     let passes = |rh: f64, rss_h0: f64, dbic: f64| {
@@ -290,18 +211,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let base_refs: Vec<&[f64]> = base_cols.iter().map(|v| v.as_slice()).collect();
         let base_ids = set_ids(set, cache);
         let base = normals(&base_refs, &sub_f, &sub_hold, 1);
-        // the set's columns with the exact sign in the Coulomb column (the third), their
-        // identities and normal equations, once per set (the Stribeck band rule below extends
-        // them by each candidate's columns, the candidate's products with the other columns
-        // kept in its Gram cache)
-        let es_base = exact_sign.as_ref().map(|es| {
-            let mut b = base_refs.clone();
-            b[2] = es.as_slice();
-            let mut ids = base_ids.clone();
-            ids[2] = (u64::MAX - 1, 2);
-            let nw = normals(&b, &sub_f, &sub_hold, 1);
-            (b, ids, nw)
-        });
         let tau_s = lag_of(set);
         let rows_s = tau_s.map(lag_rest_sub).unwrap_or_default();
         let base_fit = if rows_s.is_empty() {
@@ -315,24 +224,14 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         let k0 = base_refs.len() + set.iter().filter(|e| e.kind.scanned()).count();
         // where each effect of the set sits among the base columns (after the fixed terms)
         let set_spans = effect_spans(set, n_fixed, &*cache);
-        // the rows the longest delay scanned leaves out (`lag`'s τ are ranked on common rows)
+        // the rows the longest delay scanned leaves out (the delays are ranked on common rows)
         let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
-            if set.iter().any(|c| c.kind == cand.kind)
-                || effects::same_channel_timing(cand.kind, set)
-            {
+            if set.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
             let eval = |eff: &Effect, cache: &mut Cache| -> (f64, f64, f64) {
-                // one cause, one name: a wavelength already named (cogging or periodic
-                // friction, within 3 %) is not named again under the other periodic name; a
-                // Stribeck bump inside the presliding build-up is the build-up's shape
-                if effects::same_wavelength(eff, set)
-                    || effects::stribeck_within_presliding(eff, set, &ctx)
-                {
-                    return (f64::INFINITY, 0.0, f64::INFINITY);
-                }
                 let z = cache
                     .entry(eff.key())
                     .or_insert_with(|| effects::columns_on(&ctx, &sig, eff));
@@ -342,15 +241,15 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 let mut nn =
                     extend_normals_cached(&base, &base_refs, &base_ids, &zr, &sub_f, &sub_w, gc);
                 let nb = base_refs.len();
-                // the rows of the set's lag, or of the candidate lag: the set is compared with
+                // the rows of the set's delay, or of the candidate delay: the set is compared with
                 // it on the candidate's rows and its gain there carried to the set's rows
                 let (mut scale, mut t0) = (1.0, rss_t0);
-                let rows_c = match (tau_s, eff.kind) {
+                let rows_c = match (tau_s, eff.kind.force_delay(eff)) {
                     (Some(_), _) => rows_s.clone(),
-                    (None, EffectKind::Lag) => lag_rest_sub(eff.param),
+                    (None, Some(tau)) => lag_rest_sub(tau),
                     _ => Vec::new(),
                 };
-                let lag_cand = tau_s.is_none() && eff.kind == EffectKind::Lag;
+                let lag_cand = tau_s.is_none() && eff.kind.force_delay(eff).is_some();
                 let all: Vec<&[f64]> = if rows_c.is_empty() && !lag_cand {
                     Vec::new()
                 } else {
@@ -370,7 +269,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                         (scale, t0) = ratio(&nn);
                     }
                 }
-                // `lag`'s τ are ranked against each other on the same rows: those every τ
+                // the delays τ are ranked against each other on the same rows: those every τ
                 // scanned can fit (the rows the longest τ leaves out as well). Each τ leaves
                 // out the samples whose motion τ earlier is at rest, the first τ of each move,
                 // where the force is the dwell's and an undelayed baseline is furthest from
@@ -393,7 +292,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 if !set_physical(set, &set_spans, &t) {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
                 }
-                // `lag`: its gain's range and its τ are judged on the fit corrected for the
+                // a delay: its gain's range and its τ are judged on the fit corrected for the
                 // derived signals' noise (`lag_corrected`); the held-out rss it is compared
                 // with the other candidates by is the least-squares fit's, as theirs
                 let mut key = None;
@@ -402,8 +301,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 // every candidate; one whose gain only the correction brings into the range
                 // ranks after all of those, by the corrected gain's distance from 1; a τ whose
                 // column is more than half noise is not resolved by either fit
-                if eff.kind == EffectKind::Lag {
-                    if let Some(sn) = ctx.lag_noise(eff.param) {
+                let noise = eff.kind.derived_noise(&ctx, eff);
+                if let Some((effects::NoiseUse::RankCorrected, sn)) = noise {
+                    {
                         match lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) {
                             Some(_) if effects::plausible(eff, &t[nb..], &t[..nb.min(4)]) => {}
                             Some((c, _)) => {
@@ -414,8 +314,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                         }
                     }
                 }
-                // `compliance`: a mode whose column is more than half the derived
-                // acceleration's noise on the training rows is not resolved (as a `lag` τ):
+                // a resonance: a mode whose column is more than half the derived
+                // acceleration's noise on the training rows is not resolved (as a delay τ):
                 // its fit would low-pass the inertia's noisy column, not draw a mode. A mode
                 // resolved must carry the margin on error-free columns: the fits with and
                 // without it corrected for that noise (`eiv_fit`, the covariance of the
@@ -424,8 +324,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 // derivative cutoff is the inertia column's noise (H − 1 ≈ −1 there), so least
                 // squares credits a modal mass near the inertia with the noise it cancels on
                 // the held-out rows as on the training rows; the corrected fit does not.
-                if eff.kind == EffectKind::Compliance {
-                    if let Some(sn) = ctx.compliance_noise(eff.param) {
+                if let Some((effects::NoiseUse::MarginCorrected, sn)) = noise {
+                    {
                         let Some((_, r1)) = lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) else {
                             return (f64::INFINITY, 0.0, f64::INFINITY);
                         };
@@ -442,57 +342,18 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 }
                 let tp = tc.as_deref().unwrap_or(&t);
                 if !effects::plausible(eff, &tp[nb..], &tp[..nb.min(4)])
-                    || (eff.kind == EffectKind::CurrentLimit
-                        && !effects::clip_consistent(
-                            &ctx,
-                            eff,
-                            &t[nb..],
-                            &t[..nb.min(4)],
-                            &sub.bp,
-                            &sub.v,
-                            &sub_f,
-                            ctx.base_resid_rms,
-                        ))
+                    || !eff.kind.consistent_with_force(
+                        &ctx,
+                        eff,
+                        &t[nb..],
+                        &t[..nb.min(4)],
+                        &sub.bp,
+                        &sub.v,
+                        &sub_f,
+                        ctx.base_resid_rms,
+                    )
                 {
                     return (f64::INFINITY, 0.0, f64::INFINITY);
-                }
-                // a presliding transition beside a lag: the delay shifts the Coulomb switch
-                // by τ, and the lag's one gain (set by its inertial and viscous parts too,
-                // whose derived signals' noise biases it low) can leave part of that switch,
-                // a transition after each reversal that a Dahl state also draws; the
-                // presliding must carry the margin on top of the delayed switch given an
-                // amplitude of its own (`effects::delayed_switch`), on the lag's rows.
-                // Likewise a resonance beside a lag: the mode's column (H − 1)·a, a
-                // frequency-dependent inertia, draws what the one gain leaves of the delayed
-                // inertial and viscous parts, M·(a(t − τ) − a(t)) and Fv·(v(t − τ) − v(t)),
-                // so it must carry the margin on top of the three parts given amplitudes of
-                // their own
-                if let (EffectKind::PreslidingHysteresis | EffectKind::Compliance, Some(tau)) =
-                    (eff.kind, tau_s)
-                {
-                    if !carries_beyond_switch(&base_refs, &zr, tau, &rows_s) {
-                        return (f64::INFINITY, 0.0, f64::INFINITY);
-                    }
-                }
-                // a Stribeck bump where the motion slides inside the Coulomb sign's linear
-                // band: the part of the Coulomb force the band leaves out (sign(v) − v/v_eps,
-                // a friction above the baseline's column at the lowest speeds) is a bump too;
-                // a Dahl state that has reached the direction of sliding draws it exactly
-                // (z − sgn v = sign v − v/v_eps there); either must carry the margin against
-                // the baseline with the exact sign (its Coulomb column, the third, replaced)
-                if let (
-                    EffectKind::Stribeck | EffectKind::PreslidingHysteresis,
-                    Some((b, ids, nw)),
-                ) = (eff.kind, &es_base)
-                {
-                    let mut nw = extend_normals_cached(nw, b, ids, &zr, &sub_f, &sub_w, gc);
-                    if !rows_s.is_empty() {
-                        let all: Vec<&[f64]> = b.iter().chain(&zr).copied().collect();
-                        nw = change_rows(&nw, &all, &sub_f, &sub_hold, &rows_s, -1.0);
-                    }
-                    if !carries_over(&nw, b.len()) {
-                        return (f64::INFINITY, 0.0, f64::INFINITY);
-                    }
                 }
                 let rt = nn.0.rss(&t);
                 let k_extra = z.len() + eff.kind.scanned() as usize;
@@ -507,12 +368,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             // fill the cache for a list of values in one pass over the record (the effects
             // whose columns walk the record's history: resonators, Dahl states, play)
             let prefill = |effs: &[Effect], cache: &mut Cache| {
-                if !matches!(
-                    cand.kind,
-                    EffectKind::Compliance
-                        | EffectKind::PreslidingHysteresis
-                        | EffectKind::Backlash
-                ) {
+                if !cand.kind.walks_history() {
                     return;
                 }
                 let missing: Vec<Effect> = effs
@@ -532,7 +388,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             // fit over the parameter still falls beyond the range the record resolves), so the
             // parameter is not identified and the effect is not named
             // the values `effs` evaluated (their columns filled in one pass) and the best so
-            // far kept, ranked by each value's key: its held-out rss, for `lag` the corrected
+            // far kept, ranked by each value's key: its held-out rss, for a delay the corrected
             // fit's
             let scan = |effs: &[Effect],
                         cache: &mut Cache,
@@ -552,12 +408,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             scan(&coarse, cache, &mut cb, &mut cb_key);
             if cand.kind.scanned() {
                 // a resonance's residual is sharp in frequency: one more level for it
-                let widths: &[f64] = if cand.kind == EffectKind::Compliance {
-                    &[0.15, 0.03, 0.006]
-                } else {
-                    &[0.15, 0.03]
-                };
-                for &width in widths {
+                for &width in cand.kind.refine_widths() {
                     let Some(centre) = cb.as_ref().map(|c| c.2.clone()) else {
                         break;
                     };
@@ -565,48 +416,30 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                     scan(&fine, cache, &mut cb, &mut cb_key);
                 }
             }
-            if cand.kind == EffectKind::Backlash {
-                // the contact's restitution at the width found (`effects::PLAY_RESTITUTIONS`),
-                // ranked by the held-out key as the width is; the width refined once more at
-                // a restitution other than 0 (a rebounding device's contacts move with it)
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    let alt: Vec<Effect> = effects::PLAY_RESTITUTIONS
-                        .iter()
-                        .filter(|&&e| e != centre.param2)
-                        .map(|&e| Effect {
-                            param2: e,
-                            ..centre.clone()
-                        })
-                        .collect();
-                    scan(&alt, cache, &mut cb, &mut cb_key);
-                }
-                // a compliant, plastic flank (`effects::PLAY_CONTACT_FRACTIONS`) when the
-                // rigid, plastic one is the best restitution and itself passes the selection
-                // (the flank's stiffness refines a play the record shows; on a record without
-                // one it is not walked); the spring is one parameter more, so it must cut the
-                // rigid flank's held-out rss by the selection's margin, as an added effect must
-                let rigid_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    if centre.param2 == 0.0 && rigid_passes {
-                        let alt: Vec<Effect> = effects::PLAY_CONTACT_FRACTIONS
-                            .iter()
-                            .map(|&q| Effect {
-                                param2: -q / ctx.dt,
-                                ..centre.clone()
-                            })
-                            .collect();
-                        let (mut sb, mut sb_key) = (None, f64::INFINITY);
-                        scan(&alt, cache, &mut sb, &mut sb_key);
-                        if sb_key <= (1.0 - opt.min_holdout_gain) * cb_key {
-                            (cb, cb_key) = (sb, sb_key);
-                        }
+            // a second parameter at the best first one, ranked by the held-out key as the
+            // first is (`EffectModel::variants`); a further one when that value itself passes
+            // the selection, one parameter more, so it must cut the held-out rss by the
+            // selection's margin, as an added effect must (`EffectModel::extended_variants`);
+            // then the first refined once more at the variant chosen
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                let alt = cand.kind.variants(&ctx, &centre);
+                scan(&alt, cache, &mut cb, &mut cb_key);
+            }
+            let best_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                let alt = cand.kind.extended_variants(&ctx, &centre);
+                if best_passes && !alt.is_empty() {
+                    let (mut sb, mut sb_key) = (None, f64::INFINITY);
+                    scan(&alt, cache, &mut sb, &mut sb_key);
+                    if sb_key <= (1.0 - opt.min_holdout_gain) * cb_key {
+                        (cb, cb_key) = (sb, sb_key);
                     }
                 }
-                if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
-                    if centre.param2 != 0.0 {
-                        let fine = effects::refine(&ctx, &centre, 0.03);
-                        scan(&fine, cache, &mut cb, &mut cb_key);
-                    }
+            }
+            if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
+                if let Some(width) = cand.kind.variant_refine(&centre) {
+                    let fine = effects::refine(&ctx, &centre, width);
+                    scan(&fine, cache, &mut cb, &mut cb_key);
                 }
             }
             if cand.kind.scanned()
@@ -661,8 +494,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 .map(|(_, e)| e.clone())
                 .collect();
             let (h0, best) = scan(&others, &mut cache);
-            if chosen[k].kind == EffectKind::Lag {
-                // the lag's gain on its own rows, carried to the others' rows (as `scan` does)
+            if chosen[k].kind.force_delay(&chosen[k]).is_some() {
+                // the delay's gain on its own rows, carried to the others' rows (as `scan` does)
                 let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
                 cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
             }
@@ -706,9 +539,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         n.1.rss(&n.0.solve())
     };
     for k in 0..chosen.len() {
-        if chosen[k].kind == EffectKind::Backlash && chosen[k].param2 < 0.0 {
+        if let Some(simpler) = chosen[k].kind.simpler(&chosen[k]) {
             let mut rigid = chosen.clone();
-            rigid[k].param2 = 0.0;
+            rigid[k] = simpler;
             if whole_holdout(&rigid) <= whole_holdout(&chosen) {
                 chosen = rigid;
             }
@@ -719,7 +552,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let mut ho_rel = baseline_holdout;
     let mut findings = Vec::new();
     let mut stage_models = vec![whole_fit(&full, &cols)];
-    // the whole record's samples left out with the lag (once it is in the model)
+    // the whole record's samples left out with a delay (once it is in the model)
     let mut lag_rows_full: Vec<usize> = Vec::new();
     for i in 0..chosen.len() {
         let (t0, h0) = set_normals_on(&chosen[..i], lag_of(&chosen[..=i]), &mut cache);
@@ -735,8 +568,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         }
         cols.extend(z);
-        if eff.kind == EffectKind::Lag {
-            lag_rows_full = ctx.lag_rest_rows(eff.param, None);
+        if let Some(tau) = eff.kind.force_delay(&eff) {
+            lag_rows_full = ctx.lag_rest_rows(tau, None);
             full = change_rows(&full, &refs(&cols), &rec.f, &hold, &lag_rows_full, -1.0);
             let mut part = hold.clone();
             for &j in &lag_rows_full {
@@ -765,7 +598,6 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // by at least half the selection margin and its fit there is physical; it is kept when it
     // holds on STABILITY_MIN segments and its leading coefficient keeps its sign on all of
     // them. Its columns are the whole-record columns (`cols`) at those rows.
-    let n_sub = spread_f.len();
     let mut spans = Vec::new();
     let mut at = n_fixed;
     for e in &chosen {
@@ -776,575 +608,91 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         spans.push((at, at + k));
         at += k;
     }
-    let sub_all: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&spread_rows, v)).collect();
-    let sub_refs: Vec<&[f64]> = sub_all.iter().map(|v| v.as_slice()).collect();
-    let mut holds = vec![0usize; chosen.len()];
-    let mut signs = vec![(0usize, 0usize); chosen.len()];
-    let mut seg_coefs: Vec<Vec<Vec<f64>>> = vec![Vec::new(); chosen.len()];
-    let mut seg_held: Vec<Vec<bool>> = vec![Vec::new(); chosen.len()];
-    // A lag's rows whose delayed motion is at rest (or inside the Coulomb sign's band) are left
-    // out of the segments' fits, as of its other fits, except where a play is chosen: those
-    // rows, right after the reversals, are where its contacts lie, and a play tested without
-    // them holds nowhere (its impact taps fit to zero). A play, and a lag beside it, are
-    // tested on every row in motion; every other finding beside a lag on the lag's rows (a
-    // presliding's build-up there would take the delayed device's).
-    let lag_rest: Vec<usize> = lag_of(&chosen)
-        .map(|t| ctx.lag_rest_rows(t, Some(&spread_rows)))
-        .unwrap_or_default();
-    let mut lag_hold = spread_hold.clone();
-    for &j in &lag_rest {
-        lag_hold[j] = AT_REST;
-    }
-    let with_play = chosen.iter().any(|e| e.kind == EffectKind::Backlash);
-    let on_every_row = |k: EffectKind| {
-        with_play && !lag_rest.is_empty() && matches!(k, EffectKind::Backlash | EffectKind::Lag)
+    let selected = Selected {
+        chosen,
+        findings,
+        cols,
+        full,
+        stage_models,
+        lag_rows_full,
+        ho_rel,
     };
-    let segment_fit = |hold: &[u8], sgi: usize| {
-        let part: Vec<u8> = (0..n_sub)
-            .map(|j| {
-                if hold[j] == AT_REST {
-                    AT_REST
-                } else if j * STABILITY_SEGMENTS / n_sub == sgi {
-                    HELD_OUT
-                } else {
-                    TRAIN
-                }
-            })
-            .collect();
-        let (tr, ho) = normals(&sub_refs, &spread_f, &part, 1);
-        let th = tr.solve();
-        (tr, ho, th)
+    let spread = Spread {
+        rows: &spread_rows,
+        f: &spread_f,
+        hold: &spread_hold,
     };
-    for sgi in 0..STABILITY_SEGMENTS {
-        let on_lag_rows = segment_fit(&lag_hold, sgi);
-        let on_all_rows = chosen
-            .iter()
-            .any(|e| on_every_row(e.kind))
-            .then(|| segment_fit(&spread_hold, sgi));
-        for (k, &(a, b)) in spans.iter().enumerate() {
-            let (tr, ho, th) = match &on_all_rows {
-                Some(f) if on_every_row(chosen[k].kind) => f,
-                _ => &on_lag_rows,
-            };
-            if ho.n < 10 {
-                continue;
-            }
-            let rss_with = ho.rss(th);
-            let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
-            let (t2, h2) = (tr.select(&keep), ho.select(&keep));
-            let rss_without = h2.rss(&t2.solve());
-            // (`lag`'s range on its least-squares fit or, failing that, on its fit corrected for
-            // the derived signals' noise, as in the scan)
-            let corrected = match chosen[k].kind {
-                EffectKind::Lag => ctx
-                    .lag_noise(chosen[k].param)
-                    .map(|sn| lag_corrected(tr, ho, [0, 1, a], &sn).map(|c| c.0)),
-                _ => None,
-            };
-            let phys = match &corrected {
-                Some(None) => false,
-                Some(Some(tc)) => {
-                    effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)])
-                        || effects::plausible(&chosen[k], &tc[a..b], &tc[..4.min(n_base)])
-                }
-                None => effects::plausible(&chosen[k], &th[a..b], &th[..4.min(n_base)]),
-            };
-            let held = phys && rss_with < rss_without * (1.0 - 0.5 * opt.min_holdout_gain);
-            if held {
-                holds[k] += 1;
-            }
-            seg_held[k].push(held);
-            seg_coefs[k].push(th[a..b].to_vec());
-            if th[a] > 0.0 {
-                signs[k].0 += 1;
-            } else {
-                signs[k].1 += 1;
-            }
-        }
-    }
-    // A play's impact taps are the contact pulse's shape, resolved only by the contacts on the
-    // fitted rows: on a record with few reversals a fit without them leaves the taps in their
-    // null space (alternating ±10³ kg, their sum off the impact's momentum) and that segment
-    // does not hold (its impact outside the momentum rule or its held-out rss not lowered).
-    // The play's agreement is asked of the segments where it holds (`agreement_of_held`), at
-    // least STABILITY_MIN of them; every other effect's of all five.
-    let agreement: Vec<f64> = seg_coefs
-        .iter()
-        .zip(&seg_held)
-        .zip(&chosen)
-        .map(|((c, h), e)| {
-            if e.kind == EffectKind::Backlash {
-                play_agreement(c, h)
-            } else {
-                jackknife_t(c)
-            }
-        })
-        .collect();
-    // A periodic finding names a ripple: the residual it explains (the whole-record residual
-    // with its own contribution added back) must show that ripple as a peak of the spectrum
-    // over position (30× the median level, the `unexplained` criterion) within the 3 % of
-    // `same_wavelength`. Wavelengths longer than a third of the stroke are not resolved as
-    // peaks there (fewer than 3 periods) and are not checked.
-    let ripple_shows: Vec<bool> = {
-        let periodic = |k: EffectKind| {
-            matches!(
-                k,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )
-        };
-        let th_now = full.0.plus(&full.1).solve();
-        let resid_now = if chosen.iter().any(|e| periodic(e.kind)) {
-            resid_of(&cols, &th_now)
-        } else {
-            Vec::new()
-        };
-        chosen
-            .iter()
-            .enumerate()
-            .map(|(k, e)| {
-                if !periodic(e.kind) || e.param > 2.0 * ctx.x_half / 3.0 {
-                    return true;
-                }
-                let (a, b) = spans[k];
-                let mut r = resid_now.clone();
-                for j in a..b {
-                    for ((ri, c), &rest) in r.iter_mut().zip(&cols[j].1).zip(&ctx.rest) {
-                        if !rest {
-                            *ri += th_now[j] * c;
-                        }
-                    }
-                }
-                report::position_spectrum(rec, &r).peaks.iter().any(|p| {
-                    let probe = Effect {
-                        kind: e.kind,
-                        param: p.wavelength_m,
-                        param2: 0.0,
-                    };
-                    effects::same_wavelength(&probe, std::slice::from_ref(e))
-                })
-            })
-            .collect()
-    };
-    // A periodic finding names a force locked to position: it must be carried by the samples
-    // where its time frequency |v|/λ lies inside the band where the derived acceleration
-    // follows the motion (`effects::ripple_in_band`). Above that band a ripple of the motion
-    // itself leaves M·(a − a_derived) in the residual at the same wavelength, an inertial
-    // force the record does not measure; inside it that artefact vanishes and a force ripple
-    // does not. The in-band part of its columns must stand AGREEMENT_T standard errors out of
-    // the noise (Wald statistic ≥ AGREEMENT_T²: χ² with 2 degrees of freedom, 1 %).
-    let ripple_measured: Vec<Option<effects::RippleInBand>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            // a friction building up with speed likewise: carried by the samples where its
-            // column changes within that band (`effects::buildup_in_band`), with one rise there
-            // and at the stops the motion passes faster
-            let mask = match e.kind {
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction => {
-                    effects::ripple_in_band(&ctx, e.param)
-                }
-                EffectKind::VelocityStrengthening => effects::buildup_in_band(&ctx, e.param),
-                _ => None,
-            };
-            mask.map(|mask| effects::in_band_ripple(&ctx, &cols, spans[k], &mask))
-        })
-        .collect();
-    for (k, r) in ripple_measured.iter().enumerate() {
-        if let (Some(r), Some(f)) = (r, findings.get_mut(k)) {
-            let above = if r.amp_above > 0.0 {
-                format!(
-                    "above it {:.3} N (differing by {:.0} %, Wald {:.1})",
-                    r.amp_above,
-                    100.0 * r.rel_diff,
-                    r.wald_diff
-                )
-            } else {
-                "no sample above it".to_string()
-            };
-            f.note.push_str(&format!(
-                "; inside the derived acceleration's band {:.3} N (Wald {:.1}), {above}",
-                r.amp_in, r.wald
-            ));
-        }
-    }
-    let ripple_locked: Vec<bool> = ripple_measured
-        .iter()
-        .map(|r| r.is_none_or(|r| r.locked_to_position(AGREEMENT_T)))
-        .collect();
-    // A periodic finding names a force locked to position, not to the reversals: beside a
-    // ripple locked to the last reversal whose sign follows the direction of motion (what a
-    // reversal excites: a mode's ringing, a friction transient; on a motion that turns at the
-    // same positions it is the position ripple's part odd about the stroke's centre) its
-    // columns must stand AGREEMENT_T standard errors out of the noise
-    // (`effects::ripple_apart_from_reversals`).
-    let ripple_reversal: Vec<Option<f64>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            matches!(
-                e.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            )
-            .then(|| effects::ripple_apart_from_reversals(&ctx, &cols, spans[k], e.param))
-        })
-        .collect();
-    for (k, w) in ripple_reversal.iter().enumerate() {
-        if let (Some(w), Some(f)) = (w, findings.get_mut(k)) {
-            f.note.push_str(&format!(
-                "; beside a ripple locked to the last reversal Wald {w:.1}"
-            ));
-        }
-    }
-    let ripple_apart: Vec<bool> = ripple_reversal
-        .iter()
-        .map(|w| w.is_none_or(|w| w >= AGREEMENT_T * AGREEMENT_T))
-        .collect();
-    // A friction of the speed or a ripple of the position names a force of the motion, not
-    // one at a fixed time frequency: where the residual's spectrum holds a peak standing out
-    // of the residual (`effects::hum_in_residual`: a hum of the supply, a machine nearby),
-    // the finding's columns must stand AGREEMENT_T standard errors out of the noise beside
-    // that sinusoid (`effects::finding_apart_from_hum`).
-    let hum_kind = |k: EffectKind| {
-        matches!(
-            k,
-            EffectKind::Stribeck | EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-        )
-    };
-    // The hum is sought in the residual of the fixed terms and the finding alone: another
-    // finding of the set (a resonance at the hum's frequency) may carry it until it is dropped.
-    let hum: Vec<Option<(f64, f64)>> = chosen
-        .iter()
-        .enumerate()
-        .map(|(k, e)| {
-            if !hum_kind(e.kind) {
-                return None;
-            }
-            let idx: Vec<usize> = (0..n_fixed).chain(spans[k].0..spans[k].1).collect();
-            let own: Vec<(String, Vec<f64>)> = idx.iter().map(|&j| cols[j].clone()).collect();
-            let th = full.0.plus(&full.1).select(&idx).solve();
-            let f = effects::hum_in_residual(&ctx, &resid_of(&own, &th))?;
-            Some((f, effects::finding_apart_from_hum(&ctx, &cols, spans[k], f)))
-        })
-        .collect();
-    for (k, h) in hum.iter().enumerate() {
-        if let (Some((hz, w)), Some(f)) = (h, findings.get_mut(k)) {
-            f.note.push_str(&format!(
-                "; beside the residual's force at {hz:.3} Hz Wald {w:.1}"
-            ));
-        }
-    }
-    let hum_apart: Vec<bool> = hum
-        .iter()
-        .map(|h| h.is_none_or(|(_, w)| w >= AGREEMENT_T * AGREEMENT_T))
-        .collect();
-    let kept: Vec<usize> = (0..chosen.len())
-        .filter(|&k| {
-            holds[k] >= STABILITY_MIN
-                && (signs[k].0 == 0 || signs[k].1 == 0)
-                && agreement[k] >= AGREEMENT_T
-                && ripple_shows[k]
-                && ripple_locked[k]
-                && ripple_apart[k]
-                && hum_apart[k]
-        })
-        .collect();
-    // one cause, one name: a position ripple whose time frequency on the motion lies in the
-    // band of a mode kept is that mode's ringing (`effects::ripple_at_mode`): the mode is named
-    let modes: Vec<Effect> = kept
-        .iter()
-        .filter(|&&k| chosen[k].kind == EffectKind::Compliance)
-        .map(|&k| chosen[k].clone())
-        .collect();
-    let at_mode: Vec<bool> = chosen
-        .iter()
-        .map(|e| effects::ripple_at_mode(e, &modes, &ctx))
-        .collect();
-    let kept: Vec<usize> = kept.into_iter().filter(|&k| !at_mode[k]).collect();
-    let mut dropped_notes = Vec::new();
-    if kept.len() < chosen.len() {
-        for k in (0..chosen.len()).filter(|k| !kept.contains(k)) {
-            if let (false, Some(r)) = (ripple_locked[k], ripple_measured[k]) {
-                // a friction of the speed is tested where its build-up is followed, a ripple
-                // where its time frequency is: the same split, worded for each
-                let (not, band, outside) = if chosen[k].kind == EffectKind::VelocityStrengthening {
-                    (
-                        "a friction of the speed",
-                        "where its build-up is slow enough for the derived signals (e^(−|v|/v_b)·|a|/v_b ≤ π·fc)",
-                        "at the stops the motion passes faster",
-                    )
-                } else {
-                    (
-                        "a force locked to position",
-                        "inside the derived acceleration's band (|v|/λ ≤ half its cutoff)",
-                        "above it",
-                    )
-                };
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not {not}: {band} {:.3} N (Wald {:.1}, at least {:.0} needed), {outside}, where the inertial force is not measured, {:.3} N (differing by {:.0} %, Wald {:.1}; at most {:.0} % or Wald {:.0}): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    r.amp_in,
-                    r.wald,
-                    AGREEMENT_T * AGREEMENT_T,
-                    r.amp_above,
-                    100.0 * r.rel_diff,
-                    r.wald_diff,
-                    100.0 / AGREEMENT_T,
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if at_mode[k] {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but on most of the motion its time frequency lies in the band of the resonance named (a ripple at the speed the motion keeps and the mode's ringing after each turn, locked to the turn's position, are the same force): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                ));
-                continue;
-            }
-            if let (false, Some(wald)) = (ripple_apart[k], ripple_reversal[k]) {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not apart from a ripple locked to the last reversal (where the motion turns at the same positions, such a ripple and the position ripple's part odd about the stroke's centre are the same force): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if let (false, Some((hz, wald))) = (hum_apart[k], hum[k]) {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but it is not apart from the residual's force at {hz:.3} Hz (a force at one time frequency, which no function of the motion is): beside it Wald {wald:.1} (at least {:.0} needed): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                    AGREEMENT_T * AGREEMENT_T,
-                ));
-                continue;
-            }
-            if !ripple_shows[k] {
-                dropped_notes.push(format!(
-                    "{} ({}) selected, but the residual it explains shows no peak at its wavelength in the spectrum over position (no ripple stands 30× above the spectrum's median within 3 %): not kept",
-                    chosen[k].kind.name(),
-                    effects::describe(&ctx, &chosen[k]),
-                ));
-                continue;
-            }
-            dropped_notes.push(format!(
-                "{} ({}) selected on the whole record, held on {}/{} independent segments (at least {STABILITY_MIN} needed){}, its coefficients agreeing across them to t = {:.1} (at least {AGREEMENT_T} needed): not kept",
-                chosen[k].kind.name(),
-                effects::describe(&ctx, &chosen[k]),
-                holds[k],
-                STABILITY_SEGMENTS,
-                if signs[k].0 > 0 && signs[k].1 > 0 { ", its coefficient changing sign" } else { "" },
-                agreement[k]
-            ));
-        }
-        // a lag not kept gives its left-out samples back to the fits
-        if !lag_rows_full.is_empty() && kept.iter().all(|&k| chosen[k].kind != EffectKind::Lag) {
-            full = change_rows(&full, &refs(&cols), &rec.f, &hold, &lag_rows_full, 1.0);
-            lag_rows_full.clear();
-        }
-        // rebuild the model from the kept findings (sub-blocks of the accumulated normals)
-        let mut idx: Vec<usize> = (0..n_fixed).collect();
-        let mut new_chosen = Vec::new();
-        let mut new_findings = Vec::new();
-        let mut new_stages = vec![stage_models[0].clone()];
-        let mut new_cols: Vec<(String, Vec<f64>)> = cols[..n_fixed].to_vec();
-        for &k in &kept {
-            let (a, b) = spans[k];
-            idx.extend(a..b);
-            new_cols.extend(cols[a..b].iter().cloned());
-            new_chosen.push(chosen[k].clone());
-            let (t, h) = (full.0.select(&idx), full.1.select(&idx));
-            new_stages.push(whole_fit(&(t.clone(), h.clone()), &new_cols));
-            let th_cur = t.solve();
-            let mut fnd = findings[k].clone();
-            fnd.holdout_rel_error_after = rel(h.rss(&th_cur), h.ff);
-            fnd.parameters =
-                effects::parameters(&ctx, &new_chosen, &new_cols, &th_cur, new_chosen.len() - 1);
-            new_findings.push(fnd);
-        }
-        full = (full.0.select(&idx), full.1.select(&idx));
-        cols = new_cols;
-        chosen = new_chosen;
-        findings = new_findings;
-        stage_models = new_stages;
-        ho_rel = findings
-            .last()
-            .map_or(baseline_holdout, |f| f.holdout_rel_error_after);
-        holds = kept.iter().map(|&k| holds[k]).collect();
-    }
-    for (f, h) in findings.iter_mut().zip(&holds) {
-        f.consistency = *h as f64 / STABILITY_SEGMENTS as f64;
-    }
-    // Final model refitted on the whole record.
-    let tf = full.0.plus(&full.1);
-    let sol = tf.solve_full();
-    let (fit_rank, fit_condition) = (sol.rank, sol.condition);
-    let th_full = sol.th;
-    // Each finding's parameters are those of the final model (the coefficients `--model`
-    // writes), not of the stage at which it was selected.
-    for (k, f) in findings.iter_mut().enumerate().take(chosen.len()) {
-        f.parameters = effects::parameters(&ctx, &chosen, &cols, &th_full, k);
-    }
-    let pred = effects::predict(&cols, &th_full);
-    // samples at rest are in no fit (static friction is anywhere within its breakaway
-    // level): they carry no residual, so they cannot show as a spectral peak either; with a
-    // lag, neither do those whose delayed motion is at rest
-    let mut rest_final = ctx.rest.clone();
-    for &j in &lag_rows_full {
-        rest_final[j] = true;
-    }
-    let residual: Vec<f64> = rec
+    let (selected, dropped_notes) = validate(
+        &ctx,
+        opt,
+        selected,
+        &spans,
+        n_fixed,
+        n_base,
+        &spread,
+        baseline_holdout,
+    );
+    let Selected {
+        chosen,
+        findings,
+        cols,
+        full,
+        stage_models,
+        lag_rows_full,
+        ho_rel,
+    } = selected;
+    conclude(
+        &ctx,
+        opt,
+        Selected {
+            chosen,
+            findings,
+            cols,
+            full,
+            stage_models,
+            lag_rows_full,
+            ho_rel,
+        },
+        Baseline {
+            terms: baseline_terms,
+            confounded,
+            holdout: baseline_holdout,
+            train: baseline_train,
+            full: base_full,
+        },
+        drift,
+        dropped_notes,
+    )
+}
+
+/// The force less the model `cols` with coefficients `th`, 0 at rest.
+pub(crate) fn resid_of(
+    ctx: &effects::Context,
+    cols: &[(String, Vec<f64>)],
+    th: &[f64],
+) -> Vec<f64> {
+    let p = effects::predict(cols, th);
+    ctx.rec
         .f
         .iter()
-        .zip(&pred)
-        .zip(&rest_final)
+        .zip(&p)
+        .zip(&ctx.rest)
         .map(|((a, b), &r)| if r { 0.0 } else { a - b })
-        .collect();
-    let final_full = rel(tf.rss(&th_full), tf.ff);
-    let tb = base_full.0.plus(&base_full.1);
-    let baseline_full = rel(tb.rss(&tb.solve()), tb.ff);
-    let whiteness = report::whiteness(&residual);
-    let spectrum_peaks = report::spectral_peaks(&residual, rec.dt());
-    for pk in spectrum_peaks.iter().filter(|p| p.unexplained) {
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![("frequency_Hz".into(), pk.freq_hz), ("amplitude_N".into(), pk.amplitude)],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "residual spectral peak at {:.3} Hz ({:.1}x the median spectral level) that no catalogue effect explains",
-                pk.freq_hz, pk.ratio
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    // the slow change found on the baseline residual, or one the final residual still shows
-    let drift_carried = drift.is_some();
-    let slow =
-        drift.or_else(|| report::slow_change(&rec.t, &residual, &rest_final, opt.min_holdout_gain));
-    if let Some(sc) = slow {
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![
-                ("slope_N_per_s".into(), sc.slope_n_per_s),
-                ("change_N".into(), sc.change_n),
-                ("largest_departure_N".into(), sc.worst_n),
-                ("largest_departure_from_s".into(), sc.worst_from_s),
-                ("largest_departure_to_s".into(), sc.worst_to_s),
-            ],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "the residual's mean changes over time (a drift of the force offset: temperature, a load cell's zero, wear): {:+.3} N/s, {:+.3} N over the record, furthest from its mean by {:+.3} N over {:.2}–{:.2} s (a trend over {} blocks, F = {:.0} against the block means' scatter, bound {:.0}; {:.1} % of the residual power){}; no catalogue effect explains it",
-                sc.slope_n_per_s,
-                sc.change_n,
-                sc.worst_n,
-                sc.worst_from_s,
-                sc.worst_to_s,
-                sc.blocks.len(),
-                sc.f_stat,
-                sc.f_bound,
-                100.0 * sc.power_fraction,
-                if drift_carried { "; carried by a trend in time during the search and in the model" } else { "" }
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    let position_spectrum = report::position_spectrum(rec, &residual);
-    for pk in position_spectrum.peaks.iter().filter(|p| p.unexplained) {
-        // a residual peak at a wavelength already named is that finding's remainder (a ripple
-        // not purely sinusoidal, or whose amplitude varies along the stroke), not a second
-        // cause: stated on the finding, not named again
-        let probe = Effect {
-            kind: EffectKind::Cogging,
-            param: pk.wavelength_m,
-            param2: 0.0,
-        };
-        if let Some(k) = chosen.iter().position(|c| {
-            matches!(
-                c.kind,
-                EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-            ) && effects::same_wavelength(&probe, std::slice::from_ref(c))
-        }) {
-            let name = chosen[k].kind.name();
-            if let Some(f) = findings.iter_mut().find(|f| f.effect == name) {
-                f.note.push_str(&format!(
-                    "; the residual still shows {:.3} N at {:.4e} m (a ripple not purely sinusoidal or varying along the stroke)",
-                    pk.amplitude, pk.wavelength_m
-                ));
-            }
-            continue;
-        }
-        let matches = if pk.matches.is_empty() {
-            String::new()
-        } else {
-            format!("; its wavelength matches {}", pk.matches)
-        };
-        findings.push(Finding {
-            effect: "unexplained".into(),
-            parameters: vec![
-                ("wavelength_m".into(), pk.wavelength_m),
-                ("cycles_per_m".into(), pk.cycles_per_m),
-                ("amplitude_N".into(), pk.amplitude),
-            ],
-            holdout_rss_drop: 0.0,
-            delta_bic: 0.0,
-            note: format!(
-                "residual periodic in position, wavelength {:.4e} m ({:.1}x the median level of the position spectrum){matches}, that no catalogue effect explains",
-                pk.wavelength_m, pk.ratio
-            ),
-            holdout_rel_error_after: ho_rel,
-            consistency: 0.0,
-        });
-    }
-    let mut verdicts = baseline_verdicts(&ctx.base_th);
-    let n_rest = ctx.rest.iter().filter(|r| **r).count();
-    if n_rest > 0 {
-        verdicts.push(format!(
-            "{n_rest} of {n} samples at rest (position still within its noise over ±{} samples), within that window of rest or at the record's ends: left out of every fit (friction at rest is static, anywhere within its breakaway level)",
-            effects::REST_HALF_WINDOW
-        ));
-    }
-    if let (Some(tau), false) = (lag_of(&chosen), lag_rows_full.is_empty()) {
-        verdicts.push(format!(
-            "{} samples in motion whose motion {tau:.4} s earlier (the lag) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the lag and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
-            lag_rows_full.len()
-        ));
-    }
-    verdicts.extend(dropped_notes);
-    if fit_rank < cols.len() {
-        verdicts.push(format!(
-            "RANK-DEFICIENT FIT: the final model's {} columns have numerical rank {fit_rank} (condition number {fit_condition:.3e}): some coefficients are not determined by this record (the minimum-norm solution is reported); the motion does not separate those terms",
-            cols.len()
-        ));
-    }
-    Diagnosis {
-        n,
-        verdicts,
-        derivative_method: rec.derivative_method.clone(),
-        baseline_terms,
-        confounded,
-        baseline_holdout_rel_error: baseline_holdout,
-        baseline_train_rel_error: baseline_train,
-        baseline_full_rel_error: baseline_full,
-        findings,
-        final_holdout_rel_error: ho_rel,
-        final_full_rel_error: final_full,
-        model: cols.iter().map(|c| c.0.clone()).zip(th_full).collect(),
-        stage_models,
-        effects: chosen,
-        residual,
-        prediction: pred,
-        whiteness,
-        spectrum_peaks,
-        position_spectrum,
-        cross: None,
-        fit_rank,
-        fit_condition,
-    }
+        .collect()
+}
+
+/// The model `cols` fitted on the whole record (training and held-out normals together).
+pub(crate) fn whole_fit(
+    full: &(Normal, Normal),
+    cols: &[(String, Vec<f64>)],
+) -> Vec<(String, f64)> {
+    let t = full.0.plus(&full.1).solve();
+    cols.iter().map(|c| c.0.clone()).zip(t).collect()
+}
+
+/// The delay of the force a set of effects holds (`EffectModel::force_delay`).
+pub(crate) fn delay_of(set: &[Effect]) -> Option<f64> {
+    set.iter().find_map(|e| e.kind.force_delay(e))
 }
 
 /// The screening columns of each candidate value, keyed by its kind and parameter's bits.
@@ -1369,8 +717,8 @@ pub(crate) fn effect_spans(
 
 /// Every effect of `set` (at `spans` in the coefficients `th`, the baseline's first) inside its
 /// physical range (`effects::plausible`): an effect added beside others can move their fit out
-/// of it (on the rig's clipped multisine 100051 a `screw_efficiency` beside the drive's clip
-/// took part of the viscous force and left the clip's damping above the viscous coefficient).
+/// of it (an efficiency beside a drive's clip can take part of the viscous force and leave the
+/// clip's damping above the viscous coefficient).
 pub fn set_physical(set: &[Effect], spans: &[(usize, usize)], th: &[f64]) -> bool {
     set.iter().zip(spans).all(|(e, &(a, b))| {
         b <= th.len() && effects::plausible(e, &th[a..b], &th[..4.min(th.len())])

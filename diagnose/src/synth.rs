@@ -4,7 +4,11 @@
 //! noise and encoder quantisation, written in the measured-data CSV schema and read back
 //! through the same reader. The closed-loop simulator writes the same CSV columns.
 
-use super::effects::{effect_columns, Context, Effect, EffectKind};
+use super::effects::{
+    effect_columns, Context, Effect, EffectKind, COGGING, COMPLIANCE,
+    DIRECTION_ASYMMETRIC_FRICTION, LAG, POSITION_DEPENDENT_FRICTION, POSITION_PERIODIC_FRICTION,
+    SCREW_EFFICIENCY, STRIBECK,
+};
 use super::record::{parse_csv, Record};
 use std::fmt::Write as _;
 
@@ -82,16 +86,11 @@ impl SynthSpec {
         let mut s = Self::clean(seed, samples);
         let mut rng = Rng::new(seed.wrapping_mul(7919).wrapping_add(13));
         // The friction effects and the lag: the first seven of the catalogue.
-        let pool = &EffectKind::ALL[..7];
+        let pool = &EffectKind::all()[..7];
         let mut kinds: Vec<EffectKind> = Vec::new();
         while kinds.len() < n {
             let k = pool[(rng.next_u64() % pool.len() as u64) as usize];
-            let periodic = |k: EffectKind| {
-                matches!(
-                    k,
-                    EffectKind::PositionPeriodicFriction | EffectKind::Cogging
-                )
-            };
+            let periodic = |k: EffectKind| k == POSITION_PERIODIC_FRICTION || k == COGGING;
             let clash = periodic(k) && kinds.iter().any(|&j| periodic(j));
             if !kinds.contains(&k) && !clash {
                 kinds.push(k);
@@ -102,7 +101,7 @@ impl SynthSpec {
             let amp = rng.range(0.15, 0.35) * fc;
             let ph = rng.range(0.0, std::f64::consts::TAU);
             let (e, c) = match k {
-                EffectKind::DirectionAsymmetricFriction => (
+                k if k == DIRECTION_ASYMMETRIC_FRICTION => (
                     0.0,
                     vec![
                         rng.range(0.15, 0.35)
@@ -110,10 +109,10 @@ impl SynthSpec {
                             * if rng.uniform() < 0.5 { -1.0 } else { 1.0 },
                     ],
                 ),
-                EffectKind::PositionDependentFriction => {
+                k if k == POSITION_DEPENDENT_FRICTION => {
                     (0.0, vec![amp, 0.5 * amp * rng.range(-1.0, 1.0)])
                 }
-                EffectKind::PositionPeriodicFriction | EffectKind::Cogging => {
+                k if k == POSITION_PERIODIC_FRICTION || k == COGGING => {
                     let l = match rng.next_u64() % 3 {
                         0 => s.lead,
                         1 => s.ball * 4.0,
@@ -121,12 +120,12 @@ impl SynthSpec {
                     };
                     (l, vec![amp * ph.cos(), amp * ph.sin()])
                 }
-                EffectKind::Stribeck => (rng.range(0.003, 0.01), vec![rng.range(0.4, 0.8) * fc]),
-                EffectKind::ScrewEfficiency => (
+                k if k == STRIBECK => (rng.range(0.003, 0.01), vec![rng.range(0.4, 0.8) * fc]),
+                k if k == SCREW_EFFICIENCY => (
                     0.0,
                     vec![rng.range(0.08, 0.2) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 }],
                 ),
-                EffectKind::Lag => (rng.range(0.004, 0.02), vec![1.0]),
+                k if k == LAG => (rng.range(0.004, 0.02), vec![1.0]),
                 _ => unreachable!(),
             };
             s.hidden.push((Effect::new(k, e), c));
@@ -147,7 +146,7 @@ impl SynthSpec {
         let m2 = rng.range(8.0, 20.0);
         s.hidden.push((
             Effect {
-                kind: EffectKind::Compliance,
+                kind: COMPLIANCE,
                 param: f_r,
                 param2: 0.0,
             },
@@ -199,7 +198,7 @@ pub fn generate_csv(s: &SynthSpec) -> String {
     let ctx = Context::new(&rec); // base_pred = the exact device baseline force
     let mut f = rec.f.clone();
     for (e, c) in &s.hidden {
-        if e.kind == EffectKind::Compliance {
+        if e.kind == COMPLIANCE {
             // coefficients (modal mass, damping ratio): the mode's force at its own damping
             // (the diagnosis's column takes the damping ratio from the record)
             let col =
@@ -209,7 +208,7 @@ pub fn generate_csv(s: &SynthSpec) -> String {
             }
             continue;
         }
-        if e.kind == EffectKind::Lag {
+        if e.kind == LAG {
             // the device's baseline force delayed by τ (gain c[0]): its inertia, viscous and
             // Coulomb terms at t − τ (the diagnosis's column fits these coefficients itself);
             // the delayed device slides, its Coulomb force Fc·sign v(t − τ) at any speed

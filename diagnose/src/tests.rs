@@ -71,12 +71,12 @@ fn change_rows_is_each_entrys_own_sum() {
 fn set_physical_checks_each_effect_in_its_span() {
     let set = [
         Effect {
-            kind: EffectKind::CurrentLimit,
+            kind: effects::CURRENT_LIMIT,
             param: -0.08,
             param2: 0.0,
         },
         Effect {
-            kind: EffectKind::Stribeck,
+            kind: effects::STRIBECK,
             param: 0.004,
             param2: 0.0,
         },
@@ -875,4 +875,76 @@ fn a_current_that_follows_speed_is_not_told_from_viscous_friction() {
             report::summary(&d)
         );
     }
+}
+
+/// The method's parts that judge and report (the selection, the validation, the conclusion,
+/// the report) name
+/// no effect: every registered effect's name (whole word, any case) and its type name
+/// (CamelCase) are absent from their sources (tests excluded), so that an effect is added by
+/// its file and its registry line alone. Break: `EffectKind::from_name("lag")` written into
+/// `validation.rs` fails it.
+#[test]
+fn method_names_no_effect() {
+    fn sources(p: &std::path::Path, out: &mut Vec<(String, String)>) {
+        if p.is_dir() {
+            let mut entries: Vec<_> = std::fs::read_dir(p)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .collect();
+            entries.sort();
+            for e in entries {
+                sources(&e, out);
+            }
+        } else if p.extension().is_some_and(|x| x == "rs")
+            && p.file_name().is_some_and(|f| f != "tests.rs")
+        {
+            let text =
+                std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            out.push((p.display().to_string(), text));
+        }
+    }
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    for part in ["selection", "validation", "conclusion", "report"] {
+        let dir = src.join(part);
+        let file = src.join(format!("{part}.rs"));
+        assert!(dir.exists() || file.exists(), "no source for {part}");
+        for p in [dir, file] {
+            if p.exists() {
+                sources(&p, &mut files);
+            }
+        }
+    }
+    let word = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let has_word = |text: &str, w: &str| {
+        text.match_indices(w).any(|(i, _)| {
+            let before = text[..i].chars().next_back().is_none_or(|c| !word(c));
+            let after = text[i + w.len()..].chars().next().is_none_or(|c| !word(c));
+            before && after
+        })
+    };
+    let mut found = Vec::new();
+    for kind in effects::EffectKind::all() {
+        let name = kind.name();
+        let camel: String = name
+            .split('_')
+            .map(|w| {
+                let mut c = w.chars();
+                c.next()
+                    .map(|f| f.to_ascii_uppercase().to_string() + c.as_str())
+                    .unwrap_or_default()
+            })
+            .collect();
+        for (path, text) in &files {
+            if has_word(&text.to_lowercase(), name) || has_word(text, &camel) {
+                found.push(format!("{path}: {name}"));
+            }
+        }
+    }
+    println!(
+        "{} sources checked for {} effects",
+        files.len(),
+        effects::EffectKind::all().len()
+    );
+    assert!(found.is_empty(), "effects named: {found:#?}");
 }

@@ -147,6 +147,12 @@ pub enum ModelEffect {
         characteristic_displacement_m: f64,
         friction_N: f64,
     },
+    /// A force proportional to the displacement from a reference position,
+    /// `k·(x − x_ref)` (the force at the reference is the baseline's offset).
+    Spring {
+        stiffness_N_per_m: f64,
+        reference_position_m: f64,
+    },
 }
 
 fn one() -> f64 {
@@ -180,6 +186,7 @@ impl ModelEffect {
             ModelEffect::Compliance { .. } => "compliance",
             ModelEffect::Backlash { .. } => "backlash",
             ModelEffect::PreslidingHysteresis { .. } => "presliding_hysteresis",
+            ModelEffect::Spring { .. } => "spring",
         }
     }
 
@@ -337,6 +344,13 @@ impl ModelEffect {
             } => {
                 range(&k("characteristic_displacement_m"), xc, 1e-9, 1.0, "m")?;
                 range(&k("friction_N"), f, 0.0, F, "N")?;
+            }
+            ModelEffect::Spring {
+                stiffness_N_per_m: st,
+                reference_position_m: x0,
+            } => {
+                range(&k("stiffness_N_per_m"), st, 0.0, 1e12, "N/m")?;
+                range(&k("reference_position_m"), x0, -1e3, 1e3, "m")?;
             }
         }
         Ok(())
@@ -517,6 +531,10 @@ impl ModelState {
                     amplitude_N,
                     phase_rad,
                 } => other += amplitude_N * (TAU * x / wavelength_m + phase_rad).sin(),
+                ModelEffect::Spring {
+                    stiffness_N_per_m,
+                    reference_position_m,
+                } => other += stiffness_N_per_m * (x - reference_position_m),
                 ModelEffect::Stribeck {
                     stribeck_velocity_m_s: vs,
                     amplitude_N,

@@ -1,5 +1,5 @@
 //! A drift of the force offset on point-to-point moves whose direction follows time
-//! (docs/diagnose.md, "Slow change over time"): the first five moves run one way, the last
+//! (docs/diagnose.md, "The baseline"): the first five moves run one way, the last
 //! five back. The baseline's Coulomb term, sgn v, is then a step in time and takes part of a
 //! linear drift; what the baseline leaves of it is a sawtooth over the two halves, which a
 //! trend of degree 2 does not follow, so the drift does not stand out of the block means'

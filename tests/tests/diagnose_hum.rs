@@ -1,5 +1,5 @@
 //! A force at one time frequency (a hum: the supply, a machine nearby) beside a friction of
-//! the speed (docs/diagnose.md, "Stability as evidence": a finding apart from the residual's
+//! the speed (docs/diagnose.md, "The validation": a finding apart from the residual's
 //! hum). On a motion that reverses every second with a hum at 6.5 Hz, the hum has the same
 //! value, with the sign of the new direction, at every reversal: a Stribeck column, which
 //! lives at the low speeds around the reversals, sees it as a friction falling with speed.
@@ -8,7 +8,7 @@
 //! with the diagnosis.
 
 use hal_sim::diagnose::effects::{
-    build_columns, finding_apart_from_hum, hum_in_residual, Context, Effect, EffectKind,
+    self, build_columns, finding_apart_from_hum, hum_in_residual, Context, Effect,
 };
 use hal_sim::diagnose::synth::Rng;
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
@@ -55,7 +55,7 @@ type Columns = Vec<(String, Vec<f64>)>;
 /// The Stribeck candidate's columns on a record and the span they take.
 fn stribeck_columns(ctx: &Context) -> (Columns, (usize, usize)) {
     let e = Effect {
-        kind: EffectKind::Stribeck,
+        kind: effects::STRIBECK,
         param: V_S,
         param2: 0.0,
     };

@@ -9,7 +9,7 @@
 mod common;
 
 use hal_sim::diagnose::effects::{
-    build_columns, ripple_apart_from_reversals, travel_since_reversal, Context, Effect, EffectKind,
+    self, build_columns, ripple_apart_from_reversals, travel_since_reversal, Context, Effect,
 };
 use hal_sim::diagnose::synth::Rng;
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
@@ -129,7 +129,7 @@ fn ripple_locked_to_reversals_is_not_apart_from_them() {
         let rec = parse_csv(&record(3, extra), None).expect("record parses");
         let ctx = Context::new(&rec);
         let e = Effect {
-            kind: EffectKind::Cogging,
+            kind: effects::COGGING,
             param: lambda,
             param2: 0.0,
         };

@@ -1,10 +1,10 @@
-//! The residual's spectrum over position (docs/diagnose.md, "Spectrum over position"): a force
+//! The residual's spectrum over position (docs/diagnose.md, "The conclusion and the report"): a force
 //! periodic in position hidden in a synthetic record and left in the residual must show as an
 //! `unexplained` spatial peak at its wavelength; clean records must show no spatial peak.
 
 mod common;
 
-use hal_sim::diagnose::effects::{Effect, EffectKind};
+use hal_sim::diagnose::effects::{self, Effect, EffectKind};
 use hal_sim::diagnose::synth::{Rng, SynthSpec};
 use hal_sim::diagnose::{diagnose, report, synth, Options};
 
@@ -206,9 +206,9 @@ fn hide_ripple(spec: &mut SynthSpec, rng: &mut Rng, seed: u64, lambda: f64) -> (
     let amp = rng.range(0.15, 0.35) * spec.coulomb;
     let ph = rng.range(0.0, std::f64::consts::TAU);
     let kind = if seed.is_multiple_of(2) {
-        EffectKind::Cogging
+        effects::COGGING
     } else {
-        EffectKind::PositionPeriodicFriction
+        effects::POSITION_PERIODIC_FRICTION
     };
     spec.hidden.push((
         Effect {
@@ -319,7 +319,7 @@ fn ripple_differing_across_the_band_is_not_locked_to_position() {
         }
         let ctx = Context::new(&rec);
         let e = Effect {
-            kind: EffectKind::Cogging,
+            kind: effects::COGGING,
             param: lambda,
             param2: 0.0,
         };

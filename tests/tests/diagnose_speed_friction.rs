@@ -3,7 +3,7 @@
 //! computed in closed form here (no catalogue column), against `stribeck`, its opposite
 //! (static friction above the Coulomb level).
 
-use hal_sim::diagnose::effects::EffectKind;
+use hal_sim::diagnose::effects;
 use hal_sim::diagnose::synth::Rng;
 use hal_sim::diagnose::{diagnose, Options};
 
@@ -87,7 +87,7 @@ fn friction_building_up_with_speed_is_named_and_stribeck_is_not() {
         assert!(
             !d.effects
                 .iter()
-                .any(|e| e.kind == EffectKind::VelocityStrengthening),
+                .any(|e| e.kind == effects::VELOCITY_STRENGTHENING),
             "seed {seed}: a Stribeck bump named {names:?}"
         );
         assert!(names.contains(&"stribeck"), "seed {seed}: {names:?}");
@@ -101,7 +101,7 @@ fn friction_building_up_with_speed_is_named_and_stribeck_is_not() {
 fn velocity_strengthening_physical_range() {
     use hal_sim::diagnose::effects::{plausible, Effect};
     let e = Effect {
-        kind: EffectKind::VelocityStrengthening,
+        kind: effects::VELOCITY_STRENGTHENING,
         param: 0.01,
         param2: 0.0,
     };

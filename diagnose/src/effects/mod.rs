@@ -24,108 +24,10 @@ mod grid;
 pub use grid::*;
 mod pairs;
 pub use pairs::*;
-
-/// Catalogue entries (the baseline terms inertia, viscous, Coulomb and offset are always in
-/// the model and are reported with their significance, not searched for).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EffectKind {
-    /// Viscous coefficient differs with the direction of motion (Coulomb asymmetry is the
-    /// offset, which the baseline carries).
-    DirectionAsymmetricFriction,
-    /// Coulomb level varies slowly along the stroke (linear and quadratic in position).
-    PositionDependentFriction,
-    /// Coulomb level modulated periodically in position (parameter: wavelength, m).
-    PositionPeriodicFriction,
-    /// Force periodic in position, independent of direction (parameter: wavelength, m).
-    Cogging,
-    /// Extra friction at low speed decaying as exp(-(v/vs)^2) (parameter: vs, m/s).
-    Stribeck,
-    /// Force scaled differently when the device is driven (f·v > 0) than when it drives.
-    ScrewEfficiency,
-    /// Measured force delayed from the motion (parameter: lag, s).
-    Lag,
-    /// Force clipped at a level (parameter: limit, N).
-    CurrentLimit,
-    /// Extra inertia that acts only while the device is driven (reflected rotor inertia
-    /// seen through an efficiency < 1).
-    ReflectedInertia,
-    /// An unmodelled resonance: a mass hung on the device through a spring-damper
-    /// (parameter: resonance frequency, Hz).
-    Compliance,
-    /// Play between the imposed motion and the device (parameter: total width, m): while the
-    /// motion crosses the gap after a reversal the device carries no force.
-    Backlash,
-    /// Rate-independent friction hysteresis at reversals (Dahl model: the friction builds up
-    /// over a characteristic displacement instead of switching with the sign of v;
-    /// parameter: that displacement, m).
-    PreslidingHysteresis,
-    /// The force channel is the drive's command (a controller's output × gain), which the
-    /// force follows through the actuator's delay τ (the output's zero-order hold, half a
-    /// sample on average, and the current loop): the recorded force leads the force the motion
-    /// needs, f_cmd(t) = f(t + τ) ≈ f + τ·ḟ (coefficient: τ, as ω_c·τ, ω_c = 2π × the
-    /// derivative filter's cutoff).
-    ActuatorLag,
-    /// Friction that builds up with speed (velocity strengthening: a ballscrew's rolling and
-    /// lubricant-film drag grow with speed at low speed): the Coulomb level rises by ΔF > 0 over
-    /// a characteristic speed v_b, `ΔF·(1 − exp(−|v|/v_b))·sgn v` (parameter: v_b, m/s). The
-    /// opposite of `stribeck`, whose static friction lies above the Coulomb level.
-    VelocityStrengthening,
-}
-
-impl EffectKind {
-    pub const ALL: [EffectKind; 14] = [
-        EffectKind::DirectionAsymmetricFriction,
-        EffectKind::PositionDependentFriction,
-        EffectKind::PositionPeriodicFriction,
-        EffectKind::Cogging,
-        EffectKind::Stribeck,
-        EffectKind::ScrewEfficiency,
-        EffectKind::Lag,
-        EffectKind::CurrentLimit,
-        EffectKind::ReflectedInertia,
-        EffectKind::Compliance,
-        EffectKind::Backlash,
-        EffectKind::PreslidingHysteresis,
-        EffectKind::ActuatorLag,
-        EffectKind::VelocityStrengthening,
-    ];
-    pub fn name(self) -> &'static str {
-        match self {
-            EffectKind::DirectionAsymmetricFriction => "direction_asymmetric_friction",
-            EffectKind::PositionDependentFriction => "position_dependent_friction",
-            EffectKind::PositionPeriodicFriction => "position_periodic_friction",
-            EffectKind::Cogging => "cogging",
-            EffectKind::Stribeck => "stribeck",
-            EffectKind::ScrewEfficiency => "screw_efficiency",
-            EffectKind::Lag => "lag",
-            EffectKind::CurrentLimit => "current_limit",
-            EffectKind::ReflectedInertia => "reflected_inertia",
-            EffectKind::Compliance => "compliance",
-            EffectKind::Backlash => "backlash",
-            EffectKind::PreslidingHysteresis => "presliding_hysteresis",
-            EffectKind::ActuatorLag => "actuator_lag",
-            EffectKind::VelocityStrengthening => "velocity_strengthening_friction",
-        }
-    }
-    pub fn from_name(s: &str) -> Option<Self> {
-        Self::ALL.iter().copied().find(|k| k.name() == s)
-    }
-    /// True when the effect carries a scanned nonlinear parameter (counted in the BIC).
-    pub fn scanned(self) -> bool {
-        matches!(
-            self,
-            EffectKind::PositionPeriodicFriction
-                | EffectKind::Cogging
-                | EffectKind::Stribeck
-                | EffectKind::VelocityStrengthening
-                | EffectKind::Lag
-                | EffectKind::CurrentLimit
-                | EffectKind::Compliance
-                | EffectKind::Backlash
-                | EffectKind::PreslidingHysteresis
-        )
-    }
-}
+mod model;
+pub use model::*;
+mod catalogue;
+pub use catalogue::*;
 
 /// An effect with its scanned parameter (0 when it has none) and its second scanned
 /// parameter (`backlash`: the contact's restitution e, `PLAY_RESTITUTIONS`; 0 for every other
@@ -151,7 +53,7 @@ impl Effect {
     /// parameters' bits (the second folded in; 0 leaves the first's bits as they are).
     pub fn key(&self) -> (usize, u64) {
         (
-            self.kind as usize,
+            self.kind.index(),
             self.param.to_bits() ^ self.param2.to_bits().rotate_left(23),
         )
     }

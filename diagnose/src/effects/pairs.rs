@@ -1,132 +1,13 @@
-//! Evidence that tells a candidate from one already chosen that explains the same residual.
+//! Evidence that tells a finding from another force that explains the same residual: the
+//! in-band test, a ripple locked to the reversals, a hum.
 
 use super::*;
 
-/// True when `kind` times the force channel against the motion (`lag`: the recorded force
-/// behind it; `actuator_lag`: ahead of it, a command the force follows) and `chosen` already
-/// holds the other: the channel has one net delay, so a record is not given both (one cause,
-/// one name; a `lag` fitted a little off its delay is otherwise topped up by an
-/// `actuator_lag` of the difference).
-pub fn same_channel_timing(kind: EffectKind, chosen: &[Effect]) -> bool {
-    let timing = |k: EffectKind| matches!(k, EffectKind::Lag | EffectKind::ActuatorLag);
-    timing(kind) && chosen.iter().any(|c| timing(c.kind) && c.kind != kind)
-}
-
-/// True when `e` and `chosen` would hold both a `stribeck` (speed v_s) and a
-/// `presliding_hysteresis` (displacement x_c) and more than half of the Stribeck column's
-/// energy on the samples in motion lies within x_c of a reversal (the one before or after).
-/// Friction reaches its steady level (the Stribeck curve's, static friction above Coulomb at
-/// low speed) only after the bristles' relaxation displacement, the presliding x_c (LuGre: z
-/// relaxes to g(v)/σ₀ over |dx| ≈ g/σ₀): where the speed stays below v_s only within x_c of
-/// a reversal (on the approach or after it), the friction does not follow the Stribeck
-/// curve's rise there, and a bump fitted there is the build-up's shape, not a Stribeck
-/// force. One of the two is named (the first selected).
-pub fn stribeck_within_presliding(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
-    let other = |k: EffectKind| chosen.iter().find(|c| c.kind == k).map(|c| c.param);
-    let (vs, xc) = match e.kind {
-        EffectKind::Stribeck => match other(EffectKind::PreslidingHysteresis) {
-            Some(xc) => (e.param, xc),
-            None => return false,
-        },
-        EffectKind::PreslidingHysteresis => match other(EffectKind::Stribeck) {
-            Some(vs) => (vs, e.param),
-            None => return false,
-        },
-        _ => return false,
-    };
-    let (x, v) = (&ctx.rec.x, &ctx.rec.v);
-    let n = x.len().min(v.len());
-    // the reversals: where the direction (outside the sign band) changes
-    let mut revs = Vec::new();
-    let mut dir = 0.0;
-    for i in 0..n {
-        let s = if v[i] > ctx.v_eps {
-            1.0
-        } else if v[i] < -ctx.v_eps {
-            -1.0
-        } else {
-            0.0
-        };
-        if s != 0.0 && s != dir {
-            if dir != 0.0 {
-                revs.push(i);
-            }
-            dir = s;
-        }
-    }
-    // each sample's displacement from the nearest reversal, before or after it (the speed
-    // falls below v_s on the approach and rises through it after: both sides of a reversal)
-    let (mut inside, mut all, mut k) = (0.0, 0.0, 0usize);
-    for i in 0..n {
-        while k < revs.len() && revs[k] <= i {
-            k += 1;
-        }
-        if ctx.rest.get(i).copied().unwrap_or(false) {
-            continue;
-        }
-        let w = (-2.0 * (v[i] / vs).powi(2)).exp();
-        all += w;
-        let near = |j: Option<&usize>| j.is_some_and(|&j| (x[i] - x[j]).abs() < xc);
-        if near(k.checked_sub(1).and_then(|j| revs.get(j))) || near(revs.get(k)) {
-            inside += w;
-        }
-    }
-    all > 0.0 && inside > 0.5 * all
-}
-
-/// True when `e` is a position ripple (`cogging` or `position_periodic_friction`, wavelength
-/// λ), `chosen` holds a `compliance` (resonance f_r, damping ratio ζ from
-/// `Context::compliance_zeta`), and on more than half of the samples in motion the
-/// ripple's time frequency |v|/λ lies within the mode's half-power band f_r·(1 ± ζ). Where the
-/// motion moves at such speeds (a rounded triangle's constant-speed flanks) a ripple of λ is a
-/// force at f_r in time, and a mode's ringing after each turn, locked to the turn, is locked
-/// to the turn's position too: the two columns draw the same force, and what the mode's fit
-/// leaves of its own ringing a ripple takes. The mode is named: a ripple beside a mode kept is not kept (`diagnose`'s verdicts).
-pub fn ripple_at_mode(e: &Effect, chosen: &[Effect], ctx: &Context) -> bool {
-    if !matches!(
-        e.kind,
-        EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-    ) {
-        return false;
-    }
-    let Some(mode) = chosen.iter().find(|c| c.kind == EffectKind::Compliance) else {
-        return false;
-    };
-    let (lambda, fr) = (e.param, mode.param);
-    let Some(z) = ctx.compliance_zeta(fr) else {
-        return false;
-    };
-    if !(lambda > 0.0 && fr > 0.0) {
-        return false;
-    }
-    let (lo, hi) = (fr * (1.0 - z), fr * (1.0 + z));
-    let (mut inside, mut all) = (0usize, 0usize);
-    for (i, v) in ctx.rec.v.iter().enumerate() {
-        if ctx.rest.get(i).copied().unwrap_or(true) {
-            continue;
-        }
-        all += 1;
-        let f = v.abs() / lambda;
-        if f >= lo && f <= hi {
-            inside += 1;
-        }
-    }
-    2 * inside > all
-}
-
-/// True when `e` is a periodic effect (cogging or position-periodic friction) whose wavelength
-/// lies within 3 % of a periodic effect in `chosen` (the same spatial cause: one name).
-pub fn same_wavelength(e: &Effect, chosen: &[Effect]) -> bool {
-    let periodic = |k: EffectKind| {
-        matches!(
-            k,
-            EffectKind::Cogging | EffectKind::PositionPeriodicFriction
-        )
-    };
-    periodic(e.kind)
-        && chosen
-            .iter()
-            .any(|c| periodic(c.kind) && (e.param / c.param - 1.0).abs() < 0.03)
+/// True when `wavelength` lies within 3 % of the wavelength of the periodic effect `c`.
+pub fn at_wavelength(wavelength: f64, c: &Effect) -> bool {
+    c.kind
+        .spatial_wavelength(c)
+        .is_some_and(|lc| (wavelength / lc - 1.0).abs() < 0.03)
 }
 
 /// The samples (true) at which a position ripple of wavelength `lambda` lies well inside the

@@ -295,7 +295,7 @@ pub fn play_columns_with(
     let r = ctx.rec;
     let n = r.x.len();
     let len = rows.map_or(n, |r| r.len());
-    let name = EffectKind::Backlash.name();
+    let name = BACKLASH.name();
     let mut cols: Vec<(String, Vec<f64>)> = std::iter::once("free".to_string())
         .chain((0..IMPACT_TAPS).map(|k| format!("impact_{k}")))
         .map(|c| (format!("{name}.{c}"), vec![0.0; len]))

@@ -472,7 +472,7 @@ fn impact_momentum_rule() {
     assert!(!impact_consistent(&[40.0], -1.0));
     let base = [m, 300.0, 30.0, 0.0];
     let e = Effect {
-        kind: EffectKind::Backlash,
+        kind: BACKLASH,
         param: 1e-3,
         param2: 0.0,
     };
@@ -486,20 +486,6 @@ fn impact_momentum_rule() {
         *c = 0.0;
     }
     assert!(!plausible(&e, &coef, &base));
-}
-
-/// The force channel's timing has one name: `lag` (force behind the motion) and
-/// `actuator_lag` (force ahead of it) exclude each other, either order; neither excludes
-/// itself (its own kind is the scan's rule) nor another kind.
-#[test]
-fn channel_timing_is_named_once() {
-    let e = |kind| Effect::new(kind, 1.0);
-    let (lag, act) = (EffectKind::Lag, EffectKind::ActuatorLag);
-    assert!(same_channel_timing(act, &[e(lag)]));
-    assert!(same_channel_timing(lag, &[e(EffectKind::Cogging), e(act)]));
-    assert!(!same_channel_timing(lag, &[e(lag)]));
-    assert!(!same_channel_timing(lag, &[e(EffectKind::Cogging)]));
-    assert!(!same_channel_timing(EffectKind::Cogging, &[e(lag), e(act)]));
 }
 
 /// `compliance_zetas` (the profiles of several frequencies in one resonator pass) gives
@@ -546,49 +532,6 @@ fn batched_zeta_profiles_match_single_ones() {
     // profiled, not the fallback: distinct values, a mode identified at 12 Hz
     assert!(single[0].is_some(), "{single:?}");
     assert_ne!(single[0], single[1], "{single:?}");
-}
-
-/// `stribeck_within_presliding` on a closed-form sinusoid, x = A·cos(ωt), A 20 mm, period
-/// 2 s (the speed at a displacement d from a reversal is √(2·Aω²·d): 19.9 mm/s at 1 mm,
-/// 0.89 mm/s at 2 µm). A Stribeck bump of v_s 5 mm/s lies within 0.06 mm of the reversals
-/// (d = v_s²/(2Aω²)): inside a 1 mm presliding build-up (refused, either order); most of it
-/// lies outside a 2 µm one (kept: below 0.89 mm/s lies erf(√2·0.89/5) = 28 % of its
-/// energy, less on the samples `at_rest` keeps); with no presliding named nothing is
-/// refused. Breaks: the rule removed (always false) fails the first assertion; refusing
-/// whenever both are named fails the third.
-#[test]
-fn stribeck_inside_the_presliding_build_up() {
-    let (fs, amp, w) = (1000.0, 0.02, std::f64::consts::PI);
-    let mut rec = Record::default();
-    for i in 0..12_000 {
-        let t = i as f64 / fs;
-        let (x, v, a) = (
-            amp * (w * t).cos(),
-            -amp * w * (w * t).sin(),
-            -amp * w * w * (w * t).cos(),
-        );
-        rec.t.push(t);
-        rec.x.push(x);
-        rec.v.push(v);
-        rec.a.push(a);
-        rec.f.push(40.0 * a + 300.0 * v + 20.0 * v.signum());
-    }
-    let ctx = Context::new(&rec);
-    let e = |kind, param| Effect::new(kind, param);
-    let st = e(EffectKind::Stribeck, 5e-3);
-    let pre = |xc| e(EffectKind::PreslidingHysteresis, xc);
-    assert!(stribeck_within_presliding(&st, &[pre(1e-3)], &ctx));
-    assert!(stribeck_within_presliding(
-        &pre(1e-3),
-        std::slice::from_ref(&st),
-        &ctx
-    ));
-    assert!(!stribeck_within_presliding(&st, &[pre(2e-6)], &ctx));
-    assert!(!stribeck_within_presliding(
-        &st,
-        &[e(EffectKind::Cogging, 0.01)],
-        &ctx
-    ));
 }
 
 /// The rotated sinusoid of `sinusoid_energy` against the same projection summed with a

@@ -1,4 +1,5 @@
-//! `regen diagnose FILE [--cross FILE2] [--json OUT] [--model OUT.toml] [--plots DIR]`.
+//! `regen diagnose FILE [--cross FILE2] [--json OUT] [--model OUT.toml] [--plots DIR]
+//! [--verbose]`.
 
 use super::{cross_check, read_csv, report, try_diagnose, Options};
 use std::path::{Path, PathBuf};
@@ -30,6 +31,10 @@ pub struct DiagnoseArgs {
     /// Held-out rss drop a finding must bring (fraction).
     #[arg(long, default_value_t = 0.02)]
     pub min_gain: f64,
+    /// Explain the report's statistics (held-out error, rss drop, dBIC, segments, Wald, the
+    /// derived acceleration's band) in plain words after the report.
+    #[arg(long)]
+    pub verbose: bool,
 }
 
 /// Where an output file goes: its directory must exist or be creatable (checked before the
@@ -147,7 +152,12 @@ pub fn cli_main(args: DiagnoseArgs) -> Result<(), Box<dyn std::error::Error>> {
         }
         cross_check(&mut d, &other);
     }
-    print!("{}", report::text(&rec, &d));
+    if args.verbose {
+        print!("{}", report::text_explained(&rec, &d));
+    } else {
+        print!("{}", report::text(&rec, &d));
+        println!("(--verbose explains the statistics in plain words)");
+    }
     if let Some(p) = &args.json {
         std::fs::write(p, report::json(&d)).map_err(|e| format!("{}: {e}", p.display()))?;
         println!("wrote {}", p.display());
