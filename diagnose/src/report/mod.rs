@@ -227,9 +227,9 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
     for b in &d.baseline_terms {
         let _ = writeln!(
             s,
-            "  {:<18} {:>12.5} {:<6} held-out error without it {:6.2} % {}",
+            "  {:<18} {:>12} {:<6} held-out error without it {:6.2} % {}",
             b.effect,
-            b.value,
+            sig(b.value),
             b.unit,
             100.0 * b.holdout_rel_error_without,
             if b.significant {
