@@ -1892,7 +1892,7 @@ fn write_warnings<W: Write>(out: &mut W, w: u8) {
 fn safe_words(m: Mode) -> &'static str {
     match m {
         Mode::Short => "short (low-side switches on: phases shorted, no power to the bus)",
-        _ => "open (gates off: no current through the bridge)",
+        _ => "idle (gates off: no current through the bridge)",
     }
 }
 
