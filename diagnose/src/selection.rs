@@ -632,27 +632,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         &spread,
         baseline_holdout,
     );
-    let Selected {
-        chosen,
-        findings,
-        cols,
-        full,
-        stage_models,
-        lag_rows_full,
-        ho_rel,
-    } = selected;
     conclude(
         &ctx,
         opt,
-        Selected {
-            chosen,
-            findings,
-            cols,
-            full,
-            stage_models,
-            lag_rows_full,
-            ho_rel,
-        },
+        selected,
         Baseline {
             terms: baseline_terms,
             confounded,
