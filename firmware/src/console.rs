@@ -1318,13 +1318,13 @@ impl Console {
                     let comma = list.bytes().position(|b| b == b',');
                     let name = list.get(..comma.unwrap_or(list.len())).unwrap_or("");
                     rest = comma.and_then(|c| list.get(c + 1..));
-                    let Some(i) = CHANNELS.iter().position(|c| c.0 == name) else {
+                    let Some(i) = channel_of(name) else {
                         fail!(.s("unknown channel '").clip(name).s("' (see help)"))
                     };
                     if n == MAX_CH {
                         fail!(.s("at most ").uint(MAX_CH as u32).s(" channels"))
                     }
-                    sel[n] = i as u8;
+                    sel[n] = i;
                     n += 1;
                 }
                 let rate = match parse_f32(a2.unwrap_or("")) {
