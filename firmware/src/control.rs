@@ -1651,6 +1651,31 @@ mod tests {
         }
     }
 
+    proptest! {
+        /// The capture's one-channel read (`channel_bits`) and `tel`'s read of the whole
+        /// telemetry (`console::channel_value`) give every channel the same value, over
+        /// random currents and bus samples of a drive running the resistor law at a steady
+        /// encoder speed.
+        #[test]
+        fn channel_bits_is_the_telemetry_channel(
+            codes in prop::collection::vec((1900u16..2200, 1900u16..2200, 1900u16..2200, 2300u16..2600), 50..200),
+            (c0, speed) in (any::<u16>(), 1u16..8),
+        ) {
+            let mut ctl = Controller::new(&Config::default()).unwrap();
+            ctl.set_mode(Mode::Run).unwrap();
+            for (k, (a, b, c, v)) in codes.into_iter().enumerate() {
+                let e = c0.wrapping_add(speed.wrapping_mul(k as u16));
+                ctl.step(&RawSample { i_abc: [a, b, c], v_bus: v, encoder: e });
+                let t = ctl.telemetry();
+                for (ch, (name, _)) in crate::console::CHANNELS.iter().enumerate() {
+                    let fast = crate::numtext::q_f32(Q::from_bits(ctl.channel_bits(ch as u8)));
+                    let whole = crate::console::channel_value(&t, ch);
+                    prop_assert_eq!(fast.to_bits(), whole.to_bits(), "{}", name);
+                }
+            }
+        }
+    }
+
     /// Steps at a steady encoder speed (zero currents, 72 V), `n` periods from count `c0`.
     fn spin(ctl: &mut Controller, c0: u16, n: u16) -> u16 {
         let z = ctl.config().adc_zero_code;
