@@ -1,9 +1,13 @@
 import { defineConfig } from "vite";
 
 // Reproducible output with fixed names (embedded by hal-sim/src/cli/ui.rs): no hashes, no
-// source maps, one script and one style sheet.
+// source maps, one script, one style sheet and the live plot's worker.
 export default defineConfig({
   base: "./",
+  worker: {
+    format: "es",
+    rollupOptions: { output: { entryFileNames: "assets/[name].js" } },
+  },
   build: {
     outDir: "../hal-sim/ui-dist",
     emptyOutDir: true,

@@ -271,9 +271,8 @@ $("tel-start").addEventListener("click", async () => {
 $("tel-stop").addEventListener("click", () => void send("tel off", false));
 $("span").addEventListener("change", () => { plot.span = Math.max(0.01, Number($<HTMLInputElement>("span").value) || 10); plot.changed(); });
 $("pause").addEventListener("click", () => {
-  plot.paused = !plot.paused;
+  plot.pause(!plot.paused);
   $("pause").textContent = plot.paused ? "Resume" : "Pause";
-  if (!plot.paused) plot.changed();
 });
 function download(name: string, text: string): void {
   const a = document.createElement("a");
@@ -387,6 +386,14 @@ $("f-clear").addEventListener("click", async () => { showReply("f-msg", await se
 
 // ---------- harvest ----------
 let hplot: uPlot | null = null;
+/** The harvest plot's legend markers, by series (a CSS background for `fill`; dots round). */
+const HMARK = [
+  { width: 0, stroke: "", fill: "" },
+  { width: 0, stroke: "#1f6fd1", fill: "linear-gradient(#1f6fd1, #1f6fd1) center / 100% 2px no-repeat" },
+  { width: 2, stroke: "#2c9a4b", fill: "#2c9a4b" },
+  { width: 2, stroke: "#d1461f", fill: "#d1461f" },
+  { width: 2, stroke: "#d1461f", fill: "#fff" },
+];
 const readings: [number, number][] = [];
 async function harvest(): Promise<void> {
   const res = await fetch(`api/harvest?token=${encodeURIComponent(token)}`);
@@ -416,19 +423,23 @@ async function harvest(): Promise<void> {
     {
       width: Math.max(400, el.clientWidth), height: 380,
       scales: { x: { time: false, distr: 3 } },
-      legend: { live: false },
+      // Each legend entry in its series' style (uPlot's default marker is a square outline of
+      // the stroke): a line for the curve, a dot or a ring for the points.
+      legend: { live: false, markers: { width: (_u, i) => HMARK[i].width, stroke: (_u, i) => HMARK[i].stroke, fill: (_u, i) => HMARK[i].fill } },
       axes: [{ label: "R_L (Ω per phase)" }, { label: "mean load power (W)", size: 60 }],
       series: [
         { label: "R_L" },
-        { label: "harmonic balance", stroke: "#1f6fd1", width: 2, points: { show: false } },
-        { label: "optimum", stroke: "#2c9a4b", paths: () => null, points: { show: true, size: 12, fill: "#2c9a4b" } },
-        { label: "drive now", stroke: "#d1461f", paths: () => null, points: { show: true, size: 10, fill: "#d1461f" } },
-        { label: "earlier", stroke: "#d1461f", paths: () => null, points: { show: true, size: 8, fill: "#fff" } },
+        { label: "harmonic balance", stroke: HMARK[1].stroke, width: 2, points: { show: false } },
+        { label: "optimum", stroke: HMARK[2].stroke, paths: () => null, points: { show: true, size: 12, fill: HMARK[2].fill } },
+        { label: "drive now", stroke: HMARK[3].stroke, paths: () => null, points: { show: true, size: 10, fill: HMARK[3].fill } },
+        { label: "earlier", stroke: HMARK[4].stroke, paths: () => null, points: { show: true, size: 8, fill: HMARK[4].fill } },
       ],
     },
     [xs, curve, opt, now, past] as unknown as uPlot.AlignedData,
     el,
   );
+  // The points' markers (those with a border) round.
+  el.querySelectorAll<HTMLElement>(".u-legend .u-marker").forEach((m) => { if (m.style.borderWidth === "2px") m.style.borderRadius = "50%"; });
 }
 $("h-refresh").addEventListener("click", async () => { await loadParams(); await poll(); await harvest(); });
 

@@ -2,7 +2,8 @@
 
 import uPlot from "uplot";
 import type { TelSink } from "./protocol";
-import { fmtQty, unitOf } from "./units";
+import { fmtQty } from "./units";
+import { AXIS_W, StripChart, fmtTick, plotBox, unitGroups, type Chan, type YAxis } from "./strip";
 
 /** Samples kept per channel: over two minutes at the firmware's highest rate (2 kHz). */
 export const CAPACITY = 1 << 18;
@@ -58,194 +59,202 @@ export class TelStore implements TelSink {
   }
 }
 
-export const COLORS = ["#1f6fd1", "#d1461f", "#2c9a4b", "#8d44c9", "#c28a00", "#0b9aa6", "#b8336a", "#5c6670"];
-
 /**
- * Series, scales and y axes for channels on one time axis: one scale per unit (currents in A
- * share one, voltages another, …), its axis labelled with the unit, alternating left and right
- * and drawn in its first channel's colour; values in the legend with their unit.
+ * uPlot's series, scales and y axes for channels on one time axis (`unitGroups`: one scale
+ * per unit, its axis labelled with the unit, alternating left and right and drawn in its first
+ * channel's colour); values in the legend with their unit.
  */
 export function unitAxes(channels: string[]): { series: uPlot.Series[]; scales: uPlot.Scales; axes: uPlot.Axis[] } {
-  const units: string[] = [];
-  const series: uPlot.Series[] = [];
-  const axes: uPlot.Axis[] = [];
+  const g = unitGroups(channels);
   const scales: uPlot.Scales = {};
-  channels.forEach((c, k) => {
-    const unit = unitOf(c);
-    const scale = unit ? "u:" + unit : "c:" + c;
-    const stroke = COLORS[k % COLORS.length];
-    if (!(scale in scales)) {
-      scales[scale] = { auto: true };
-      const side = units.length % 2 === 0 ? 3 : 1;
-      units.push(scale);
-      axes.push({ scale, side, label: unit || c, stroke, size: 62, grid: { show: units.length === 1 }, values: (_u, v) => v.map((x) => fmtTick(x)) });
-    }
-    series.push({ label: c, scale, stroke, width: 1, points: { show: false }, value: (_u, v) => (v == null ? "–" : fmtQty(v, unit)) });
+  const axes: uPlot.Axis[] = g.axes.map((a, i) => {
+    scales[a.scale] = { auto: true };
+    return { scale: a.scale, side: a.side, label: a.label, stroke: a.color, size: AXIS_W, grid: { show: i === 0 }, values: (_u, v) => v.map((x) => fmtTick(x)) };
   });
+  const series: uPlot.Series[] = g.chans.map((c) => ({ label: c.label, scale: c.scale, stroke: c.color, width: 1, points: { show: false }, value: (_u, v) => (v == null ? "–" : fmtQty(v, c.unit)) }));
   return { series, scales, axes };
-}
-
-const linear = uPlot.paths.linear!();
-
-/** `#rrggbb` as a pixel of an ImageData's Uint32Array (little-endian RGBA), opaque. */
-function pixel(hex: string): number {
-  const n = parseInt(hex.slice(1), 16);
-  return (0xff000000 | ((n & 0xff) << 16) | (n & 0xff00) | ((n >> 16) & 0xff)) >>> 0;
-}
-
-/**
- * Series drawn as an oscilloscope draws a trace: into a pixel buffer of the plotting area, in
- * each pixel column every pixel from the lowest to the highest point falling in it, extended to
- * the previous column's last point so the trace stays joined (peaks kept). The buffer is put,
- * once per redraw, on a canvas of its own over the plotting area: column-major (a column's span
- * is one contiguous run of the buffer), the canvas turned into place by a CSS transposition.
- * Stroking a line through the same points costs several times more (docs/ui.md, Performance).
- * With fewer points than pixel columns (zoomed in) a series is drawn by uPlot's own line.
- */
-export function tracePlugin(): uPlot.Plugin {
-  let img: ImageData | null = null;
-  let buf = new Uint32Array(0);
-  let cv: HTMLCanvasElement | null = null;
-  const paths: uPlot.Series.PathBuilder = (u, si, i0, i1) => {
-    const { width: W, height: H } = u.bbox;
-    // Fewer points than CSS pixel columns (the plot is handed two per column): a line.
-    if (i1 - i0 + 1 < W / devicePixelRatio || !img) return linear(u, si, i0, i1);
-    const xs = u.data[0], ys = u.data[si];
-    const s = u.series[si];
-    const sx = u.scales.x, sy = u.scales[s.scale!];
-    const x0 = sx.min!, kx = W / (sx.max! - x0);
-    const y0 = sy.max!, ky = H / (sy.min! - y0);
-    if (!(kx > 0 && kx < Infinity && ky < 0 && ky > -Infinity)) return linear(u, si, i0, i1);
-    const px = pixel((s as unknown as { _stroke: string })._stroke);
-    const lw = Math.max(1, Math.round(devicePixelRatio));
-    const span = (c: number, a: number, b: number) => {
-      if (c < 0 || c >= W) return;
-      const r0 = Math.max(0, Math.round(Math.min(a, b))), r1 = Math.min(H - 1, Math.round(Math.max(a, b)) + lw - 1);
-      for (let k = 0; k < lw && c + k < W; k++) buf.fill(px, (c + k) * H + r0, (c + k) * H + r1 + 1);
-    };
-    let col = -1, lo = 0, hi = 0, last = NaN;
-    for (let i = i0; i <= i1; i++) {
-      const v = ys[i];
-      if (v == null || v !== v) { if (col >= 0) span(col, lo, hi); col = -1; last = NaN; continue; }
-      const x = Math.floor((xs[i] - x0) * kx);
-      const y = (v - y0) * ky;
-      if (x !== col) {
-        if (col >= 0) span(col, lo, hi);
-        // Columns no point fell in (a bucket wider than a pixel): the straight line between.
-        if (last === last && col >= 0 && x - col > 1) {
-          const ya = last;
-          for (let c = col + 1; c < x; c++) {
-            const yc = ya + ((y - ya) * (c - col)) / (x - col);
-            span(c, last, yc);
-            last = yc;
-          }
-        }
-        col = x;
-        lo = hi = last === last ? last : y;
-      }
-      if (y < lo) lo = y;
-      if (y > hi) hi = y;
-      last = y;
-    }
-    if (col >= 0) span(col, lo, hi);
-    return { stroke: null, fill: null, clip: null, band: null, gaps: null, flags: 0, _width: 0 } as unknown as uPlot.Series.Paths;
-  };
-  return {
-    opts: (_u, o) => {
-      o.series.forEach((s, i) => { if (i > 0) s.paths = paths; });
-    },
-    hooks: {
-      drawClear: (u) => {
-        const { width: W, height: H } = u.bbox;
-        if (W <= 0 || H <= 0) { img = null; return; }
-        if (!img || img.width !== H || img.height !== W) {
-          img = new ImageData(H, W);
-          buf = new Uint32Array(img.data.buffer);
-          cv?.remove();
-          cv = document.createElement("canvas");
-          cv.width = H;
-          cv.height = W;
-          const r = devicePixelRatio;
-          cv.style.cssText = `position:absolute;left:0;top:0;width:${H / r}px;height:${W / r}px;transform-origin:0 0;transform:matrix(0,1,1,0,0,0);pointer-events:none`;
-          u.over.prepend(cv);
-        } else buf.fill(0);
-        // Every redraw rebuilds the traces (uPlot keeps a series' paths between redraws).
-        u.series.forEach((s, i) => { if (i > 0) (s as unknown as { _paths: unknown })._paths = null; });
-      },
-      draw: () => {
-        if (!img || !cv) return;
-        cv.getContext("2d")!.putImageData(img, 0, 0);
-      },
-    },
-  };
-}
-
-/** An axis tick: short, no prefix (the axis label carries the unit). */
-function fmtTick(x: number): string {
-  const a = Math.abs(x);
-  if (a !== 0 && (a >= 1e5 || a < 1e-3)) return x.toExponential(1);
-  return String(Number(x.toPrecision(6)));
 }
 
 /** Height of the plots' drawing area (the legend goes below it, inside the panel). */
 export const PLOT_HEIGHT = 400;
 
-/** Several channels on one time axis, redrawn once per frame from min/max per pixel column. */
+/**
+ * Several channels on one time axis. Following the stream, the last `span` seconds are drawn
+ * once per frame from min/max per pixel column by a `StripChart` in a Web Worker, on canvases
+ * handed to it (`transferControlToOffscreen`): the page's main thread only cuts the points and
+ * posts them. Paused, uPlot draws every sample of the window (drag to zoom, double-click to
+ * reset, values under the cursor).
+ */
 export class LivePlot {
+  /** The paused view (null while following the stream). */
   u: uPlot | null = null;
   paused = false;
   /** Seconds shown while following the stream. */
   span = 10;
-  shown: boolean[] = [];
-  /** Samples that reached the plot's data (the test compares it with the store's count). */
+  /** Samples in the last frame drawn (the test compares it with the store's count). */
   drawnUpTo = 0;
+  /** Frames drawn. */
   frames = 0;
+  /** The points of the last frame handed to the drawing: times, then each channel's. */
+  points: Float64Array[] = [];
+  /** Pixel columns (CSS px) of the plotting area: one bucket of samples each. */
+  cols = 0;
+  drawMs: number[] = [];
   private dirty = false;
+  /** Frames handed to the worker and not yet drawn: at most two (the next waits). */
+  private pending = 0;
+  private live: HTMLDivElement;
+  private bgCv: HTMLCanvasElement;
+  private trCv: HTMLCanvasElement;
+  private legend: HTMLDivElement;
+  private pausedEl: HTMLDivElement;
+  private worker: Worker | null = null;
+  /** Without OffscreenCanvas: the same chart drawn on the main thread. */
+  private local: StripChart | null = null;
+  private chans: Chan[] = [];
+  private axes: YAxis[] = [];
+  private w = 0;
 
   constructor(private el: HTMLElement, private store: TelStore) {
+    this.live = document.createElement("div");
+    this.live.style.cssText = `position:relative;height:${PLOT_HEIGHT}px`;
+    this.bgCv = document.createElement("canvas");
+    this.trCv = document.createElement("canvas");
+    this.bgCv.style.cssText = "position:absolute;left:0;top:0";
+    this.trCv.style.cssText = "position:absolute;transform-origin:0 0;transform:matrix(0,1,1,0,0,0);pointer-events:none";
+    this.live.append(this.bgCv, this.trCv);
+    this.legend = document.createElement("div");
+    this.legend.className = "strip-legend";
+    this.pausedEl = document.createElement("div");
+    this.pausedEl.hidden = true;
+    el.append(this.live, this.legend, this.pausedEl);
+    if ("transferControlToOffscreen" in this.bgCv) {
+      try {
+        const bg = this.bgCv.transferControlToOffscreen(), tr = this.trCv.transferControlToOffscreen();
+        this.worker = new Worker(new URL("./plot.worker.ts", import.meta.url), { type: "module" });
+        this.worker.postMessage({ type: "init", bg, tr }, [bg, tr]);
+        this.worker.onmessage = (e: MessageEvent<{ type: string; upTo: number; ms: number }>) => {
+          if (e.data.type !== "drawn") return;
+          this.drawMs.push(e.data.ms);
+          this.pending--;
+          this.drawnUpTo = e.data.upTo;
+          this.frames++;
+        };
+      } catch {
+        this.worker = null;
+      }
+    }
+    if (!this.worker) {
+      // The canvases were not transferred (an older browser): draw them here.
+      this.bgCv = this.bgCv.cloneNode() as HTMLCanvasElement;
+      this.trCv = this.trCv.cloneNode() as HTMLCanvasElement;
+      this.live.replaceChildren(this.bgCv, this.trCv);
+      this.local = new StripChart(this.bgCv.getContext("2d")!, this.trCv.getContext("2d")!);
+    }
     const tick = () => {
-      this.frames++;
-      if (this.dirty && !this.paused) this.draw();
+      if (this.dirty && !this.paused && this.pending < 2) this.draw();
       requestAnimationFrame(tick);
     };
     requestAnimationFrame(tick);
-    let w = 0;
     new ResizeObserver(() => {
-      if (this.el.clientWidth !== w) { w = this.el.clientWidth; this.u?.setSize(this.size()); }
+      if (this.el.clientWidth !== this.w) { this.w = this.el.clientWidth; this.resize(); }
     }).observe(el);
   }
 
-  private size() {
-    return { width: Math.max(300, this.el.clientWidth - 8), height: PLOT_HEIGHT };
+  private post(m: Record<string, unknown>): void {
+    if (this.worker) this.worker.postMessage(m);
+    else if (m.type === "setup") this.local!.setup(this.chans, this.axes);
+    else if (m.type === "size") this.local!.size(m.w as number, m.h as number, m.dpr as number);
+  }
+
+  private resize(): void {
+    const w = Math.max(300, this.el.clientWidth - 8), h = PLOT_HEIGHT;
+    const b = plotBox(w, h, this.axes);
+    this.cols = Math.floor(b.width);
+    this.bgCv.style.width = w + "px";
+    this.bgCv.style.height = h + "px";
+    // Transposed into place: its width is the plotting area's height.
+    Object.assign(this.trCv.style, { left: b.left + "px", top: b.top + "px", width: b.height + "px", height: b.width + "px" });
+    this.post({ type: "size", w, h, dpr: devicePixelRatio });
+    this.u?.setSize({ width: w, height: h });
+    this.dirty = true;
   }
 
   rebuild(): void {
-    this.u?.destroy();
-    this.el.textContent = "";
     const s = this.store;
-    this.shown = s.channels.map(() => true);
+    const g = unitGroups(s.channels);
+    this.chans = g.chans;
+    this.axes = g.axes;
+    this.post({ type: "setup", chans: this.chans, axes: this.axes });
+    this.legend.replaceChildren(
+      ...this.chans.map((c) => {
+        const e = document.createElement("span");
+        const m = document.createElement("i");
+        m.style.background = c.color;
+        e.append(m, c.unit ? `${c.label} (${c.unit})` : c.label);
+        return e;
+      }),
+    );
+    this.resize();
+    // A new stream counts its samples from 0 again: no bucket of the last one is reused.
+    this.per = 0;
+    this.key.fill(-1);
+    this.dirty = true;
+    if (this.paused) this.pause(true);
+  }
+
+  changed(): void {
+    this.dirty = true;
+  }
+
+  /** Paused: uPlot with every sample of the window; resumed: the live chart again. */
+  pause(on: boolean): void {
+    this.paused = on;
+    this.u?.destroy();
+    this.u = null;
+    this.pausedEl.textContent = "";
+    this.pausedEl.hidden = !on;
+    this.live.hidden = on;
+    this.legend.hidden = on;
+    if (!on) { this.dirty = true; return; }
+    const s = this.store, M = CAPACITY - 1;
+    const [lo, b] = this.window();
+    const xs = new Float64Array(b - lo);
+    const ys = s.channels.map(() => new Float64Array(b - lo));
+    for (let j = lo; j < b; j++) {
+      xs[j - lo] = s.t[j & M];
+      for (let k = 0; k < ys.length; k++) ys[k][j - lo] = s.v[k][j & M];
+    }
     const ua = unitAxes(s.channels);
     this.u = new uPlot(
       {
-        ...this.size(),
+        width: Math.max(300, this.el.clientWidth - 8),
+        height: PLOT_HEIGHT,
         series: [{ label: "t", value: (_u, v) => (v == null ? "–" : v.toFixed(4) + " s") }, ...ua.series],
         scales: { x: { time: false }, ...ua.scales },
         axes: [{ label: "t since tel (s)" }, ...ua.axes],
         cursor: { drag: { x: true, y: false, setScale: true } },
         legend: { live: true },
-        plugins: [tracePlugin()],
       },
-      [[], ...s.channels.map(() => [])] as unknown as uPlot.AlignedData,
-      this.el,
+      [xs, ...ys] as unknown as uPlot.AlignedData,
+      this.pausedEl,
     );
-    // A new stream counts its samples from 0 again: no bucket of the last one is reused.
-    this.per = 0;
-    this.key.fill(-1);
-    this.dirty = true;
   }
 
-  changed(): void {
-    this.dirty = true;
+  /** Index range [lo, b) of the held samples in the last `span` seconds. */
+  private window(): [number, number] {
+    const s = this.store, M = CAPACITY - 1;
+    const [a, b] = s.held();
+    if (b === a) return [a, b];
+    const t0 = s.t[(b - 1) & M] - this.span;
+    // First sample inside the window (binary search on the ring).
+    let lo = a, hi = b - 1;
+    while (lo < hi) {
+      const mid = (lo + hi) >> 1;
+      if (s.t[mid & M] < t0) lo = mid + 1;
+      else hi = mid;
+    }
+    return [lo, b];
   }
 
   /**
@@ -281,27 +290,16 @@ export class LivePlot {
     }
   }
 
-  /** The last `span` seconds, at most two points (min and max) per pixel column per channel. */
+  /** The last `span` seconds, at most two points (min and max) per pixel column per channel, handed to the drawing. */
   draw(): void {
     const s = this.store;
-    const u = this.u;
-    if (!u) return;
     this.dirty = false;
-    const [a, b] = s.held();
-    this.drawnUpTo = b;
-    if (b === a) return;
+    const [lo, b] = this.window();
+    if (b === lo) return;
     const M = CAPACITY - 1;
     const K = s.channels.length;
     const tEnd = s.t[(b - 1) & M];
-    const t0 = tEnd - this.span;
-    // First sample inside the window (binary search on the ring).
-    let lo = a, hi = b - 1;
-    while (lo < hi) {
-      const mid = (lo + hi) >> 1;
-      if (s.t[mid & M] < t0) lo = mid + 1;
-      else hi = mid;
-    }
-    const cols = Math.min(BUCKETS >> 1, Math.max(100, Math.floor(u.bbox.width / devicePixelRatio)));
+    const cols = Math.min(BUCKETS >> 1, Math.max(100, this.cols));
     const per = Math.max(1, Math.ceil((b - lo) / cols));
     if (per !== this.per || this.bv.length !== K) {
       this.per = per;
@@ -342,6 +340,16 @@ export class LivePlot {
         n += 2;
       }
     }
-    u.setData([xs.subarray(0, n), ...ys.map((c) => c.subarray(0, n))] as unknown as uPlot.AlignedData, true);
+    // Copies of the points in use (posting a view would copy its whole buffer).
+    this.points = [xs.slice(0, n), ...ys.map((c) => c.slice(0, n))];
+    const f = { type: "frame", upTo: b, x0: tEnd - this.span, x1: tEnd, xs: this.points[0], ys: this.points.slice(1) };
+    if (this.worker) {
+      this.pending++;
+      this.worker.postMessage(f);
+    } else {
+      this.local!.draw(f);
+      this.drawnUpTo = b;
+      this.frames++;
+    }
   }
 }

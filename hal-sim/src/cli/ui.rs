@@ -262,6 +262,11 @@ const ASSETS: &[(&str, &str, &[u8])] = &[
         include_bytes!("../../ui-dist/assets/app.js"),
     ),
     (
+        "/assets/plot.worker.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../../ui-dist/assets/plot.worker.js"),
+    ),
+    (
         "/assets/app.css",
         "text/css; charset=utf-8",
         include_bytes!("../../ui-dist/assets/app.css"),
