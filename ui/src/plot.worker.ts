@@ -8,9 +8,9 @@ type Msg =
   | { type: "init"; bg: OffscreenCanvas; tr: OffscreenCanvas }
   | { type: "setup"; chans: Chan[]; axes: YAxis[] }
   | { type: "size"; w: number; h: number; dpr: number }
-  | ({ type: "frame"; upTo: number } & Frame);
+  | ({ type: "frame" } & Frame);
 
-const scope = self as unknown as { onmessage: (e: MessageEvent<Msg>) => void; postMessage(m: unknown): void };
+const scope = self as unknown as { onmessage: (e: MessageEvent<Msg>) => void; postMessage(m: unknown, t: Transferable[]): void };
 let chart: StripChart | null = null;
 
 scope.onmessage = (e) => {
@@ -21,6 +21,8 @@ scope.onmessage = (e) => {
   else if (m.type === "frame") {
     const t0 = performance.now();
     chart?.draw(m);
-    scope.postMessage({ type: "drawn", upTo: m.upTo, ms: performance.now() - t0 });
+    // The buffer back to the page (the points on show; reused for a later frame).
+    const f: Frame = { upTo: m.upTo, x0: m.x0, x1: m.x1, n: m.n, stride: m.stride, buf: m.buf };
+    scope.postMessage({ type: "drawn", f, ms: performance.now() - t0 }, [m.buf.buffer]);
   }
 };

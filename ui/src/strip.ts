@@ -80,12 +80,18 @@ function pixel(hex: string): number {
 
 type Ctx = OffscreenCanvasRenderingContext2D | CanvasRenderingContext2D;
 
-/** One frame: the time window [x0, x1] and the points (min and max per pixel column). */
+/**
+ * One frame: the time window [x0, x1] and `n` points (min and max per pixel column) in `buf`:
+ * their times from 0, then each channel's from `stride`, `2·stride`, …; `upTo` the samples
+ * received when it was cut.
+ */
 export interface Frame {
+  upTo: number;
   x0: number;
   x1: number;
-  xs: Float64Array;
-  ys: Float64Array[];
+  n: number;
+  stride: number;
+  buf: Float64Array;
 }
 
 /**
@@ -137,6 +143,7 @@ export class StripChart {
 
   draw(f: Frame): void {
     const r = this.dpr, c = this.bg;
+    const xs = f.buf.subarray(0, f.n), ys = this.chans.map((_, k) => f.buf.subarray((k + 1) * f.stride, (k + 1) * f.stride + f.n));
     const b = plotBox(this.w, this.h, this.axes);
     const L = b.left * r, T = b.top * r, W = Math.round(b.width * r), H = Math.round(b.height * r);
     const ranges = new Map<string, { lo: number; hi: number; step: number }>();
@@ -144,7 +151,7 @@ export class StripChart {
       let mn = Infinity, mx = -Infinity;
       this.chans.forEach((ch, k) => {
         if (ch.scale !== a.scale) return;
-        const y = f.ys[k];
+        const y = ys[k];
         for (let i = 0; i < y.length; i++) { const v = y[i]; if (v < mn) mn = v; if (v > mx) mx = v; }
       });
       ranges.set(a.scale, yRange(mn, mx, b.height));
@@ -209,7 +216,7 @@ export class StripChart {
     if (kx > 0 && kx < Infinity) {
       this.chans.forEach((ch, k) => {
         const g = ranges.get(ch.scale)!;
-        this.trace(f.xs, f.ys[k], f.x0, kx, g.hi, H / (g.lo - g.hi), W, H, this.px[k], Math.max(1, Math.round(r)));
+        this.trace(xs, ys[k], f.x0, kx, g.hi, H / (g.lo - g.hi), W, H, this.px[k], Math.max(1, Math.round(r)));
       });
     }
     this.tr.putImageData(img, 0, 0);

@@ -3,7 +3,7 @@
 import uPlot from "uplot";
 import type { TelSink } from "./protocol";
 import { fmtQty } from "./units";
-import { AXIS_W, StripChart, fmtTick, plotBox, unitGroups, type Chan, type YAxis } from "./strip";
+import { AXIS_W, StripChart, fmtTick, plotBox, unitGroups, type Chan, type Frame, type YAxis } from "./strip";
 
 /** Samples kept per channel: over two minutes at the firmware's highest rate (2 kHz). */
 export const CAPACITY = 1 << 18;
@@ -93,13 +93,24 @@ export class LivePlot {
   span = 10;
   /** Samples in the last frame drawn (the test compares it with the store's count). */
   drawnUpTo = 0;
-  /** Frames drawn. */
+  /** Frames drawn (a frame in which no sample arrived is not redrawn). */
   frames = 0;
-  /** The points of the last frame handed to the drawing: times, then each channel's. */
-  points: Float64Array[] = [];
+  /** The points of the last frame drawn: times, then each channel's. */
+  get points(): Float64Array[] {
+    const f = this.last;
+    if (!f) return [];
+    return Array.from({ length: f.buf.length / f.stride | 0 }, (_, k) => f.buf.subarray(k * f.stride, k * f.stride + f.n));
+  }
+  private last: Frame | null = null;
+  /** Point buffers not in use. */
+  private pool: Float64Array[] = [];
   /** Pixel columns (CSS px) of the plotting area: one bucket of samples each. */
   cols = 0;
-  drawMs: number[] = [];
+  /** The worker's drawing time, summed over the frames (ms). */
+  drawMs = 0;
+  /** Display frames (animation frames of the page), and those in which samples waited for the worker. */
+  ticks = 0;
+  late = 0;
   private dirty = false;
   /** Frames handed to the worker and not yet drawn: at most two (the next waits). */
   private pending = 0;
@@ -133,12 +144,11 @@ export class LivePlot {
         const bg = this.bgCv.transferControlToOffscreen(), tr = this.trCv.transferControlToOffscreen();
         this.worker = new Worker(new URL("./plot.worker.ts", import.meta.url), { type: "module" });
         this.worker.postMessage({ type: "init", bg, tr }, [bg, tr]);
-        this.worker.onmessage = (e: MessageEvent<{ type: string; upTo: number; ms: number }>) => {
+        this.worker.onmessage = (e: MessageEvent<{ type: string; f: Frame; ms: number }>) => {
           if (e.data.type !== "drawn") return;
-          this.drawMs.push(e.data.ms);
+          this.drawMs += e.data.ms;
           this.pending--;
-          this.drawnUpTo = e.data.upTo;
-          this.frames++;
+          this.drawn(e.data.f);
         };
       } catch {
         this.worker = null;
@@ -152,6 +162,8 @@ export class LivePlot {
       this.local = new StripChart(this.bgCv.getContext("2d")!, this.trCv.getContext("2d")!);
     }
     const tick = () => {
+      this.ticks++;
+      if (this.dirty && this.pending >= 2) this.late++;
       if (this.dirty && !this.paused && this.pending < 2) this.draw();
       requestAnimationFrame(tick);
     };
@@ -265,9 +277,6 @@ export class LivePlot {
   private key = new Float64Array(BUCKETS).fill(-1);
   private bt = new Float64Array(2 * BUCKETS);
   private bv: Float64Array[] = [];
-  /** The arrays handed to uPlot (views of these), reused from frame to frame. */
-  private xs = new Float64Array(0);
-  private ys: Float64Array[] = [];
 
   /** One bucket [j, e) into xs/ys at point index o (two points: min and max in time order). */
   private bucket(j: number, e: number, xs: Float64Array, ys: Float64Array[], o: number): void {
@@ -306,12 +315,13 @@ export class LivePlot {
       this.key.fill(-1);
       this.bv = s.channels.map(() => new Float64Array(2 * BUCKETS));
     }
+    // The points go into one buffer (times, then each channel's, `stride` apart), handed to the
+    // worker and back without a copy.
     const need = 2 * (Math.ceil((b - lo) / per) + 2);
-    if (this.xs.length < need || this.ys.length !== K) {
-      this.xs = new Float64Array(2 * need);
-      this.ys = s.channels.map(() => new Float64Array(2 * need));
-    }
-    const xs = this.xs, ys = this.ys;
+    let buf = this.pool.pop();
+    if (!buf || buf.length < (K + 1) * need) buf = new Float64Array(2 * (K + 1) * need);
+    const stride = Math.floor(buf.length / (K + 1));
+    const xs = buf.subarray(0, stride), ys = s.channels.map((_, k) => buf.subarray((k + 1) * stride, (k + 2) * stride));
     let n = 0;
     if (per === 1) {
       for (let j = lo; j < b; j++, n++) {
@@ -340,16 +350,21 @@ export class LivePlot {
         n += 2;
       }
     }
-    // Copies of the points in use (posting a view would copy its whole buffer).
-    this.points = [xs.slice(0, n), ...ys.map((c) => c.slice(0, n))];
-    const f = { type: "frame", upTo: b, x0: tEnd - this.span, x1: tEnd, xs: this.points[0], ys: this.points.slice(1) };
+    const f: Frame = { upTo: b, x0: tEnd - this.span, x1: tEnd, n, stride, buf };
     if (this.worker) {
       this.pending++;
-      this.worker.postMessage(f);
+      this.worker.postMessage({ type: "frame", ...f }, [buf.buffer]);
     } else {
       this.local!.draw(f);
-      this.drawnUpTo = b;
-      this.frames++;
+      this.drawn(f);
     }
+  }
+
+  /** A frame drawn: its buffer kept as the points on show, the one before back to the pool. */
+  private drawn(f: Frame): void {
+    if (this.last) this.pool.push(this.last.buf);
+    this.last = f;
+    this.drawnUpTo = f.upTo;
+    this.frames++;
   }
 }

@@ -299,13 +299,25 @@ test("Web Serial path: navigator.serial stubbed onto the simulated drive", async
     contexts.push(ctx);
     const page = await ctx.newPage();
     await page.addInitScript(stub, { token: ui.token });
+    await page.addInitScript(() => delete HTMLCanvasElement.prototype.transferControlToOffscreen);
     await page.goto(ui.base + "?token=" + ui.token + "#manual"); // no automatic connection
     await page.selectOption("#transport", "serial");
     await page.click("#connect");
     await page.locator('#status [data-k="mode"]').waitFor({ timeout: 15000 });
     assert.equal(await page.evaluate(() => window.__serialStub), true);
     assert.match(await page.locator("#link").textContent(), /Web Serial/);
-    console.log("Web Serial stub: connected, status read:", await statusOf(page, "mode"));
+    // Telemetry over the same port, into a page without OffscreenCanvas (removed below): the
+    // live chart drawn on the main thread instead, every sample reaching it.
+    await page.fill("#tel-ch", "p,w");
+    await page.fill("#tel-hz", "200");
+    await page.click("#tel-start");
+    await page.waitForTimeout(1500);
+    await page.click("#tel-stop");
+    await page.waitForFunction(() => window.__regen.stats.telReceived() > 200 && window.__regen.stats.plotted() === window.__regen.stats.telReceived(), null, { timeout: 5000 });
+    const live = await page.evaluate(() => ({ n: window.__regen.stats.telReceived(), frames: window.__regen.stats.frames(), worker: window.__regen.plot.worker !== null, points: window.__regen.plot.points.length }));
+    assert.equal(live.worker, false, "no worker without OffscreenCanvas");
+    assert.ok(live.frames > 30 && live.points === 3, JSON.stringify(live));
+    console.log("Web Serial stub: connected, status read:", await statusOf(page, "mode"), "; telemetry drawn without a worker:", JSON.stringify(live));
   } finally {
     ui.proc.kill("SIGKILL");
     await closeContexts();
@@ -410,7 +422,7 @@ test("capture: a level trigger around an R_L step; pre-trigger samples, t = 0 at
   }
 });
 
-test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", async (t) => {
+test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", async () => {
   const ui = await startUi(1);
   const secs = Number(process.env.SMOOTH_S ?? 60);
   try {
@@ -442,7 +454,7 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     const rendererCpu = async () => (await sys.send("SystemInfo.getProcessInfo")).processInfo.filter((p) => p.type === "renderer").reduce((a, p) => a + p.cpuTime, 0);
     const metrics = async () => {
       const m = Object.fromEntries((await cdp.send("Performance.getMetrics")).metrics.map((x) => [x.name, x.value]));
-      const p = await page.evaluate(() => ({ frames: window.__regen.stats.frames(), n: window.__regen.stats.telReceived(), gaps: window.__regen.stats.telGaps(), plotted: window.__regen.stats.plotted() }));
+      const p = await page.evaluate(() => ({ frames: window.__regen.stats.frames(), ticks: window.__regen.stats.ticks(), late: window.__regen.stats.late(), drawMs: window.__regen.stats.drawMs(), n: window.__regen.stats.telReceived(), gaps: window.__regen.stats.telGaps(), plotted: window.__regen.stats.plotted() }));
       return { ...m, ...p, cpu: await rendererCpu() };
     };
     const t0 = await metrics();
@@ -493,9 +505,13 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     assert.ok(dec.points <= 2 * dec.cols + 4, `${dec.points} points for ${dec.cols} columns`);
     const dt = t1.Timestamp - t0.Timestamp;
     const d = (k) => (t1[k] - t0[k]) / dt;
-    const rate = (t1.n - t0.n) / dt, fps = (t1.frames - t0.frames) / dt, busy = d("TaskDuration");
+    const rate = (t1.n - t0.n) / dt, busy = d("TaskDuration");
+    // Frames: the page's animation frames less those in which samples waited for the worker
+    // (two frames already with it); drawn: the frames the worker drew (one in which no sample
+    // arrived is not redrawn: the bridge's messages come in bursts).
+    const fps = d("ticks") - d("late"), drawn = d("frames");
     const pct = (x) => (100 * x).toFixed(1) + " %";
-    console.log(`smoothness over ${dt.toFixed(1)} s: ${t1.n - t0.n} samples of 8 channels (${rate.toFixed(0)}/s), dropped (gaps) ${t1.gaps}, the plot behind the stream by ${lags.join(", ")} samples at the slices' ends; ${fps.toFixed(1)} frames/s`);
+    console.log(`smoothness over ${dt.toFixed(1)} s: ${t1.n - t0.n} samples of 8 channels (${rate.toFixed(0)}/s), dropped (gaps) ${t1.gaps}, the plot behind the stream by ${lags.join(", ")} samples at the slices' ends; ${fps.toFixed(1)} frames/s with the plot up to date (${d("late").toFixed(1)}/s late), drawn ${drawn.toFixed(1)}/s, the worker's drawing ${((t1.drawMs - t0.drawMs) / (t1.frames - t0.frames)).toFixed(2)} ms per frame`);
     console.log(`main thread busy ${pct(busy)} of wall time (script ${pct(d("ScriptDuration"))}, layout ${pct(d("LayoutDuration"))}, style ${pct(d("RecalcStyleDuration"))}); per 5 s slice: ${slices.map(pct).join(", ")}; renderer CPU ${pct(d("cpu"))} of one core`);
     assert.equal(t1.gaps, 0, "no sample dropped");
     assert.ok(rate > 1900, `sample rate ${rate}`);
@@ -504,13 +520,8 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     // loaded machine (frames late by up to about 2 frames); bound 200 (100 ms), about 2x that.
     assert.ok(Math.max(...lags) < 200, `the plot keeps up with the stream (lags ${lags.join(", ")})`);
     assert.ok(fps >= 50, `${fps} frames/s`);
-    // Required: under 25 %. Not met reliably yet (20 s runs on this 2-core machine shared with
-    // builds: 23.5-41 % of wall time, best 23.5; the page with the plot not drawn 5 %; renderer
-    // CPU 26-33 % of a core; docs/ui.md, Status): run and printed as a todo, so its figure shows
-    // in every run without failing the suite.
-    await t.test("the page's main thread busy under 25 % of the time", { todo: "not met yet: docs/ui.md, Status" }, () => {
-      assert.ok(busy < 0.25, `main thread busy ${pct(busy)}`);
-    });
+    // Required: under 25 %. Measured MEASURED (docs/ui.md, Status).
+    assert.ok(busy < 0.25, `main thread busy ${pct(busy)}`);
   } finally {
     ui.proc.kill("SIGKILL");
     await closeContexts();
