@@ -97,6 +97,35 @@ async function capCsvAndDump(page) {
   return { csv: csv.trimEnd().split("\n"), dump };
 }
 
+/**
+ * The live plot's traces as shown: a screenshot of the plotting area (what the compositor
+ * shows of the worker's canvas), decoded by the page; per channel colour, the pixel columns
+ * holding it, and a hash of the pixels.
+ */
+async function traceColumns(page) {
+  const box = await page.evaluate(() => { const r = window.__regen.plot.trCv.getBoundingClientRect(); return { x: r.left, y: r.top, width: r.width, height: r.height }; });
+  const png = (await page.screenshot({ clip: box })).toString("base64");
+  return page.evaluate(async (b64) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const bm = await createImageBitmap(new Blob([bytes], { type: "image/png" }));
+    const cv = new OffscreenCanvas(bm.width, bm.height);
+    const cx = cv.getContext("2d");
+    cx.drawImage(bm, 0, 0);
+    const px = cx.getImageData(0, 0, bm.width, bm.height).data;
+    const colors = window.__regen.plot.chans.map((c) => c.color);
+    const rgb = colors.map((h) => [1, 3, 5].map((i) => parseInt(h.slice(i, i + 2), 16)));
+    const cols = colors.map(() => new Set());
+    let hash = 0;
+    for (let y = 0; y < bm.height; y++)
+      for (let x = 0; x < bm.width; x++) {
+        const o = 4 * (y * bm.width + x);
+        hash = (hash * 31 + px[o] + 7 * px[o + 1] + 13 * px[o + 2]) | 0;
+        rgb.forEach((c, k) => { if (px[o] === c[0] && px[o + 1] === c[1] && px[o + 2] === c[2]) cols[k].add(x); });
+      }
+    return { width: bm.width, columns: cols.map((s) => s.size), hash };
+  }, png);
+}
+
 test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault, CSV", async () => {
   const ui = await startUi(10);
   try {
@@ -472,6 +501,10 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
       prev = now;
     }
     const t1 = prev;
+    // Redrawn while streaming: the traces' pixels change from one look to the next.
+    const look1 = await traceColumns(page);
+    await page.waitForTimeout(300);
+    const look2 = await traceColumns(page);
     await page.click("#tel-stop");
     // What the plot was handed: two points per bucket of consecutive samples (its first and
     // last time; its minimum and maximum in time order). Checked against the page's buffer
@@ -499,6 +532,14 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
       }
       return { points: d[0].length, window: b - first, covered, bad, cols: plot.cols };
     });
+    // Drawn: every channel's colour on screen, and the last channel drawn (p, never painted
+    // over) in every pixel column of the window (the stream has run longer than the window).
+    await page.waitForTimeout(200);
+    const look = await traceColumns(page);
+    console.log(`traces on screen: pixel columns holding each channel's colour ${look.columns.join(", ")} of ${look.width}; changed while streaming: ${look1.hash !== look2.hash}`);
+    assert.notEqual(look1.hash, look2.hash, "the traces redrawn while streaming");
+    assert.ok(look.columns.every((c) => c > 0), "every channel drawn");
+    assert.ok(look.columns.at(-1) >= look.width - 1, `p in ${look.columns.at(-1)} of ${look.width} columns`);
     console.log(`plotted: ${dec.points} points per channel for the ${dec.window} samples of the window (${dec.cols} pixel columns); samples in a bucket ${dec.covered}, buckets whose min/max differ from the buffer's ${dec.bad}`);
     assert.equal(dec.bad, 0, "every bucket's min and max are its samples' min and max");
     assert.equal(dec.covered, dec.window, "every sample of the window is in a bucket");
