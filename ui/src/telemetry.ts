@@ -99,7 +99,7 @@ export class LivePlot {
   get points(): Float64Array[] {
     const f = this.last;
     if (!f) return [];
-    return Array.from({ length: f.buf.length / f.stride | 0 }, (_, k) => f.buf.subarray(k * f.stride, k * f.stride + f.n));
+    return Array.from({ length: this.chans.length + 1 }, (_, k) => f.buf.subarray(k * f.stride, k * f.stride + f.n));
   }
   private last: Frame | null = null;
   /** Point buffers not in use. */
