@@ -18,7 +18,7 @@ const plot = new LivePlot($("plot"), store);
 store.onHeader = () => plot.rebuild();
 
 // Figures the browser suite reads (window.__regen).
-const stats = { telReceived: () => store.n, telGaps: () => store.gaps, plotted: () => plot.drawnUpTo, frames: () => plot.frames, ticks: () => plot.ticks, late: () => plot.late, drawMs: () => plot.drawMs, rtt: [] as number[], log: [] as string[] };
+const stats = { telReceived: () => store.n, telGaps: () => store.gaps, plotted: () => plot.drawnUpTo, frames: () => plot.frames, drawMs: () => plot.drawMs, rtt: [] as number[], log: [] as string[] };
 (window as unknown as { __regen: unknown }).__regen = { stats, store, plot, cap: () => capDump, capPlot: () => capPlot, cmd: (l: string) => send(l) };
 
 // ---------- tabs, modal confirmation, log ----------

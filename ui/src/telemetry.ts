@@ -9,6 +9,8 @@ import { AXIS_W, StripChart, fmtTick, plotBox, unitGroups, type Chan, type Frame
 export const CAPACITY = 1 << 18;
 /** Buckets of min/max kept between frames (twice the widest plot in pixel columns). */
 const BUCKETS = 8192;
+/** Shortest time between two frames of the live plot (ms): at most 62 frames/s. */
+const FRAME_MS = 16;
 
 export class TelStore implements TelSink {
   channels: string[] = [];
@@ -108,12 +110,12 @@ export class LivePlot {
   cols = 0;
   /** The worker's drawing time, summed over the frames (ms). */
   drawMs = 0;
-  /** Display frames (animation frames of the page), and those in which samples waited for the worker. */
-  ticks = 0;
-  late = 0;
   private dirty = false;
-  /** Frames handed to the worker and not yet drawn: at most two (the next waits). */
+  /** Frames handed to the worker and not yet drawn: at most two (the next waits for one). */
   private pending = 0;
+  private timer = 0;
+  /** When the last frame was cut (performance.now(), ms). */
+  private lastCut = 0;
   private live: HTMLDivElement;
   private bgCv: HTMLCanvasElement;
   private trCv: HTMLCanvasElement;
@@ -149,6 +151,7 @@ export class LivePlot {
           this.drawMs += e.data.ms;
           this.pending--;
           this.drawn(e.data.f);
+          if (this.dirty) this.changed();
         };
       } catch {
         this.worker = null;
@@ -161,13 +164,6 @@ export class LivePlot {
       this.live.replaceChildren(this.bgCv, this.trCv);
       this.local = new StripChart(this.bgCv.getContext("2d")!, this.trCv.getContext("2d")!);
     }
-    const tick = () => {
-      this.ticks++;
-      if (this.dirty && this.pending >= 2) this.late++;
-      if (this.dirty && !this.paused && this.pending < 2) this.draw();
-      requestAnimationFrame(tick);
-    };
-    requestAnimationFrame(tick);
     new ResizeObserver(() => {
       if (this.el.clientWidth !== this.w) { this.w = this.el.clientWidth; this.resize(); }
     }).observe(el);
@@ -189,7 +185,7 @@ export class LivePlot {
     Object.assign(this.trCv.style, { left: b.left + "px", top: b.top + "px", width: b.height + "px", height: b.width + "px" });
     this.post({ type: "size", w, h, dpr: devicePixelRatio });
     this.u?.setSize({ width: w, height: h });
-    this.dirty = true;
+    this.changed();
   }
 
   rebuild(): void {
@@ -211,12 +207,22 @@ export class LivePlot {
     // A new stream counts its samples from 0 again: no bucket of the last one is reused.
     this.per = 0;
     this.key.fill(-1);
-    this.dirty = true;
+    this.changed();
     if (this.paused) this.pause(true);
   }
 
+  /**
+   * Samples arrived (or the view changed): a frame is cut at most FRAME_MS after the last one,
+   * on a timer, not on the page's animation frames (those would have the main thread run
+   * Chrome's frame pipeline every display frame; the worker's canvases need none of it).
+   */
   changed(): void {
     this.dirty = true;
+    if (this.timer || this.paused || this.pending >= 2) return;
+    this.timer = setTimeout(() => {
+      this.timer = 0;
+      if (this.dirty && !this.paused && this.pending < 2) this.draw();
+    }, Math.max(0, FRAME_MS - (performance.now() - this.lastCut)));
   }
 
   /** Paused: uPlot with every sample of the window; resumed: the live chart again. */
@@ -228,7 +234,7 @@ export class LivePlot {
     this.pausedEl.hidden = !on;
     this.live.hidden = on;
     this.legend.hidden = on;
-    if (!on) { this.dirty = true; return; }
+    if (!on) { this.changed(); return; }
     const s = this.store, M = CAPACITY - 1;
     const [lo, b] = this.window();
     const xs = new Float64Array(b - lo);
@@ -303,6 +309,7 @@ export class LivePlot {
   draw(): void {
     const s = this.store;
     this.dirty = false;
+    this.lastCut = performance.now();
     const [lo, b] = this.window();
     if (b === lo) return;
     const M = CAPACITY - 1;

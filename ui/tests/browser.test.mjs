@@ -483,7 +483,7 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     const rendererCpu = async () => (await sys.send("SystemInfo.getProcessInfo")).processInfo.filter((p) => p.type === "renderer").reduce((a, p) => a + p.cpuTime, 0);
     const metrics = async () => {
       const m = Object.fromEntries((await cdp.send("Performance.getMetrics")).metrics.map((x) => [x.name, x.value]));
-      const p = await page.evaluate(() => ({ frames: window.__regen.stats.frames(), ticks: window.__regen.stats.ticks(), late: window.__regen.stats.late(), drawMs: window.__regen.stats.drawMs(), n: window.__regen.stats.telReceived(), gaps: window.__regen.stats.telGaps(), plotted: window.__regen.stats.plotted() }));
+      const p = await page.evaluate(() => ({ frames: window.__regen.stats.frames(), drawMs: window.__regen.stats.drawMs(), n: window.__regen.stats.telReceived(), gaps: window.__regen.stats.telGaps(), plotted: window.__regen.stats.plotted() }));
       return { ...m, ...p, cpu: await rendererCpu() };
     };
     const t0 = await metrics();
@@ -547,12 +547,10 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     const dt = t1.Timestamp - t0.Timestamp;
     const d = (k) => (t1[k] - t0[k]) / dt;
     const rate = (t1.n - t0.n) / dt, busy = d("TaskDuration");
-    // Frames: the page's animation frames less those in which samples waited for the worker
-    // (two frames already with it); drawn: the frames the worker drew (one in which no sample
-    // arrived is not redrawn: the bridge's messages come in bursts).
-    const fps = d("ticks") - d("late"), drawn = d("frames");
+    // Frames: those the worker drew.
+    const fps = d("frames");
     const pct = (x) => (100 * x).toFixed(1) + " %";
-    console.log(`smoothness over ${dt.toFixed(1)} s: ${t1.n - t0.n} samples of 8 channels (${rate.toFixed(0)}/s), dropped (gaps) ${t1.gaps}, the plot behind the stream by ${lags.join(", ")} samples at the slices' ends; ${fps.toFixed(1)} frames/s with the plot up to date (${d("late").toFixed(1)}/s late), drawn ${drawn.toFixed(1)}/s, the worker's drawing ${((t1.drawMs - t0.drawMs) / (t1.frames - t0.frames)).toFixed(2)} ms per frame`);
+    console.log(`smoothness over ${dt.toFixed(1)} s: ${t1.n - t0.n} samples of 8 channels (${rate.toFixed(0)}/s), dropped (gaps) ${t1.gaps}, the plot behind the stream by ${lags.join(", ")} samples at the slices' ends; ${fps.toFixed(1)} frames/s drawn, the worker's drawing ${((t1.drawMs - t0.drawMs) / (t1.frames - t0.frames)).toFixed(2)} ms per frame`);
     console.log(`main thread busy ${pct(busy)} of wall time (script ${pct(d("ScriptDuration"))}, layout ${pct(d("LayoutDuration"))}, style ${pct(d("RecalcStyleDuration"))}); per 5 s slice: ${slices.map(pct).join(", ")}; renderer CPU ${pct(d("cpu"))} of one core`);
     assert.equal(t1.gaps, 0, "no sample dropped");
     assert.ok(rate > 1900, `sample rate ${rate}`);
