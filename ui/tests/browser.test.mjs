@@ -184,6 +184,16 @@ test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault
     await page.click("#h-refresh");
     await page.waitForTimeout(500);
     await page.screenshot({ path: join(FIG, "ui-harvest.png") });
+    // Each legend entry in its series' style: the curve a line (no outline, a 2 px stripe), the
+    // points round (an outline; the ring white inside).
+    const marks = await page.$$eval("#h-plot .u-legend .u-series", (rows) =>
+      rows.map((r) => { const m = r.querySelector(".u-marker"), c = m && getComputedStyle(m); return c && { label: r.textContent.trim(), border: c.borderTopWidth, round: c.borderTopLeftRadius, image: c.backgroundImage, color: c.backgroundColor }; }).filter((x) => x && x.label));
+    const mark = (l) => marks.find((m) => m.label.startsWith(l));
+    assert.equal(mark("harmonic balance").border, "0px");
+    assert.match(mark("harmonic balance").image, /linear-gradient/);
+    for (const l of ["optimum", "drive now", "earlier"]) assert.equal(mark(l).round, "50%", l);
+    assert.equal(mark("earlier").color, "rgb(255, 255, 255)");
+    assert.equal(mark("drive now").color, "rgb(209, 70, 31)");
     // Telemetry, a few channels on one axis; export the CSV and compare with the stream.
     await tab(page, "monitor");
     await page.fill("#tel-ch", "p,w,iq,x");
