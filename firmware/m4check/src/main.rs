@@ -298,7 +298,7 @@ pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, _k: u32
 /// A capture armed with its most expensive sample: power, speed, travel and phase a (the
 /// channels read through products), a level trigger on the bus voltage at 500 V (never
 /// reached: armed for the whole replay, the ring wrapping).
-fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32) {
+fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32, g: &regen_fw::Gains) {
     let set = Settings {
         ch: [12, 10, 11, 0],
         n_ch: 4,
@@ -310,7 +310,7 @@ fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32) {
             level: 500.0,
         },
     };
-    cap.arm(&set, dt_s);
+    cap.arm(&set, dt_s, g);
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -418,7 +418,7 @@ fn main() -> ! {
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
     let mut cap = Capture::<SAMPLES>::new();
-    armed_capture(&mut cap, cfg.ts());
+    armed_capture(&mut cap, cfg.ts(), ctl.gains());
     let mut cap_iq = Capture::<SAMPLES>::new();
     cap_iq.arm(
         &Settings {
@@ -429,6 +429,7 @@ fn main() -> ! {
             trig: Trigger::Cmd,
         },
         cfg.ts(),
+        ctl.gains(),
     );
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half {
