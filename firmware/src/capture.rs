@@ -435,15 +435,19 @@ pub struct Capture<const N: usize> {
     left: u32,
     /// `cap now` pending.
     now: bool,
-    /// The level trigger: its channel's source, level code, edge (0 rise, 1 fall, 2 both); the
-    /// channel's code at the last sample.
+    /// The level trigger: its channel's source, level code, the edges it fires on; the
+    /// channel's code at the last sample (the level's own at the arm: no crossing into the
+    /// first sample).
     lv_word: Word,
     lv_shift: Shift,
     lv_code: i32,
-    lv_edge: u8,
+    /// −1 when the trigger fires on that edge, else 0.
+    lv_rise: i32,
+    lv_fall: i32,
     lv_prev: i32,
     kind: u8,
-    /// A fault was latched at the last sample.
+    /// A fault was latched at the last sample (true at the arm: a fault latched before the
+    /// first sample does not count).
     fault_prev: bool,
     k_trig: u32,
     dt_s: f32,
@@ -494,7 +498,8 @@ impl<const N: usize> Capture<N> {
             lv_word: Word::W0,
             lv_shift: Shift::S0,
             lv_code: 0,
-            lv_edge: 0,
+            lv_rise: 0,
+            lv_fall: 0,
             lv_prev: 0,
             kind: K_FAULT,
             fault_prev: false,
@@ -580,7 +585,7 @@ impl<const N: usize> Capture<N> {
         let fired = match self.kind {
             K_FAULT => {
                 let f = ctl.fault().is_some();
-                let edge = f && !self.fault_prev && k > 0;
+                let edge = f & !self.fault_prev;
                 self.fault_prev = f;
                 edge
             }
@@ -593,14 +598,11 @@ impl<const N: usize> Capture<N> {
                 };
                 let (p, l) = (self.lv_prev, self.lv_code);
                 self.lv_prev = c;
-                let rise = p < l && c >= l;
-                let fall = p > l && c <= l;
-                k > 0
-                    && match self.lv_edge {
-                        0 => rise,
-                        1 => fall,
-                        _ => rise | fall,
-                    }
+                // Codes within ±2^15: the differences' signs are the comparisons. Rising:
+                // p < l ≤ c; falling: p > l ≥ c; each in the sign bit, masked by the edges.
+                let rise = (p - l) & !(c - l);
+                let fall = (l - p) & !(l - c);
+                ((rise & self.lv_rise) | (fall & self.lv_fall)) < 0
             }
         };
         if fired && k >= self.pre_n {
@@ -651,7 +653,7 @@ impl<const N: usize> CapPort for Capture<N> {
         self.pre_n = Self::pre_samples(set.pre_pct);
         self.left = 0;
         self.now = false;
-        self.fault_prev = false;
+        self.fault_prev = true;
         self.k_trig = 0;
         self.dt_s = dt_s;
         match set.trig {
@@ -664,7 +666,9 @@ impl<const N: usize> CapPort for Capture<N> {
                 self.lv_shift = Shift::of(s.shift);
                 self.power |= ((ch == CH_P) as u8) << 4;
                 self.lv_code = level_code(ch, level, g);
-                self.lv_edge = edge as u8;
+                self.lv_rise = -((edge != Edge::Fall) as i32);
+                self.lv_fall = -((edge != Edge::Rise) as i32);
+                self.lv_prev = self.lv_code;
             }
         }
         self.state = State::Armed;
@@ -696,6 +700,55 @@ impl<const N: usize> CapPort for Capture<N> {
 mod tests {
     use super::*;
     use crate::config::Config;
+    use crate::io::RawSample;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// A level trigger on the bus voltage fires at the first sample whose voltage has
+        /// reached the level on its edge (the previous one short of it), and never into the
+        /// first sample: over random walks of the bus code, levels at a code's voltage, each
+        /// edge, the trigger sample's index (`k_trig`) is the first crossing found from the
+        /// voltages themselves.
+        #[test]
+        fn level_trigger_fires_at_the_first_crossing(
+            start in 2300u16..3100,
+            steps in prop::collection::vec(-40i32..=40, 20..200),
+            above in 0u16..20,
+            edge in prop::sample::select(std::vec![Edge::Rise, Edge::Fall, Edge::Both]),
+        ) {
+            let cfg = Config::default();
+            let vpc = cfg.volts_per_count as f64;
+            let mut ctl = Controller::new(&cfg).unwrap();
+            let mut codes = std::vec![start];
+            for d in steps {
+                let c = (*codes.last().unwrap() as i32 + d).clamp(2300, 3100);
+                codes.push(c as u16);
+            }
+            // A code's voltage near the start (a crossing is likely): reached is crossed.
+            let level = ((start + above) as f64 - 10.0) * vpc;
+            let mut cap = Capture::<64>::new();
+            let set = Settings { ch: [9, 0, 0, 0], n_ch: 1, div: 1, pre_pct: 0,
+                trig: Trigger::Level { ch: 9, edge, level: level as f32 } };
+            cap.arm(&set, 5e-5, ctl.gains());
+            let z = cfg.adc_zero_code;
+            for &c in &codes {
+                ctl.step(&RawSample { i_abc: [z; 3], v_bus: c, encoder: 0 });
+                cap.record(&ctl);
+                if cap.state() != State::Armed {
+                    break;
+                }
+            }
+            let v: std::vec::Vec<f64> = codes.iter().map(|&c| c as f64 * vpc).collect();
+            let want = (1..v.len()).find(|&k| {
+                // (Relative 1e-9: the level's own rounding to f32.)
+                let (below, above) = (|x: f64| x < level * (1.0 - 1e-9), |x: f64| x > level * (1.0 + 1e-9));
+                let rise = below(v[k - 1]) && !below(v[k]);
+                let fall = above(v[k - 1]) && !above(v[k]);
+                match edge { Edge::Rise => rise, Edge::Fall => fall, Edge::Both => rise || fall }
+            });
+            prop_assert_eq!(cap.status().k_trig, want.map(|k| k as u32));
+        }
+    }
 
     /// A level trigger compares in codes: the code of a level, read back as the dump reads it,
     /// is that level to within half a step, on every channel over its whole range (the phase

@@ -254,9 +254,9 @@ impl StepRecord {
     fn v_dq(&self) -> Dq {
         self.dq(W_VD)
     }
-    /// The phase and bus codes of the sample (12-bit codes, kept as they came).
-    fn codes(&self) -> [u16; 4] {
-        [0, 1, 2, W_VBUS].map(|k| self.w[k] as u16)
+    /// Word `k`, a phase or bus code of the sample (12-bit, kept as it came).
+    fn code(&self, k: usize) -> u16 {
+        self.w[k] as u16
     }
 }
 
@@ -943,14 +943,13 @@ impl Controller {
     /// Telemetry of the last period (derived here from what the step stored).
     pub fn telemetry(&self) -> Telemetry {
         let (g, r) = (&self.g, &self.rec);
-        let c = r.codes();
-        let amps = |k: usize| amps_of_code(g.amps_per_count, g.adc_zero, c[k]);
+        let amps = |k: usize| amps_of_code(g.amps_per_count, g.adc_zero, r.code(k));
         Telemetry {
             i_abc: [amps(0), amps(1), amps(2)],
             i_dq: r.i_dq(),
             i_ref: r.i_ref(),
             v_dq: r.v_dq(),
-            v_bus: volts_of_code(g.volts_per_count, c[3]),
+            v_bus: volts_of_code(g.volts_per_count, r.code(W_VBUS)),
             omega_m: self.enc.omega_m(&g.enc),
             x: self.enc.x(&g.enc),
             theta_e: r.theta_e,

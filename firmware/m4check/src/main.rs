@@ -266,7 +266,7 @@ fn measure_path(cfg: &Config) {
 /// The running step with a capture armed: the step to its outputs, then the capture's
 /// sample as the period takes it after the outputs (`Period::finish` → `Capture::record`),
 /// counted together on a copy of the controller every step of the replay (the capture's
-/// worst case: four channels, the level trigger's channel read and compared every sample).
+/// worst case, `armed_capture`).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_step_cap(
@@ -279,7 +279,7 @@ pub fn regen_step_cap(
     a
 }
 
-/// The capture's sample alone (`Capture::record` with the capture armed as above).
+/// The capture's sample alone (`Capture::record`, a capture armed as `armed_capture`).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>) {
@@ -295,19 +295,25 @@ pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, _k: u32
     cap.record(ctl)
 }
 
-/// A capture armed with its most expensive sample: power, speed, travel and phase a (the
-/// channels read through products), a level trigger on the bus voltage at 500 V (never
-/// reached: armed for the whole replay, the ring wrapping).
+/// A capture armed with its most expensive sample, over every channel set and trigger kind:
+/// the power in a slot (the one channel the sample computes: `Controller::p_elec`), three
+/// channels read (any word of the step's record costs the same load and shift), and a level
+/// trigger on a read channel (its word read and compared, branch-free: the same count whatever
+/// the data; a fault trigger tests a flag, a command trigger a bool), here phase a's current
+/// crossing zero on either edge, no pre-trigger share: the trigger fires at the first crossing (that
+/// sample also starts the post-trigger part), the ring fills (a triggered sample skips the
+/// trigger test) and the replay arms it again once it is ready, so the count covers armed,
+/// firing and triggered samples.
 fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32, g: &regen_fw::Gains) {
     let set = Settings {
         ch: [12, 10, 11, 0],
         n_ch: 4,
         div: 1,
-        pre_pct: 50,
+        pre_pct: 0,
         trig: Trigger::Level {
-            ch: 9,
+            ch: 0,
             edge: Edge::Both,
-            level: 500.0,
+            level: 0.0,
         },
     };
     cap.arm(&set, dt_s, g);
@@ -419,6 +425,8 @@ fn main() -> ! {
     let mut pi = CurrentPi::default();
     let mut cap = Capture::<SAMPLES>::new();
     armed_capture(&mut cap, cfg.ts(), ctl.gains());
+    let mut cap_step = cap.clone();
+    let mut fired = 0u32;
     let mut cap_iq = Capture::<SAMPLES>::new();
     cap_iq.arm(
         &Settings {
@@ -486,11 +494,17 @@ fn main() -> ! {
             }
         }
         // The step with the capture armed, on a copy (the same step as the one below), and
-        // the capture's sample alone.
-        black_box(regen_step_cap(&mut c.clone(), s, &mut cap));
+        // the capture's sample alone (each capture armed again once ready).
+        black_box(regen_step_cap(&mut c.clone(), s, &mut cap_step));
         regen_cap_record(c, &mut cap);
         regen_cap_record_iq(c, &mut cap_iq, k as u32);
-        if cap.state() != State::Armed || cap_iq.state() != State::Armed {
+        for cp in [&mut cap, &mut cap_step] {
+            if cp.state() == State::Ready {
+                armed_capture(cp, c.config().ts(), c.gains());
+                fired += 1;
+            }
+        }
+        if cap_iq.state() != State::Armed {
             bad_cfg = true;
         }
         k += 1;
@@ -505,7 +519,9 @@ fn main() -> ! {
         pieces(c, s, &mut enc, &mut pi);
         a
     });
-    if bad_cfg {
+    // Both captures fired and filled several times (phase a's current crosses zero at the
+    // electrical frequency).
+    if bad_cfg || fired < 4 {
         exit(5);
     }
     hprintln!("digest={:016x} steps={}", digest, steps);
