@@ -9,7 +9,7 @@
 //! already stored ([`Controller::cap_words`]), converted to nothing: each channel is resolved
 //! when the capture is armed ([`source`]) to a word of the step's record and a right shift,
 //! and its code is that word shifted and saturated to `i16` (an indexed load, one `asr` and
-//! one `ssat`): the phase and bus currents' ADC codes as they came, the d/q currents,
+//! one `ssat`): the phase currents' and the bus voltage's ADC codes as they came, the d/q currents,
 //! references and voltages as their Q16.16 bits shifted, the speed as the encoder's speed
 //! estimate (counts per period) shifted, the travel as the encoder's count shifted. Only the
 //! power, which the step does not compute, is computed by the sample when a channel (or the
@@ -19,7 +19,7 @@
 //! channel's step ([`lsb`]); the speed is `tel`'s formula on the speed estimate floored to
 //! the step; the travel is `tel`'s formula on the count floored to the step (without the
 //! speed observer's sub-count part, which `tel`'s travel adds). A level trigger compares in
-//! the same codes.
+//! the same codes, by the signs of their differences (no branch).
 //!
 //! States: `idle` → `arm` → `armed` (the ring fills; the trigger is looked for once
 //! `pre` samples are held) → `triggered` (the rest of the ring fills) → `ready` (the
