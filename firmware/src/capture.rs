@@ -11,9 +11,9 @@
 //! and its code is that word shifted and saturated to `i16` (an indexed load, one `asr` and
 //! one `ssat`): the phase currents' and the bus voltage's ADC codes as they came, the d/q currents,
 //! references and voltages as their Q16.16 bits shifted, the speed as the encoder's speed
-//! estimate (counts per period) shifted, the travel as the encoder's count shifted. Only the
-//! power, which the step does not compute, is computed by the sample when a channel (or the
-//! level trigger) is `p`. `cap dump` converts each code to the channel's unit with the gains
+//! estimate (counts per period) shifted, the travel as the encoder's count shifted, and the
+//! power, which the step does not store, as the period computes it for its energy sum
+//! ([`Capture::record`] takes it). `cap dump` converts each code to the channel's unit with the gains
 //! in force at the arm ([`Decode`]), by the functions `tel` uses: a phase current or the bus
 //! voltage is exactly `tel`'s value; a d/q value or the power is `tel`'s value floored to the
 //! channel's step ([`lsb`]); the speed is `tel`'s formula on the speed estimate floored to
@@ -63,7 +63,7 @@ const STEP_W: f32 = 1.0 / 256.0;
 const STEP_X: f32 = 1.0 / 65_536.0;
 
 /// Where a channel's code comes from: a word of [`Controller::cap_words`] and its right shift
-/// (the power: the first word, read and replaced; the sample computes it).
+/// (the power: the first word, read and replaced by the period's power).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Source {
     pub word: u8,
@@ -461,12 +461,6 @@ const K_FAULT: u8 = 0;
 const K_CMD: u8 = 1;
 const K_LEVEL: u8 = 2;
 
-/// The power's code (the sample computes it: the step does not).
-#[inline(always)]
-fn power_code(ctl: &Controller) -> i32 {
-    code(ctl.p_elec().to_bits(), SHIFT_V)
-}
-
 impl<const N: usize> Default for Capture<N> {
     fn default() -> Self {
         Self::new()
@@ -520,12 +514,20 @@ impl<const N: usize> Capture<N> {
         ((N as u32 * pct.min(100) as u32) / 100).min(N as u32 - 1)
     }
 
-    /// One period (the period routine, after its outputs): a sample when one is due, the
-    /// trigger, the state. Does nothing unless armed or triggered.
+    /// Armed or triggered: [`Capture::record`] has work (one compare).
     #[inline(always)]
-    pub fn record(&mut self, ctl: &Controller) {
-        // Armed (1) or triggered (2): one compare.
-        if (self.state as u8).wrapping_sub(1) > 1 {
+    pub fn active(&self) -> bool {
+        (self.state as u8).wrapping_sub(1) <= 1
+    }
+
+    /// One period (the period routine, after its outputs): a sample when one is due, the
+    /// trigger, the state, with `p_bits` the period's electrical power (Q16.16 bits of
+    /// [`Controller::p_elec`], which the period computes for its energy sum; read only when
+    /// a slot or the level trigger records the power). Does nothing unless
+    /// [`Capture::active`].
+    #[inline(always)]
+    pub fn record(&mut self, ctl: &Controller, p_bits: i32) {
+        if !self.active() {
             return;
         }
         self.count -= 1;
@@ -533,13 +535,13 @@ impl<const N: usize> Capture<N> {
             return;
         }
         self.count = self.set.div;
-        self.take(ctl);
+        self.take(ctl, p_bits);
     }
 
     /// A sample and its trigger test (out of line: the period's common path is the test
     /// above).
     #[inline(never)]
-    fn take(&mut self, ctl: &Controller) {
+    fn take(&mut self, ctl: &Controller, p_bits: i32) {
         // All four slots, unrolled (a loop over `n_ch` costs more than the unused reads; the
         // slots past `n_ch` are never shown).
         let words = ctl.cap_words();
@@ -550,10 +552,9 @@ impl<const N: usize> Capture<N> {
             read(words, c[2], sh[2]),
             read(words, c[3], sh[3]),
         );
-        // The power, which the step does not compute, when a slot or the level trigger
-        // records it (once for both).
+        // The power, which the step does not store, into the slots that record it.
         let pm = self.power;
-        let p = if pm != 0 { power_code(ctl) } else { 0 };
+        let p = code(p_bits, SHIFT_V);
         if pm & 0xF != 0 {
             let put = |r: &mut i32, k: u8| {
                 if pm & (1 << k) != 0 {
@@ -733,7 +734,7 @@ mod tests {
             let z = cfg.adc_zero_code;
             for &c in &codes {
                 ctl.step(&RawSample { i_abc: [z; 3], v_bus: c, encoder: 0 });
-                cap.record(&ctl);
+                cap.record(&ctl, ctl.p_elec().to_bits());
                 if cap.state() != State::Armed {
                     break;
                 }

@@ -2552,7 +2552,7 @@ mod tests {
             if k == 300 {
                 exec(&mut con, &mut ctl, &mut cap, "cap now");
             }
-            cap.record(&ctl);
+            cap.record(&ctl, ctl.p_elec().to_bits());
         }
         assert_eq!(cap.state(), State::Ready);
         for machine in [false, true] {
@@ -3122,7 +3122,7 @@ mod tests {
                 }
                 for _ in 0..7 {
                     ctl.step_outputs(&s0);
-                    cap.record(&ctl);
+                    cap.record(&ctl, ctl.p_elec().to_bits());
                 }
             }
         }

@@ -1735,7 +1735,7 @@ mod tests {
                 let err = ((ctl.enc.position as i64) << 16) - ctl.enc.pos_est();
                 want.push((vals, (err as f64 / 65_536.0).abs()));
                 for cap in caps.iter_mut() {
-                    cap.record(&ctl);
+                    cap.record(&ctl, ctl.p_elec().to_bits());
                 }
             }
             let m_per_count = ctl.gains().enc.m_per_count.to_f32() as f64;
