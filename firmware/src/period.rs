@@ -125,8 +125,9 @@ impl Pending {
 /// The period's own state: supervision countdown, exact energy sum and counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Period {
-    /// Periods until the next supervision (0: this one).
-    countdown: u32,
+    /// Periods until the next supervision (0: this one; `supervise_every()` is at most 100,
+    /// `pwm_hz` ≤ 100 kHz: a `u16`, so that `summed` fits beside it in the struct's 24 bytes).
+    countdown: u16,
     /// Σ `p_elec` over all periods but the last, Q16.16 watt·periods (saturating; 2^47
     /// W·periods); the last one's is still the controller's ([`Period::energy_bits`]) unless
     /// `summed`.
@@ -209,7 +210,7 @@ impl Period {
         }
         if self.countdown == 0 {
             ctl.supervise();
-            self.countdown = ctl.supervise_every().saturating_sub(1);
+            self.countdown = ctl.supervise_every().saturating_sub(1).min(u16::MAX as u32) as u16;
         } else {
             self.countdown -= 1;
         }
@@ -283,7 +284,7 @@ impl Period {
 
     /// Periods until the next supervision (0: the next period supervises).
     pub fn countdown(&self) -> u32 {
-        self.countdown
+        self.countdown as u32
     }
 }
 
