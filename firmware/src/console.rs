@@ -517,14 +517,12 @@ pub struct Console {
     dump: Option<Dump>,
 }
 
-/// A `cap dump` under way: the next sample, and what its lines need.
+/// A `cap dump` under way: the next sample (the rest, the settings and the codes' units, is
+/// the capture's status, read per piece: kept here it would be ≈ 110 bytes of the board's
+/// console task).
 #[derive(Clone, Copy, Debug)]
 struct Dump {
     next: u32,
-    len: u32,
-    pre_n: u32,
-    dt_s: f32,
-    set: Settings,
 }
 
 /// The longest line of a `cap dump` (a machine-mode `D` line with an 8-character id, the
@@ -1528,14 +1526,14 @@ impl Console {
                                 fail!(.s("cap trig ").s(name).s(" ").clip(e).s(": unknown edge; allowed rise, fall, both"))
                             }
                         };
-                        let m = capture::level_max(ch);
+                        let (lo, hi) = capture::level_range(ch, ctl.gains());
                         let unit = CHANNELS.get(ch as usize).map_or("", |c| c.1);
                         match numtext::parse_f32(l) {
-                            Ok(v) if v.is_finite() && v.abs() <= m => {
+                            Ok(v) if v.is_finite() && v >= lo && v <= hi => {
                                 Trigger::Level { ch, edge, level: v }
                             }
                             _ => {
-                                fail!(.s("cap trig ").s(name).s(" ").s(e).s(" ").clip(l).s(": level out of range; allowed -").num(m).s(" .. ").num(m).s(" ").s(unit))
+                                fail!(.s("cap trig ").s(name).s(" ").s(e).s(" ").clip(l).s(": level out of range; allowed ").num(lo).s(" .. ").num(hi).s(" ").s(unit))
                             }
                         }
                     }
@@ -1543,7 +1541,11 @@ impl Console {
                 };
             }
             "arm" => {
-                cap.arm(&self.cap, self.cap.div as f32 / ctl.config().pwm_hz);
+                cap.arm(
+                    &self.cap,
+                    self.cap.div as f32 / ctl.config().pwm_hz,
+                    ctl.gains(),
+                );
                 self.cap_seen = State::Armed;
             }
             // (`trigger_now` arms the command trigger when the capture is armed.)
@@ -1558,26 +1560,20 @@ impl Console {
                 if st.state != State::Ready {
                     fail!(.s("cap dump refused: capture ").s(st.state.name()).s("; allowed only when ready (cap arm, then wait for ready)"))
                 }
-                let d = Dump {
-                    next: 0,
-                    len: st.len,
-                    pre_n: st.pre_n,
-                    dt_s: st.dt_s,
-                    set: st.set,
-                };
                 out.s("# cap dt_s=")
-                    .num(d.dt_s)
+                    .num(st.dt_s)
                     .s(" n=")
-                    .uint(d.len)
+                    .uint(st.len)
                     .s(" pre=")
-                    .uint(d.pre_n)
+                    .uint(st.pre_n)
                     .s(" trig=")
-                    .trig(&d.set.trig)
+                    .trig(&st.set.trig)
                     .s("\r\nt");
-                for &c in d.set.channels() {
+                for &c in st.set.channels() {
                     out.s(",").s(CHANNELS.get(c as usize).map_or("?", |c| c.0));
                 }
                 out.s("\r\n");
+                let d = Dump { next: 0 };
                 self.dump = Some(d);
                 return None;
             }
@@ -1632,16 +1628,16 @@ impl Console {
         let id = self.id.clone();
         let mut c = Counted { w: out, n: 0 };
         let mut o = Out::new(&mut c, self.machine, &id);
-        let lsb = d.set.ch.map(capture::lsb);
-        while d.next < d.len {
+        let st = cap.status();
+        while d.next < st.len {
             if o.w.n + DUMP_LINE_MAX > budget {
                 self.dump = Some(d);
                 return true;
             }
             let row = cap.sample(d.next);
-            o.fixed((d.next as f32 - d.pre_n as f32) * d.dt_s, 7);
-            for (k, v) in row.iter().take(d.set.n_ch as usize).enumerate() {
-                o.s(",").num(*v as f32 * lsb[k]);
+            o.fixed((d.next as f32 - st.pre_n as f32) * st.dt_s, 7);
+            for (k, v) in row.iter().take(st.set.n_ch as usize).enumerate() {
+                o.s(",").num(st.decode.value(k, *v));
             }
             o.s("\r\n");
             d.next += 1;
@@ -1650,7 +1646,7 @@ impl Console {
             self.dump = Some(d);
             return true;
         }
-        o.fin(true).s(" ").uint(d.len).s(" samples");
+        o.fin(true).s(" ").uint(st.len).s(" samples");
         o.raw = true;
         o.s("\r\n");
         self.dump = None;
@@ -2556,7 +2552,7 @@ mod tests {
             if k == 300 {
                 exec(&mut con, &mut ctl, &mut cap, "cap now");
             }
-            cap.record(&ctl);
+            cap.record(&ctl, ctl.p_elec().to_bits());
         }
         assert_eq!(cap.state(), State::Ready);
         for machine in [false, true] {
@@ -3126,7 +3122,7 @@ mod tests {
                 }
                 for _ in 0..7 {
                     ctl.step_outputs(&s0);
-                    cap.record(&ctl);
+                    cap.record(&ctl, ctl.p_elec().to_bits());
                 }
             }
         }

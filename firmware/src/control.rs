@@ -204,15 +204,60 @@ pub struct Telemetry {
 /// What the step stores for telemetry: the raw sample and the values it computes anyway.
 /// Scaled phase currents, bus voltage, speed, travel and power are derived on reading
 /// ([`Controller::telemetry`]), which is rare compared with the 20 kHz step.
+///
+/// The words the capture reads (`crate::capture`) are one array, indexed as
+/// [`crate::console::CHANNELS`] up to `vbus` ([`W_VBUS`]), then the speed estimate and the
+/// count ([`W_VEL`], [`W_POS`]): a sample reads any of them with one indexed load.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct StepRecord {
-    sample: RawSample,
-    i_dq: Dq,
-    i_ref: Dq,
-    v_dq: Dq,
+    /// The phase codes, d/q currents, references and voltages (Q16.16 bits), bus code, the
+    /// encoder's speed estimate (counts per period, Q16.16 bits) and multi-turn count.
+    w: [i32; CAP_WORDS],
     theta_e: Angle,
     duties: [Duty; 3],
     v_saturated: bool,
+}
+
+/// Words of the step's record the capture can read ([`Controller::cap_words`]).
+pub const CAP_WORDS: usize = 12;
+/// Indices into [`Controller::cap_words`]: the phase codes (0 … 2, as `ia`, `ib`, `ic`), the
+/// d/q currents, references and voltages (3 … 8, Q16.16 bits, as `id` … `vq`), the bus code
+/// (9, as `vbus`), the speed estimate (counts per period, Q16.16 bits) and the count.
+pub const W_ID: usize = 3;
+pub const W_IQ: usize = 4;
+pub const W_ID_REF: usize = 5;
+pub const W_IQ_REF: usize = 6;
+pub const W_VD: usize = 7;
+pub const W_VQ: usize = 8;
+pub const W_VBUS: usize = 9;
+pub const W_VEL: usize = 10;
+pub const W_POS: usize = 11;
+
+impl StepRecord {
+    fn dq(&self, k: usize) -> Dq {
+        Dq {
+            d: Q::from_bits(self.w[k]),
+            q: Q::from_bits(self.w[k + 1]),
+        }
+    }
+    #[inline(always)]
+    fn set_dq(&mut self, k: usize, v: Dq) {
+        self.w[k] = v.d.to_bits();
+        self.w[k + 1] = v.q.to_bits();
+    }
+    fn i_dq(&self) -> Dq {
+        self.dq(W_ID)
+    }
+    fn i_ref(&self) -> Dq {
+        self.dq(W_ID_REF)
+    }
+    fn v_dq(&self) -> Dq {
+        self.dq(W_VD)
+    }
+    /// Word `k`, a phase or bus code of the sample (12-bit, kept as it came).
+    fn code(&self, k: usize) -> u16 {
+        self.w[k] as u16
+    }
 }
 
 /// A configuration validated and compiled outside the current loop
@@ -306,13 +351,11 @@ impl Controller {
             brake: false,
             rec: StepRecord {
                 // Zero-current codes: the telemetry reads zero before the first step.
-                sample: RawSample {
-                    i_abc: [cfg.adc_zero_code; 3],
-                    ..RawSample::default()
+                w: {
+                    let mut w = [0; CAP_WORDS];
+                    w[..3].fill(cfg.adc_zero_code as i32);
+                    w
                 },
-                i_dq: Dq::default(),
-                i_ref: Dq::default(),
-                v_dq: Dq::default(),
                 theta_e: Angle::default(),
                 duties: [Duty::ZERO; 3],
                 v_saturated: false,
@@ -737,10 +780,10 @@ impl Controller {
     #[cold]
     #[inline(never)]
     fn calibrate(&mut self) {
-        let s = self.rec.sample;
+        let w = &self.rec.w;
         let b = &mut self.bs;
-        for k in 0..3 {
-            b.sum[k] += (s.i_abc[k] as u32).min(CODE_MAX);
+        for (sum, &c) in b.sum.iter_mut().zip(&w[..3]) {
+            *sum += (c as u32).min(CODE_MAX);
         }
         b.n_cal += 1;
         if b.n_cal < CAL_PERIODS {
@@ -885,45 +928,28 @@ impl Controller {
     #[cfg_attr(target_os = "none", inline(never))]
     #[cfg_attr(not(target_os = "none"), inline)]
     pub fn p_elec(&self) -> Q {
-        let (v, i) = (self.rec.v_dq, self.rec.i_dq);
+        let (v, i) = (self.rec.v_dq(), self.rec.i_dq());
         let p = mul(v.d, i.d).saturating_add(mul(v.q, i.q));
         p.saturating_add(p / 2).saturating_neg()
     }
 
-    /// The Q16.16 bits of telemetry channel `ch` (an index into
-    /// [`crate::console::CHANNELS`]) of the last period, computed alone: the capture's read
-    /// ([`crate::capture::Capture::record`]), one channel without the whole [`Telemetry`].
+    /// The words of the last period's record the capture reads (`crate::capture`: indices
+    /// [`W_ID`] … [`W_POS`], the phase codes at 0 … 2): what the step stored, no conversion.
     #[inline(always)]
-    pub fn channel_bits(&self, ch: u8) -> i32 {
-        let (g, r) = (&self.g, &self.rec);
-        let v = match ch {
-            0 => amps_of_code(g, r.sample.i_abc[0]),
-            1 => amps_of_code(g, r.sample.i_abc[1]),
-            2 => amps_of_code(g, r.sample.i_abc[2]),
-            3 => r.i_dq.d,
-            4 => r.i_dq.q,
-            5 => r.i_ref.d,
-            6 => r.i_ref.q,
-            7 => r.v_dq.d,
-            8 => r.v_dq.q,
-            9 => volts_of_code(g, r.sample.v_bus),
-            10 => self.enc.omega_m(&g.enc),
-            11 => self.enc.x(&g.enc),
-            _ => self.p_elec(),
-        };
-        v.to_bits()
+    pub fn cap_words(&self) -> &[i32; CAP_WORDS] {
+        &self.rec.w
     }
 
     /// Telemetry of the last period (derived here from what the step stored).
     pub fn telemetry(&self) -> Telemetry {
         let (g, r) = (&self.g, &self.rec);
-        let (v, i) = (r.v_dq, r.i_dq);
+        let amps = |k: usize| amps_of_code(g.amps_per_count, g.adc_zero, r.code(k));
         Telemetry {
-            i_abc: r.sample.i_abc.map(|c| amps_of_code(g, c)),
-            i_dq: i,
-            i_ref: r.i_ref,
-            v_dq: v,
-            v_bus: volts_of_code(g, r.sample.v_bus),
+            i_abc: [amps(0), amps(1), amps(2)],
+            i_dq: r.i_dq(),
+            i_ref: r.i_ref(),
+            v_dq: r.v_dq(),
+            v_bus: volts_of_code(g.volts_per_count, r.code(W_VBUS)),
             omega_m: self.enc.omega_m(&g.enc),
             x: self.enc.x(&g.enc),
             theta_e: r.theta_e,
@@ -1042,7 +1068,7 @@ impl Controller {
         self.latching = Latching {
             found,
             before,
-            i_dq: self.rec.i_dq,
+            i_dq: self.rec.i_dq(),
         };
     }
 
@@ -1109,7 +1135,10 @@ impl Controller {
         // The record of this period starts with its sample, copied first while no other value
         // holds a register, as two words and a half-word (a whole-struct copy becomes a
         // `memcpy` call when the board builds for size).
-        self.rec.sample = RawSample::from_words(s.to_words());
+        self.rec.w[0] = s.i_abc[0] as i32;
+        self.rec.w[1] = s.i_abc[1] as i32;
+        self.rec.w[2] = s.i_abc[2] as i32;
+        self.rec.w[W_VBUS] = s.v_bus as i32;
         // Element by element: `map` becomes a loop through the stack when built for size.
         // The two phases whose low-side shunts conducted at the sample (from the duties in
         // force then: the last step's), the third from the zero sum (`shunt`).
@@ -1156,7 +1185,7 @@ impl Controller {
         let i_dq = park_bounded(i_ab, sin, cos);
         // The rest of this period's record, written as its values become known (after
         // `trip_on`, whose snapshot takes them from the last period).
-        self.rec.i_dq = i_dq;
+        self.rec.set_dq(W_ID, i_dq);
         self.rec.theta_e = theta_e;
 
         // Run, Open and Align control current: the odd discriminants, one bit to test
@@ -1203,8 +1232,8 @@ impl Controller {
             q: Q::from_bits(h.i_ref.q.to_bits().wrapping_sub(i_dq.q.to_bits())),
         };
         let out = self.pi.update_within(err, h.ff, &self.g.pi, &h.v_lim);
-        self.rec.i_ref = h.i_ref;
-        self.rec.v_dq = out.v;
+        self.rec.set_dq(W_ID_REF, h.i_ref);
+        self.rec.set_dq(W_VD, out.v);
         self.rec.v_saturated = out.saturated;
         let h = &self.held;
 
@@ -1220,6 +1249,7 @@ impl Controller {
         let v_ab = inverse_park_bounded(core::hint::black_box(out.v), s2, c2);
         let duties = modulate_scaled(v_ab, h.inv8);
         self.rec.duties = duties;
+        self.record_encoder();
         Actuation {
             duties,
             enable: true,
@@ -1227,10 +1257,19 @@ impl Controller {
         }
     }
 
+    /// The speed estimate and the count into the record, for the capture (last in the step:
+    /// earlier, while the step's values fill the registers, the two stores cost spills).
+    #[inline(always)]
+    fn record_encoder(&mut self) {
+        self.rec.w[W_VEL] = self.enc.vel.to_bits();
+        self.rec.w[W_POS] = self.enc.position;
+    }
+
     /// The end of a period in Idle or Short: no control, the record says so.
     #[cold]
     #[inline(never)]
     fn step_off(&mut self) -> Actuation {
+        self.record_encoder();
         if self.mode == Mode::Measure {
             if let Some(a) = self.measure_step() {
                 return a;
@@ -1245,8 +1284,8 @@ impl Controller {
         } else {
             (CENTRED, false)
         };
-        self.rec.i_ref = Dq::default();
-        self.rec.v_dq = Dq::default();
+        self.rec.set_dq(W_ID_REF, Dq::default());
+        self.rec.set_dq(W_VD, Dq::default());
         self.rec.duties = duties;
         self.rec.v_saturated = false;
         Actuation {
@@ -1278,11 +1317,14 @@ impl Controller {
         let v_ab = inverse_park_bounded(v, sin, cos);
         let duties = modulate_scaled(v_ab, (inv_bus(t.v_bus) << 8) as i32);
         let r = self.meas.i_ref();
-        self.rec.i_ref = Dq {
-            d: q_of(r[0]),
-            q: q_of(r[1]),
-        };
-        self.rec.v_dq = v;
+        self.rec.set_dq(
+            W_ID_REF,
+            Dq {
+                d: q_of(r[0]),
+                q: q_of(r[1]),
+            },
+        );
+        self.rec.set_dq(W_VD, v);
         self.rec.duties = duties;
         self.rec.v_saturated = false;
         Some(Actuation {
@@ -1409,7 +1451,7 @@ impl Controller {
             return;
         }
         if matches!(self.law, Law::Resistor(_)) {
-            let (i_dq, vb) = (self.rec.i_dq, self.rec.sample.v_bus as u32);
+            let (i_dq, vb) = (self.rec.i_dq(), self.rec.w[W_VBUS] as u32);
             self.refresh_all(i_dq, vb);
             self.refresh_rest(vb);
             self.slow_tick = 2;
@@ -1449,15 +1491,16 @@ struct HeldTerms {
     tick_or: u8,
 }
 
-/// Phase current of an ADC code, A (telemetry and fault snapshots; not on the loop's path).
-fn amps_of_code(g: &Gains, code: u16) -> Q {
-    g.amps_per_count
-        .scale(Q::from_bits((code as i32 - g.adc_zero) << 16))
+/// Phase current of an ADC code, A, for `Gains::amps_per_count` and `Gains::adc_zero`
+/// (telemetry, fault snapshots and the capture's dump; not on the loop's path).
+pub fn amps_of_code(amps_per_count: Gain, adc_zero: i32, code: u16) -> Q {
+    amps_per_count.scale(Q::from_bits((code as i32 - adc_zero) << 16))
 }
 
-/// Bus voltage of an ADC code, V (telemetry and fault snapshots).
-fn volts_of_code(g: &Gains, code: u16) -> Q {
-    g.volts_per_count.scale(Q::from_bits((code as i32) << 16))
+/// Bus voltage of an ADC code, V, for `Gains::volts_per_count` (telemetry, fault snapshots
+/// and the capture's dump).
+pub fn volts_of_code(volts_per_count: Gain, code: u16) -> Q {
+    volts_per_count.scale(Q::from_bits((code as i32) << 16))
 }
 
 /// Protection hook (protect.rs): bus derating of a regenerative reference (`e_q` has the
@@ -1652,25 +1695,69 @@ mod tests {
     }
 
     proptest! {
-        /// The capture's one-channel read (`channel_bits`) and `tel`'s read of the whole
-        /// telemetry (`console::channel_value`) give every channel the same value, over
-        /// random currents and bus samples of a drive running the resistor law at a steady
-        /// encoder speed.
+        /// A capture's dump and `tel` agree on every channel: over random currents and bus
+        /// samples of a drive running the resistor law at a steady encoder speed, random
+        /// channel sets recorded every period (`Capture::record` after each step, the ring
+        /// wrapped), each sample's code read back through `Decode` is, against
+        /// `console::channel_value` of that period's telemetry: the same value for the phase
+        /// currents and the bus voltage (ADC codes kept as they came); the telemetry floored
+        /// to the channel's step for the d/q values and the power; for the speed, within one
+        /// step below; for the travel, within one step plus the speed observer's sub-count
+        /// position (its error, which the capture's count leaves out).
         #[test]
-        fn channel_bits_is_the_telemetry_channel(
-            codes in prop::collection::vec((1900u16..2200, 1900u16..2200, 1900u16..2200, 2300u16..2600), 50..200),
-            (c0, speed) in (any::<u16>(), 1u16..8),
+        fn capture_dump_is_the_telemetry_channel(
+            codes in prop::collection::vec((1900u16..2200, 1900u16..2200, 1900u16..2200, 2300u16..2600), 300..420),
+            (c0, speed) in (any::<u16>(), 1u16..5),
+            sets in prop::collection::vec(prop::array::uniform4(0u8..13), 3),
         ) {
+            use crate::capture::{CapPort, Capture, Settings, Trigger};
+            const N: usize = 256;
+            let chans = crate::console::CHANNELS;
             let mut ctl = Controller::new(&Config::default()).unwrap();
             ctl.set_mode(Mode::Run).unwrap();
-            for (k, (a, b, c, v)) in codes.into_iter().enumerate() {
+            let mut caps: std::vec::Vec<Capture<N>> = sets
+                .iter()
+                .map(|&ch| {
+                    let mut c = Capture::<N>::new();
+                    let set = Settings { ch, n_ch: 4, div: 1, pre_pct: 50, trig: Trigger::Cmd };
+                    c.arm(&set, 5e-5, ctl.gains());
+                    c
+                })
+                .collect();
+            // Each period's telemetry channels, and the observer's error then (counts).
+            let mut want = std::vec::Vec::new();
+            for (k, &(a, b, c, v)) in codes.iter().enumerate() {
                 let e = c0.wrapping_add(speed.wrapping_mul(k as u16));
                 ctl.step(&RawSample { i_abc: [a, b, c], v_bus: v, encoder: e });
                 let t = ctl.telemetry();
-                for (ch, (name, _)) in crate::console::CHANNELS.iter().enumerate() {
-                    let fast = crate::numtext::q_f32(Q::from_bits(ctl.channel_bits(ch as u8)));
-                    let whole = crate::console::channel_value(&t, ch);
-                    prop_assert_eq!(fast.to_bits(), whole.to_bits(), "{}", name);
+                let vals: std::vec::Vec<f32> =
+                    (0..chans.len()).map(|i| crate::console::channel_value(&t, i)).collect();
+                let err = ((ctl.enc.position as i64) << 16) - ctl.enc.pos_est();
+                want.push((vals, (err as f64 / 65_536.0).abs()));
+                for cap in caps.iter_mut() {
+                    cap.record(&ctl, ctl.p_elec().to_bits());
+                }
+            }
+            let m_per_count = ctl.gains().enc.m_per_count.to_f32() as f64;
+            let n = codes.len();
+            for (cap, set) in caps.iter().zip(&sets) {
+                let dec = cap.status().decode;
+                for j in 0..N {
+                    let (vals, err) = &want[n - N + j];
+                    let row = cap.sample(j as u32);
+                    for (slot, &ch) in set.iter().enumerate() {
+                        let (got, tel) = (dec.value(slot, row[slot]), vals[ch as usize]);
+                        let (name, lsb) = (chans[ch as usize].0, dec.lsb(slot) as f64);
+                        let d = tel as f64 - got as f64;
+                        let ok = match ch {
+                            0..=2 | 9 => got.to_bits() == tel.to_bits(),
+                            3..=8 | 12 => d >= 0.0 && d < lsb,
+                            // The speed's gain rounds: one Q16.16 LSB beyond the step.
+                            10 => d >= 0.0 && d <= lsb + 1.0 / 65_536.0,
+                            _ => d.abs() <= lsb + err * m_per_count + 2.0 / 65_536.0,
+                        };
+                        prop_assert!(ok, "{} sample {}: dump {} tel {} (step {})", name, j, got, tel, lsb);
+                    }
                 }
             }
         }
@@ -1992,7 +2079,7 @@ mod tests {
                     r.step_outputs(&x);
                     (r.mode, r.fault, r.latching) = (pre.mode, pre.fault, Latching::default());
                     let t = Telemetry {
-                        i_dq: pre.rec.i_dq,
+                        i_dq: pre.rec.i_dq(),
                         ..r.telemetry()
                     };
                     for f in faults {

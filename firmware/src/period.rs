@@ -125,11 +125,16 @@ impl Pending {
 /// The period's own state: supervision countdown, exact energy sum and counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Period {
-    /// Periods until the next supervision (0: this one).
-    countdown: u32,
+    /// Periods until the next supervision (0: this one; `supervise_every()` is at most 100,
+    /// `pwm_hz` ≤ 100 kHz: a `u16`, so that `summed` fits beside it in the struct's 24 bytes).
+    countdown: u16,
     /// Σ `p_elec` over all periods but the last, Q16.16 watt·periods (saturating; 2^47
-    /// W·periods); the last one's is still the controller's ([`Period::energy_bits`]).
+    /// W·periods); the last one's is still the controller's ([`Period::energy_bits`]) unless
+    /// `summed`.
     energy: i64,
+    /// The last period's power is in `energy` already: [`Period::finish`] computed it for an
+    /// active capture and added it there.
+    summed: bool,
     /// Periods run (wraps).
     pub periods: u32,
     /// Periods whose work ended after the next sample was ready.
@@ -142,6 +147,7 @@ impl Period {
     pub const NEW: Period = Period {
         countdown: 0,
         energy: 0,
+        summed: false,
         periods: 0,
         overruns: 0,
         mode_refused: 0,
@@ -167,10 +173,12 @@ impl Period {
     /// long known by then; added after the step, it would wait for the step's last values
     /// (the PI's voltages), and hold up the work behind it (in the simulator, the next
     /// period's plant: the closed loop 3 % slower, `docs/simulator.md`, "Speed"). The same sum:
-    /// [`Period::energy_bits`] adds the last period's power when read.
+    /// [`Period::energy_bits`] adds the last period's power when read. While a capture is
+    /// active, [`Period::finish`] has added it already (`summed`).
     #[inline(always)]
     pub fn step(&mut self, ctl: &mut Controller, s: &RawSample) -> Actuation {
         self.energy = self.energy_bits(ctl);
+        self.summed = false;
         ctl.step_outputs(s)
     }
 
@@ -179,11 +187,16 @@ impl Period {
     /// the new controller's (nothing yet: no step, no power).
     pub fn bank(&mut self, ctl: &Controller) {
         self.energy = self.energy_bits(ctl);
+        self.summed = true;
     }
 
     /// After the actuation: the step's latch finished, hardware trip, supervision, the
     /// capture's sample ([`Capture::record`]: after the latches, so a fault latched in this
-    /// period is in this period's sample), counters, overrun.
+    /// period is in this period's sample), counters, overrun. While a capture is armed or
+    /// triggered it gets the power, the one value it may record that the step does not store,
+    /// from here: the energy sum's computation of this period's power, done and added now
+    /// instead of at the next period's start (the same value: nothing between the two changes
+    /// the step's record), so the period computes it once either way.
     #[inline(always)]
     pub fn finish<H: PeriodHw, const N: usize>(
         &mut self,
@@ -197,11 +210,16 @@ impl Period {
         }
         if self.countdown == 0 {
             ctl.supervise();
-            self.countdown = ctl.supervise_every().saturating_sub(1);
+            self.countdown = ctl.supervise_every().saturating_sub(1).min(u16::MAX as u32) as u16;
         } else {
             self.countdown -= 1;
         }
-        cap.record(ctl);
+        if cap.active() {
+            let p = ctl.p_elec().to_bits();
+            self.energy = self.energy.saturating_add(p as i64);
+            self.summed = true;
+            cap.record(ctl, p);
+        }
         self.periods = self.periods.wrapping_add(1);
         if hw.overran() {
             self.overruns = self.overruns.wrapping_add(1);
@@ -252,6 +270,9 @@ impl Period {
     /// still in `ctl`, the controller this period steps.
     #[inline(always)]
     pub fn energy_bits(&self, ctl: &Controller) -> i64 {
+        if self.summed {
+            return self.energy;
+        }
         self.energy.saturating_add(ctl.p_elec().to_bits() as i64)
     }
 
@@ -263,7 +284,7 @@ impl Period {
 
     /// Periods until the next supervision (0: the next period supervises).
     pub fn countdown(&self) -> u32 {
-        self.countdown
+        self.countdown as u32
     }
 }
 
@@ -401,12 +422,32 @@ mod tests {
     /// an f64 sum of the telemetry read after each period (exact too: integers < 2^53).
     #[test]
     fn energy_sum_is_exact() {
+        use crate::capture::{CapPort, Settings, Trigger};
         let mut ctl = running();
         let (mut per, mut mail, mut io) = (Period::NEW, Pending::EMPTY, Mock::new(5, 0));
         let mut sum = 0.0f64;
         let mut nonzero = 0;
-        for _ in 0..20_000 {
-            run(&mut per, &mut ctl, &mut mail, &mut io);
+        // A capture armed (never triggered) over the middle third: the period adds each
+        // period's power at its end then, at the next period's start otherwise; the sum must
+        // not see the difference.
+        let mut cap = crate::capture::Capture::<4>::new();
+        let set = Settings {
+            ch: [4, 12, 0, 0],
+            n_ch: 2,
+            div: 3,
+            pre_pct: 50,
+            trig: Trigger::Cmd,
+        };
+        for k in 0..20_000 {
+            if k == 7_000 {
+                cap.arm(&set, 1.5e-4, ctl.gains());
+            }
+            if k == 14_000 {
+                assert!(cap.active());
+                cap.stop();
+            }
+            per.run(&mut ctl, &mut io, &mut cap);
+            per.apply(&mut ctl, &mut mail, &mut io);
             let p = ctl.telemetry().p_elec.to_num::<f64>();
             nonzero += (p != 0.0) as u32;
             sum += p * 65_536.0;

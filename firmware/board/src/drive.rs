@@ -25,7 +25,7 @@ use embassy_stm32::peripherals::{ADC1, ADC2};
 use embassy_stm32::timer::qei::Qei;
 use embassy_time::{Duration, Instant};
 use regen_fw::capture::{CapPort, Capture, Settings, Status};
-use regen_fw::config::Config;
+use regen_fw::config::{Config, Gains};
 use regen_fw::control::{Controller, Fault};
 use regen_fw::io::{Actuation, DriveIo, HwThresholds, RawSample};
 use regen_fw::period::{Pending, Period, PeriodHw, Slot};
@@ -128,8 +128,8 @@ impl CapPort for BoardCap {
     fn status(&self) -> Status {
         critical_section::with(|cs| CAP.borrow_ref(cs).status())
     }
-    fn arm(&mut self, set: &Settings, dt_s: f32) {
-        critical_section::with(|cs| CAP.borrow_ref_mut(cs).arm(set, dt_s))
+    fn arm(&mut self, set: &Settings, dt_s: f32, g: &Gains) {
+        critical_section::with(|cs| CAP.borrow_ref_mut(cs).arm(set, dt_s, g))
     }
     fn trigger_now(&mut self) -> bool {
         critical_section::with(|cs| CAP.borrow_ref_mut(cs).trigger_now())

@@ -266,51 +266,76 @@ fn measure_path(cfg: &Config) {
 /// The running step with a capture armed: the step to its outputs, then the capture's
 /// sample as the period takes it after the outputs (`Period::finish` → `Capture::record`),
 /// counted together on a copy of the controller every step of the replay (the capture's
-/// worst case: four channels, the level trigger's channel read and compared every sample).
+/// worst case, `armed_capture`). `p` is the period's power (`Controller::p_elec` after this
+/// step, computed on another copy): the period's energy sum computes it in every period,
+/// with or without a capture (counted apart, `regen_period_power`): while a capture is
+/// active it is computed after the outputs instead of at the next period's start
+/// (`Period::finish`), as here.
 #[no_mangle]
 #[inline(never)]
 pub fn regen_step_cap(
     ctl: &mut Controller,
     s: &RawSample,
     cap: &mut Capture<SAMPLES>,
+    p: i32,
 ) -> Actuation {
     let a = ctl.step_outputs(s);
-    cap.record(ctl);
+    if cap.active() {
+        cap.record(ctl, p);
+    }
     a
 }
 
-/// The capture's sample alone (`Capture::record` with the capture armed as above).
+/// The period's electrical power for its energy sum (`Period::step`, or `Period::finish`
+/// while a capture is active).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>) {
-    cap.record(ctl)
+pub fn regen_period_power(ctl: &Controller) -> i32 {
+    ctl.p_elec().to_bits()
+}
+
+/// The capture's sample alone (`Capture::record`, a capture armed as `armed_capture`).
+#[no_mangle]
+#[inline(never)]
+pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32) {
+    if cap.active() {
+        cap.record(ctl, p)
+    }
 }
 
 /// The capture's sample for the load step's channels (`iq,iq_ref`, trigger `cmd`, never
 /// given: armed for the whole replay).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, _k: u32) {
-    // (A third argument: a body of its own.)
-    cap.record(ctl)
+pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32, _k: u32) {
+    // (A fourth argument: a body of its own.)
+    if cap.active() {
+        cap.record(ctl, p)
+    }
 }
 
-/// A capture armed with its most expensive sample: power, speed, travel and phase a (the
-/// channels read through products), a level trigger on the bus voltage at 500 V (never
-/// reached: armed for the whole replay, the ring wrapping).
-fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32) {
+/// A capture armed with its most expensive sample, over every channel set and trigger kind:
+/// the power in a slot (the one channel the step does not store: the period's, put into the
+/// slot), three channels read (any word of the step's record costs the same load and shift), and a level
+/// trigger on a read channel (its word read and compared, branch-free: the same count whatever
+/// the data; a fault trigger tests a flag, a command trigger a bool), here phase a's current
+/// crossing zero on either edge, no pre-trigger share: the trigger fires at the first crossing (that
+/// sample also starts the post-trigger part), the ring fills (a triggered sample skips the
+/// trigger test) and the replay arms it again once it is ready, so the count covers armed,
+/// firing and triggered samples.
+fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32, g: &regen_fw::Gains) {
     let set = Settings {
         ch: [12, 10, 11, 0],
         n_ch: 4,
         div: 1,
-        pre_pct: 50,
+        pre_pct: 0,
         trig: Trigger::Level {
-            ch: 9,
+            ch: 0,
             edge: Edge::Both,
-            level: 500.0,
+            level: 0.0,
         },
     };
-    cap.arm(&set, dt_s);
+    cap.arm(&set, dt_s, g);
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -418,7 +443,9 @@ fn main() -> ! {
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
     let mut cap = Capture::<SAMPLES>::new();
-    armed_capture(&mut cap, cfg.ts());
+    armed_capture(&mut cap, cfg.ts(), ctl.gains());
+    let mut cap_step = cap.clone();
+    let mut fired = 0u32;
     let mut cap_iq = Capture::<SAMPLES>::new();
     cap_iq.arm(
         &Settings {
@@ -429,6 +456,7 @@ fn main() -> ! {
             trig: Trigger::Cmd,
         },
         cfg.ts(),
+        ctl.gains(),
     );
     let (digest, steps) = replay(&mut ctl, VECTORS, |c, s| {
         if k == half {
@@ -485,11 +513,23 @@ fn main() -> ! {
             }
         }
         // The step with the capture armed, on a copy (the same step as the one below), and
-        // the capture's sample alone.
-        black_box(regen_step_cap(&mut c.clone(), s, &mut cap));
-        regen_cap_record(c, &mut cap);
-        regen_cap_record_iq(c, &mut cap_iq, k as u32);
-        if cap.state() != State::Armed || cap_iq.state() != State::Armed {
+        // the capture's sample alone (each capture armed again once ready).
+        let p_next = {
+            let mut copy = c.clone();
+            copy.step_outputs(s);
+            copy.p_elec().to_bits()
+        };
+        black_box(regen_step_cap(&mut c.clone(), s, &mut cap_step, p_next));
+        let p = regen_period_power(c);
+        regen_cap_record(c, &mut cap, p);
+        regen_cap_record_iq(c, &mut cap_iq, p, k as u32);
+        for cp in [&mut cap, &mut cap_step] {
+            if cp.state() == State::Ready {
+                armed_capture(cp, c.config().ts(), c.gains());
+                fired += 1;
+            }
+        }
+        if cap_iq.state() != State::Armed {
             bad_cfg = true;
         }
         k += 1;
@@ -504,7 +544,9 @@ fn main() -> ! {
         pieces(c, s, &mut enc, &mut pi);
         a
     });
-    if bad_cfg {
+    // Both captures fired and filled several times (phase a's current crosses zero at the
+    // electrical frequency).
+    if bad_cfg || fired < 4 {
         exit(5);
     }
     hprintln!("digest={:016x} steps={}", digest, steps);
