@@ -111,7 +111,8 @@ impl PowerUp {
 /// The `[plant_draw]` scenario table: the plant's machine drawn off its nameplate (the
 /// scenario's `[machine]`, which the firmware is configured with unless `[firmware]` says
 /// otherwise), each value uniformly within ±its relative tolerance, from its own seeded
-/// generator. The plant is non-salient: one inductance stands for L_d and L_q.
+/// generator. With `lq_ratio_max` above 1 the plant is salient: its L_q is its L_d times a ratio
+/// drawn within [1, `lq_ratio_max`] (the nameplate's `l_h` is L_d's).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlantDraw {
@@ -121,6 +122,9 @@ pub struct PlantDraw {
     pub l_rel: f64,
     /// Back-emf constant within ±this, relative.
     pub ke_rel: f64,
+    /// L_q/L_d drawn uniformly within [1, this] (1 = the nameplate's L_q, `l_q_h` or `l_h`,
+    /// drawn with L_d's factor).
+    pub lq_ratio_max: f64,
     /// Seed of the draws.
     pub seed: u64,
 }
@@ -131,6 +135,7 @@ impl Default for PlantDraw {
             r_rel: 0.0,
             l_rel: 0.0,
             ke_rel: 0.0,
+            lq_ratio_max: 1.0,
             seed: 1,
         }
     }
@@ -148,21 +153,35 @@ impl PlantDraw {
                 return Err(format!("{k} = {v}: must lie in [0, 0.5]"));
             }
         }
+        let q = self.lq_ratio_max;
+        if !(q.is_finite() && (1.0..=3.0).contains(&q)) {
+            return Err(format!("plant_draw.lq_ratio_max = {q}: must lie in [1, 3]"));
+        }
         Ok(())
     }
 
-    /// The plant's machine for the nameplate `m`: R, L and K_e each times `1 + u·tol`, `u`
+    /// The plant's machine for the nameplate `m`: R, L_d and K_e each times `1 + u·tol`, `u`
     /// uniform in [−1, 1) (splitmix64, drawn in that order; shares nothing with the other
-    /// generators).
+    /// generators), then L_q: L_d times `1 + (u + 1)/2·(lq_ratio_max − 1)` when
+    /// `lq_ratio_max` > 1, else the nameplate's L_q times L_d's factor (a non-salient
+    /// nameplate stays non-salient).
     pub fn draw(&self, m: &crate::plant::Machine) -> crate::plant::Machine {
         let mut st = self.seed ^ 0x6e61_6d65_706c_6174; // "nameplat": apart from [powerup]'s
         let mut u = move || {
             2.0 * ((crate::study::splitmix(&mut st) >> 11) as f64 / (1u64 << 53) as f64) - 1.0
         };
-        let (ur, ul, uk) = (u(), u(), u());
+        let (ur, ul, uk, uq) = (u(), u(), u(), u());
+        let fl = 1.0 + ul * self.l_rel;
+        let l_h = m.l_h * fl;
+        let l_q_h = if self.lq_ratio_max > 1.0 {
+            Some(l_h * (1.0 + 0.5 * (uq + 1.0) * (self.lq_ratio_max - 1.0)))
+        } else {
+            m.l_q_h.map(|l| l * fl)
+        };
         crate::plant::Machine {
             r_ohm: m.r_ohm * (1.0 + ur * self.r_rel),
-            l_h: m.l_h * (1.0 + ul * self.l_rel),
+            l_h,
+            l_q_h,
             ke_v_s_per_rad: m.ke_v_s_per_rad * (1.0 + uk * self.ke_rel),
             ..*m
         }
