@@ -24,9 +24,11 @@
 //!    `meas_i_a/2`; the emf's change over the pulse, `(K_e + p·L_d·i_d)·Δω_m`, is taken out
 //!    with the K_e and L_d just measured (and cancels between the pulses' alternating signs).
 //!
-//! Each result's uncertainty is the standard error of its 8 repeats (pairs, pulses, blocks:
-//! their spread over √8; weighted by Σω² for K_e), so noise, a motion that disturbed one
-//! repeat and a drift all show in it. Travel beyond `meas_travel_m` while the d current flows
+//! Each result's uncertainty ([`Measure::uncertainty`]) is the standard error of its 8
+//! repeats (pairs, pulses, blocks: their spread over √8; weighted by Σω² for K_e), so noise, a
+//! motion that disturbed one repeat and a drift all show in it, combined with what is the same
+//! in every repeat: the current and bus-voltage sensors' stated gain tolerances
+//! ([`I_GAIN_TOL`], [`V_GAIN_TOL`]). Travel beyond `meas_travel_m` while the d current flows
 //! stops it (`measure_moving`), as does any fault (its name) or a mode change (`aborted`).
 
 use core::fmt::Write;
@@ -45,6 +47,13 @@ const N_BASE: u32 = 40;
 const BW_SHARE: f32 = 0.5;
 /// The pulses' current swing as a fraction of `meas_i_a`.
 const SWING: f32 = 0.4;
+/// The board's current sensors' stated gain tolerance, ± relative per phase, uniform within
+/// it (a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain; not calibrated at boot: no
+/// reference current).
+pub const I_GAIN_TOL: f32 = 0.02;
+/// The board's bus-voltage sensor's stated gain tolerance, ± relative, uniform within it (the
+/// divider's two 0.5 % resistors and the ADC's gain).
+pub const V_GAIN_TOL: f32 = 0.01;
 
 /// Where a measurement is.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -500,6 +509,30 @@ impl Measure {
         }
     }
 
+    /// The standard uncertainty of R, L_d, L_q and K_e (in their units) with the sensors'
+    /// stated gain tolerances ([`I_GAIN_TOL`], [`V_GAIN_TOL`]): the repeats' standard error combined in quadrature
+    /// with the sensors' gain errors, each the same in every repeat. R and L go as
+    /// (bus gain)¹·(current gain)⁻¹, K_e as (bus gain)¹: the loop's voltage is written as a
+    /// duty of the bus it reads, the currents are read through the sensors. A per-phase gain
+    /// uniform within ±t (standard t/√3) reads a current vector at an angle the
+    /// measurement does not choose with the gain error `ḡ + ⅓·Σ g_k·cos 2(φ − 2πk/3)`
+    /// (three phases through the amplitude-invariant Clarke), of standard deviation
+    /// (t/√3)/√2 = t/√6; the bus's gain uniform within ±t_v, t_v/√3.
+    pub fn uncertainty(&self) -> [f32; 4] {
+        let (ti, tv) = (I_GAIN_TOL, V_GAIN_TOL);
+        let (ui2, uv2) = (ti * ti / 6.0, tv * tv / 3.0);
+        let u = |s: &Stats, rel2: f32| {
+            let (m, e) = (s.mean(), s.sigma());
+            sqrt(e * e + m * m * rel2)
+        };
+        [
+            u(&self.r, ui2 + uv2),
+            u(&self.ld, ui2 + uv2),
+            u(&self.lq, ui2 + uv2),
+            u(&self.ke_est, uv2),
+        ]
+    }
+
     /// The r.m.s. shaft speed over the K_e window, rad/s.
     pub fn ke_rms_rad_s(&self) -> f32 {
         self.ke_rms
@@ -511,12 +544,14 @@ impl Measure {
     }
 }
 
-/// A result: registry name, unit, its estimate, the configured value, what it is.
+/// A result: registry name, unit, its estimate and standard uncertainty, the configured
+/// value, what it is.
 struct Row {
     name: &'static str,
     what: &'static str,
     unit: &'static str,
     est: Stats,
+    u: f32,
     cfg: f32,
 }
 
@@ -526,7 +561,7 @@ fn put_row<W: Write>(out: &mut W, r: &Row) {
     let _ = out.write_str(" measured ");
     let _ = out.write_str(Num(r.est.mean()).text().as_str());
     let _ = out.write_str(" +- ");
-    let _ = out.write_str(Num(r.est.sigma()).text().as_str());
+    let _ = out.write_str(Num(r.u).text().as_str());
     let _ = out.write_str(" ");
     let _ = out.write_str(r.unit);
     let _ = out.write_str(" configured ");
@@ -538,12 +573,14 @@ fn put_row<W: Write>(out: &mut W, r: &Row) {
 
 /// The results as rows (K_e only if measured).
 fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
+    let u = m.uncertainty();
     let rows = [
         Row {
             name: "r_phase_ohm",
             what: "",
             unit: "ohm",
             est: m.r,
+            u: u[0],
             cfg: c.r_phase_ohm,
         },
         Row {
@@ -551,6 +588,7 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
             what: " (d)",
             unit: "H",
             est: m.ld,
+            u: u[1],
             cfg: c.l_phase_h,
         },
         Row {
@@ -558,6 +596,7 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
             what: " (q)",
             unit: "H",
             est: m.lq,
+            u: u[2],
             cfg: c.l_phase_h,
         },
         Row {
@@ -565,6 +604,7 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
             what: "",
             unit: "V*s/rad",
             est: m.ke_est,
+            u: u[3],
             cfg: c.ke_v_s_per_rad,
         },
     ];
@@ -572,12 +612,14 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
     (rows, n)
 }
 
-/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (the mean of L_d
-/// and L_q: the loop has one inductance) and `ke_v_s_per_rad` (if measured).
+/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (L_q: the loop has
+/// one inductance, and with i_d* = 0 in every law the q loop carries the commanded current
+/// and the d loop's decoupling `−ω_e·L·i_q` is L_q's; `docs/commissioning.md`) and
+/// `ke_v_s_per_rad` (if measured).
 pub fn applied(m: &Measure, c: &Config) -> Config {
     let mut n = *c;
     n.r_phase_ohm = m.r.mean();
-    n.l_phase_h = 0.5 * (m.ld.mean() + m.lq.mean());
+    n.l_phase_h = m.lq.mean();
     if m.ke_refused.is_none() {
         n.ke_v_s_per_rad = m.ke_est.mean();
     }

@@ -8,7 +8,9 @@
 //! * offset ±`offset_a` (0.15 A suggested for the board: ±12 codes at 12.2 mA per code, i.e.
 //!   ±10 mV at a 3.3 V, 12-bit ADC input: a shunt amplifier's output offset of a few mV plus
 //!   the ADC's offset error of a few LSB);
-//! * gain ±`gain_rel` (0.02 suggested: a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain).
+//! * gain ±`gain_rel` (0.02 suggested: a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain);
+//! * the bus-voltage sensor's gain ±`vbus_gain_rel` (0.01 suggested: the divider's two 0.5 %
+//!   resistors and the ADC's gain; off in the board scenarios, on in the commissioning test).
 //!
 //! The firmware calibrates the offsets at boot (gates off); gain errors are not calibrated
 //! (no reference current at boot) and remain as a per-phase scale error.
@@ -32,6 +34,8 @@ pub struct PowerUp {
     pub offset_a: f64,
     /// Per-phase current gain errors drawn within ±this, relative (0 = none).
     pub gain_rel: f64,
+    /// The bus-voltage sensor's gain error drawn within ±this, relative (0 = none).
+    pub vbus_gain_rel: f64,
     /// The encoder's index pulse, once per mechanical revolution at a seeded angle.
     pub index: bool,
     /// Seed of the draws.
@@ -44,6 +48,7 @@ impl Default for PowerUp {
             random_angle: false,
             offset_a: 0.0,
             gain_rel: 0.0,
+            vbus_gain_rel: 0.0,
             index: false,
             seed: 1,
         }
@@ -60,16 +65,21 @@ pub struct Draw {
     /// Per-phase current offsets, A, and relative gain errors.
     pub offset_a: [f64; 3],
     pub gain_rel: [f64; 3],
-    /// The index mark's mechanical angle on the rotor, rad, in [0, 2π) (drawn last, so that
-    /// the other draws do not depend on whether the index is modelled).
+    /// The index mark's mechanical angle on the rotor, rad, in [0, 2π) (drawn after the
+    /// above, so that they do not depend on whether the index is modelled).
     pub index_m: f64,
+    /// The bus-voltage sensor's relative gain error (drawn last).
+    pub vbus_gain_rel: f64,
 }
 
 impl PowerUp {
     /// Any model on that the firmware must boot against (the index pulse alone is a sensor
     /// more, not an error to calibrate or align).
     pub fn any(&self) -> bool {
-        self.random_angle || self.offset_a != 0.0 || self.gain_rel != 0.0
+        self.random_angle
+            || self.offset_a != 0.0
+            || self.gain_rel != 0.0
+            || self.vbus_gain_rel != 0.0
     }
 
     /// Refuse values outside their ranges, naming the key, the value and the range.
@@ -86,6 +96,12 @@ impl PowerUp {
                 self.gain_rel
             ));
         }
+        if !(self.vbus_gain_rel.is_finite() && (0.0..=0.5).contains(&self.vbus_gain_rel)) {
+            return Err(format!(
+                "powerup.vbus_gain_rel = {}: must lie in [0, 0.5]",
+                self.vbus_gain_rel
+            ));
+        }
         Ok(())
     }
 
@@ -98,12 +114,14 @@ impl PowerUp {
         let offset_a = [0; 3].map(|_| (2.0 * u() - 1.0) * self.offset_a);
         let gain_rel = [0; 3].map(|_| (2.0 * u() - 1.0) * self.gain_rel);
         let index_m = u() * std::f64::consts::TAU;
+        let vbus_gain_rel = (2.0 * u() - 1.0) * self.vbus_gain_rel;
         Draw {
             theta_m0,
             encoder_start,
             offset_a,
             gain_rel,
             index_m,
+            vbus_gain_rel,
         }
     }
 }
@@ -288,6 +306,7 @@ mod tests {
             random_angle: true,
             offset_a: 0.15,
             gain_rel: 0.02,
+            vbus_gain_rel: 0.01,
             index: true,
             seed: 7,
         };
@@ -300,6 +319,7 @@ mod tests {
         assert!(min(&|d| d.theta_m0) < 0.005 * std::f64::consts::TAU);
         assert!(max(&|d| d.offset_a[2]) > 0.149 && max(&|d| d.offset_a[2]) <= 0.15);
         assert!(min(&|d| d.gain_rel[0]) < -0.0199 && min(&|d| d.gain_rel[0]) >= -0.02);
+        assert!(max(&|d| d.vbus_gain_rel) > 0.00995 && max(&|d| d.vbus_gain_rel) <= 0.01);
         assert!(max(&|d| d.encoder_start as f64) > 65_000.0);
         assert!(max(&|d| d.index_m) > 0.995 * std::f64::consts::TAU);
         assert!(min(&|d| d.index_m) < 0.005 * std::f64::consts::TAU);

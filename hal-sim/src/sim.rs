@@ -568,6 +568,7 @@ impl Sim {
         let mut pre = Pre::new(&self.rig, &self.cfg, self.ts);
         pre.enc_start = old.enc_start;
         pre.counts_per_amp_k = old.counts_per_amp_k;
+        pre.counts_per_volt = old.counts_per_volt;
         pre.code_base = old.code_base;
         pre.adc_offsets = old.adc_offsets;
         pre.theta_offset = old.theta_offset;
@@ -760,6 +761,7 @@ impl Sim {
             self.pre.code_base[k] += d.offset_a[k] * cpa;
             self.pre.counts_per_amp_k[k] = cpa * (1.0 + d.gain_rel[k]);
         }
+        self.pre.counts_per_volt *= 1.0 + d.vbus_gain_rel;
         self.ctl.require_alignment();
         self.powered_up = true;
         Ok(Some(d))
