@@ -732,19 +732,20 @@ mod tests {
     use super::*;
 
     /// A still rotor on a bus of 72 V: `Measure::step` against the d/q equations of a
-    /// non-salient machine (R = 2 Ω, L = 5 mH) integrated exactly over each period with the
-    /// PWM's one-period delay; K_e is refused for want of motion, R and L come out within
-    /// 2.5e-4 (measured: R −4e-6, L +7.0e-5, the discrete integral's rounding; a one-period
-    /// error in the delay's count is +6 % on L), and a run that moves is stopped by name.
+    /// salient machine (R = 2 Ω, L_d = 5 mH, L_q = 8 mH) integrated exactly over each period
+    /// with the PWM's one-period delay; K_e is refused for want of motion, R, L_d and L_q come
+    /// out within 2.5e-4 of each (measured: see the print; the discrete integral's rounding; a
+    /// one-period error in the delay's count is +6 % on L, swapped axes 60 %), and a run that
+    /// moves is stopped by name.
     #[test]
     fn measures_an_rl_machine_and_refuses_without_motion() {
         let cfg = Config {
             meas_ke_time_s: 0.1,
             ..Config::default()
         };
-        let (r, l) = (2.0f64, 5e-3f64);
+        let (r, l) = (2.0f64, [5e-3f64, 8e-3]);
         let ts = 1.0 / cfg.pwm_hz as f64;
-        let decay = (-r * ts / l).exp();
+        let decay = l.map(|l| (-r * ts / l).exp());
         let mut m = Measure::default();
         m.start(&cfg, 0.0);
         let (mut i, mut last) = ([0.0f64; 2], [0.0f64; 2]);
@@ -753,7 +754,7 @@ mod tests {
             // The sample just taken; over the period from it to the next sample the voltage
             // commanded a period ago acts (this one's is written for the next period).
             for k in 0..2 {
-                i[k] = i[k] * decay + last[k] / r * (1.0 - decay);
+                i[k] = i[k] * decay[k] + last[k] / r * (1.0 - decay[k]);
             }
             last = [v[0] as f64, v[1] as f64];
             n += 1;
@@ -763,8 +764,8 @@ mod tests {
         assert_eq!(m.ke_refused(), Some(Failure::NoMotion));
         let (er, ed, eq) = (
             m.r.mean() as f64 / r - 1.0,
-            m.ld.mean() as f64 / l - 1.0,
-            m.lq.mean() as f64 / l - 1.0,
+            m.ld.mean() as f64 / l[0] - 1.0,
+            m.lq.mean() as f64 / l[1] - 1.0,
         );
         std::println!("R {er:+.2e}, L_d {ed:+.2e}, L_q {eq:+.2e}");
         for e in [er, ed, eq] {
