@@ -300,6 +300,59 @@ mod tests {
         assert!(skipped > 150_000 && passes > 500, "{skipped} {passes}");
     }
 
+    /// L_q/L_d covers [1, lq_ratio_max] and leaves R, L_d and K_e's draws as they were; a
+    /// non-salient nameplate stays non-salient with the ratio at 1; out-of-range values are
+    /// refused by name.
+    #[test]
+    fn plant_draw_saliency() {
+        let m = crate::plant::Machine::default();
+        let d = PlantDraw {
+            r_rel: 0.2,
+            l_rel: 0.2,
+            ke_rel: 0.2,
+            lq_ratio_max: 1.6,
+            seed: 0,
+        };
+        let mut ratio = (f64::MAX, f64::MIN);
+        for seed in 0..2000 {
+            let sal = PlantDraw { seed, ..d }.draw(&m);
+            let one = PlantDraw {
+                seed,
+                lq_ratio_max: 1.0,
+                ..d
+            }
+            .draw(&m);
+            assert_eq!(one.l_q_h, None);
+            assert!(!one.salient());
+            assert_eq!(
+                (sal.r_ohm, sal.l_h, sal.ke_v_s_per_rad),
+                (one.r_ohm, one.l_h, one.ke_v_s_per_rad)
+            );
+            let q = sal.l_q() / sal.l_d();
+            assert!((1.0..1.6).contains(&q), "{q}");
+            assert!((sal.l_d() / m.l_h - 1.0).abs() <= 0.2);
+            ratio = (ratio.0.min(q), ratio.1.max(q));
+        }
+        // 2,000 uniform draws: both ends within 0.5 % of the range.
+        assert!(ratio.0 < 1.003 && ratio.1 > 1.597, "{ratio:?}");
+        for v in [0.9, 3.5, f64::NAN] {
+            let e = PlantDraw {
+                lq_ratio_max: v,
+                ..d
+            }
+            .check()
+            .unwrap_err();
+            assert!(e.starts_with("plant_draw.lq_ratio_max = "), "{e}");
+        }
+        let e = PowerUp {
+            vbus_gain_rel: 0.7,
+            ..PowerUp::default()
+        }
+        .check()
+        .unwrap_err();
+        assert!(e.starts_with("powerup.vbus_gain_rel = 0.7"), "{e}");
+    }
+
     #[test]
     fn draws_cover_their_ranges_and_depend_on_the_seed() {
         let p = PowerUp {
