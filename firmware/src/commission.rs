@@ -584,12 +584,12 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
             cfg: c.r_phase_ohm,
         },
         Row {
-            name: "l_phase_h",
-            what: " (d)",
+            name: "l_d_h",
+            what: "",
             unit: "H",
             est: m.ld,
             u: u[1],
-            cfg: c.l_phase_h,
+            cfg: c.l_d(),
         },
         Row {
             name: "l_phase_h",
@@ -612,14 +612,16 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
     (rows, n)
 }
 
-/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (L_q: the loop has
-/// one inductance, and with i_d* = 0 in every law the q loop carries the commanded current
-/// and the d loop's decoupling `−ω_e·L·i_q` is L_q's; `docs/commissioning.md`) and
-/// `ke_v_s_per_rad` (if measured).
+/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (L_q: the loop's PI
+/// has one inductance, and with i_d* = 0 in every law the q loop carries the commanded
+/// current and the d loop's decoupling `−ω_e·L·i_q` is L_q's; `docs/commissioning.md`),
+/// `l_d_h` (L_d: the short's peak bound, flux braking's voltage circle, the encoder's emf
+/// check) and `ke_v_s_per_rad` (if measured).
 pub fn applied(m: &Measure, c: &Config) -> Config {
     let mut n = *c;
     n.r_phase_ohm = m.r.mean();
     n.l_phase_h = m.lq.mean();
+    n.l_d_h = m.ld.mean();
     if m.ke_refused.is_none() {
         n.ke_v_s_per_rad = m.ke_est.mean();
     }
@@ -673,7 +675,7 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
                     out,
                     &[match m.phase {
                         Phase::R => "r_phase_ohm",
-                        Phase::Ld => "l_phase_h (d)",
+                        Phase::Ld => "l_d_h",
                         Phase::Ke => "ke_v_s_per_rad",
                         _ => "l_phase_h (q)",
                     }],
@@ -713,7 +715,7 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
             let c = applied(&m, ctl.config());
             match ctl.set_config(&c) {
                 Ok(()) => {
-                    say(out, &["ok applied r_phase_ohm l_phase_h"]);
+                    say(out, &["ok applied r_phase_ohm l_phase_h l_d_h"]);
                     if m.ke_refused.is_none() {
                         say(out, &[" ke_v_s_per_rad"]);
                     }
