@@ -22,7 +22,11 @@
 //!    blocks; refused (`ke_no_motion`) below an r.m.s. speed of `meas_speed_min_rad_s`.
 //! 4. **L_q**: as L_d on the q axis from zero q current, the d current held at
 //!    `meas_i_a/2`; the emf's change over the pulse, `(K_e + p·L_d·i_d)·Δω_m`, is taken out
-//!    with the K_e and L_d just measured (and cancels between the pulses' alternating signs).
+//!    with the K_e and L_d just measured. The pulse's own torque moves the rotor by less than
+//!    a count, and the speed estimate misses part of that emf: the same integral taken again
+//!    at the end of a window after the pulse (the current back near i₀) gives a second
+//!    equation, and L_q and that emf's gain are solved together (the tracking loop's response
+//!    to the torque's speed change `∫(i − i₀)` modelled beside it; `docs/commissioning.md`).
 //!
 //! Each result's uncertainty ([`Measure::uncertainty`]) is the standard error of its 8
 //! repeats (pairs, pulses, blocks: their spread over √8; weighted by Σω² for K_e), so noise, a
@@ -204,6 +208,15 @@ pub struct Measure {
     pub lq: Stats,
     /// The d current held during L_q (for its cross term).
     id_hold: f32,
+    /// L_q's window after each pulse (the loop bringing the current back), periods; the
+    /// speed-tracking loop's gains per period (`kp = 2ω_b·T_s`, `ki = (ω_b·T_s)²`).
+    n_post: u32,
+    pll: [f32; 2],
+    /// The pulse-torque model (unit gain): the speed `u = ∫(i − i₀)`, its position, the
+    /// tracking loop's position and speed on it, `Σ(u − v̂)` to the window's end; at the
+    /// pulse's end `Σ(u − v̂)`, the integral `S_T` and `Δi`.
+    model: [f32; 4],
+    at_end: [f32; 3],
     /// The configured K_e (L_q's emf term when K_e was refused) and pole pairs; K_e's least
     /// r.m.s. speed and the r.m.s. speed found.
     ke_cfg: f32,
@@ -219,6 +232,15 @@ pub struct Measure {
 /// Periods of `t` seconds at the configured PWM rate (at least 2).
 fn periods(t: f32, cfg: &Config) -> u32 {
     ((t * cfg.pwm_hz) as u32).max(2)
+}
+
+/// L_q's window after each pulse: 8 time constants of the measuring loop (its current back
+/// within e⁻⁸ of the hold), periods.
+fn post_periods(cfg: &Config) -> u32 {
+    periods(
+        8.0 / (core::f32::consts::TAU * cfg.current_bw_hz * BW_SHARE),
+        cfg,
+    )
 }
 
 impl Measure {
@@ -238,7 +260,8 @@ impl Measure {
     }
     /// The measurement's duration for `cfg`, s.
     pub fn duration_s(cfg: &Config) -> f32 {
-        let pulses = 2.0 * REPEATS as f32 * (0.02 + cfg.meas_l_time_s);
+        let post = REPEATS as f32 * post_periods(cfg) as f32 / cfg.pwm_hz;
+        let pulses = 2.0 * REPEATS as f32 * (0.02 + cfg.meas_l_time_s) + post;
         2.0 * REPEATS as f32 * cfg.meas_r_time_s + pulses + cfg.meas_ke_time_s
     }
 
@@ -267,6 +290,11 @@ impl Measure {
             r_cfg: cfg.r_phase_ohm,
             pole_pairs: cfg.pole_pairs as f32,
             speed_min: cfg.meas_speed_min_rad_s,
+            n_post: post_periods(cfg),
+            pll: {
+                let wb = core::f32::consts::TAU * cfg.speed_bw_hz * ts;
+                [2.0 * wb, wb * wb]
+            },
             ..Measure::default()
         };
     }
@@ -401,12 +429,28 @@ impl Measure {
             };
             // The sample of period gap + 1 is the last before the pulse's voltage acted;
             // the voltage in force over [k − 1, k] was commanded at k − 2.
+            if n == gap + 2 {
+                self.model = [0.0; 4];
+            }
             if n >= gap + 2 {
                 self.acc[0] += self.v2[ax] - self.base[0];
                 self.acc[1] += 0.5 * (i[ax] + self.i_prev) - self.base[1];
                 self.acc[2] += 0.5 * (w + self.w_prev) - self.base[2];
+                if ax == 1 {
+                    // The pulse's own torque moves the rotor as `u = ∫(i − i₀)` (to a gain);
+                    // the speed estimate sees it through its tracking loop (`v̂`): the emf
+                    // it leaves out goes as `u − v̂`.
+                    let u = self.acc[1];
+                    let m = &mut self.model;
+                    m[0] += u;
+                    let e = m[0] - m[1];
+                    m[1] += m[2] + self.pll[0] * e;
+                    m[2] += self.pll[1] * e;
+                    m[3] += u - m[2];
+                }
             }
-            if n == gap + nl + 1 {
+            let post = if ax == 1 { self.n_post } else { 0 };
+            if n == gap + nl + 1 || n == gap + nl + 1 + post {
                 let di = i[ax] - self.base[1];
                 let r = self.r.mean();
                 // The emf's change over the pulse: on d the frame's share (`kd`), on q the
@@ -416,7 +460,26 @@ impl Measure {
                 } else {
                     self.kq_value() + self.pole_pairs * self.ld.mean() * self.id_hold
                 };
-                let l = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts / di;
+                let s_n = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts;
+                if post > 0 && n == gap + nl + 1 {
+                    self.at_end = [self.model[3], s_n, di];
+                    self.i_prev = i[ax];
+                    self.w_prev = w;
+                    self.n += 1;
+                    return v;
+                }
+                // On q, with the loop's window after the pulse: `S = L·Δi + β·U` at the
+                // pulse's end and at the window's (the current back near i₀), U the model's
+                // `Σ(u − v̂)`, β the emf the speed estimate missed per unit of it: both
+                // unknowns solved (`docs/commissioning.md`).
+                let l = if post > 0 {
+                    let [u_t, s_t, di_t] = self.at_end;
+                    let u_w = self.model[3];
+                    (s_t * u_w - s_n * u_t) / (di_t * u_w - di * u_t)
+                } else {
+                    s_n / di
+                };
+                let di = if post > 0 { self.at_end[2] } else { di };
                 if di.abs() > 0.1 * SWING * self.i_hi {
                     if ax == 0 {
                         self.ld.add(l, 1.0);

@@ -57,10 +57,10 @@ fn measure(sc: &Scenario) -> (SimDrive, String) {
 
 /// The tolerance of each measured value (R, L_d, L_q, K_e), relative to the plant's, from
 /// the largest error of the 100 salient plants with their sensors' gain errors
-/// (`measured_within_tolerance_of_the_plant`): R +2.58 %, L_d +3.85 %, L_q +4.94 %, K_e
+/// (`measured_within_tolerance_of_the_plant`): R +2.58 %, L_d +3.85 %, L_q +3.06 %, K_e
 /// +1.23 %; each bound 1.3–1.4× that (3× would pass a 5 % error in the arithmetic, which
 /// must fail: tried on L_q's quotient, it fails).
-const TOL: [f64; 4] = [0.035, 0.05, 0.065, 0.016];
+const TOL: [f64; 4] = [0.035, 0.05, 0.042, 0.016];
 
 /// Relative errors (measured/plant − 1) of R, L_d, L_q, K_e for `seeds`, each plant drawn
 /// within ±20 % of the nameplate.
@@ -146,22 +146,16 @@ fn measured_within_tolerance_of_the_plant() {
             "{name}: the repeats' spread alone covers {rep} of {}",
             e.len()
         );
-        if k != 2 {
-            // The stated uncertainty is a standard one: 68 % of a normal error within 1 of it,
-            // 95 % within 2; 100 plants put the share within ±4.7 % (1) and ±2.2 % (2) of
-            // those (binomial): bounds 3 of that. Measured R 65/95 %, L_d 62/97 %, K_e
-            // 71/100 %. The repeats' spread alone (the gain errors left out) covers R 27 %,
-            // L_d 33 %, K_e 20 % within 1.
-            assert!(
-                (0.54..=0.82).contains(&c1) && c2 >= 0.88,
-                "{name}: coverage {c1} within 1, {c2} within 2"
-            );
-        } else {
-            // L_q carries a bias the uncertainty does not (docs/commissioning.md): the
-            // speed estimate lags the pulse's own torque, so part of its emf stays in L_q
-            // (+1.9 % mean with ideal sensors). Measured 34 % within 1, 68 % within 2.
-            assert!(c1 >= 0.25 && c2 >= 0.58, "{name}: {c1} {c2}");
-        }
+        // The stated uncertainty is a standard one: 68 % of a normal error within 1 of it,
+        // 95 % within 2; 100 plants put the share within ±4.7 % (1) and ±2.2 % (2) of those
+        // (binomial): bounds 3 of that. Measured R 65/95 %, L_d 62/97 %, L_q 59/96 %, K_e
+        // 71/100 %. The repeats' spread alone (the gain errors left out) covers R 27 %,
+        // L_d 33 %, L_q 33 %, K_e 20 % within 1; L_q without its pulse-torque term (the
+        // window after each pulse, `docs/commissioning.md`) 34 % and 68 %.
+        assert!(
+            (0.54..=0.82).contains(&c1) && c2 >= 0.88,
+            "{name}: coverage {c1} within 1, {c2} within 2"
+        );
         assert!(
             q(0.0) > -TOL[k] && q(1.0) < TOL[k],
             "{name}: error {:+.3} % … {:+.3} % beyond ±{} %",
