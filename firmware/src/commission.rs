@@ -22,11 +22,19 @@
 //!    blocks; refused (`ke_no_motion`) below an r.m.s. speed of `meas_speed_min_rad_s`.
 //! 4. **L_q**: as L_d on the q axis from zero q current, the d current held at
 //!    `meas_i_a/2`; the emf's change over the pulse, `(K_e + p·L_d·i_d)·Δω_m`, is taken out
-//!    with the K_e and L_d just measured (and cancels between the pulses' alternating signs).
+//!    with the K_e and L_d just measured. The pulse's own torque moves the rotor by less than
+//!    a count, and the speed estimate misses part of that emf: the same integral taken again
+//!    at the end of a window after the pulse (the current back near i₀) gives a second
+//!    equation, and L_q and that emf's gain are solved together (the tracking loop's response
+//!    to the torque's speed change `∫(i − i₀)` modelled beside it; `docs/commissioning.md`).
+//!    Last, L_d and L_q are solved from what the pulses met along the encoder's axes, the
+//!    encoder's frame δ off the rotor's (δ from K_e's window; [`frame_corrected`]).
 //!
-//! Each result's uncertainty is the standard error of its 8 repeats (pairs, pulses, blocks:
-//! their spread over √8; weighted by Σω² for K_e), so noise, a motion that disturbed one
-//! repeat and a drift all show in it. Travel beyond `meas_travel_m` while the d current flows
+//! Each result's uncertainty ([`Measure::uncertainty`]) is the standard error of its 8
+//! repeats (pairs, pulses, blocks: their spread over √8; weighted by Σω² for K_e), so noise, a
+//! motion that disturbed one repeat and a drift all show in it, combined with what is the same
+//! in every repeat: the current and bus-voltage sensors' stated gain tolerances
+//! ([`I_GAIN_TOL`], [`V_GAIN_TOL`]). Travel beyond `meas_travel_m` while the d current flows
 //! stops it (`measure_moving`), as does any fault (its name) or a mode change (`aborted`).
 
 use core::fmt::Write;
@@ -45,6 +53,13 @@ const N_BASE: u32 = 40;
 const BW_SHARE: f32 = 0.5;
 /// The pulses' current swing as a fraction of `meas_i_a`.
 const SWING: f32 = 0.4;
+/// The board's current sensors' stated gain tolerance, ± relative per phase, uniform within
+/// it (a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain; not calibrated at boot: no
+/// reference current).
+pub const I_GAIN_TOL: f32 = 0.02;
+/// The board's bus-voltage sensor's stated gain tolerance, ± relative, uniform within it (the
+/// divider's two 0.5 % resistors and the ADC's gain).
+pub const V_GAIN_TOL: f32 = 0.01;
 
 /// Where a measurement is.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -131,6 +146,31 @@ impl Stats {
     pub fn count(&self) -> u32 {
         self.n
     }
+    /// Every estimate moved by `d` (the spread unchanged).
+    fn shift(&mut self, d: f32) {
+        self.swxx += 2.0 * d * self.swx + d * d * self.sw;
+        self.swx += d * self.sw;
+    }
+}
+
+/// L_d and L_q from the inductances the pulses met along the encoder's d and q axes (`md`,
+/// `mq`) when the encoder's frame is δ off the rotor's, δ from the emf per rad/s K_e's window
+/// found on the encoder's axes (`kd = k·sin δ`, `kq = k·cos δ`). Along an axis δ off the
+/// rotor's d, the other axis's current held, the winding's flux per current is
+/// `L_d·cos²δ + L_q·sin²δ`: `md = L_d·c + L_q·s`, `mq = L_q·c + L_d·s` (c = cos²δ, s = sin²δ),
+/// solved with `c − s = cos 2δ`. Unchanged without an emf, or beyond |δ| = 30° (no aligned
+/// frame: the alignment's check refuses far less).
+fn frame_corrected(md: f32, mq: f32, kd: f32, kq: f32) -> (f32, f32) {
+    let k2 = kd * kd + kq * kq;
+    if k2.is_nan() || k2 <= 0.0 {
+        return (md, mq);
+    }
+    let (s, c) = (kd * kd / k2, kq * kq / k2);
+    let den = c - s;
+    if den < 0.5 {
+        return (md, mq);
+    }
+    ((md * c - mq * s) / den, (mq * c - md * s) / den)
 }
 
 /// √x for x ≥ 0 (`f32::sqrt` is not in `core`): Newton's iteration from the exponent halved,
@@ -195,6 +235,15 @@ pub struct Measure {
     pub lq: Stats,
     /// The d current held during L_q (for its cross term).
     id_hold: f32,
+    /// L_q's window after each pulse (the loop bringing the current back), periods; the
+    /// speed-tracking loop's gains per period (`kp = 2ω_b·T_s`, `ki = (ω_b·T_s)²`).
+    n_post: u32,
+    pll: [f32; 2],
+    /// The pulse-torque model (unit gain): the speed `u = ∫(i − i₀)`, its position, the
+    /// tracking loop's position and speed on it, `Σ(u − v̂)` to the window's end; at the
+    /// pulse's end `Σ(u − v̂)`, the integral `S_T` and `Δi`.
+    model: [f32; 4],
+    at_end: [f32; 3],
     /// The configured K_e (L_q's emf term when K_e was refused) and pole pairs; K_e's least
     /// r.m.s. speed and the r.m.s. speed found.
     ke_cfg: f32,
@@ -210,6 +259,15 @@ pub struct Measure {
 /// Periods of `t` seconds at the configured PWM rate (at least 2).
 fn periods(t: f32, cfg: &Config) -> u32 {
     ((t * cfg.pwm_hz) as u32).max(2)
+}
+
+/// L_q's window after each pulse: 8 time constants of the measuring loop (its current back
+/// within e⁻⁸ of the hold), periods.
+fn post_periods(cfg: &Config) -> u32 {
+    periods(
+        8.0 / (core::f32::consts::TAU * cfg.current_bw_hz * BW_SHARE),
+        cfg,
+    )
 }
 
 impl Measure {
@@ -229,7 +287,8 @@ impl Measure {
     }
     /// The measurement's duration for `cfg`, s.
     pub fn duration_s(cfg: &Config) -> f32 {
-        let pulses = 2.0 * REPEATS as f32 * (0.02 + cfg.meas_l_time_s);
+        let post = REPEATS as f32 * post_periods(cfg) as f32 / cfg.pwm_hz;
+        let pulses = 2.0 * REPEATS as f32 * (0.02 + cfg.meas_l_time_s) + post;
         2.0 * REPEATS as f32 * cfg.meas_r_time_s + pulses + cfg.meas_ke_time_s
     }
 
@@ -258,6 +317,11 @@ impl Measure {
             r_cfg: cfg.r_phase_ohm,
             pole_pairs: cfg.pole_pairs as f32,
             speed_min: cfg.meas_speed_min_rad_s,
+            n_post: post_periods(cfg),
+            pll: {
+                let wb = core::f32::consts::TAU * cfg.speed_bw_hz * ts;
+                [2.0 * wb, wb * wb]
+            },
             ..Measure::default()
         };
     }
@@ -392,12 +456,28 @@ impl Measure {
             };
             // The sample of period gap + 1 is the last before the pulse's voltage acted;
             // the voltage in force over [k − 1, k] was commanded at k − 2.
+            if n == gap + 2 {
+                self.model = [0.0; 4];
+            }
             if n >= gap + 2 {
                 self.acc[0] += self.v2[ax] - self.base[0];
                 self.acc[1] += 0.5 * (i[ax] + self.i_prev) - self.base[1];
                 self.acc[2] += 0.5 * (w + self.w_prev) - self.base[2];
+                if ax == 1 {
+                    // The pulse's own torque moves the rotor as `u = ∫(i − i₀)` (to a gain);
+                    // the speed estimate sees it through its tracking loop (`v̂`): the emf
+                    // it leaves out goes as `u − v̂`.
+                    let u = self.acc[1];
+                    let m = &mut self.model;
+                    m[0] += u;
+                    let e = m[0] - m[1];
+                    m[1] += m[2] + self.pll[0] * e;
+                    m[2] += self.pll[1] * e;
+                    m[3] += u - m[2];
+                }
             }
-            if n == gap + nl + 1 {
+            let post = if ax == 1 { self.n_post } else { 0 };
+            if n == gap + nl + 1 || n == gap + nl + 1 + post {
                 let di = i[ax] - self.base[1];
                 let r = self.r.mean();
                 // The emf's change over the pulse: on d the frame's share (`kd`), on q the
@@ -407,7 +487,26 @@ impl Measure {
                 } else {
                     self.kq_value() + self.pole_pairs * self.ld.mean() * self.id_hold
                 };
-                let l = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts / di;
+                let s_n = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts;
+                if post > 0 && n == gap + nl + 1 {
+                    self.at_end = [self.model[3], s_n, di];
+                    self.i_prev = i[ax];
+                    self.w_prev = w;
+                    self.n += 1;
+                    return v;
+                }
+                // On q, with the loop's window after the pulse: `S = L·Δi + β·U` at the
+                // pulse's end and at the window's (the current back near i₀), U the model's
+                // `Σ(u − v̂)`, β the emf the speed estimate missed per unit of it: both
+                // unknowns solved (`docs/commissioning.md`).
+                let l = if post > 0 {
+                    let [u_t, s_t, di_t] = self.at_end;
+                    let u_w = self.model[3];
+                    (s_t * u_w - s_n * u_t) / (di_t * u_w - di * u_t)
+                } else {
+                    s_n / di
+                };
+                let di = if post > 0 { self.at_end[2] } else { di };
                 if di.abs() > 0.1 * SWING * self.i_hi {
                     if ax == 0 {
                         self.ld.add(l, 1.0);
@@ -420,6 +519,12 @@ impl Measure {
                 self.i_prev = i[ax];
                 self.w_prev = w;
                 if self.rep == REPEATS {
+                    if ax == 1 && self.ke_est.count() > 0 {
+                        let (md, mq) = (self.ld.mean(), self.lq.mean());
+                        let (ld, lq) = frame_corrected(md, mq, self.kd.mean(), self.kq.mean());
+                        self.ld.shift(ld - md);
+                        self.lq.shift(lq - mq);
+                    }
                     self.next(if ax == 0 { Phase::Lq } else { Phase::Done });
                 }
                 return v;
@@ -500,6 +605,30 @@ impl Measure {
         }
     }
 
+    /// The standard uncertainty of R, L_d, L_q and K_e (in their units) with the sensors'
+    /// stated gain tolerances ([`I_GAIN_TOL`], [`V_GAIN_TOL`]): the repeats' standard error combined in quadrature
+    /// with the sensors' gain errors, each the same in every repeat. R and L go as
+    /// (bus gain)¹·(current gain)⁻¹, K_e as (bus gain)¹: the loop's voltage is written as a
+    /// duty of the bus it reads, the currents are read through the sensors. A per-phase gain
+    /// uniform within ±t (standard t/√3) reads a current vector at an angle the
+    /// measurement does not choose with the gain error `ḡ + ⅓·Σ g_k·cos 2(φ − 2πk/3)`
+    /// (three phases through the amplitude-invariant Clarke), of standard deviation
+    /// (t/√3)/√2 = t/√6; the bus's gain uniform within ±t_v, t_v/√3.
+    pub fn uncertainty(&self) -> [f32; 4] {
+        let (ti, tv) = (I_GAIN_TOL, V_GAIN_TOL);
+        let (ui2, uv2) = (ti * ti / 6.0, tv * tv / 3.0);
+        let u = |s: &Stats, rel2: f32| {
+            let (m, e) = (s.mean(), s.sigma());
+            sqrt(e * e + m * m * rel2)
+        };
+        [
+            u(&self.r, ui2 + uv2),
+            u(&self.ld, ui2 + uv2),
+            u(&self.lq, ui2 + uv2),
+            u(&self.ke_est, uv2),
+        ]
+    }
+
     /// The r.m.s. shaft speed over the K_e window, rad/s.
     pub fn ke_rms_rad_s(&self) -> f32 {
         self.ke_rms
@@ -511,12 +640,14 @@ impl Measure {
     }
 }
 
-/// A result: registry name, unit, its estimate, the configured value, what it is.
+/// A result: registry name, unit, its estimate and standard uncertainty, the configured
+/// value, what it is.
 struct Row {
     name: &'static str,
     what: &'static str,
     unit: &'static str,
     est: Stats,
+    u: f32,
     cfg: f32,
 }
 
@@ -526,7 +657,7 @@ fn put_row<W: Write>(out: &mut W, r: &Row) {
     let _ = out.write_str(" measured ");
     let _ = out.write_str(Num(r.est.mean()).text().as_str());
     let _ = out.write_str(" +- ");
-    let _ = out.write_str(Num(r.est.sigma()).text().as_str());
+    let _ = out.write_str(Num(r.u).text().as_str());
     let _ = out.write_str(" ");
     let _ = out.write_str(r.unit);
     let _ = out.write_str(" configured ");
@@ -538,26 +669,30 @@ fn put_row<W: Write>(out: &mut W, r: &Row) {
 
 /// The results as rows (K_e only if measured).
 fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
+    let u = m.uncertainty();
     let rows = [
         Row {
             name: "r_phase_ohm",
             what: "",
             unit: "ohm",
             est: m.r,
+            u: u[0],
             cfg: c.r_phase_ohm,
         },
         Row {
-            name: "l_phase_h",
-            what: " (d)",
+            name: "l_d_h",
+            what: "",
             unit: "H",
             est: m.ld,
-            cfg: c.l_phase_h,
+            u: u[1],
+            cfg: c.l_d(),
         },
         Row {
             name: "l_phase_h",
             what: " (q)",
             unit: "H",
             est: m.lq,
+            u: u[2],
             cfg: c.l_phase_h,
         },
         Row {
@@ -565,6 +700,7 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
             what: "",
             unit: "V*s/rad",
             est: m.ke_est,
+            u: u[3],
             cfg: c.ke_v_s_per_rad,
         },
     ];
@@ -572,12 +708,16 @@ fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
     (rows, n)
 }
 
-/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (the mean of L_d
-/// and L_q: the loop has one inductance) and `ke_v_s_per_rad` (if measured).
+/// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (L_q: the loop's PI
+/// has one inductance, and with i_d* = 0 in every law the q loop carries the commanded
+/// current and the d loop's decoupling `−ω_e·L·i_q` is L_q's; `docs/commissioning.md`),
+/// `l_d_h` (L_d: the short's peak bound, flux braking's voltage circle, the encoder's emf
+/// check) and `ke_v_s_per_rad` (if measured).
 pub fn applied(m: &Measure, c: &Config) -> Config {
     let mut n = *c;
     n.r_phase_ohm = m.r.mean();
-    n.l_phase_h = 0.5 * (m.ld.mean() + m.lq.mean());
+    n.l_phase_h = m.lq.mean();
+    n.l_d_h = m.ld.mean();
     if m.ke_refused.is_none() {
         n.ke_v_s_per_rad = m.ke_est.mean();
     }
@@ -631,7 +771,7 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
                     out,
                     &[match m.phase {
                         Phase::R => "r_phase_ohm",
-                        Phase::Ld => "l_phase_h (d)",
+                        Phase::Ld => "l_d_h",
                         Phase::Ke => "ke_v_s_per_rad",
                         _ => "l_phase_h (q)",
                     }],
@@ -671,7 +811,7 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
             let c = applied(&m, ctl.config());
             match ctl.set_config(&c) {
                 Ok(()) => {
-                    say(out, &["ok applied r_phase_ohm l_phase_h"]);
+                    say(out, &["ok applied r_phase_ohm l_phase_h l_d_h"]);
                     if m.ke_refused.is_none() {
                         say(out, &[" ke_v_s_per_rad"]);
                     }
@@ -689,20 +829,65 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
 mod tests {
     use super::*;
 
+    /// `frame_corrected` against the inductance tensor rotated into a frame δ off the
+    /// rotor's (`Rᵀ·diag(L_d, L_q)·R`, its diagonal: what a pulse on each axis meets) and the
+    /// emf (0, k) rotated the same way, for δ up to ±20° and L_q/L_d in [1, 1.6]: L_d and
+    /// L_q back within 4e-7 (f32 rounding: measured 1.2e-7, a few units in the last place).
+    #[test]
+    fn frame_error_taken_out_of_l() {
+        let mut worst = 0f64;
+        for deg in [-20.0f64, -6.0, -4.5, 0.0, 3.0, 12.0, 20.0] {
+            for ratio in [1.0f64, 1.25, 1.6] {
+                let (ld, lq, k) = (5e-3f64, 5e-3 * ratio, 0.9f64);
+                let d = deg.to_radians();
+                // Rows of the rotation from the rotor's frame to the encoder's.
+                let rot = [[d.cos(), d.sin()], [-d.sin(), d.cos()]];
+                let lr = [[ld, 0.0], [0.0, lq]];
+                let mut le = [[0.0f64; 2]; 2];
+                for a in 0..2 {
+                    for b in 0..2 {
+                        for x in 0..2 {
+                            for y in 0..2 {
+                                le[a][b] += rot[a][x] * lr[x][y] * rot[b][y];
+                            }
+                        }
+                    }
+                }
+                // The emf along the rotor's q, read in the encoder's frame.
+                let e = [rot[0][1] * k, rot[1][1] * k];
+                let (gd, gq) = frame_corrected(
+                    le[0][0] as f32,
+                    le[1][1] as f32,
+                    e[0].abs() as f32,
+                    e[1] as f32,
+                );
+                let err = (gd as f64 / ld - 1.0)
+                    .abs()
+                    .max((gq as f64 / lq - 1.0).abs());
+                worst = worst.max(err);
+                assert!(err < 4e-7, "{deg}° {ratio}: {gd} {gq}");
+            }
+        }
+        std::println!("frame correction: worst relative error {worst:.2e}");
+        // No emf (K_e refused): unchanged.
+        assert_eq!(frame_corrected(1.0, 2.0, 0.0, 0.0), (1.0, 2.0));
+    }
+
     /// A still rotor on a bus of 72 V: `Measure::step` against the d/q equations of a
-    /// non-salient machine (R = 2 Ω, L = 5 mH) integrated exactly over each period with the
-    /// PWM's one-period delay; K_e is refused for want of motion, R and L come out within
-    /// 2.5e-4 (measured: R −4e-6, L +7.0e-5, the discrete integral's rounding; a one-period
-    /// error in the delay's count is +6 % on L), and a run that moves is stopped by name.
+    /// salient machine (R = 2 Ω, L_d = 5 mH, L_q = 8 mH) integrated exactly over each period
+    /// with the PWM's one-period delay; K_e is refused for want of motion, R, L_d and L_q come
+    /// out within 2.5e-4 of each (measured: see the print; the discrete integral's rounding; a
+    /// one-period error in the delay's count is +6 % on L, swapped axes 60 %), and a run that
+    /// moves is stopped by name.
     #[test]
     fn measures_an_rl_machine_and_refuses_without_motion() {
         let cfg = Config {
             meas_ke_time_s: 0.1,
             ..Config::default()
         };
-        let (r, l) = (2.0f64, 5e-3f64);
+        let (r, l) = (2.0f64, [5e-3f64, 8e-3]);
         let ts = 1.0 / cfg.pwm_hz as f64;
-        let decay = (-r * ts / l).exp();
+        let decay = l.map(|l| (-r * ts / l).exp());
         let mut m = Measure::default();
         m.start(&cfg, 0.0);
         let (mut i, mut last) = ([0.0f64; 2], [0.0f64; 2]);
@@ -711,7 +896,7 @@ mod tests {
             // The sample just taken; over the period from it to the next sample the voltage
             // commanded a period ago acts (this one's is written for the next period).
             for k in 0..2 {
-                i[k] = i[k] * decay + last[k] / r * (1.0 - decay);
+                i[k] = i[k] * decay[k] + last[k] / r * (1.0 - decay[k]);
             }
             last = [v[0] as f64, v[1] as f64];
             n += 1;
@@ -721,8 +906,8 @@ mod tests {
         assert_eq!(m.ke_refused(), Some(Failure::NoMotion));
         let (er, ed, eq) = (
             m.r.mean() as f64 / r - 1.0,
-            m.ld.mean() as f64 / l - 1.0,
-            m.lq.mean() as f64 / l - 1.0,
+            m.ld.mean() as f64 / l[0] - 1.0,
+            m.lq.mean() as f64 / l[1] - 1.0,
         );
         std::println!("R {er:+.2e}, L_d {ed:+.2e}, L_q {eq:+.2e}");
         for e in [er, ed, eq] {

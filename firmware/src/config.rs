@@ -23,6 +23,10 @@ pub struct Config {
     /// Phase inductance, line-to-neutral, H. The datasheet value was lost from our copy; 6 mH
     /// (half of a line-to-line value of about 12 mH, the order of the AKM4x family) is assumed.
     pub l_phase_h: f32,
+    /// d-axis inductance, line-to-neutral, H; 0: the same as `l_phase_h` (a non-salient
+    /// machine). On a salient machine `l_phase_h` holds L_q (the q loop's, `measure apply`)
+    /// and this L_d; the short's peak bound takes the smaller ([`Config::l_d`]).
+    pub l_d_h: f32,
     /// Back-emf constant, per-phase peak, V·s/rad (mechanical): `e_q = K_e·ω_m`,
     /// `T = 3/2·K_e·i_q`. Default 0.77·√(3/2) = 0.943: the reading of the paper's "K_e = 0.77"
     /// under which its own formulas (`c_e = 9/4·K²/(l²(R+R_L))`) are physically right in our
@@ -177,6 +181,7 @@ impl Default for Config {
         Config {
             r_phase_ohm: 2.41,
             l_phase_h: 6.0e-3,
+            l_d_h: 0.0,
             ke_v_s_per_rad: 0.943_054,
             pole_pairs: 5,
             lead_m_per_rad: 0.016 / TAU,
@@ -263,6 +268,15 @@ fn check(ok: bool, field: &'static str, reason: &'static str) -> Result<(), Conf
 }
 
 impl Config {
+    /// The d-axis inductance, H: `l_d_h`, or `l_phase_h` where that is 0 (non-salient).
+    pub fn l_d(&self) -> f32 {
+        if self.l_d_h > 0.0 {
+            self.l_d_h
+        } else {
+            self.l_phase_h
+        }
+    }
+
     /// Check every field and the relations between them.
     pub fn validate(&self) -> Result<(), ConfigError> {
         // Each field against its range in the parameter registry (`params::PARAMS`, the one
@@ -685,7 +699,7 @@ mod tests {
     #[test]
     fn differs_covers_every_field() {
         let names = field_names();
-        assert_eq!(names.len(), 62, "{names:?}");
+        assert_eq!(names.len(), 63, "{names:?}");
         for n in &names {
             assert!(
                 n == "opt" || PARAMS.iter().any(|p| p.name == n.as_str()),

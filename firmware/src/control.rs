@@ -530,39 +530,39 @@ impl Controller {
     }
 
     /// A bound on the phase current's peak if the phases were shorted now, from zero
-    /// current at the present speed estimate, A. The short's current vector is
-    /// `i(t) = i_ss(t) − i_ss(0)·e^(−t/τ)` (τ = L/R) with `|i_ss| = E/√(R² + (ω_e·L)²)`,
-    /// `E = K_e·|ω_m|`, and `d|i|/dt ≤ E/L` from zero: so `|i| ≤ E·t/L` up to `t₁`, where that
-    /// reaches 90 % of `i_trip_a`, and `|i| ≤ |i_ss|·(1 + τ/(τ + t₁))` after (`e^(−x) ≤
+    /// current at the present speed estimate, A, on a machine with the inductances L_d
+    /// ([`Config::l_d`]) and L_q (`l_phase_h`), salient or not. In the rotor frame (ω_e =
+    /// p·ω_m, ψ = K_e/p, `E = K_e·|ω_m|`) the short's current is `i = i_ss + i_tr`: the steady
+    /// state `i_d = −ω_e²·L_q·ψ/D`, `i_q = −R·ω_e·ψ/D` (`D = R² + ω_e²·L_d·L_q`), so
+    /// `|i_ss| = E·√(R² + ω_e²·L_q²)/D`, and a transient starting at `−i_ss` whose flux
+    /// `Φ = (L_d·i_d, L_q·i_q)` obeys `d|Φ|²/dt = −2R·(L_d·i_d² + L_q·i_q²)` (the rotation's
+    /// cross terms cancel in this norm): `|Φ_tr| ≤ |Φ_ss|·e^(−t/τ)`, τ = L_max/R, with
+    /// `|Φ_ss| = E·L_q·√(R² + ω_e²·L_d²)/D`, and `|i| ≤ |Φ|/L_min`. From zero the whole flux
+    /// grows at most as `d|Φ|/dt ≤ E`, so `|i| ≤ E·t/L_min` up to `t₁`, where that reaches 90 %
+    /// of `i_trip_a`, and `|i| ≤ |i_ss| + |Φ_ss|/L_min·τ/(τ + t₁)` after (`e^(−x) ≤
     /// 1/(1 + x)`). Returns the larger of the two (or the first when the second is below it:
-    /// the bound is then under 90 % of the trip). The speed does not grow during a short
-    /// (it brakes), so the bound holds for the whole short.
+    /// the bound is then under 90 % of the trip). Non-salient (L_d = L_q = L) it is
+    /// `|i_ss|·(1 + τ/(τ + t₁))`, `|i_ss| = E/√(R² + (ω_e·L)²)`. The speed does not grow
+    /// during a short (it brakes), so the bound holds for the whole short.
     pub fn short_peak_a(&self) -> f32 {
         let c = &self.cfg;
         let w = crate::numtext::q_f32(self.enc.omega_m(&self.g.enc));
         let w = if w < 0.0 { -w } else { w };
         let e = c.ke_v_s_per_rad * w;
-        let xl = w * c.pole_pairs as f32 * c.l_phase_h;
-        let z2 = c.r_phase_ohm * c.r_phase_ohm + xl * xl;
+        let (ld, lq, r) = (c.l_d(), c.l_phase_h, c.r_phase_ohm);
+        let (l_min, l_max) = if ld < lq { (ld, lq) } else { (lq, ld) };
+        let we = w * c.pole_pairs as f32;
+        let d = r * r + we * we * ld * lq;
+        let i_ss = e * crate::protect::sqrt_f32(r * r + we * we * lq * lq) / d;
+        let phi_ss = e * lq * crate::protect::sqrt_f32(r * r + we * we * ld * ld) / d;
         let i_lim = 0.9 * c.i_trip_a;
-        let tau = c.l_phase_h / c.r_phase_ohm;
-        let t1 = if e > 0.0 {
-            i_lim * c.l_phase_h / e
-        } else {
-            f32::MAX
-        };
-        let k = 1.0 + tau / (tau + t1);
-        // |i_ss|·k against i_lim, squared (no root): the bound is i_lim when below it.
-        let iss2k2 = e * e / z2 * k * k;
-        if iss2k2 <= i_lim * i_lim {
+        let tau = l_max / r;
+        let t1 = if e > 0.0 { i_lim * l_min / e } else { f32::MAX };
+        let b = i_ss + phi_ss / l_min * (tau / (tau + t1));
+        if b <= i_lim {
             i_lim
         } else {
-            // Above: |i_ss|·k by Newton's root (cold path, `+ − × ÷` only).
-            let mut r = iss2k2;
-            for _ in 0..40 {
-                r = 0.5 * (r + iss2k2 / r);
-            }
-            r
+            b
         }
     }
 

@@ -553,6 +553,14 @@ registry! {
         "phase inductance, line-to-neutral"
     ),
     real!(
+        l_d_h,
+        "H",
+        0.0,
+        1.0,
+        false,
+        "d-axis inductance (0: l_phase_h)"
+    ),
+    real!(
         ke_v_s_per_rad,
         "V*s/rad",
         1e-4,

@@ -616,9 +616,14 @@ mod tests {
                 "{k:?}: {cases} power cuts over {saves} saves (2 of them erasing a page), \
                  {zeroed} inside a double word also zeroed: all old or new"
             );
+            // Every byte a save writes is a cut, and a save writes at least 6 bytes per
+            // parameter (the log a double word, the map's item 6 and its header); the first
+            // 8 saves are all cut (fewer when the second erase comes sooner: then all of
+            // them): a cut skipped anywhere leaves fewer.
+            let cut = (saves as usize).min(8);
             assert!(
-                cases >= 10 * PARAMS.len() * 6 && zeroed > cases / 2,
-                "{cases} {zeroed}"
+                cases >= cut * PARAMS.len() * 6 && zeroed > cases / 2,
+                "{cases} {zeroed} {saves}"
             );
         }
     }

@@ -200,6 +200,7 @@ fn main() {
         random_angle: true,
         offset_a: 0.15,
         gain_rel: 0.02,
+        vbus_gain_rel: 0.0,
         index: true,
         seed: 1,
     };

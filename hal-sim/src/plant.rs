@@ -15,8 +15,14 @@ use std::f64::consts::{PI, TAU};
 pub struct Machine {
     /// Phase resistance, line-to-neutral, Ω.
     pub r_ohm: f64,
-    /// Phase inductance, line-to-neutral, H.
+    /// Phase inductance of the d axis, line-to-neutral, H; with `l_q_h` absent the machine is
+    /// non-salient and this is both axes' (L_d = L_q).
     pub l_h: f64,
+    /// Phase inductance of the q axis, line-to-neutral, H (a salient machine: the dq voltage
+    /// equations with their cross-coupling and the reluctance torque, `crate::sim`); absent:
+    /// `l_h`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub l_q_h: Option<f64>,
     /// Back-emf constant, per-phase PEAK, V·s/rad mechanical (`e_q = K_e·ω_m`,
     /// `T = 3/2·K_e·i_q`). Default: the firmware's, 0.77·√(3/2) = 0.943 (see the doc of
     /// `regen_fw::Config::ke_v_s_per_rad` and `docs/simulator.md` §K_e).
@@ -32,10 +38,26 @@ impl Default for Machine {
         Machine {
             r_ohm: 2.41,
             l_h: 6.0e-3,
+            l_q_h: None,
             ke_v_s_per_rad: regen_fw::Config::default().ke_v_s_per_rad as f64,
             pole_pairs: 5,
             angle_offset_rad: 0.0,
         }
+    }
+}
+
+impl Machine {
+    /// The d axis's inductance, H.
+    pub fn l_d(&self) -> f64 {
+        self.l_h
+    }
+    /// The q axis's inductance, H (`l_q_h`, else `l_h`).
+    pub fn l_q(&self) -> f64 {
+        self.l_q_h.unwrap_or(self.l_h)
+    }
+    /// L_d ≠ L_q.
+    pub fn salient(&self) -> bool {
+        self.l_q() != self.l_h
     }
 }
 

@@ -8,7 +8,9 @@
 //! * offset ±`offset_a` (0.15 A suggested for the board: ±12 codes at 12.2 mA per code, i.e.
 //!   ±10 mV at a 3.3 V, 12-bit ADC input: a shunt amplifier's output offset of a few mV plus
 //!   the ADC's offset error of a few LSB);
-//! * gain ±`gain_rel` (0.02 suggested: a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain).
+//! * gain ±`gain_rel` (0.02 suggested: a 1 % shunt, 0.5 % amplifier gain, 0.5 % ADC gain);
+//! * the bus-voltage sensor's gain ±`vbus_gain_rel` (0.01 suggested: the divider's two 0.5 %
+//!   resistors and the ADC's gain; off in the board scenarios, on in the commissioning test).
 //!
 //! The firmware calibrates the offsets at boot (gates off); gain errors are not calibrated
 //! (no reference current at boot) and remain as a per-phase scale error.
@@ -32,6 +34,8 @@ pub struct PowerUp {
     pub offset_a: f64,
     /// Per-phase current gain errors drawn within ±this, relative (0 = none).
     pub gain_rel: f64,
+    /// The bus-voltage sensor's gain error drawn within ±this, relative (0 = none).
+    pub vbus_gain_rel: f64,
     /// The encoder's index pulse, once per mechanical revolution at a seeded angle.
     pub index: bool,
     /// Seed of the draws.
@@ -44,6 +48,7 @@ impl Default for PowerUp {
             random_angle: false,
             offset_a: 0.0,
             gain_rel: 0.0,
+            vbus_gain_rel: 0.0,
             index: false,
             seed: 1,
         }
@@ -60,16 +65,21 @@ pub struct Draw {
     /// Per-phase current offsets, A, and relative gain errors.
     pub offset_a: [f64; 3],
     pub gain_rel: [f64; 3],
-    /// The index mark's mechanical angle on the rotor, rad, in [0, 2π) (drawn last, so that
-    /// the other draws do not depend on whether the index is modelled).
+    /// The index mark's mechanical angle on the rotor, rad, in [0, 2π) (drawn after the
+    /// above, so that they do not depend on whether the index is modelled).
     pub index_m: f64,
+    /// The bus-voltage sensor's relative gain error (drawn last).
+    pub vbus_gain_rel: f64,
 }
 
 impl PowerUp {
     /// Any model on that the firmware must boot against (the index pulse alone is a sensor
     /// more, not an error to calibrate or align).
     pub fn any(&self) -> bool {
-        self.random_angle || self.offset_a != 0.0 || self.gain_rel != 0.0
+        self.random_angle
+            || self.offset_a != 0.0
+            || self.gain_rel != 0.0
+            || self.vbus_gain_rel != 0.0
     }
 
     /// Refuse values outside their ranges, naming the key, the value and the range.
@@ -86,6 +96,12 @@ impl PowerUp {
                 self.gain_rel
             ));
         }
+        if !(self.vbus_gain_rel.is_finite() && (0.0..=0.5).contains(&self.vbus_gain_rel)) {
+            return Err(format!(
+                "powerup.vbus_gain_rel = {}: must lie in [0, 0.5]",
+                self.vbus_gain_rel
+            ));
+        }
         Ok(())
     }
 
@@ -98,12 +114,14 @@ impl PowerUp {
         let offset_a = [0; 3].map(|_| (2.0 * u() - 1.0) * self.offset_a);
         let gain_rel = [0; 3].map(|_| (2.0 * u() - 1.0) * self.gain_rel);
         let index_m = u() * std::f64::consts::TAU;
+        let vbus_gain_rel = (2.0 * u() - 1.0) * self.vbus_gain_rel;
         Draw {
             theta_m0,
             encoder_start,
             offset_a,
             gain_rel,
             index_m,
+            vbus_gain_rel,
         }
     }
 }
@@ -111,7 +129,8 @@ impl PowerUp {
 /// The `[plant_draw]` scenario table: the plant's machine drawn off its nameplate (the
 /// scenario's `[machine]`, which the firmware is configured with unless `[firmware]` says
 /// otherwise), each value uniformly within ±its relative tolerance, from its own seeded
-/// generator. The plant is non-salient: one inductance stands for L_d and L_q.
+/// generator. With `lq_ratio_max` above 1 the plant is salient: its L_q is its L_d times a ratio
+/// drawn within [1, `lq_ratio_max`] (the nameplate's `l_h` is L_d's).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlantDraw {
@@ -121,6 +140,9 @@ pub struct PlantDraw {
     pub l_rel: f64,
     /// Back-emf constant within ±this, relative.
     pub ke_rel: f64,
+    /// L_q/L_d drawn uniformly within [1, this] (1 = the nameplate's L_q, `l_q_h` or `l_h`,
+    /// drawn with L_d's factor).
+    pub lq_ratio_max: f64,
     /// Seed of the draws.
     pub seed: u64,
 }
@@ -131,6 +153,7 @@ impl Default for PlantDraw {
             r_rel: 0.0,
             l_rel: 0.0,
             ke_rel: 0.0,
+            lq_ratio_max: 1.0,
             seed: 1,
         }
     }
@@ -148,21 +171,35 @@ impl PlantDraw {
                 return Err(format!("{k} = {v}: must lie in [0, 0.5]"));
             }
         }
+        let q = self.lq_ratio_max;
+        if !(q.is_finite() && (1.0..=3.0).contains(&q)) {
+            return Err(format!("plant_draw.lq_ratio_max = {q}: must lie in [1, 3]"));
+        }
         Ok(())
     }
 
-    /// The plant's machine for the nameplate `m`: R, L and K_e each times `1 + u·tol`, `u`
+    /// The plant's machine for the nameplate `m`: R, L_d and K_e each times `1 + u·tol`, `u`
     /// uniform in [−1, 1) (splitmix64, drawn in that order; shares nothing with the other
-    /// generators).
+    /// generators), then L_q: L_d times `1 + (u + 1)/2·(lq_ratio_max − 1)` when
+    /// `lq_ratio_max` > 1, else the nameplate's L_q times L_d's factor (a non-salient
+    /// nameplate stays non-salient).
     pub fn draw(&self, m: &crate::plant::Machine) -> crate::plant::Machine {
         let mut st = self.seed ^ 0x6e61_6d65_706c_6174; // "nameplat": apart from [powerup]'s
         let mut u = move || {
             2.0 * ((crate::study::splitmix(&mut st) >> 11) as f64 / (1u64 << 53) as f64) - 1.0
         };
-        let (ur, ul, uk) = (u(), u(), u());
+        let (ur, ul, uk, uq) = (u(), u(), u(), u());
+        let fl = 1.0 + ul * self.l_rel;
+        let l_h = m.l_h * fl;
+        let l_q_h = if self.lq_ratio_max > 1.0 {
+            Some(l_h * (1.0 + 0.5 * (uq + 1.0) * (self.lq_ratio_max - 1.0)))
+        } else {
+            m.l_q_h.map(|l| l * fl)
+        };
         crate::plant::Machine {
             r_ohm: m.r_ohm * (1.0 + ur * self.r_rel),
-            l_h: m.l_h * (1.0 + ul * self.l_rel),
+            l_h,
+            l_q_h,
             ke_v_s_per_rad: m.ke_v_s_per_rad * (1.0 + uk * self.ke_rel),
             ..*m
         }
@@ -263,12 +300,66 @@ mod tests {
         assert!(skipped > 150_000 && passes > 500, "{skipped} {passes}");
     }
 
+    /// L_q/L_d covers [1, lq_ratio_max] and leaves R, L_d and K_e's draws as they were; a
+    /// non-salient nameplate stays non-salient with the ratio at 1; out-of-range values are
+    /// refused by name.
+    #[test]
+    fn plant_draw_saliency() {
+        let m = crate::plant::Machine::default();
+        let d = PlantDraw {
+            r_rel: 0.2,
+            l_rel: 0.2,
+            ke_rel: 0.2,
+            lq_ratio_max: 1.6,
+            seed: 0,
+        };
+        let mut ratio = (f64::MAX, f64::MIN);
+        for seed in 0..2000 {
+            let sal = PlantDraw { seed, ..d }.draw(&m);
+            let one = PlantDraw {
+                seed,
+                lq_ratio_max: 1.0,
+                ..d
+            }
+            .draw(&m);
+            assert_eq!(one.l_q_h, None);
+            assert!(!one.salient());
+            assert_eq!(
+                (sal.r_ohm, sal.l_h, sal.ke_v_s_per_rad),
+                (one.r_ohm, one.l_h, one.ke_v_s_per_rad)
+            );
+            let q = sal.l_q() / sal.l_d();
+            assert!((1.0..1.6).contains(&q), "{q}");
+            assert!((sal.l_d() / m.l_h - 1.0).abs() <= 0.2);
+            ratio = (ratio.0.min(q), ratio.1.max(q));
+        }
+        // 2,000 uniform draws: both ends within 0.5 % of the range.
+        assert!(ratio.0 < 1.003 && ratio.1 > 1.597, "{ratio:?}");
+        for v in [0.9, 3.5, f64::NAN] {
+            let e = PlantDraw {
+                lq_ratio_max: v,
+                ..d
+            }
+            .check()
+            .unwrap_err();
+            assert!(e.starts_with("plant_draw.lq_ratio_max = "), "{e}");
+        }
+        let e = PowerUp {
+            vbus_gain_rel: 0.7,
+            ..PowerUp::default()
+        }
+        .check()
+        .unwrap_err();
+        assert!(e.starts_with("powerup.vbus_gain_rel = 0.7"), "{e}");
+    }
+
     #[test]
     fn draws_cover_their_ranges_and_depend_on_the_seed() {
         let p = PowerUp {
             random_angle: true,
             offset_a: 0.15,
             gain_rel: 0.02,
+            vbus_gain_rel: 0.01,
             index: true,
             seed: 7,
         };
@@ -281,6 +372,7 @@ mod tests {
         assert!(min(&|d| d.theta_m0) < 0.005 * std::f64::consts::TAU);
         assert!(max(&|d| d.offset_a[2]) > 0.149 && max(&|d| d.offset_a[2]) <= 0.15);
         assert!(min(&|d| d.gain_rel[0]) < -0.0199 && min(&|d| d.gain_rel[0]) >= -0.02);
+        assert!(max(&|d| d.vbus_gain_rel) > 0.00995 && max(&|d| d.vbus_gain_rel) <= 0.01);
         assert!(max(&|d| d.encoder_start as f64) > 65_000.0);
         assert!(max(&|d| d.index_m) > 0.995 * std::f64::consts::TAU);
         assert!(min(&|d| d.index_m) < 0.005 * std::f64::consts::TAU);

@@ -452,6 +452,9 @@ impl Scenario {
         let m = &self.machine;
         key_in_range("machine.r_ohm", m.r_ohm)?;
         key_in_range("machine.l_h", m.l_h)?;
+        if let Some(l) = m.l_q_h {
+            key_in_range("machine.l_q_h", l)?;
+        }
         key_in_range("machine.ke_v_s_per_rad", m.ke_v_s_per_rad)?;
         key_in_range("machine.pole_pairs", m.pole_pairs as f64)?;
         key_in_range("machine.angle_offset_rad", m.angle_offset_rad)?;
@@ -712,6 +715,7 @@ pub const RANGES: &[KeyRange] = {
         kr("duration_s", Open(0.0), 1e5, "s", "a day of simulated time (2·10⁹ periods at 20 kHz): the ledger's sums keep 1e-8 of the largest flow; longer runs are limited by time and memory, not the model"),
         kr("machine.r_ohm", Open(0.0), 1e3, "Ω", "the per-period solution is exact for any R; 1 kΩ is beyond any machine of this class"),
         kr("machine.l_h", Closed(1e-4), 10.0, "H", "the averaged inverter books the mean current, not the PWM ripple V_bus/(4·L·f_pwm): 40 A peak to peak at 320 V, 20 kHz and 0.1 mH, whose copper loss then goes unbooked (`inverter.switched` books it)"),
+        kr("machine.l_q_h", Closed(1e-4), 10.0, "H", "the q axis's, as `machine.l_h` (the d axis's; absent: `l_h`, a non-salient machine); a salient machine's period is integrated in sub-steps of at most τ_min/8 for any L_q/L_d"),
         kr("machine.ke_v_s_per_rad", Open(0.0), 100.0, "V·s/rad", "per-phase peak; the firmware's fixed point holds K_e·ω up to its bus range"),
         kr("machine.pole_pairs", Closed(1.0), 50.0, "", "the firmware's `pole_pairs` range (params.rs); the electrical angle per PWM period is judged by the run's verdict"),
         kr("machine.angle_offset_rad", Closed(-1e3), 1e3, "rad", "an angle: any value, wrapped"),
@@ -989,6 +993,7 @@ mod tests {
             "duration_s" => sc.duration_s = v,
             "machine.r_ohm" => sc.machine.r_ohm = v,
             "machine.l_h" => sc.machine.l_h = v,
+            "machine.l_q_h" => sc.machine.l_q_h = Some(v),
             "machine.ke_v_s_per_rad" => sc.machine.ke_v_s_per_rad = v,
             "machine.pole_pairs" => sc.machine.pole_pairs = v as u32,
             "machine.angle_offset_rad" => sc.machine.angle_offset_rad = v,

@@ -91,7 +91,8 @@ impl StageSpec {
     /// The hardware settings as the board derives them from the firmware's configuration,
     /// for a stage of absolute maximum `v_abs_max`.
     pub fn from_config(cfg: &Config, v_abs_max: f64) -> StageSpec {
-        let i_sc = cfg.ke_v_s_per_rad as f64 / (cfg.pole_pairs as f64 * cfg.l_phase_h as f64);
+        let i_sc = cfg.ke_v_s_per_rad as f64
+            / (cfg.pole_pairs as f64 * cfg.l_d().min(cfg.l_phase_h) as f64);
         let range = cfg.adc_zero_code as f64 * cfg.amps_per_count as f64;
         let oc = (1.1 * cfg.i_trip_a as f64).min(0.95 * range);
         StageSpec {

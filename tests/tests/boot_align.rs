@@ -18,6 +18,7 @@ fn board_powerup(seed: u64) -> PowerUp {
         random_angle: true,
         offset_a: 0.15,
         gain_rel: 0.02,
+        vbus_gain_rel: 0.0,
         seed,
         ..PowerUp::default()
     }
@@ -299,6 +300,7 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
                 random_angle: false,
                 offset_a: 0.15,
                 gain_rel: 0.0,
+                vbus_gain_rel: 0.0,
                 seed,
                 ..PowerUp::default()
             })
@@ -343,6 +345,7 @@ fn offsets_calibrated_within_tolerance_refused_beyond() {
         random_angle: true,
         offset_a: 0.0,
         gain_rel: 0.0,
+        vbus_gain_rel: 0.0,
         seed: 1,
         ..PowerUp::default()
     };

@@ -167,6 +167,7 @@ fn load_step_current_response_matches_the_loop_model() {
             r_rel: 0.2,
             l_rel: 0.2,
             ke_rel: 0.0,
+            lq_ratio_max: 1.0,
             seed,
         };
         let m = sc.plant_machine();

@@ -20,13 +20,18 @@ fn board(seed: u64, tol: f64) -> Scenario {
             freq_hz: 0.5,
         };
     }
+
     sc.plant_draw = PlantDraw {
         r_rel: tol,
         l_rel: tol,
         ke_rel: tol,
+        lq_ratio_max: 1.6,
         seed,
     };
     sc.powerup.seed = seed;
+    // The bus-voltage sensor's gain error within its stated tolerance (the firmware's
+    // `V_GAIN_TOL`); the current sensors' (±2 %) are the scenario's.
+    sc.powerup.vbus_gain_rel = regen_fw::commission::V_GAIN_TOL as f64;
     sc
 }
 
@@ -36,6 +41,7 @@ fn measure(sc: &Scenario) -> (SimDrive, String) {
     let mut out = String::new();
     d.execute("mode idle", &mut out).expect("idle");
     out.clear();
+
     d.execute("measure", &mut out)
         .unwrap_or_else(|_| panic!("{out}"));
     let mut tel = String::new();
@@ -50,14 +56,15 @@ fn measure(sc: &Scenario) -> (SimDrive, String) {
 }
 
 /// The tolerance of each measured value (R, L_d, L_q, K_e), relative to the plant's, from
-/// the largest error of the 100 plants (`measured_within_tolerance_of_the_plant`): R +2.44 %,
-/// L_d +2.32 %, L_q +4.47 %, K_e +0.29 %; each bound 1.4–2× that, so that a 5 % error in
-/// any one's arithmetic fails (tried on R's quotient: it fails).
-const TOL: [f64; 4] = [0.035, 0.035, 0.06, 0.006];
+/// the largest error of the 100 salient plants with their sensors' gain errors
+/// (`measured_within_tolerance_of_the_plant`): R +2.58 %, L_d +3.40 %, L_q +3.40 %, K_e
+/// +1.23 %; each bound 1.3–1.4× that (3× would pass a 5 % error in the arithmetic, which
+/// must fail: tried on L_q's quotient, it fails).
+const TOL: [f64; 4] = [0.035, 0.046, 0.045, 0.016];
 
 /// Relative errors (measured/plant − 1) of R, L_d, L_q, K_e for `seeds`, each plant drawn
 /// within ±20 % of the nameplate.
-fn errors(seeds: std::ops::Range<u64>) -> Vec<[[f64; 2]; 4]> {
+fn errors(seeds: std::ops::Range<u64>) -> Vec<[[f64; 3]; 4]> {
     use rayon::prelude::*;
     seeds
         .into_par_iter()
@@ -67,26 +74,45 @@ fn errors(seeds: std::ops::Range<u64>) -> Vec<[[f64; 2]; 4]> {
             let (d, out) = measure(&sc);
             let me = *d.sim().controller().measurement();
             assert_eq!(me.phase(), Phase::Done, "seed {seed}: {out}");
-            // (measured/plant − 1, stated uncertainty relative to the plant's value)
-            let rel = |s: &regen_fw::commission::Stats, y: f64| {
-                [s.mean() as f64 / y - 1.0, s.sigma() as f64 / y]
+            // (measured/plant − 1, stated uncertainty and the repeats' standard error alone,
+            // relative to the plant's value)
+            let u = me.uncertainty();
+            let rel = |s: &regen_fw::commission::Stats, u: f32, y: f64| {
+                [
+                    s.mean() as f64 / y - 1.0,
+                    u as f64 / y,
+                    s.sigma() as f64 / y,
+                ]
             };
             [
-                rel(&me.r, m.r_ohm),
-                rel(&me.ld, m.l_h),
-                rel(&me.lq, m.l_h),
-                rel(&me.ke_est, m.ke_v_s_per_rad),
+                rel(&me.r, u[0], m.r_ohm),
+                rel(&me.ld, u[1], m.l_d()),
+                rel(&me.lq, u[2], m.l_q()),
+                rel(&me.ke_est, u[3], m.ke_v_s_per_rad),
             ]
         })
         .collect()
 }
 
-/// 100 plants off the nameplate by up to ±20 % in R, L and K_e, each on the board's TMD
-/// (power-up draws, shunt sampling, the structure at 0.4 m/s²): every measured value within
-/// `TOL` of the plant's.
+/// 100 plants off the nameplate by up to ±20 % in R, L_d and K_e, L_q/L_d within [1, 1.6],
+/// each on the board's TMD (power-up draws with the current sensors' ±2 % and the bus
+/// sensor's ±1 % gain errors, shunt sampling, the structure at 0.4 m/s²): every measured
+/// value within `TOL` of the plant's (L_d judged against the plant's L_d, L_q against its
+/// L_q), and the stated uncertainty covers the true error as a standard uncertainty does.
 #[test]
 fn measured_within_tolerance_of_the_plant() {
     let e = errors(0..100);
+    let ratio: Vec<f64> = (0..100)
+        .map(|s| {
+            let m = board(s, 0.2).plant_machine();
+            m.l_q() / m.l_d()
+        })
+        .collect();
+    println!(
+        "L_q/L_d of the plants: {:.3} … {:.3}",
+        ratio.iter().cloned().fold(f64::MAX, f64::min),
+        ratio.iter().cloned().fold(f64::MIN, f64::max)
+    );
     for (k, name) in ["R", "L_d", "L_q", "K_e"].iter().enumerate() {
         let mut v: Vec<f64> = e.iter().map(|x| x[k][0]).collect();
         v.sort_by(f64::total_cmp);
@@ -94,10 +120,15 @@ fn measured_within_tolerance_of_the_plant() {
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         let mut sig: Vec<f64> = e.iter().map(|x| x[k][1]).collect();
         sig.sort_by(f64::total_cmp);
-        let beyond = e.iter().filter(|x| x[k][0].abs() > 3.0 * x[k][1]).count();
+        // Coverage: the share whose true error lies within 1 and 2 stated uncertainties.
+        let within = |c: f64| {
+            e.iter().filter(|x| x[k][0].abs() <= c * x[k][1]).count() as f64 / e.len() as f64
+        };
+        let (c1, c2) = (within(1.0), within(2.0));
         println!(
             "{name}: error mean {:+.3} %, min {:+.3} %, p5 {:+.3} %, median {:+.3} %, p95 {:+.3} %, \
-             max {:+.3} %; stated uncertainty median {:.3} %, {beyond} of {} beyond 3 of it",
+             max {:+.3} %; stated uncertainty median {:.3} % (min {:.3} %, max {:.3} %); \
+             coverage {:.0} % within 1 of it, {:.0} % within 2",
             mean * 100.0,
             q(0.0) * 100.0,
             q(0.05) * 100.0,
@@ -105,7 +136,25 @@ fn measured_within_tolerance_of_the_plant() {
             q(0.95) * 100.0,
             q(1.0) * 100.0,
             sig[sig.len() / 2] * 100.0,
+            sig[0] * 100.0,
+            sig[sig.len() - 1] * 100.0,
+            100.0 * c1,
+            100.0 * c2,
+        );
+        let rep = e.iter().filter(|x| x[k][0].abs() <= x[k][2]).count();
+        println!(
+            "{name}: the repeats' spread alone covers {rep} of {}",
             e.len()
+        );
+        // The stated uncertainty is a standard one: 68 % of a normal error within 1 of it,
+        // 95 % within 2; 100 plants put the share within ±4.7 % (1) and ±2.2 % (2) of those
+        // (binomial): bounds 3 of that. Measured R 65/95 %, L_d 68/98 %, L_q 56/93 %, K_e
+        // 71/100 %. The repeats' spread alone (the gain errors left out) covers R 27 %,
+        // L_d 36 %, L_q 32 %, K_e 20 % within 1; L_q without its pulse-torque term (the
+        // window after each pulse, `docs/commissioning.md`) 34 % and 68 %.
+        assert!(
+            (0.54..=0.82).contains(&c1) && c2 >= 0.88,
+            "{name}: coverage {c1} within 1, {c2} within 2"
         );
         assert!(
             q(0.0) > -TOL[k] && q(1.0) < TOL[k],
@@ -143,15 +192,22 @@ fn emulated(r_l: f64, cfg: &regen_fw::Config, m: &hal_sim::plant::Machine) -> f6
 /// lightly damped while the drive idles and measures, comes back to the law's steady state.
 const SETTLE_S: f64 = 40.0;
 
-/// The reference TMD (320 V, 1 m/s²) at `r_l`, the firmware told K_e and R `err` high:
-/// idle, `measure` (unless `meas` is false), `measure apply`, run; the emulated load before
-/// and after, the measurement's reply and the mean power over 4 s after `SETTLE_S`.
+/// L_q/L_d of the apply test's plant: the board draw's largest.
+const SALIENCY: f64 = 1.6;
+
+/// The reference TMD (320 V, 1 m/s²) with a salient machine (L_q = 1.6·L_d, the firmware
+/// told L_d) at `r_l`, the firmware told K_e and R `err` high: idle, `measure` (unless `meas`
+/// is false: then told its machine, `l_phase_h` L_q as `measure apply` writes it), `measure
+/// apply`, run; the emulated load before and after, the measurement's reply and the mean
+/// power over 4 s after `SETTLE_S`.
 fn measured_drive(r_l: f64, err: f64, meas: bool) -> (f64, f64, String, f64) {
     let mut sc = Scenario::tmd(r_l);
     sc.record.channels.clear();
+    sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
     let m = sc.plant_machine();
     sc.firmware.ke_v_s_per_rad = Some((m.ke_v_s_per_rad * (1.0 + err)) as f32);
     sc.firmware.r_phase_ohm = Some((m.r_ohm * (1.0 + err)) as f32);
+    sc.firmware.l_phase_h = Some(if meas { m.l_d() } else { m.l_q() } as f32);
     let mut d = SimDrive::from_scenario(&sc).expect("build");
     let before = emulated(r_l, d.sim().controller().config(), &m);
     exec(&mut d, "mode idle");
@@ -215,14 +271,14 @@ fn apply_restores_the_load_and_the_power() {
         );
         // Told 15 % high, the load was 13 % low.
         assert!(before / r_l < 0.9, "R_L {r_l}: {before}");
-        // Measured: +0.084 % (10 Ω), −0.008 %, −0.011 %: bound 0.25 %, 3× the largest. A 1 %
-        // error of the measured K_e alone moves the load by 1 % (and more at 10 Ω, R's share).
+        // Measured: +0.172 % (10 Ω), −0.003 %, −0.007 %: bound 0.25 %. A 1 % error of the
+        // measured K_e alone moves the load by 1 % (and more at 10 Ω, R's share).
         assert!(de.abs() < 2.5e-3, "R_L {r_l}: emulated {after} ohm");
-        // Measured: +0.083 % (10 Ω), −0.002 %, −0.002 %: bound 0.25 %.
+        // Measured: +0.163 % (10 Ω), +0.001 %, +0.016 %: bound 0.25 %.
         assert!(dp.abs() < 2.5e-3, "R_L {r_l}: {p} W against {p_true} W");
         // The closed-loop test's bound of the harmonic balance (`sim_closed_loop.rs`,
-        // `tmd_power_matches_harmonic_balance`; 100 Ω's for 306 Ω). Measured: +0.54 %
-        // (10 Ω), +0.056 %, −0.112 %.
+        // `tmd_power_matches_harmonic_balance`; 100 Ω's for 306 Ω). Measured: +0.62 %
+        // (10 Ω), +0.054 %, −0.106 %.
         assert!(dh.abs() < hb_tol, "R_L {r_l}: {p} W against {hb} W");
     }
 }
@@ -312,14 +368,16 @@ fn board_scenarios_plants() {
         let sc = Scenario::from_file(&dir.join(format!("{f}.toml"))).unwrap();
         let (n, p) = (sc.machine, sc.plant_machine());
         println!(
-            "{f}: R {:+.2} %, L {:+.2} %, K_e {:+.2} %",
+            "{f}: R {:+.2} %, L_d {:+.2} %, L_q/L_d {:.3}, K_e {:+.2} %",
             100.0 * (p.r_ohm / n.r_ohm - 1.0),
-            100.0 * (p.l_h / n.l_h - 1.0),
+            100.0 * (p.l_d() / n.l_d() - 1.0),
+            p.l_q() / p.l_d(),
             100.0 * (p.ke_v_s_per_rad / n.ke_v_s_per_rad - 1.0)
         );
         assert!(
             sc.plant_draw.r_rel > 0.0 && p != n,
             "{f}: the plant is the nameplate"
         );
+        assert!(p.salient(), "{f}: the plant is not salient");
     }
 }

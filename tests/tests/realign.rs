@@ -21,6 +21,7 @@ fn powerup(seed: u64) -> PowerUp {
         random_angle: true,
         offset_a: 0.15,
         gain_rel: 0.02,
+        vbus_gain_rel: 0.0,
         seed,
         ..PowerUp::default()
     }

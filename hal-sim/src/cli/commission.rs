@@ -68,7 +68,7 @@ impl Port for Client {
 /// One measured value as `measure show` lists it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measured {
-    /// The registry's name, with ` (d)`/` (q)` for the inductances.
+    /// The registry's name, with ` (q)` for L_q (`l_phase_h`).
     pub name: String,
     pub value: f64,
     pub sigma: f64,
