@@ -225,7 +225,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         // where each effect of the set sits among the base columns (after the fixed terms)
         let set_spans = effect_spans(set, n_fixed, &*cache);
         // the rows the longest delay scanned leaves out (the delays are ranked on common rows)
-        let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
+        let lag_common = lag_rest_sub(effects::lag_max(ctx.dt));
         let mut best: Option<(f64, f64, Effect)> = None;
         for cand in &catalogue {
             if set.iter().any(|c| c.kind == cand.kind) {

@@ -481,6 +481,55 @@ fn rig_held_out_sample() {
     }
 }
 
+/// The tuning range's figures per kind, without the held-out range (`cargo test -p
+/// regen-tests --test diagnose_rig rig_tuning_sample -- --ignored --nocapture`): the records
+/// the diagnosis is developed on. `RIG_TUNE_N` tuning records per kind (8 by default) of the
+/// rigs `RIG_RIGS` names (`widened` by default; `classic,widened` for both), `RIG_TUNE_J0`
+/// the first record of each kind; `RIG_KINDS` narrows, `RIG_VERBOSE` prints every record.
+#[test]
+#[ignore]
+fn rig_tuning_sample() {
+    let emps = emps_x();
+    let n = per_kind("RIG_TUNE_N", 8);
+    let j0 = per_kind("RIG_TUNE_J0", 0);
+    let rigs = std::env::var("RIG_RIGS").unwrap_or_else(|_| "widened".into());
+    for rig in [Rig::Classic, Rig::Widened] {
+        if !rigs.split(',').any(|r| r == rig.name()) {
+            continue;
+        }
+        let tune = run(rig, false, n, j0, &emps);
+        println!(
+            "\n{} rig, tuning records {j0} .. {} of each kind",
+            rig.name(),
+            j0 + n
+        );
+        for kind in rig.kinds() {
+            if let Some(t) = tune.get(kind) {
+                println!(
+                    "{kind:>20} {:>4}/{:<4} {:>4.0}%  detected {:>4.0}%  false name {:>4.0}%",
+                    t.exact,
+                    t.records,
+                    pct(t.exact, t.records),
+                    pct(t.detected, t.records),
+                    pct(t.false_name, t.records)
+                );
+            }
+        }
+        let f = figures(&tune);
+        println!(
+            "{} tuning: {}/{} exactly right ({:.1} %); effect-free named {}/{}; out of catalogue unexplained {}/{}",
+            rig.name(),
+            f.exact,
+            f.all,
+            pct(f.exact, f.all),
+            f.none_named,
+            f.none,
+            f.out_unexpl,
+            f.out_all
+        );
+    }
+}
+
 /// Floors of `rig_held_out_sample` (classic, widened): exactly right, effect-free records
 /// named (at most), out-of-catalogue effects unexplained. Measured (the long run's records):
 /// classic 34/36 exactly right, 0/4 named, 8/8 unexplained; widened 32/56, 0/4, 11/12. Three
