@@ -1,6 +1,8 @@
 //! `compliance`: an unmodelled resonance, a mass hung on the device through a spring-damper
 //! (parameter: the resonance frequency f_r, Hz; the damping ratio from the record,
-//! `Context::compliance_zeta`).
+//! `Context::compliance_zeta`). Its variant `COMPLIANCE_BEHIND`: the force measured in front
+//! of the compliant part with the device (inertia, drive, friction) behind it, so that the
+//! device's viscous force passes through the mode too.
 
 use super::*;
 
@@ -31,6 +33,17 @@ impl EffectModel for Compliance {
     }
     fn walks_history(&self) -> bool {
         true
+    }
+    /// The device behind the compliance (`COMPLIANCE_BEHIND`) at the frequency found, ranked
+    /// by the held-out rss as the frequency is.
+    fn variants(&self, _ctx: &Context, centre: &Effect) -> Vec<Effect> {
+        if behind(centre) {
+            return Vec::new();
+        }
+        vec![Effect {
+            param2: COMPLIANCE_BEHIND,
+            ..centre.clone()
+        }]
     }
     /// From 10 periods over the screening window to the motion bandwidth, and at most half the
     /// derivative filter's default cutoff (fs/20): above it the derived acceleration is
@@ -63,9 +76,10 @@ impl EffectModel for Compliance {
     fn refine_widths(&self) -> &'static [f64] {
         &[0.15, 0.03, 0.006]
     }
-    /// A positive modal mass (its damping ratio lies in [0.01, 1] by construction).
-    fn admissible(&self, _e: &Effect, coef: &[f64], _base: &[f64]) -> bool {
-        coef[0] > 0.0
+    /// A positive modal mass (its damping ratio lies in [0.01, 1] by construction); behind
+    /// it, a device of positive viscous friction.
+    fn admissible(&self, e: &Effect, coef: &[f64], _base: &[f64]) -> bool {
+        coef[0] > 0.0 && (!behind(e) || coef.get(1).is_some_and(|c| *c >= 0.0))
     }
     fn parameters(
         &self,
@@ -74,17 +88,40 @@ impl EffectModel for Compliance {
         coef: &dyn Fn(&str) -> f64,
         _base: &[f64],
     ) -> Vec<(String, f64)> {
-        vec![
+        let mut p = vec![
             ("resonance_Hz".into(), e.param),
             ("modal_mass_kg".into(), coef("mode_minus_rigid")),
             (
                 "damping_ratio".into(),
                 ctx.compliance_zeta(e.param).unwrap_or(f64::NAN),
             ),
-        ]
+        ];
+        if behind(e) {
+            p.push(("viscous_behind_Ns_per_m".into(), coef("viscous_through_mode")));
+        }
+        p
     }
     fn describe(&self, _ctx: &Context, e: &Effect) -> String {
-        format!("resonance near {:.3} Hz", e.param)
+        if behind(e) {
+            format!(
+                "resonance near {:.3} Hz, the device behind the compliant part (the force measured in front of it)",
+                e.param
+            )
+        } else {
+            format!("resonance near {:.3} Hz", e.param)
+        }
+    }
+    fn fragment(
+        &self,
+        e: &Effect,
+        _model: &[(String, f64)],
+        _dt: f64,
+    ) -> Result<Vec<(String, FragmentValue)>, &'static str> {
+        if behind(e) {
+            Err("a device behind its compliance, not simulated")
+        } else {
+            Ok(Vec::new())
+        }
     }
     /// A mode whose column is more than half the derived acceleration's noise is not resolved;
     /// one resolved must carry the margin on fits corrected for that noise
@@ -97,8 +134,19 @@ impl EffectModel for Compliance {
     }
 }
 
+/// `compliance`'s second parameter for the device behind the compliant part (0: a mass hung
+/// on the device).
+pub const COMPLIANCE_BEHIND: f64 = 1.0;
+
+/// True for the variant with the device behind the compliance.
+fn behind(e: &Effect) -> bool {
+    e.param2 == COMPLIANCE_BEHIND
+}
+
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
-/// pass (a frequency whose profile identifies no mode has a zero column).
+/// pass (a frequency whose profile identifies no mode has a zero column); a value with the
+/// device behind the compliance adds (H − 1)·v, the device's viscous force through the mode
+/// (coefficient: its viscous friction), from a second pass over the velocity.
 pub(crate) fn compliance_batch(
     ctx: &Context,
     s: &Sig,
@@ -112,14 +160,33 @@ pub(crate) fn compliance_batch(
         .filter_map(|(e, z)| z.map(|z| (e.param, z)))
         .collect();
     let mut cols = compliance_columns_at(&ctx.rec.a, &modes, ctx.dt, s.rows).into_iter();
-    zetas
+    let behind_modes: Vec<(f64, f64)> = effs
         .iter()
-        .map(|z| {
-            let c = match z {
-                Some(_) => cols.next().unwrap_or_default(),
-                None => vec![0.0; s.len()],
+        .zip(&zetas)
+        .filter(|(e, _)| behind(e))
+        .filter_map(|(e, z)| z.map(|z| (e.param, z)))
+        .collect();
+    let mut vcols = if behind_modes.is_empty() {
+        Vec::new()
+    } else {
+        compliance_columns_at(&ctx.rec.v, &behind_modes, ctx.dt, s.rows)
+    }
+    .into_iter();
+    effs.iter()
+        .zip(&zetas)
+        .map(|(e, z)| {
+            let (c, cv) = match z {
+                Some(_) => (
+                    cols.next().unwrap_or_default(),
+                    behind(e).then(|| vcols.next().unwrap_or_default()),
+                ),
+                None => (vec![0.0; s.len()], behind(e).then(|| vec![0.0; s.len()])),
             };
-            vec![("compliance.mode_minus_rigid".to_string(), c)]
+            let mut out = vec![("compliance.mode_minus_rigid".to_string(), c)];
+            if let Some(cv) = cv {
+                out.push(("compliance.viscous_through_mode".to_string(), cv));
+            }
+            out
         })
         .collect()
 }
