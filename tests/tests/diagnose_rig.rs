@@ -115,20 +115,31 @@ struct Outcome {
 
 /// Whether a diagnosis is exactly right for a hidden effect: (exact, detected, false names).
 /// In the catalogue: every expected name given (detected) and no other catalogue name; outside
-/// it: `unexplained` reported and no catalogue name; no effect: no catalogue name.
+/// it: `unexplained` reported and no catalogue name; no effect: no catalogue name. A finding
+/// reported as confounded with another effect (`Finding::confounded_with`) names neither: it
+/// does not detect the hidden effect, and on a record whose hidden effect has no catalogue name
+/// (none, or outside the catalogue) it counts as a false name; a record with one is never
+/// exact.
 fn judge(hidden: &Hidden, d: &Diagnosis) -> (bool, bool, bool) {
     let names = d.catalogue_names();
+    let confounded = d.findings.iter().any(|f| f.confounded_with.is_some());
     let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
     let want = hidden.expected_names();
     let (detected, false_names) = if hidden.out_of_catalogue() {
-        (unexpl, !names.is_empty())
+        (unexpl, !names.is_empty() || confounded)
+    } else if want.is_empty() {
+        (true, !names.is_empty() || confounded)
     } else {
         (
             want.iter().all(|w| names.contains(w)),
             names.iter().any(|n| !want.contains(n)),
         )
     };
-    (detected && !false_names, detected, false_names)
+    (
+        detected && !false_names && !confounded,
+        detected,
+        false_names,
+    )
 }
 
 /// Diagnose the record of `seed` and say how it came out.
@@ -156,7 +167,11 @@ fn outcome(rig: Rig, kind: &'static str, j: usize, seed: u64, emps: &[f64]) -> O
             String::new()
         },
         d.catalogue_names(),
-        if unexpl { " + unexplained" } else { "" },
+        d.findings
+            .iter()
+            .filter_map(|f| f.confounded_with.as_ref().map(|o| format!(" + confounded {} / {o}", f.effect)))
+            .collect::<String>()
+            + if unexpl { " + unexplained" } else { "" },
         100.0 * d.baseline_holdout_rel_error,
         100.0 * d.final_holdout_rel_error,
         if exact { "" } else { "  <-- not exact" }

@@ -67,9 +67,15 @@ pub fn summary(d: &Diagnosis) -> String {
                 .take(2)
                 .map(|(k, v)| format!("{k} = {}", sig(*v)))
                 .collect();
+            let name = match &f.confounded_with {
+                Some(other) => format!(
+                    "{} or {other}, which the record does not tell apart",
+                    f.effect
+                ),
+                None => f.effect.clone(),
+            };
             format!(
-                "{} ({}) takes away {:.2} points",
-                f.effect,
+                "{name} ({}) takes away {:.2} points",
                 p.join(", "),
                 pct(gain[i])
             )

@@ -186,7 +186,10 @@ impl EffectModel for Backlash {
             .collect();
         Ok(vec![
             ("impact_pulse_kg".into(), FragmentValue::List(taps)),
-            ("impact_tap_s".into(), FragmentValue::Number(dt)),
+            (
+                "impact_tap_s".into(),
+                FragmentValue::Number(dt * tap_samples(dt) as f64),
+            ),
         ])
     }
     fn tested_at_reversals(&self) -> bool {

@@ -34,39 +34,34 @@ impl EffectModel for Compliance {
     fn walks_history(&self) -> bool {
         true
     }
-    /// The device behind the compliance (`COMPLIANCE_BEHIND`) at the frequency found, ranked
-    /// by the held-out rss as the frequency is.
-    fn variants(&self, _ctx: &Context, centre: &Effect) -> Vec<Effect> {
-        if behind(centre) {
-            return Vec::new();
-        }
-        vec![Effect {
-            param2: COMPLIANCE_BEHIND,
-            ..centre.clone()
-        }]
-    }
     /// From 10 periods over the screening window to the motion bandwidth, and at most half the
     /// derivative filter's default cutoff (fs/20): above it the derived acceleration is
     /// attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so a
     /// mode's force cannot be told from the filter's loss; and to a quarter of the derivative
-    /// filter's cutoff when the record states it (24 values, log-spaced).
+    /// filter's cutoff when the record states it (24 values, log-spaced). With the device
+    /// behind the compliance (`COMPLIANCE_BEHIND`) the mode is driven by the device's own
+    /// force, whose friction steps at every reversal: its values reach above the motion
+    /// bandwidth, to the same caps (24 more).
     fn grid(&self, ctx: &Context, cand: &Effect) -> Vec<Effect> {
         let t = ctx.dt * ctx.window as f64;
         let cap = ctx
             .rec
             .meta
             .get(crate::record::DERIVATIVE_CUTOFF_KEY)
-            .map_or(f64::INFINITY, |fc| 0.25 * fc);
-        let hi = ctx.f_motion.min(0.025 / ctx.dt).min(cap);
+            .map_or(f64::INFINITY, |fc| 0.25 * fc)
+            .min(0.025 / ctx.dt);
         let lo = 10.0 / t;
-        if hi > 1.5 * lo {
-            logspace(lo, hi, 24)
-                .into_iter()
-                .map(|p| Effect::new(cand.kind, p))
-                .collect()
-        } else {
-            vec![]
+        let mut g = Vec::new();
+        for (hi, p2) in [(ctx.f_motion.min(cap), 0.0), (cap, COMPLIANCE_BEHIND)] {
+            if hi > 1.5 * lo {
+                g.extend(logspace(lo, hi, 24).into_iter().map(|p| Effect {
+                    kind: cand.kind,
+                    param: p,
+                    param2: p2,
+                }));
+            }
         }
+        g
     }
     /// Each value costs a pass of the resonator over the record: 7 values per level.
     fn refine(&self, _ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
@@ -77,9 +72,13 @@ impl EffectModel for Compliance {
         &[0.15, 0.03, 0.006]
     }
     /// A positive modal mass (its damping ratio lies in [0.01, 1] by construction); behind
-    /// it, a device of positive viscous friction.
+    /// it, the device's whole force through the mode at unit gain (0.8 … 1.25).
     fn admissible(&self, e: &Effect, coef: &[f64], _base: &[f64]) -> bool {
-        coef[0] > 0.0 && (!behind(e) || coef.get(1).is_some_and(|c| *c >= 0.0))
+        if behind(e) {
+            unit_gain(coef[0])
+        } else {
+            coef[0] > 0.0
+        }
     }
     fn parameters(
         &self,
@@ -88,18 +87,23 @@ impl EffectModel for Compliance {
         coef: &dyn Fn(&str) -> f64,
         _base: &[f64],
     ) -> Vec<(String, f64)> {
-        let mut p = vec![
+        let zeta = ctx.compliance_zeta(e.param).unwrap_or(f64::NAN);
+        if behind(e) {
+            let d = behind_device(ctx, e.param, zeta).unwrap_or([f64::NAN; 3]);
+            return vec![
+                ("resonance_Hz".into(), e.param),
+                ("gain".into(), coef("device_through_mode")),
+                ("damping_ratio".into(), zeta),
+                ("device_inertia_kg".into(), d[0]),
+                ("device_viscous_Ns_per_m".into(), d[1]),
+                ("device_coulomb_N".into(), d[2]),
+            ];
+        }
+        vec![
             ("resonance_Hz".into(), e.param),
             ("modal_mass_kg".into(), coef("mode_minus_rigid")),
-            (
-                "damping_ratio".into(),
-                ctx.compliance_zeta(e.param).unwrap_or(f64::NAN),
-            ),
-        ];
-        if behind(e) {
-            p.push(("viscous_behind_Ns_per_m".into(), coef("viscous_through_mode")));
-        }
-        p
+            ("damping_ratio".into(), zeta),
+        ]
     }
     fn describe(&self, _ctx: &Context, e: &Effect) -> String {
         if behind(e) {
@@ -128,7 +132,12 @@ impl EffectModel for Compliance {
     /// (`Context::compliance_noise`): the column's noise near the derivative cutoff is the
     /// inertia column's (H − 1 ≈ −1 there), so least squares credits a modal mass near the
     /// inertia with the noise it cancels.
+    /// (Not with the device behind the compliance: its column is the device's whole force
+    /// through the mode, at unit gain, not a modal mass the inertia's noise can buy.)
     fn derived_noise(&self, ctx: &Context, e: &Effect) -> Option<(NoiseUse, [[f64; 3]; 3])> {
+        if behind(e) {
+            return None;
+        }
         ctx.compliance_noise(e.param)
             .map(|c| (NoiseUse::MarginCorrected, c))
     }
@@ -144,9 +153,10 @@ fn behind(e: &Effect) -> bool {
 }
 
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
-/// pass (a frequency whose profile identifies no mode has a zero column); a value with the
-/// device behind the compliance adds (H − 1)·v, the device's viscous force through the mode
-/// (coefficient: its viscous friction), from a second pass over the velocity.
+/// pass (a frequency whose profile identifies no mode has a zero column). A value with the
+/// device behind the compliance has one column instead, (H − 1)·(M·a + Fv·v + Fc·sgn v): the
+/// device's force through the mode less the rigid device's (coefficient: 1), its inertia,
+/// viscous and Coulomb coefficients fitted through the mode (`behind_device`).
 pub(crate) fn compliance_batch(
     ctx: &Context,
     s: &Sig,
@@ -154,39 +164,68 @@ pub(crate) fn compliance_batch(
 ) -> Vec<Vec<(String, Vec<f64>)>> {
     let fs: Vec<f64> = effs.iter().map(|e| e.param).collect();
     let zetas = ctx.compliance_zetas(&fs);
-    let modes: Vec<(f64, f64)> = effs
+    let hung: Vec<(f64, f64)> = effs
         .iter()
         .zip(&zetas)
+        .filter(|(e, _)| !behind(e))
         .filter_map(|(e, z)| z.map(|z| (e.param, z)))
         .collect();
-    let mut cols = compliance_columns_at(&ctx.rec.a, &modes, ctx.dt, s.rows).into_iter();
-    let behind_modes: Vec<(f64, f64)> = effs
-        .iter()
-        .zip(&zetas)
-        .filter(|(e, _)| behind(e))
-        .filter_map(|(e, z)| z.map(|z| (e.param, z)))
-        .collect();
-    let mut vcols = if behind_modes.is_empty() {
-        Vec::new()
-    } else {
-        compliance_columns_at(&ctx.rec.v, &behind_modes, ctx.dt, s.rows)
-    }
-    .into_iter();
+    let mut cols = compliance_columns_at(&ctx.rec.a, &hung, ctx.dt, s.rows).into_iter();
     effs.iter()
         .zip(&zetas)
         .map(|(e, z)| {
-            let (c, cv) = match z {
-                Some(_) => (
-                    cols.next().unwrap_or_default(),
-                    behind(e).then(|| vcols.next().unwrap_or_default()),
-                ),
-                None => (vec![0.0; s.len()], behind(e).then(|| vec![0.0; s.len()])),
-            };
-            let mut out = vec![("compliance.mode_minus_rigid".to_string(), c)];
-            if let Some(cv) = cv {
-                out.push(("compliance.viscous_through_mode".to_string(), cv));
+            if behind(e) {
+                let c = z
+                    .and_then(|z| behind_device(ctx, e.param, z).map(|d| (z, d)))
+                    .map(|(z, d)| {
+                        let t = through_mode(ctx, (e.param, z), s.rows);
+                        map(s.len(), |j| {
+                            d[0] * t[0][j] + d[1] * t[1][j] + d[2] * t[2][j]
+                        })
+                    })
+                    .unwrap_or_else(|| vec![0.0; s.len()]);
+                return vec![("compliance.device_through_mode".to_string(), c)];
             }
-            out
+            let c = match z {
+                Some(_) => cols.next().unwrap_or_default(),
+                None => vec![0.0; s.len()],
+            };
+            vec![("compliance.mode_minus_rigid".to_string(), c)]
         })
         .collect()
+}
+
+/// (H − 1)·a, (H − 1)·v and (H − 1)·sgn v of the mode (f_r, ζ) on `rows` (all when None).
+fn through_mode(ctx: &Context, mode: (f64, f64), rows: Option<&[usize]>) -> [Vec<f64>; 3] {
+    let one = |sig: &[f64]| {
+        compliance_columns_at(sig, &[mode], ctx.dt, rows)
+            .pop()
+            .unwrap_or_default()
+    };
+    [one(&ctx.rec.a), one(&ctx.rec.v), one(&ctx.sgn)]
+}
+
+/// The device behind a compliance of mode (f_r, ζ): its inertia, viscous and Coulomb
+/// coefficients fitted with its motion columns taken through the mode (H·a, H·v, H·sgn v, and
+/// an offset) on the training samples in motion (`Context::training_rows`, as `lag`'s delayed
+/// device). None when the fit is not a device's (a coefficient below 0, or fewer than 10
+/// rows): the column is then zero and the variant is not named at this frequency.
+pub(crate) fn behind_device(ctx: &Context, f_r: f64, zeta: f64) -> Option<[f64; 3]> {
+    let rows = ctx.training_rows(ctx.window, LAG_ROWS);
+    if rows.len() < 10 {
+        return None;
+    }
+    let t = through_mode(ctx, (f_r, zeta), Some(&rows));
+    let r = ctx.rec;
+    let sigs: [&[f64]; 3] = [&r.a, &r.v, &ctx.sgn];
+    let mut cols: Vec<Vec<f64>> = (0..3)
+        .map(|k| map(rows.len(), |j| sigs[k][rows[j]] + t[k][j]))
+        .collect();
+    cols.push(vec![1.0; rows.len()]);
+    let f: Vec<f64> = rows.iter().map(|&i| r.f[i]).collect();
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let train = vec![crate::TRAIN; rows.len()];
+    let th = crate::normals(&refs, &f, &train, 1).0.solve();
+    let d = [th[0], th[1], th[2]];
+    d.iter().all(|c| c.is_finite() && *c >= 0.0).then_some(d)
 }
