@@ -34,6 +34,26 @@ impl EffectModel for Compliance {
     fn walks_history(&self) -> bool {
         true
     }
+    /// With the device behind the compliance, the other damping ratios (`BEHIND_ZETAS`) at the
+    /// frequency found.
+    fn variants(&self, _ctx: &Context, centre: &Effect) -> Vec<Effect> {
+        if !behind(centre) {
+            return Vec::new();
+        }
+        BEHIND_ZETAS
+            .iter()
+            .map(|z| COMPLIANCE_BEHIND + z)
+            .filter(|&p2| p2 != centre.param2)
+            .map(|param2| Effect {
+                param2,
+                ..centre.clone()
+            })
+            .collect()
+    }
+    /// The frequency refined once more at the damping ratio chosen.
+    fn variant_refine(&self, centre: &Effect) -> Option<f64> {
+        behind(centre).then_some(0.03)
+    }
     /// From 10 periods over the screening window to the motion bandwidth, and at most half the
     /// derivative filter's default cutoff (fs/20): above it the derived acceleration is
     /// attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so a
@@ -52,7 +72,8 @@ impl EffectModel for Compliance {
             .min(0.025 / ctx.dt);
         let lo = 10.0 / t;
         let mut g = Vec::new();
-        for (hi, p2) in [(ctx.f_motion.min(cap), 0.0), (cap, COMPLIANCE_BEHIND)] {
+        let behind_p2 = COMPLIANCE_BEHIND + BEHIND_ZETAS[BEHIND_ZETA_GRID];
+        for (hi, p2) in [(ctx.f_motion.min(cap), 0.0), (cap, behind_p2)] {
             if hi > 1.5 * lo {
                 g.extend(logspace(lo, hi, 24).into_iter().map(|p| Effect {
                     kind: cand.kind,
@@ -87,8 +108,8 @@ impl EffectModel for Compliance {
         coef: &dyn Fn(&str) -> f64,
         _base: &[f64],
     ) -> Vec<(String, f64)> {
-        let zeta = ctx.compliance_zeta(e.param).unwrap_or(f64::NAN);
         if behind(e) {
+            let zeta = behind_zeta(e);
             let d = behind_device(ctx, e.param, zeta).unwrap_or([f64::NAN; 3]);
             return vec![
                 ("resonance_Hz".into(), e.param),
@@ -99,6 +120,7 @@ impl EffectModel for Compliance {
                 ("device_coulomb_N".into(), d[2]),
             ];
         }
+        let zeta = ctx.compliance_zeta(e.param).unwrap_or(f64::NAN);
         vec![
             ("resonance_Hz".into(), e.param),
             ("modal_mass_kg".into(), coef("mode_minus_rigid")),
@@ -143,13 +165,25 @@ impl EffectModel for Compliance {
     }
 }
 
-/// `compliance`'s second parameter for the device behind the compliant part (0: a mass hung
-/// on the device).
+/// `compliance`'s second parameter for the device behind the compliant part is this plus its
+/// damping ratio (0: a mass hung on the device, its damping ratio from the record's profile).
 pub const COMPLIANCE_BEHIND: f64 = 1.0;
+
+/// The damping ratios of a mode with the device behind it: its own drive's and friction's
+/// damping pass through the mode, so the hung mass's profile does not give it; the grid's
+/// frequencies at `BEHIND_ZETA_GRID`'s, the others as variants at the frequency found.
+pub const BEHIND_ZETAS: [f64; 6] = [0.03, 0.06, 0.1, 0.2, 0.35, 0.6];
+/// The damping ratio of `BEHIND_ZETAS` the frequency grid is scanned at.
+pub const BEHIND_ZETA_GRID: usize = 2;
 
 /// True for the variant with the device behind the compliance.
 fn behind(e: &Effect) -> bool {
-    e.param2 == COMPLIANCE_BEHIND
+    e.param2 >= COMPLIANCE_BEHIND
+}
+
+/// The damping ratio of the variant with the device behind the compliance.
+fn behind_zeta(e: &Effect) -> f64 {
+    e.param2 - COMPLIANCE_BEHIND
 }
 
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
@@ -162,8 +196,22 @@ pub(crate) fn compliance_batch(
     s: &Sig,
     effs: &[Effect],
 ) -> Vec<Vec<(String, Vec<f64>)>> {
-    let fs: Vec<f64> = effs.iter().map(|e| e.param).collect();
-    let zetas = ctx.compliance_zetas(&fs);
+    let fs: Vec<f64> = effs
+        .iter()
+        .filter(|e| !behind(e))
+        .map(|e| e.param)
+        .collect();
+    let mut hung_z = ctx.compliance_zetas(&fs).into_iter();
+    let zetas: Vec<Option<f64>> = effs
+        .iter()
+        .map(|e| {
+            if behind(e) {
+                Some(behind_zeta(e))
+            } else {
+                hung_z.next().flatten()
+            }
+        })
+        .collect();
     let hung: Vec<(f64, f64)> = effs
         .iter()
         .zip(&zetas)
@@ -195,12 +243,20 @@ pub(crate) fn compliance_batch(
         .collect()
 }
 
-/// (H − 1)·a, (H − 1)·v and (H − 1)·sgn v of the mode (f_r, ζ) on `rows` (all when None).
+/// (H − 1)·a, (H − 1)·v and (H − 1)·sgn v of the mode (f_r, ζ) on `rows` (all when None), H
+/// the device's motion behind the compliance over the motion in front of it: a low-pass of
+/// damping ratio ζ, the device's drive and friction damping it (the link's own damping, small
+/// beside them, left out of its numerator).
 fn through_mode(ctx: &Context, mode: (f64, f64), rows: Option<&[usize]>) -> [Vec<f64>; 3] {
-    let one = |sig: &[f64]| {
-        compliance_columns_at(sig, &[mode], ctx.dt, rows)
+    let one = |sig: &[f64]| -> Vec<f64> {
+        let kept = resonator_passes(sig, &[mode], ctx.dt, rows)
             .pop()
-            .unwrap_or_default()
+            .map(|(_, k)| k)
+            .unwrap_or_default();
+        kept.iter()
+            .enumerate()
+            .map(|(j, o)| o[0] - rows.map_or(sig[j], |r| sig[r[j]]))
+            .collect()
     };
     [one(&ctx.rec.a), one(&ctx.rec.v), one(&ctx.sgn)]
 }
