@@ -547,9 +547,11 @@ fn rig_tuning_sample() {
 
 /// Floors of `rig_held_out_sample` (classic, widened): exactly right, effect-free records
 /// named (at most), out-of-catalogue effects unexplained. Measured (the long run's records):
-/// classic 34/36 exactly right, 0/4 named, 8/8 unexplained; widened 32/56, 0/4, 11/12. Three
-/// records of margin on the first, one on the third, none on the second.
-const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (30, 0, 10)];
+/// classic 33/36 exactly right (one of them a clip reported as confounded with a friction
+/// building up with speed on a rounded triangle, which a refitted baseline explains entirely),
+/// 0/4 named, 8/8 unexplained; widened 44/56, 0/4, 11/12. Two records of margin on the
+/// classic first, three on the widened first, one on the third, none on the second.
+const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (41, 0, 10)];
 
 /// A held-out sample in every `cargo test`: records 200 and 201 of each kind of both rigs
 /// (apart from the long run's and CI's), exactly right at least as often as `QUICK_FLOOR`

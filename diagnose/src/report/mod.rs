@@ -271,6 +271,12 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
             }
         );
         let _ = writeln!(s, "  {}", f.note);
+        if let Some(other) = &f.confounded_with {
+            let _ = writeln!(
+                s,
+                "      confounded with {other}: the record does not tell the two apart (not named)"
+            );
+        }
         for (k, v) in &f.parameters {
             let _ = writeln!(s, "      {k} = {}", sig(*v));
         }
@@ -406,6 +412,7 @@ pub fn json(d: &Diagnosis) -> String {
                 "note": f.note,
             },
             "holdout_rel_error_after": num(f.holdout_rel_error_after),
+            "confounded_with": f.confounded_with,
         })).collect::<Vec<_>>(),
         "whiteness": {
             "ljung_box_q": num(w.q),

@@ -224,12 +224,12 @@ pub(crate) fn compliance_batch(
         .map(|(e, z)| {
             if behind(e) {
                 let c = z
-                    .and_then(|z| behind_device(ctx, e.param, z).map(|d| (z, d)))
-                    .map(|(z, d)| {
+                    .and_then(|z| {
                         let t = through_mode(ctx, (e.param, z), s.rows);
-                        map(s.len(), |j| {
+                        let d = device_through(ctx, s.rows, &t)?;
+                        Some(map(s.len(), |j| {
                             d[0] * t[0][j] + d[1] * t[1][j] + d[2] * t[2][j]
-                        })
+                        }))
                     })
                     .unwrap_or_else(|| vec![0.0; s.len()]);
                 return vec![("compliance.device_through_mode".to_string(), c)];
@@ -262,25 +262,41 @@ fn through_mode(ctx: &Context, mode: (f64, f64), rows: Option<&[usize]>) -> [Vec
 }
 
 /// The device behind a compliance of mode (f_r, ζ): its inertia, viscous and Coulomb
-/// coefficients fitted with its motion columns taken through the mode (H·a, H·v, H·sgn v, and
-/// an offset) on the training samples in motion (`Context::training_rows`, as `lag`'s delayed
-/// device). None when the fit is not a device's (a coefficient below 0, or fewer than 10
-/// rows): the column is then zero and the variant is not named at this frequency.
+/// coefficients fitted with its motion columns taken through the mode (`device_through`) on
+/// the whole record's training samples in motion.
 pub(crate) fn behind_device(ctx: &Context, f_r: f64, zeta: f64) -> Option<[f64; 3]> {
-    let rows = ctx.training_rows(ctx.window, LAG_ROWS);
-    if rows.len() < 10 {
+    let t = through_mode(ctx, (f_r, zeta), None);
+    device_through(ctx, None, &t)
+}
+
+/// The device's inertia, viscous and Coulomb coefficients fitted with its motion columns taken
+/// through the mode (H·a, H·v, H·sgn v from `t`, the (H − 1) columns on `rows`, and an offset)
+/// on the training samples in motion among `rows` (all when None; screening rows lie in the
+/// screening window and take its held-out blocks), as `lag`'s delayed device. None when the
+/// fit is not a device's (a coefficient below 0, or fewer than 10 rows): the column is then
+/// zero and the variant is not named at this frequency.
+fn device_through(ctx: &Context, rows: Option<&[usize]>, t: &[Vec<f64>; 3]) -> Option<[f64; 3]> {
+    let r = ctx.rec;
+    let n = rows.map_or(r.len(), |rw| rw.len());
+    let hold = crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() });
+    let at = |j: usize| rows.map_or(j, |rw| rw[j]);
+    let fit: Vec<usize> = (0..n)
+        .filter(|&j| {
+            let i = at(j);
+            !ctx.rest[i] && hold.get(i).is_some_and(|h| *h == crate::TRAIN)
+        })
+        .collect();
+    if fit.len() < 10 {
         return None;
     }
-    let t = through_mode(ctx, (f_r, zeta), Some(&rows));
-    let r = ctx.rec;
     let sigs: [&[f64]; 3] = [&r.a, &r.v, &ctx.sgn];
     let mut cols: Vec<Vec<f64>> = (0..3)
-        .map(|k| map(rows.len(), |j| sigs[k][rows[j]] + t[k][j]))
+        .map(|k| fit.iter().map(|&j| sigs[k][at(j)] + t[k][j]).collect())
         .collect();
-    cols.push(vec![1.0; rows.len()]);
-    let f: Vec<f64> = rows.iter().map(|&i| r.f[i]).collect();
+    cols.push(vec![1.0; fit.len()]);
+    let f: Vec<f64> = fit.iter().map(|&j| r.f[at(j)]).collect();
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let train = vec![crate::TRAIN; rows.len()];
+    let train = vec![crate::TRAIN; fit.len()];
     let th = crate::normals(&refs, &f, &train, 1).0.solve();
     let d = [th[0], th[1], th[2]];
     d.iter().all(|c| c.is_finite() && *c >= 0.0).then_some(d)
