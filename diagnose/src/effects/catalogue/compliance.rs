@@ -55,7 +55,7 @@ impl EffectModel for Compliance {
         behind(centre).then_some(0.03)
     }
     /// From 10 periods over the screening window to the motion bandwidth, and at most half the
-    /// derivative filter's default cutoff (fs/20): above it the derived acceleration is
+    /// derivative filter's default cutoff (`record::default_cutoff`): above it the derived acceleration is
     /// attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so a
     /// mode's force cannot be told from the filter's loss; and to a quarter of the derivative
     /// filter's cutoff when the record states it (24 values, log-spaced). With the device
