@@ -85,6 +85,7 @@ pub(crate) fn conclude(
             ),
             holdout_rel_error_after: ho_rel,
             consistency: 0.0,
+            confounded_with: None,
         });
     }
     // the slow change found on the baseline residual, or one the final residual still shows
@@ -118,6 +119,7 @@ pub(crate) fn conclude(
             ),
             holdout_rel_error_after: ho_rel,
             consistency: 0.0,
+            confounded_with: None,
         });
     }
     let position_spectrum = report::position_spectrum(rec, &residual);
@@ -158,6 +160,7 @@ pub(crate) fn conclude(
             ),
             holdout_rel_error_after: ho_rel,
             consistency: 0.0,
+            confounded_with: None,
         });
     }
     let mut verdicts = baseline_verdicts(&ctx.base_th);
@@ -173,6 +176,17 @@ pub(crate) fn conclude(
             "{} samples in motion whose motion {tau:.4} s earlier (the delay) is at rest, or whose speed lies inside the Coulomb sign's band: left out of the fits with the delay and of those it is compared with (the delayed device is at rest there, or the baseline's sign is not the sliding device's)",
             lag_rows_full.len()
         ));
+    }
+    for f in findings.iter() {
+        if let Some(other) = &f.confounded_with {
+            verdicts.push(format!(
+                "CONFOUNDED: {} ({}) and {other} explain the same residual: the held-out error of the model with either is within the selection's margin ({:.0} %) of the other's, so the record does not tell them apart; the model keeps {} and neither is named",
+                f.effect,
+                f.note,
+                100.0 * opt.min_holdout_gain,
+                f.effect
+            ));
+        }
     }
     verdicts.extend(dropped_notes);
     if fit_rank < cols.len() {

@@ -104,6 +104,10 @@ pub struct Finding {
     /// Fraction of the independent segments of the record on which the finding held (see
     /// `STABILITY_SEGMENTS`); 0 for `unexplained`.
     pub consistency: f64,
+    /// The catalogue effect of another kind that explains the same residual as well on the
+    /// held-out data (within the selection's margin): the record does not tell the two
+    /// apart, and the finding is reported as confounded with it, not named.
+    pub confounded_with: Option<String>,
 }
 
 /// A baseline term with its significance (held-out error when it is dropped).
@@ -183,11 +187,12 @@ impl Diagnosis {
         Some(pred)
     }
 
-    /// The catalogue names among the findings, in order (`unexplained` left out).
+    /// The catalogue names among the findings, in order (`unexplained` and findings confounded
+    /// with another effect left out).
     pub fn catalogue_names(&self) -> Vec<&str> {
         self.findings
             .iter()
-            .filter(|f| f.effect != "unexplained")
+            .filter(|f| f.effect != "unexplained" && f.confounded_with.is_none())
             .map(|f| f.effect.as_str())
             .collect()
     }

@@ -224,7 +224,7 @@ pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordErr
         return Err(err(None, "x_m never changes: no motion to diagnose"));
     }
     let fs = 1.0 / dt;
-    let fc = cutoff_hz.unwrap_or(fs / 20.0);
+    let fc = cutoff_hz.unwrap_or_else(|| default_cutoff(fs));
     check_cutoff(fc, fs)?;
     let (v, a, method) = match (idx("v_m_s"), idx("a_m_s2")) {
         (Some(iv), Some(ia)) => (
@@ -277,7 +277,7 @@ impl Record {
             return;
         }
         let fs = 1.0 / self.dt();
-        let fc = cutoff_hz.unwrap_or(fs / 20.0);
+        let fc = cutoff_hz.unwrap_or_else(|| default_cutoff(fs));
         if check_cutoff(fc, fs).is_err() {
             return;
         }
@@ -298,6 +298,19 @@ impl Record {
             "; force f_N low-passed by the same filter ({fc:.3} Hz, parallel filtering)"
         ));
     }
+}
+
+/// The highest default cutoff of the derivative (and force) filter, Hz (`default_cutoff`).
+pub const DEFAULT_CUTOFF_MAX_HZ: f64 = 50.0;
+
+/// The derivative (and force) filter's default cutoff for a record sampled at `fs`: fs/20, at
+/// most `DEFAULT_CUTOFF_MAX_HZ`. The band the derived acceleration must follow is the
+/// device's motion and the forces it excites (a bench's or a structure's motion below a few
+/// hertz, its modes and contacts within tens of hertz), not a share of the sample rate: the
+/// noise a quantised position puts into the acceleration grows as fc^2.5, so a cutoff raised
+/// with the sample rate buys noise and no band.
+pub fn default_cutoff(fs: f64) -> f64 {
+    (fs / 20.0).min(DEFAULT_CUTOFF_MAX_HZ)
 }
 
 /// The derivative (and force) filter's cutoff must lie strictly between 0 and the Nyquist

@@ -206,7 +206,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     };
     // The best candidate to add to a set (every kind not in it, every grid value, refined):
     // (held-out rss of the set, and of the best candidate with its training BIC change).
-    let scan = |set: &[Effect], cache: &mut Cache| -> (f64, Option<(f64, f64, Effect)>) {
+    // (and the best value of each kind: its held-out rss, BIC change and value)
+    let scan = |set: &[Effect], cache: &mut Cache| -> (f64, Option<Scanned>, Vec<Scanned>) {
         let base_cols = set_cols(set, cache);
         let base_refs: Vec<&[f64]> = base_cols.iter().map(|v| v.as_slice()).collect();
         let base_ids = set_ids(set, cache);
@@ -225,8 +226,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         // where each effect of the set sits among the base columns (after the fixed terms)
         let set_spans = effect_spans(set, n_fixed, &*cache);
         // the rows the longest delay scanned leaves out (the delays are ranked on common rows)
-        let lag_common = lag_rest_sub(effects::LAG_MAX_SAMPLES * ctx.dt);
+        let lag_common = lag_rest_sub(effects::lag_max(ctx.dt));
         let mut best: Option<(f64, f64, Effect)> = None;
+        let mut of_kind: Vec<(f64, f64, Effect)> = Vec::new();
         for cand in &catalogue {
             if set.iter().any(|c| c.kind == cand.kind) {
                 continue;
@@ -451,18 +453,21 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 cb = None;
             }
             if let Some(c) = cb {
-                if c.0.is_finite() && best.as_ref().is_none_or(|b| c.0 < b.0) {
-                    best = Some(c);
+                if c.0.is_finite() {
+                    if best.as_ref().is_none_or(|b| c.0 < b.0) {
+                        best = Some(c.clone());
+                    }
+                    of_kind.push(c);
                 }
             }
         }
-        (rss_h0, best)
+        (rss_h0, best, of_kind)
     };
     let forward = |chosen: &mut Vec<Effect>, cache: &mut Cache| -> bool {
         let mut added = false;
         while chosen.len() < opt.max_effects {
             match scan(chosen, cache) {
-                (h0, Some((rh, db, eff))) if passes(rh, h0, db) => {
+                (h0, Some((rh, db, eff)), _) if passes(rh, h0, db) => {
                     chosen.push(eff);
                     added = true;
                 }
@@ -493,7 +498,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
                 .filter(|(j, _)| *j != k)
                 .map(|(_, e)| e.clone())
                 .collect();
-            let (h0, best) = scan(&others, &mut cache);
+            let (h0, best, _) = scan(&others, &mut cache);
             if chosen[k].kind.force_delay(&chosen[k]).is_some() {
                 // the delay's gain on its own rows, carried to the others' rows (as `scan` does)
                 let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
@@ -547,6 +552,36 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             }
         }
     }
+    // Two candidates that explain the same residual, one rule for every pair: each finding is
+    // set against the best candidate of another kind scanned without it (the swap pass's
+    // scan). Where that candidate passes the selection itself and the finding's held-out rss
+    // does not beat it by the selection's margin, the held-out data do not tell the two apart:
+    // the finding is kept in the model and reported as confounded with it, not named.
+    let mut confounded_with: Vec<Option<&'static str>> = vec![None; chosen.len()];
+    for k in 0..chosen.len() {
+        let (ntr, nho) = set_normals(&chosen, &mut cache);
+        let mut cur = nho.rss(&ntr.solve());
+        let others: Vec<Effect> = chosen
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != k)
+            .map(|(_, e)| e.clone())
+            .collect();
+        let (h0, _, of_kind) = scan(&others, &mut cache);
+        if chosen[k].kind.force_delay(&chosen[k]).is_some() {
+            let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
+            cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
+        }
+        let rival = of_kind
+            .iter()
+            .filter(|(rh, db, e)| e.kind != chosen[k].kind && passes(*rh, h0, *db))
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((rh, _, e)) = rival {
+            if 1.0 - cur / rh.max(1e-300) < opt.min_holdout_gain {
+                confounded_with[k] = Some(e.kind.name());
+            }
+        }
+    }
     // The findings in their order: each one's held-out gain and BIC change on the subsample
     // with the findings before it, then added to the whole record's normal equations.
     let mut ho_rel = baseline_holdout;
@@ -589,6 +624,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             note: effects::describe(&ctx, &eff),
             holdout_rel_error_after: after,
             consistency: 0.0,
+            confounded_with: confounded_with[i].map(str::to_string),
         });
         ho_rel = after;
     }
@@ -672,6 +708,9 @@ pub(crate) fn whole_fit(
     let t = full.0.plus(&full.1).solve();
     cols.iter().map(|c| c.0.clone()).zip(t).collect()
 }
+
+/// A candidate as the scan ranks it: its held-out rss, its training BIC change and its value.
+pub(crate) type Scanned = (f64, f64, Effect);
 
 /// The delay of the force a set of effects holds (`EffectModel::force_delay`).
 pub(crate) fn delay_of(set: &[Effect]) -> Option<f64> {

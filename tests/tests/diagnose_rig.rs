@@ -115,20 +115,31 @@ struct Outcome {
 
 /// Whether a diagnosis is exactly right for a hidden effect: (exact, detected, false names).
 /// In the catalogue: every expected name given (detected) and no other catalogue name; outside
-/// it: `unexplained` reported and no catalogue name; no effect: no catalogue name.
+/// it: `unexplained` reported and no catalogue name; no effect: no catalogue name. A finding
+/// reported as confounded with another effect (`Finding::confounded_with`) names neither: it
+/// does not detect the hidden effect, and on a record whose hidden effect has no catalogue name
+/// (none, or outside the catalogue) it counts as a false name; a record with one is never
+/// exact.
 fn judge(hidden: &Hidden, d: &Diagnosis) -> (bool, bool, bool) {
     let names = d.catalogue_names();
+    let confounded = d.findings.iter().any(|f| f.confounded_with.is_some());
     let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
     let want = hidden.expected_names();
     let (detected, false_names) = if hidden.out_of_catalogue() {
-        (unexpl, !names.is_empty())
+        (unexpl, !names.is_empty() || confounded)
+    } else if want.is_empty() {
+        (true, !names.is_empty() || confounded)
     } else {
         (
             want.iter().all(|w| names.contains(w)),
             names.iter().any(|n| !want.contains(n)),
         )
     };
-    (detected && !false_names, detected, false_names)
+    (
+        detected && !false_names && !confounded,
+        detected,
+        false_names,
+    )
 }
 
 /// Diagnose the record of `seed` and say how it came out.
@@ -156,7 +167,11 @@ fn outcome(rig: Rig, kind: &'static str, j: usize, seed: u64, emps: &[f64]) -> O
             String::new()
         },
         d.catalogue_names(),
-        if unexpl { " + unexplained" } else { "" },
+        d.findings
+            .iter()
+            .filter_map(|f| f.confounded_with.as_ref().map(|o| format!(" + confounded {} / {o}", f.effect)))
+            .collect::<String>()
+            + if unexpl { " + unexplained" } else { "" },
         100.0 * d.baseline_holdout_rel_error,
         100.0 * d.final_holdout_rel_error,
         if exact { "" } else { "  <-- not exact" }
@@ -481,11 +496,62 @@ fn rig_held_out_sample() {
     }
 }
 
+/// The tuning range's figures per kind, without the held-out range (`cargo test -p
+/// regen-tests --test diagnose_rig rig_tuning_sample -- --ignored --nocapture`): the records
+/// the diagnosis is developed on. `RIG_TUNE_N` tuning records per kind (8 by default) of the
+/// rigs `RIG_RIGS` names (`widened` by default; `classic,widened` for both), `RIG_TUNE_J0`
+/// the first record of each kind; `RIG_KINDS` narrows, `RIG_VERBOSE` prints every record.
+#[test]
+#[ignore]
+fn rig_tuning_sample() {
+    let emps = emps_x();
+    let n = per_kind("RIG_TUNE_N", 8);
+    let j0 = per_kind("RIG_TUNE_J0", 0);
+    let rigs = std::env::var("RIG_RIGS").unwrap_or_else(|_| "widened".into());
+    for rig in [Rig::Classic, Rig::Widened] {
+        if !rigs.split(',').any(|r| r == rig.name()) {
+            continue;
+        }
+        let tune = run(rig, false, n, j0, &emps);
+        println!(
+            "\n{} rig, tuning records {j0} .. {} of each kind",
+            rig.name(),
+            j0 + n
+        );
+        for kind in rig.kinds() {
+            if let Some(t) = tune.get(kind) {
+                println!(
+                    "{kind:>20} {:>4}/{:<4} {:>4.0}%  detected {:>4.0}%  false name {:>4.0}%",
+                    t.exact,
+                    t.records,
+                    pct(t.exact, t.records),
+                    pct(t.detected, t.records),
+                    pct(t.false_name, t.records)
+                );
+            }
+        }
+        let f = figures(&tune);
+        println!(
+            "{} tuning: {}/{} exactly right ({:.1} %); effect-free named {}/{}; out of catalogue unexplained {}/{}",
+            rig.name(),
+            f.exact,
+            f.all,
+            pct(f.exact, f.all),
+            f.none_named,
+            f.none,
+            f.out_unexpl,
+            f.out_all
+        );
+    }
+}
+
 /// Floors of `rig_held_out_sample` (classic, widened): exactly right, effect-free records
 /// named (at most), out-of-catalogue effects unexplained. Measured (the long run's records):
-/// classic 34/36 exactly right, 0/4 named, 8/8 unexplained; widened 32/56, 0/4, 11/12. Three
-/// records of margin on the first, one on the third, none on the second.
-const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (30, 0, 10)];
+/// classic 33/36 exactly right (one of them a clip reported as confounded with a friction
+/// building up with speed on a rounded triangle, which a refitted baseline explains entirely),
+/// 0/4 named, 8/8 unexplained; widened 44/56, 0/4, 11/12. Two records of margin on the
+/// classic first, three on the widened first, one on the third, none on the second.
+const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (41, 0, 10)];
 
 /// A held-out sample in every `cargo test`: records 200 and 201 of each kind of both rigs
 /// (apart from the long run's and CI's), exactly right at least as often as `QUICK_FLOOR`

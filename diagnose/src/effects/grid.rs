@@ -108,11 +108,15 @@ pub fn grid(ctx: &Context, cand: &Effect) -> Vec<Effect> {
 }
 
 /// The scanned range [lo, hi] of a coarse grid that `best` belongs to: the values of the same
-/// sign (the two hypotheses of `current_limit` are two grids, told apart by the sign).
+/// sign (the two hypotheses of `current_limit` are two grids, told apart by the sign) and, when
+/// the coarse grid holds `best`'s second parameter, of that second parameter (an effect's
+/// variants scanned as grids of their own, `EffectModel::grid`).
 pub fn scan_range(coarse: &[Effect], best: &Effect) -> (f64, f64) {
+    let own = coarse.iter().any(|e| e.param2 == best.param2);
     coarse
         .iter()
         .filter(|e| (e.param < 0.0) == (best.param < 0.0))
+        .filter(|e| !own || e.param2 == best.param2)
         .fold((f64::MAX, f64::MIN), |(a, b), e| {
             (a.min(e.param), b.max(e.param))
         })

@@ -15,8 +15,25 @@ pub fn delayed(s: &[f64], i: usize, k: f64) -> f64 {
     s[j] + al * (s[j + 1] - s[j])
 }
 
-/// The longest delay `lag` scans, in samples (its grid's last value).
+/// The longest delay `lag` scans in samples at the lowest sample rates (`lag_max`).
 pub const LAG_MAX_SAMPLES: f64 = 64.0;
+
+/// The longest skew of an acquisition `lag` scans, s (`lag_max`).
+pub const LAG_MAX_S: f64 = 0.064;
+
+/// The longest delay `lag` scans on a record sampled every `dt` (its grid's last value):
+/// `LAG_MAX_S`, or `LAG_MAX_SAMPLES` samples where they last longer (a skew of a few samples
+/// is resolved at any rate; one beyond 64 ms is not an acquisition's).
+pub fn lag_max(dt: f64) -> f64 {
+    (LAG_MAX_SAMPLES * dt).max(LAG_MAX_S)
+}
+
+/// Values of `lag`'s grid from one sample to `lag_max`, log-spaced about 15 % apart: 30 over
+/// 64 samples, more over a longer span in samples.
+pub fn lag_grid_len(dt: f64) -> usize {
+    let ratio = lag_max(dt) / dt;
+    ((29.0 * ratio.ln() / LAG_MAX_SAMPLES.ln()).ceil() as usize + 1).max(30)
+}
 
 /// The exact sign of the velocity `v` at `k` samples before sample `i` (fractional: the two
 /// samples' signs interpolated linearly, so a reversal between them switches in proportion;

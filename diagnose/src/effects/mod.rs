@@ -146,7 +146,7 @@ pub fn median(v: &mut [f64]) -> f64 {
 }
 
 /// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
-/// of the default derivative filter (fs/20), the span over which the derived velocity averages.
+/// of the derivative filter at fs/20, the span over which the derived velocity averages.
 pub const REST_HALF_WINDOW: usize = 20;
 
 /// Samples left out of every fit: at rest — the position moves by no more than its own noise

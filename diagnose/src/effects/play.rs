@@ -95,6 +95,17 @@ pub const PLAY_CONTACT_FRACTIONS: [f64; 2] = [0.125, 0.0625];
 /// longer than the pulse the taps resolve.
 pub const CONTACT_SETTLE: usize = 2 * IMPACT_TAPS;
 
+/// The period of the impact's taps, s, at the sample rates whose period is shorter
+/// (`tap_samples`): a contact's pulse lasts as long as its mode's half-period whatever the
+/// sample rate (8 ms for the rig's 60 Hz contact), and `IMPACT_TAPS` taps of it resolve it.
+pub const IMPACT_TAP_S: f64 = 1e-3;
+
+/// Samples per impact tap on a record sampled every `dt`: `IMPACT_TAP_S` in samples, at least
+/// one (one at 1 kHz and below).
+pub fn tap_samples(dt: f64) -> usize {
+    ((IMPACT_TAP_S / dt).round() as usize).max(1)
+}
+
 /// The device behind a play of total width `b` (`play_device`): its position, whether it is
 /// off both flanks (free: no force passes), and each impact (sample of the first contact,
 /// time from the contact to that sample in sample periods, relative velocity v − v_m).
@@ -167,7 +178,11 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
     let n = dev.free.len().min(r.x.len());
     let mut skip = vec![false; n];
     for &(i, _, _) in &dev.impacts {
-        for s in skip.iter_mut().skip(i).take(CONTACT_SETTLE) {
+        for s in skip
+            .iter_mut()
+            .skip(i)
+            .take(CONTACT_SETTLE * tap_samples(ctx.dt))
+        {
             *s = true;
         }
     }
@@ -262,9 +277,9 @@ pub(crate) fn play_device_on(
 /// device's force where it is off both flanks, −(M·a + Fv·v + Fc·sgn v) (across the gap and
 /// while it coasts ahead of the motion no force passes; the offset, a sensor property, stays),
 /// coefficient 1 when the device is the baseline's; columns `impact_k` (k < `IMPACT_TAPS`) are
-/// the impact: at each contact the relative velocity v − v_m times fs, on the k-th sample
-/// period after the contact (linearly interpolated between the taps by the contact's instant
-/// within its sample), so that the coefficients are the impact's force pulse per unit
+/// the impact: at each contact the relative velocity v − v_m over the tap's period
+/// (`tap_samples` sample periods), on the k-th tap after the contact (linearly interpolated
+/// between the taps by the contact's instant within its sample), so that the coefficients are the impact's force pulse per unit
 /// relative velocity and their sum its momentum per unit velocity, (1 + e)·M for an impact of
 /// restitution e.
 ///
@@ -339,15 +354,18 @@ pub fn play_columns_with(
             }
         }
     }
-    let fs = 1.0 / ctx.dt;
+    // a tap lasts `m` samples (`tap_samples`): its column carries v_r over the tap's period,
+    // so that the taps' coefficients sum to the impact's momentum per unit velocity
+    let m = tap_samples(ctx.dt);
+    let fs = 1.0 / (ctx.dt * m as f64);
     for &(i, delta, vr) in &dev.impacts {
-        for jj in 0..=IMPACT_TAPS {
+        for jj in 0..=IMPACT_TAPS * m {
             let Some(q) = slot(i + jj).filter(|_| i + jj < end) else {
                 continue;
             };
-            // the sample lies (jj + delta) periods after the contact; tap k stands for the
-            // pulse k + ½ periods after it
-            let t = (jj as f64 + delta - 0.5).max(0.0);
+            // the sample lies (jj + delta) sample periods after the contact; tap k stands for
+            // the pulse k + ½ taps after it
+            let t = ((jj as f64 + delta) / m as f64 - 0.5).max(0.0);
             let k0 = t as usize; // t ≥ 0: its floor
             let al = t - k0 as f64;
             if k0 < IMPACT_TAPS {

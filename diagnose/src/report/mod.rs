@@ -67,9 +67,15 @@ pub fn summary(d: &Diagnosis) -> String {
                 .take(2)
                 .map(|(k, v)| format!("{k} = {}", sig(*v)))
                 .collect();
+            let name = match &f.confounded_with {
+                Some(other) => format!(
+                    "{} or {other}, which the record does not tell apart",
+                    f.effect
+                ),
+                None => f.effect.clone(),
+            };
             format!(
-                "{} ({}) takes away {:.2} points",
-                f.effect,
+                "{name} ({}) takes away {:.2} points",
                 p.join(", "),
                 pct(gain[i])
             )
@@ -163,7 +169,7 @@ pub const STATISTICS: [(&str, &str); 6] = [
     ),
     (
         "derived acceleration's band",
-        "the derived acceleration's band: velocity and acceleration are derived from the position by a zero-phase low-pass filter (cutoff fs/20 unless stated); above about half that cutoff the derived acceleration loses more than 6 %, so an inertial force M·a there is not measured and may look like an effect. A finding tested 'inside the band' is measured where the derived signals follow the motion.",
+        "the derived acceleration's band: velocity and acceleration are derived from the position by a zero-phase low-pass filter (cutoff fs/20, at most 50 Hz, unless stated); above about half that cutoff the derived acceleration loses more than 6 %, so an inertial force M·a there is not measured and may look like an effect. A finding tested 'inside the band' is measured where the derived signals follow the motion.",
     ),
 ];
 
@@ -265,6 +271,12 @@ pub fn text(rec: &Record, d: &Diagnosis) -> String {
             }
         );
         let _ = writeln!(s, "  {}", f.note);
+        if let Some(other) = &f.confounded_with {
+            let _ = writeln!(
+                s,
+                "      confounded with {other}: the record does not tell the two apart (not named)"
+            );
+        }
         for (k, v) in &f.parameters {
             let _ = writeln!(s, "      {k} = {}", sig(*v));
         }
@@ -400,6 +412,7 @@ pub fn json(d: &Diagnosis) -> String {
                 "note": f.note,
             },
             "holdout_rel_error_after": num(f.holdout_rel_error_after),
+            "confounded_with": f.confounded_with,
         })).collect::<Vec<_>>(),
         "whiteness": {
             "ljung_box_q": num(w.q),

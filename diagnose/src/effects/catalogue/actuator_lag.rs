@@ -64,7 +64,7 @@ impl EffectModel for ActuatorLag {
 }
 
 /// The time constant τ_c = 1/ω_c of the derivative filter's cutoff (the record's
-/// `derivative_cutoff_hz`, else the default fs/20) that scales the `actuator_lag` column: its
+/// `derivative_cutoff_hz`, else the default, `record::default_cutoff`) that scales the `actuator_lag` column: its
 /// coefficient ω_c·τ is at most 1, where the first-order expansion f(t + τ) ≈ f + τ·ḟ holds
 /// over the band the derived signals carry (its error (ωτ)²/2 stays below half the term).
 pub fn actuator_tc(ctx: &Context) -> f64 {
@@ -73,6 +73,6 @@ pub fn actuator_tc(ctx: &Context) -> f64 {
         .meta
         .get(crate::record::DERIVATIVE_CUTOFF_KEY)
         .copied()
-        .unwrap_or(0.05 / ctx.dt);
+        .unwrap_or_else(|| crate::record::default_cutoff(1.0 / ctx.dt));
     1.0 / (2.0 * std::f64::consts::PI * fc)
 }

@@ -33,12 +33,12 @@ impl EffectModel for Lag {
         };
         vec![(format!("{}.delayed_minus_now", self.name()), z)]
     }
-    /// One sample to 64 (a skew beyond 64 ms at 1 kHz is not an acquisition's), 30 values 15 %
-    /// apart: the ±15 % refinement reaches the neighbours, so the optimum is found whatever
+    /// One sample to `lag_max` (64 samples, at least 64 ms: a skew beyond is not an
+    /// acquisition's), values 15 % apart (`lag_grid_len`): the ±15 % refinement reaches the neighbours, so the optimum is found whatever
     /// coarse value is nearest (a delay and its gain trade against each other on a narrowband
     /// motion, a coarser grid's nearest value took the gain out of its range).
     fn grid(&self, ctx: &Context, cand: &Effect) -> Vec<Effect> {
-        logspace(ctx.dt, LAG_MAX_SAMPLES * ctx.dt, 30)
+        logspace(ctx.dt, lag_max(ctx.dt), lag_grid_len(ctx.dt))
             .into_iter()
             .map(|p| Effect::new(cand.kind, p))
             .collect()

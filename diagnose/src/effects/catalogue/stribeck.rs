@@ -27,9 +27,11 @@ impl EffectModel for Stribeck {
     fn refine(&self, _ctx: &Context, e: &Effect, width: f64) -> Vec<Effect> {
         refine_fine(e, width)
     }
-    /// The bump is positive (static friction above Coulomb).
-    fn admissible(&self, _e: &Effect, coef: &[f64], _base: &[f64]) -> bool {
-        coef[0] > 0.0
+    /// The bump is positive (static friction above Coulomb) and the Coulomb level it stands on
+    /// (the baseline's, fitted beside it) is not negative: a bump above a negative sliding
+    /// friction is a friction curve rising with speed, not Stribeck's.
+    fn admissible(&self, _e: &Effect, coef: &[f64], base: &[f64]) -> bool {
+        coef[0] > 0.0 && base.get(2).copied().unwrap_or(0.0) >= 0.0
     }
     fn parameters(
         &self,
