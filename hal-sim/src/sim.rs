@@ -1653,6 +1653,27 @@ fn switched_period(
     i_ab: &mut [f64; 2],
 ) {
     let tau = p.tau;
+    let (segs, n) = pattern_segments(d, ts, vb0);
+    for &(dt, v_ab) in &segs[..n] {
+        let a = (-dt / tau).exp();
+        el.segment(
+            e,
+            p.inv_r,
+            v_ab,
+            dt * p.inv_ts,
+            a,
+            (1.0 - a) * tau * p.inv_ts,
+            (1.0 - a * a) * tau / 2.0 * p.inv_ts,
+            i_ab,
+        );
+    }
+}
+
+/// The centre-aligned pattern (phase k at `vb0` over [T/2·(1 − d_k), T/2·(1 + d_k)], else at
+/// 0) as its constant-voltage segments in time order: each one's length and αβ voltage, and
+/// how many there are (at most 7; empty ones left out).
+#[inline]
+fn pattern_segments(d: &[f64; 3], ts: f64, vb0: f64) -> ([(f64, [f64; 2]); 7], usize) {
     let mut edges = [0.0; 8];
     for k in 0..3 {
         edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
@@ -1660,6 +1681,8 @@ fn switched_period(
     }
     edges[7] = ts;
     edges.sort_by(|a, b| a.total_cmp(b));
+    let mut segs = [(0.0f64, [0.0f64; 2]); 7];
+    let mut n = 0;
     for w in edges.windows(2) {
         let dt = w[1] - w[0];
         if dt <= 0.0 {
@@ -1673,18 +1696,10 @@ fn switched_period(
                 0.0
             }
         });
-        let a = (-dt / tau).exp();
-        el.segment(
-            e,
-            p.inv_r,
-            clarke(ph),
-            dt * p.inv_ts,
-            a,
-            (1.0 - a) * tau * p.inv_ts,
-            (1.0 - a * a) * tau / 2.0 * p.inv_ts,
-            i_ab,
-        );
+        segs[n] = (dt, clarke(ph));
+        n += 1;
     }
+    (segs, n)
 }
 
 /// The one inductance of the models that take one: a non-salient machine's `l_h`, a salient
@@ -1724,37 +1739,14 @@ fn salient_period(
         core::array::from_fn(|k| (act.duties[k].to_bits() as f64 * DUTY_LSB).min(1.0))
     };
     // The period's constant-voltage segments: one (averaged) or the centre-aligned pattern's.
-    let mut segs = [(0.0f64, [0.0f64; 2]); 7];
-    let mut n_seg = 0;
-    if p.switched {
-        let mut edges = [0.0; 8];
-        for k in 0..3 {
-            edges[1 + 2 * k] = 0.5 * ts * (1.0 - d[k]);
-            edges[2 + 2 * k] = 0.5 * ts * (1.0 + d[k]);
-        }
-        edges[7] = ts;
-        edges.sort_by(|a, b| a.total_cmp(b));
-        for w in edges.windows(2) {
-            let dt = w[1] - w[0];
-            if dt <= 0.0 {
-                continue;
-            }
-            let tm = 0.5 * (w[0] + w[1]);
-            let ph: [f64; 3] = core::array::from_fn(|k| {
-                if (tm - 0.5 * ts).abs() < 0.5 * ts * d[k] {
-                    vb0
-                } else {
-                    0.0
-                }
-            });
-            segs[n_seg] = (dt, clarke(ph));
-            n_seg += 1;
-        }
+    let (segs, n_seg) = if p.switched {
+        pattern_segments(&d, ts, vb0)
     } else {
         let v = clarke(d);
+        let mut segs = [(0.0f64, [0.0f64; 2]); 7];
         segs[0] = (ts, [v[0] * vb0, v[1] * vb0]);
-        n_seg = 1;
-    }
+        (segs, 1)
+    };
     // The rotor frame at the period's start.
     let (s0, c0) = (0.5 * w_e * ts).sin_cos();
     let (mut s, mut c) = (sn * c0 - cs * s0, cs * c0 + sn * s0);
