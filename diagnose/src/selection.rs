@@ -486,24 +486,30 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // on top of the others is removed. Then forward selection resumes; repeated until the
     // set no longer changes (each change lowers the held-out rss or removes a finding, so it
     // ends; at most `SWAP_ROUNDS` rounds).
+    // Finding `k` against the set without it: the set's held-out rss (a delay's gain on its
+    // own rows carried to the others' rows, as `scan` does), and the scan of the others (its
+    // held-out rss, its best candidate, the best of each kind).
+    let without = |chosen: &[Effect], k: usize, cache: &mut Cache| {
+        let (ntr, nho) = set_normals(chosen, cache);
+        let mut cur = nho.rss(&ntr.solve());
+        let others: Vec<Effect> = chosen
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != k)
+            .map(|(_, e)| e.clone())
+            .collect();
+        let (h0, best, of_kind) = scan(&others, cache);
+        if chosen[k].kind.force_delay(&chosen[k]).is_some() {
+            let (otr, oho) = set_normals_on(&others, lag_of(chosen), cache);
+            cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
+        }
+        (cur, h0, best, of_kind)
+    };
     for _ in 0..SWAP_ROUNDS {
         let mut changed = false;
         let mut k = 0;
         while k < chosen.len() {
-            let (ntr, nho) = set_normals(&chosen, &mut cache);
-            let mut cur = nho.rss(&ntr.solve());
-            let others: Vec<Effect> = chosen
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != k)
-                .map(|(_, e)| e.clone())
-                .collect();
-            let (h0, best, _) = scan(&others, &mut cache);
-            if chosen[k].kind.force_delay(&chosen[k]).is_some() {
-                // the delay's gain on its own rows, carried to the others' rows (as `scan` does)
-                let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
-                cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
-            }
+            let (cur, h0, best, _) = without(&chosen, k, &mut cache);
             match best {
                 Some((rh, db, eff))
                     if rh < cur * (1.0 - 1e-9) && passes(rh, h0, db) && eff != chosen[k] =>
@@ -559,19 +565,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     // the finding is kept in the model and reported as confounded with it, not named.
     let mut confounded_with: Vec<Option<&'static str>> = vec![None; chosen.len()];
     for k in 0..chosen.len() {
-        let (ntr, nho) = set_normals(&chosen, &mut cache);
-        let mut cur = nho.rss(&ntr.solve());
-        let others: Vec<Effect> = chosen
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != k)
-            .map(|(_, e)| e.clone())
-            .collect();
-        let (h0, _, of_kind) = scan(&others, &mut cache);
-        if chosen[k].kind.force_delay(&chosen[k]).is_some() {
-            let (otr, oho) = set_normals_on(&others, lag_of(&chosen), &mut cache);
-            cur *= h0 / oho.rss(&otr.solve()).max(1e-300);
-        }
+        let (cur, h0, _, of_kind) = without(&chosen, k, &mut cache);
         let rival = of_kind
             .iter()
             .filter(|(rh, db, e)| e.kind != chosen[k].kind && passes(*rh, h0, *db))
