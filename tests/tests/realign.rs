@@ -16,6 +16,9 @@ use regen_fw::control::{AlignMethod, Fault};
 use regen_fw::{Boot, Mode};
 use regen_tests::stats;
 
+mod imposed;
+use imposed::triangle;
+
 fn powerup(seed: u64) -> PowerUp {
     PowerUp {
         random_angle: true,
@@ -110,22 +113,6 @@ fn tmd306() -> Scenario {
         "/../hal-sim/scenarios/tmd-306.toml"
     );
     let mut sc = Scenario::from_file(std::path::Path::new(p)).unwrap();
-    sc.record.channels.clear();
-    sc
-}
-
-/// An imposed triangle at `v` m/s (amplitude 0.4 m: a quarter cycle lasts 0.4/v s, longer
-/// than the calibration and the alignment at every speed tested).
-fn triangle(v: f64) -> Scenario {
-    let a = 0.4;
-    let mut sc = Scenario::imposed(
-        Motion::Triangle {
-            amplitude_m: a,
-            freq_hz: v / (4.0 * a),
-        },
-        306.0,
-        10.0,
-    );
     sc.record.channels.clear();
     sc
 }

@@ -18,6 +18,8 @@ use hal_sim::sim::Sim;
 use regen_fw::fx::Duty;
 use regen_fw::io::Actuation;
 
+mod imposed;
+
 const R: f64 = 2.0;
 const LD: f64 = 4.0e-3;
 const LQ: f64 = 7.0e-3;
@@ -258,17 +260,7 @@ fn short_on_a_salient_machine_is_bounded_by_its_d_axis() {
     let lead = hal_sim::plant::Screw::default().lead_m_per_rad;
     // (accepted, tripped) per speed, for the drive told L_d and the one told only L_q.
     let run = |w: f64, told_ld: bool| -> (Option<(f64, f64)>, bool) {
-        let a = 0.4;
-        let v = w * lead;
-        let mut sc = Scenario::imposed(
-            Motion::Triangle {
-                amplitude_m: a,
-                freq_hz: v / (4.0 * a),
-            },
-            306.0,
-            10.0,
-        );
-        sc.record.channels.clear();
+        let mut sc = imposed::triangle(w * lead);
         sc.machine.l_h = LD6;
         sc.machine.l_q_h = Some(1.6 * LD6);
         sc.firmware.i_trip_a = 32.0;
