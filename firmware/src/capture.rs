@@ -6,14 +6,14 @@
 //! [`Capture::record`] runs in the period routine ([`crate::period::Period::finish`], after
 //! the outputs are written and the period's latch and supervision are done, so a fault that
 //! latched in this period is seen in this period's sample). A sample stores what the step
-//! already stored ([`Controller::cap_words`]), converted to nothing: each channel is resolved
+//! already stored ([`Controller::cap_words_with_power`]), converted to nothing: each channel is resolved
 //! when the capture is armed ([`source`]) to a word of the step's record and a right shift,
 //! and its code is that word shifted and saturated to `i16` (an indexed load, one `asr` and
 //! one `ssat`): the phase currents' and the bus voltage's ADC codes as they came, the d/q currents,
 //! references and voltages as their Q16.16 bits shifted, the speed as the encoder's speed
 //! estimate (counts per period) shifted, the travel as the encoder's count shifted, and the
-//! power, which the step does not store, as the period computes it for its energy sum
-//! ([`Capture::record`] takes it). `cap dump` converts each code to the channel's unit with the gains
+//! power, which the step does not compute, as the period computes it for its energy sum
+//! ([`Capture::record`] puts it into the record's power word). `cap dump` converts each code to the channel's unit with the gains
 //! in force at the arm ([`Decode`]), by the functions `tel` uses: a phase current or the bus
 //! voltage is exactly `tel`'s value; a d/q value or the power is `tel`'s value floored to the
 //! channel's step ([`lsb`]); the speed is `tel`'s formula on the speed estimate floored to
@@ -30,26 +30,28 @@
 //! capture itself, on the board a handle that locks the loop for each call.
 
 use crate::config::Gains;
-use crate::control::{amps_of_code, volts_of_code, Controller, CAP_WORDS, W_POS, W_VBUS, W_VEL};
+use crate::control::{
+    amps_of_code, volts_of_code, Controller, CAP_WORDS, W_P, W_POS, W_VBUS, W_VEL,
+};
 use crate::fx::{sat_i32, Gain, Q};
 use crate::numtext::q_f32;
 
-// The sample indexes the record's words by a [`Word`] (12 values) without a bounds check.
-const _: () = assert!(CAP_WORDS == 12);
+// The sample indexes the record's words by a [`Word`] (13 values) without a bounds check.
+const _: () = assert!(CAP_WORDS == 13);
 
 /// Channels a capture records at most.
 pub const CH_MAX: usize = 4;
 
-/// Samples of the G474's capture ring (and the simulator's): 50 ms of 4 channels at 20 kHz.
-pub const SAMPLES: usize = 1000;
+/// Samples of the G474's capture ring (and the simulator's): 51.2 ms of 4 channels at 20 kHz
+/// (a power of two: the ring's index is the sample count's low bits).
+pub const SAMPLES: usize = 1024;
 
 /// Channel indices into [`crate::console::CHANNELS`] the capture treats apart: the phase
 /// currents (0 … 2) and the bus voltage are ADC codes, the speed and the travel the encoder's
-/// estimate and count, the power computed.
+/// estimate and count (any other channel is the power, computed).
 const CH_VBUS: u8 = W_VBUS as u8;
 const CH_W: u8 = 10;
 const CH_X: u8 = 11;
-const CH_P: u8 = 12;
 
 /// The right shift of a d/q current (2⁻¹⁰ A, ±32 A), a d/q voltage and the power (2⁻⁶ V,
 /// ±512 V; 2⁻⁶ W, ±512 W) from their Q16.16 bits.
@@ -62,16 +64,16 @@ const SHIFT_V: u8 = 10;
 const STEP_W: f32 = 1.0 / 256.0;
 const STEP_X: f32 = 1.0 / 65_536.0;
 
-/// Where a channel's code comes from: a word of [`Controller::cap_words`] and its right shift
-/// (the power: the first word, read and replaced by the period's power).
+/// Where a channel's code comes from: a word of [`Controller::cap_words_with_power`] and its
+/// right shift.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Source {
     pub word: u8,
     pub shift: u8,
 }
 
-/// A number below 12 or 17 as a value the compiler knows the range of (an enum's
-/// discriminant): a word index into the 12 of [`Controller::cap_words`] and a shift below 32
+/// A number below 13 or 17 as a value the compiler knows the range of (an enum's
+/// discriminant): a word index into the 13 of [`Controller::cap_words_with_power`] and a shift below 32
 /// need no bounds check or mask in [`Capture::take`].
 macro_rules! small {
     ($name:ident, $($v:ident = $n:expr),+) => {
@@ -102,7 +104,8 @@ small!(
     W8 = 8,
     W9 = 9,
     W10 = 10,
-    W11 = 11
+    W11 = 11,
+    W12 = 12
 );
 small!(
     Shift,
@@ -149,7 +152,7 @@ pub fn source(ch: u8, g: &Gains) -> Source {
             W_POS as u8,
             finest_shift(g.enc.m_per_count.to_f32(), STEP_X),
         ),
-        _ => (0, SHIFT_V),
+        _ => (W_P as u8, SHIFT_V),
     };
     Source { word, shift }
 }
@@ -412,44 +415,47 @@ pub trait CapPort {
     fn sample(&self, k: u32) -> [i16; CH_MAX];
 }
 
-/// The capture: its state and a ring of `N` samples. (`repr(C)`: what a sample reads first
-/// and the ring last, each field within a load's immediate offset of the capture's address.)
+/// The capture: its state and a ring of `N` samples (`N` a power of two: the ring index is
+/// the sample count's low bits). (`repr(C)`: what a sample reads first and the ring last,
+/// each field within a load's immediate offset of the capture's address.)
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct Capture<const N: usize> {
     state: State,
-    set: Settings,
-    /// The channels' sources: words of [`Controller::cap_words`] and shifts.
+    kind: u8,
+    /// `cap now` pending.
+    now: bool,
+    /// A fault was latched at the last sample (true at the arm: a fault latched before the
+    /// first sample does not count).
+    fault_prev: bool,
+    /// The channels' sources: words of [`Controller::cap_words_with_power`] and shifts.
     word: [Word; CH_MAX],
     shift: [Shift; CH_MAX],
-    /// Bit k: slot k is the power; bit 4: the level trigger's channel is.
-    power: u8,
+    /// The level trigger's channel's source.
+    lv_word: Word,
+    lv_shift: Shift,
     /// Periods until the next sample (1: this one).
     count: u16,
-    /// Next ring slot written.
-    w: u32,
-    /// Samples recorded since the arm (saturating).
-    k: u32,
+    /// `div`, the count's start.
+    div: u16,
+    /// The state a trigger starts: triggered, or ready when no sample follows the trigger's.
+    fire_state: State,
+    /// Samples recorded since the arm; the next one goes to ring slot `k mod N`.
+    k: u64,
     pre_n: u32,
     /// Samples still to record after the trigger sample.
     left: u32,
-    /// `cap now` pending.
-    now: bool,
-    /// The level trigger: its channel's source, level code, the edges it fires on; the
-    /// channel's code at the last sample (the level's own at the arm: no crossing into the
-    /// first sample).
-    lv_word: Word,
-    lv_shift: Shift,
+    /// `N − 1 − pre_n`: `left` at the trigger.
+    post_n: u32,
+    /// The level trigger: its level code, the edges it fires on; the channel's code at the
+    /// last sample (the level's own at the arm: no crossing into the first sample).
     lv_code: i32,
     /// −1 when the trigger fires on that edge, else 0.
     lv_rise: i32,
     lv_fall: i32,
     lv_prev: i32,
-    kind: u8,
-    /// A fault was latched at the last sample (true at the arm: a fault latched before the
-    /// first sample does not count).
-    fault_prev: bool,
-    k_trig: u32,
+    k_trig: u64,
+    set: Settings,
     dt_s: f32,
     decode: Decode,
     /// The samples, two codes to a word (the first channel's in the low half).
@@ -468,11 +474,34 @@ impl<const N: usize> Default for Capture<N> {
 }
 
 impl<const N: usize> Capture<N> {
+    const POW2: () = assert!(N.is_power_of_two(), "a capture ring of 2^n samples");
+
     /// An idle capture, all zero bytes (a static one is zero-initialised: no flash); its
     /// settings are the first `arm`'s.
     pub const fn new() -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::POW2;
         Capture {
             state: State::Idle,
+            kind: K_FAULT,
+            now: false,
+            fault_prev: false,
+            word: [Word::W0; CH_MAX],
+            shift: [Shift::S0; CH_MAX],
+            lv_word: Word::W0,
+            lv_shift: Shift::S0,
+            count: 0,
+            div: 0,
+            fire_state: State::Idle,
+            k: 0,
+            pre_n: 0,
+            left: 0,
+            post_n: 0,
+            lv_code: 0,
+            lv_rise: 0,
+            lv_fall: 0,
+            lv_prev: 0,
+            k_trig: 0,
             set: Settings {
                 ch: [0; CH_MAX],
                 n_ch: 0,
@@ -480,24 +509,6 @@ impl<const N: usize> Capture<N> {
                 pre_pct: 0,
                 trig: Trigger::Fault,
             },
-            word: [Word::W0; CH_MAX],
-            shift: [Shift::S0; CH_MAX],
-            power: 0,
-            count: 0,
-            w: 0,
-            k: 0,
-            pre_n: 0,
-            left: 0,
-            now: false,
-            lv_word: Word::W0,
-            lv_shift: Shift::S0,
-            lv_code: 0,
-            lv_rise: 0,
-            lv_fall: 0,
-            lv_prev: 0,
-            kind: K_FAULT,
-            fault_prev: false,
-            k_trig: 0,
             dt_s: 0.0,
             decode: Decode::NONE,
             buf: [[0; 2]; N],
@@ -522,11 +533,11 @@ impl<const N: usize> Capture<N> {
 
     /// One period (the period routine, after its outputs): a sample when one is due, the
     /// trigger, the state, with `p_bits` the period's electrical power (Q16.16 bits of
-    /// [`Controller::p_elec`], which the period computes for its energy sum; read only when
-    /// a slot or the level trigger records the power). Does nothing unless
+    /// [`Controller::p_elec`], which the period computes for its energy sum; put into the
+    /// record's power word, which a slot or the level trigger may read). Does nothing unless
     /// [`Capture::active`].
     #[inline(always)]
-    pub fn record(&mut self, ctl: &Controller, p_bits: i32) {
+    pub fn record(&mut self, ctl: &mut Controller, p_bits: i32) {
         if !self.active() {
             return;
         }
@@ -534,47 +545,28 @@ impl<const N: usize> Capture<N> {
         if self.count != 0 {
             return;
         }
-        self.count = self.set.div;
+        self.count = self.div;
         self.take(ctl, p_bits);
     }
 
-    /// A sample and its trigger test (out of line: the period's common path is the test
-    /// above).
-    #[inline(never)]
-    fn take(&mut self, ctl: &Controller, p_bits: i32) {
+    /// A sample and its trigger test.
+    #[inline(always)]
+    fn take(&mut self, ctl: &mut Controller, p_bits: i32) {
         // All four slots, unrolled (a loop over `n_ch` costs more than the unused reads; the
         // slots past `n_ch` are never shown).
-        let words = ctl.cap_words();
+        let words = ctl.cap_words_with_power(p_bits);
         let (c, sh) = (&self.word, &self.shift);
-        let (mut r0, mut r1, mut r2, mut r3) = (
+        let (r0, r1, r2, r3) = (
             read(words, c[0], sh[0]),
             read(words, c[1], sh[1]),
             read(words, c[2], sh[2]),
             read(words, c[3], sh[3]),
         );
-        // The power, which the step does not store, into the slots that record it.
-        let pm = self.power;
-        let p = code(p_bits, SHIFT_V);
-        if pm & 0xF != 0 {
-            let put = |r: &mut i32, k: u8| {
-                if pm & (1 << k) != 0 {
-                    *r = p;
-                }
-            };
-            put(&mut r0, 0);
-            put(&mut r1, 1);
-            put(&mut r2, 2);
-            put(&mut r3, 3);
-        }
-        // Two codes to a word (one `pkhbt` each).
+        // Two codes to a word (one `pkhbt` each), into slot `k mod N` (no bounds check).
         let pack = |a: i32, b: i32| (a as u16 as u32) | (b as u32) << 16;
-        let w = self.w as usize;
-        if let Some(r) = self.buf.get_mut(w) {
-            *r = [pack(r0, r1), pack(r2, r3)];
-        }
-        self.w = if w + 1 >= N { 0 } else { w as u32 + 1 };
         let k = self.k;
-        self.k = k.saturating_add(1);
+        self.buf[k as usize & (N - 1)] = [pack(r0, r1), pack(r2, r3)];
+        self.k = k + 1;
         if self.state == State::Triggered {
             self.left -= 1;
             if self.left == 0 {
@@ -592,11 +584,7 @@ impl<const N: usize> Capture<N> {
             }
             K_CMD => self.now,
             _ => {
-                let c = if pm & 0x10 != 0 {
-                    p
-                } else {
-                    read(words, self.lv_word, self.lv_shift)
-                };
+                let c = read(words, self.lv_word, self.lv_shift);
                 let (p, l) = (self.lv_prev, self.lv_code);
                 self.lv_prev = c;
                 // Codes within ±2^15: the differences' signs are the comparisons. Rising:
@@ -606,14 +594,10 @@ impl<const N: usize> Capture<N> {
                 ((rise & self.lv_rise) | (fall & self.lv_fall)) < 0
             }
         };
-        if fired && k >= self.pre_n {
+        if fired && k >= self.pre_n as u64 {
             self.k_trig = k;
-            self.left = N as u32 - 1 - self.pre_n;
-            self.state = if self.left == 0 {
-                State::Ready
-            } else {
-                State::Triggered
-            };
+            self.left = self.post_n;
+            self.state = self.fire_state;
         }
     }
 }
@@ -623,10 +607,11 @@ impl<const N: usize> CapPort for Capture<N> {
         Status {
             state: self.state,
             set: self.set,
-            held: self.k.min(N as u32),
+            held: self.k.min(N as u64) as u32,
             len: N as u32,
             pre_n: self.pre_n,
-            k_trig: (self.state >= State::Triggered).then_some(self.k_trig),
+            k_trig: (self.state >= State::Triggered)
+                .then_some(self.k_trig.min(u32::MAX as u64) as u32),
             dt_s: self.dt_s,
             decode: self.decode,
         }
@@ -635,23 +620,27 @@ impl<const N: usize> CapPort for Capture<N> {
     fn arm(&mut self, set: &Settings, dt_s: f32, g: &Gains) {
         self.set = *set;
         self.set.div = set.div.clamp(1, DIV_MAX);
+        self.div = self.set.div;
         let n_ch = set.n_ch.min(CH_MAX as u8) as usize;
         // The slots past `n_ch` read `ia`'s code (one load: [`Capture::take`] reads all four).
         for c in self.set.ch.iter_mut().skip(n_ch) {
             *c = 0;
         }
-        self.power = 0;
         for (k, &c) in self.set.ch.iter().enumerate() {
             let s = source(c, g);
             self.word[k] = Word::of(s.word);
             self.shift[k] = Shift::of(s.shift);
-            self.power |= ((c == CH_P) as u8) << k;
         }
         self.decode = Decode::new(self.set.ch, g);
         self.count = 1;
-        self.w = 0;
         self.k = 0;
         self.pre_n = Self::pre_samples(set.pre_pct);
+        self.post_n = N as u32 - 1 - self.pre_n;
+        self.fire_state = if self.post_n == 0 {
+            State::Ready
+        } else {
+            State::Triggered
+        };
         self.left = 0;
         self.now = false;
         self.fault_prev = true;
@@ -665,7 +654,6 @@ impl<const N: usize> CapPort for Capture<N> {
                 let s = source(ch, g);
                 self.lv_word = Word::of(s.word);
                 self.lv_shift = Shift::of(s.shift);
-                self.power |= ((ch == CH_P) as u8) << 4;
                 self.lv_code = level_code(ch, level, g);
                 self.lv_rise = -((edge != Edge::Fall) as i32);
                 self.lv_fall = -((edge != Edge::Rise) as i32);
@@ -687,12 +675,12 @@ impl<const N: usize> CapPort for Capture<N> {
     fn stop(&mut self) {
         self.state = State::Idle;
         self.k = 0;
-        self.w = 0;
     }
 
     fn sample(&self, k: u32) -> [i16; CH_MAX] {
-        let i = (self.w as usize + k as usize) % N.max(1);
-        let [a, b] = self.buf.get(i).copied().unwrap_or([0; 2]);
+        // The next slot written is the oldest once the ring is full (as it is when ready).
+        let i = (self.k as usize).wrapping_add(k as usize) & (N - 1);
+        let [a, b] = self.buf[i];
         [a as i16, (a >> 16) as i16, b as i16, (b >> 16) as i16]
     }
 }
@@ -734,7 +722,8 @@ mod tests {
             let z = cfg.adc_zero_code;
             for &c in &codes {
                 ctl.step(&RawSample { i_abc: [z; 3], v_bus: c, encoder: 0 });
-                cap.record(&ctl, ctl.p_elec().to_bits());
+                let p = ctl.p_elec().to_bits();
+                    cap.record(&mut ctl, p);
                 if cap.state() != State::Armed {
                     break;
                 }

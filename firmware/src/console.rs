@@ -2532,7 +2532,10 @@ mod tests {
         ctl.set_mode(Mode::Run).unwrap();
         let mut cap = Capture::<{ crate::capture::SAMPLES }>::new();
         let mut con = Console::new();
-        let exec = |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, l: &str| {
+        let exec = |con: &mut Console,
+                    ctl: &mut Controller,
+                    cap: &mut Capture<{ crate::capture::SAMPLES }>,
+                    l: &str| {
             let mut s = String::new();
             let r = con.execute_cap(l, ctl, &mut NoStore, Some(cap), &mut s);
             assert!(r.is_ok(), "{s}");
@@ -2552,28 +2555,31 @@ mod tests {
             if k == 300 {
                 exec(&mut con, &mut ctl, &mut cap, "cap now");
             }
-            cap.record(&ctl, ctl.p_elec().to_bits());
+            let p = ctl.p_elec().to_bits();
+            cap.record(&mut ctl, p);
         }
         assert_eq!(cap.state(), State::Ready);
         for machine in [false, true] {
             con.set_machine(machine);
-            let whole =
-                |con: &mut Console, ctl: &mut Controller, cap: &mut Capture<1000>, budget| {
-                    let line = if con.machine() {
-                        "#x1 cap dump"
-                    } else {
-                        "cap dump"
-                    };
-                    let mut pieces = std::vec![exec(con, ctl, cap, line)];
-                    loop {
-                        let mut p = String::new();
-                        let more = con.dump_more(cap, budget, &mut p);
-                        pieces.push(p);
-                        if !more {
-                            return pieces;
-                        }
-                    }
+            let whole = |con: &mut Console,
+                         ctl: &mut Controller,
+                         cap: &mut Capture<{ crate::capture::SAMPLES }>,
+                         budget| {
+                let line = if con.machine() {
+                    "#x1 cap dump"
+                } else {
+                    "cap dump"
                 };
+                let mut pieces = std::vec![exec(con, ctl, cap, line)];
+                loop {
+                    let mut p = String::new();
+                    let more = con.dump_more(cap, budget, &mut p);
+                    pieces.push(p);
+                    if !more {
+                        return pieces;
+                    }
+                }
+            };
             let one = whole(&mut con, &mut ctl, &mut cap, usize::MAX);
             let parts = whole(&mut con, &mut ctl, &mut cap, REPLY_MAX);
             assert_eq!(one.len(), 2);
@@ -2588,9 +2594,10 @@ mod tests {
                 text.len(),
                 parts.len()
             );
-            assert_eq!(text.lines().count(), 1000 + 3);
+            let n = crate::capture::SAMPLES;
+            assert_eq!(text.lines().count(), n + 3);
             if machine {
-                assert!(text.ends_with("R x1 ok 1000 samples\r\n"));
+                assert!(text.ends_with(&std::format!("R x1 ok {n} samples\r\n")));
                 assert!(text.lines().rev().skip(1).all(|l| l.starts_with("D x1 ")));
             }
         }
@@ -3122,7 +3129,8 @@ mod tests {
                 }
                 for _ in 0..7 {
                     ctl.step_outputs(&s0);
-                    cap.record(&ctl, ctl.p_elec().to_bits());
+                    let p = ctl.p_elec().to_bits();
+                    cap.record(&mut ctl, p);
                 }
             }
         }

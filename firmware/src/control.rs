@@ -207,22 +207,26 @@ pub struct Telemetry {
 ///
 /// The words the capture reads (`crate::capture`) are one array, indexed as
 /// [`crate::console::CHANNELS`] up to `vbus` ([`W_VBUS`]), then the speed estimate and the
-/// count ([`W_VEL`], [`W_POS`]): a sample reads any of them with one indexed load.
+/// count ([`W_VEL`], [`W_POS`]), and a word for the period's power ([`W_P`], which the step
+/// does not compute: [`Controller::cap_words_with_power`] puts it there): a sample reads any
+/// of them with one indexed load.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct StepRecord {
     /// The phase codes, d/q currents, references and voltages (Q16.16 bits), bus code, the
-    /// encoder's speed estimate (counts per period, Q16.16 bits) and multi-turn count.
+    /// encoder's speed estimate (counts per period, Q16.16 bits) and multi-turn count, and
+    /// the power of the last period a capture sampled.
     w: [i32; CAP_WORDS],
     theta_e: Angle,
     duties: [Duty; 3],
     v_saturated: bool,
 }
 
-/// Words of the step's record the capture can read ([`Controller::cap_words`]).
-pub const CAP_WORDS: usize = 12;
-/// Indices into [`Controller::cap_words`]: the phase codes (0 … 2, as `ia`, `ib`, `ic`), the
+/// Words of the step's record the capture can read ([`Controller::cap_words_with_power`]).
+pub const CAP_WORDS: usize = 13;
+/// Indices into [`Controller::cap_words_with_power`]: the phase codes (0 … 2, as `ia`, `ib`, `ic`), the
 /// d/q currents, references and voltages (3 … 8, Q16.16 bits, as `id` … `vq`), the bus code
-/// (9, as `vbus`), the speed estimate (counts per period, Q16.16 bits) and the count.
+/// (9, as `vbus`), the speed estimate (counts per period, Q16.16 bits), the count and the
+/// power (Q16.16 bits, as `p`).
 pub const W_ID: usize = 3;
 pub const W_IQ: usize = 4;
 pub const W_ID_REF: usize = 5;
@@ -232,6 +236,7 @@ pub const W_VQ: usize = 8;
 pub const W_VBUS: usize = 9;
 pub const W_VEL: usize = 10;
 pub const W_POS: usize = 11;
+pub const W_P: usize = 12;
 
 impl StepRecord {
     fn dq(&self, k: usize) -> Dq {
@@ -934,9 +939,12 @@ impl Controller {
     }
 
     /// The words of the last period's record the capture reads (`crate::capture`: indices
-    /// [`W_ID`] … [`W_POS`], the phase codes at 0 … 2): what the step stored, no conversion.
+    /// [`W_ID`] … [`W_POS`], the phase codes at 0 … 2): what the step stored, no conversion;
+    /// and at [`W_P`] `p_bits`, the period's power ([`Controller::p_elec`]'s bits, which the
+    /// period computes for its energy sum), put there by this call (one store).
     #[inline(always)]
-    pub fn cap_words(&self) -> &[i32; CAP_WORDS] {
+    pub fn cap_words_with_power(&mut self, p_bits: i32) -> &[i32; CAP_WORDS] {
+        self.rec.w[W_P] = p_bits;
         &self.rec.w
     }
 
@@ -1735,7 +1743,8 @@ mod tests {
                 let err = ((ctl.enc.position as i64) << 16) - ctl.enc.pos_est();
                 want.push((vals, (err as f64 / 65_536.0).abs()));
                 for cap in caps.iter_mut() {
-                    cap.record(&ctl, ctl.p_elec().to_bits());
+                    let p = ctl.p_elec().to_bits();
+                    cap.record(&mut ctl, p);
                 }
             }
             let m_per_count = ctl.gains().enc.m_per_count.to_f32() as f64;

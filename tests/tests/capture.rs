@@ -245,7 +245,8 @@ fn load_step_current_response_matches_the_loop_model() {
             "seed {seed}: R {:.3} Ω L {:.2} mH, step {step:.3} A to R_L {r2}: rise {tr:.3} periods (model {trm:.3}), overshoot {:.2} % (model {:.2} %)",
             m.r_ohm, 1e3 * m.l_h, 100.0 * os, 100.0 * osm
         );
-        assert_eq!((dump.dt_s, dump.n, dump.pre), (5e-5, 1000, 200));
+        let n = regen_fw::capture::SAMPLES;
+        assert_eq!((dump.dt_s, dump.n, dump.pre), (5e-5, n, n / 5));
         assert_eq!(dump.cols, ["t", "iq", "iq_ref"]);
         // The step is where `cap now` put it: within the law's refresh (4 periods) of the
         // trigger sample.
@@ -348,7 +349,8 @@ fn fault_capture_holds_the_samples_before_the_latch() {
         );
         let status = exec(&mut fs, "cap");
         let d = parse(&exec(&mut fs, "cap dump"));
-        let want_pre = (1000 * pre as usize / 100).min(999);
+        let n = regen_fw::capture::SAMPLES;
+        let want_pre = (n * pre as usize / 100).min(n - 1);
         assert_eq!(d.pre, want_pre, "pre {pre}");
         // The trigger sample (t = 0) is the latch's period: the sample index from the arm.
         let k_trig = (latch - p0) as f64;
@@ -403,7 +405,8 @@ fn machine_mode_dump_is_tagged_and_the_same_csv() {
     let m = ok(&mut d, "#d7 cap dump");
     let lines: Vec<&str> = m.split("\r\n").filter(|l| !l.is_empty()).collect();
     let (last, data) = lines.split_last().unwrap();
-    assert_eq!(*last, "R d7 ok 1000 samples");
+    let n = regen_fw::capture::SAMPLES;
+    assert_eq!(*last, format!("R d7 ok {n} samples"));
     assert!(
         data.iter().all(|l| l.starts_with("D d7 ")),
         "an untagged line"
@@ -413,7 +416,7 @@ fn machine_mode_dump_is_tagged_and_the_same_csv() {
     assert_eq!(csv.len() + 1, hl.len());
     assert_eq!(csv[..], hl[..hl.len() - 1]);
     assert!(
-        csv[0].starts_with("# cap dt_s=0.00015 n=1000 pre=200 trig=cmd"),
+        csv[0].starts_with(&format!("# cap dt_s=0.00015 n={n} pre={} trig=cmd", n / 5)),
         "{}",
         csv[0]
     );

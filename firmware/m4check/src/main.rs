@@ -297,7 +297,7 @@ pub fn regen_period_power(ctl: &Controller) -> i32 {
 /// The capture's sample alone (`Capture::record`, a capture armed as `armed_capture`).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32) {
+pub fn regen_cap_record(ctl: &mut Controller, cap: &mut Capture<SAMPLES>, p: i32) {
     if cap.active() {
         cap.record(ctl, p)
     }
@@ -307,7 +307,7 @@ pub fn regen_cap_record(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32) {
 /// given: armed for the whole replay).
 #[no_mangle]
 #[inline(never)]
-pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32, _k: u32) {
+pub fn regen_cap_record_iq(ctl: &mut Controller, cap: &mut Capture<SAMPLES>, p: i32, _k: u32) {
     // (A fourth argument: a body of its own.)
     if cap.active() {
         cap.record(ctl, p)
@@ -315,12 +315,13 @@ pub fn regen_cap_record_iq(ctl: &Controller, cap: &mut Capture<SAMPLES>, p: i32,
 }
 
 /// A capture armed with its most expensive sample, over every channel set and trigger kind:
-/// the power in a slot (the one channel the step does not store: the period's, put into the
-/// slot), three channels read (any word of the step's record costs the same load and shift), and a level
-/// trigger on a read channel (its word read and compared, branch-free: the same count whatever
-/// the data; a fault trigger tests a flag, a command trigger a bool), here phase a's current
-/// crossing zero on either edge, no pre-trigger share: the trigger fires at the first crossing (that
-/// sample also starts the post-trigger part), the ring fills (a triggered sample skips the
+/// four channels (every slot is read whatever `n_ch`, and any channel costs the same: an
+/// indexed load of the step's record, the power included, which the sample puts into the
+/// record's power word; `p`, `w`, `x` and `ia` here), and a level trigger (its channel's word
+/// read and compared, branch-free: the same count whatever the data; a fault trigger tests a
+/// flag, a command trigger a bool), here phase a's current crossing zero on either edge, no
+/// pre-trigger share: the trigger fires at the first crossing (that sample also starts the
+/// post-trigger part, the dearest sample), the ring fills (a triggered sample skips the
 /// trigger test) and the replay arms it again once it is ready, so the count covers armed,
 /// firing and triggered samples.
 fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32, g: &regen_fw::Gains) {
