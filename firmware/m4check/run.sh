@@ -78,7 +78,7 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   bline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_boot 2>&1 | grep insnwin | tail -n1)
   echo "instructions per power-up step at opt-level 3: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_cap_record 2>&1 | grep insnwin | tail -n1)
-  echo "instructions of the capture's sample (cap armed, after the outputs are written: Period::finish -> Capture::record; its dearest, the worst over channel sets and trigger kinds: the period's p put in a slot, w, x, ia read, a level trigger on ia at 0 A, armed again once full) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  echo "instructions of the capture's sample (cap armed, after the outputs are written: Period::finish -> Capture::record; the worst over channel sets and trigger kinds: four channels with a level trigger on ia firing, a fault, a command and a level trigger on p with four, one channel with a level trigger on vbus; each armed again once full) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_cap_record_iq 2>&1 | grep insnwin | tail -n1)
   echo "  the same for a load step's channels (iq, iq_ref, trigger cmd): $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   pline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_period_power 2>&1 | grep insnwin | tail -n1)

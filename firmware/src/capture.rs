@@ -421,8 +421,8 @@ pub trait CapPort {
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct Capture<const N: usize> {
-    state: State,
-    kind: u8,
+    /// The state and, while armed, the trigger's kind, in one byte (`P_…`).
+    phase: u8,
     /// `cap now` pending.
     now: bool,
     /// A fault was latched at the last sample (true at the arm: a fault latched before the
@@ -438,8 +438,8 @@ pub struct Capture<const N: usize> {
     count: u16,
     /// `div`, the count's start.
     div: u16,
-    /// The state a trigger starts: triggered, or ready when no sample follows the trigger's.
-    fire_state: State,
+    /// The phase a trigger starts: triggered, or ready when no sample follows the trigger's.
+    fire_phase: u8,
     /// Samples recorded since the arm; the next one goes to ring slot `k mod N`.
     k: u64,
     pre_n: u32,
@@ -447,10 +447,9 @@ pub struct Capture<const N: usize> {
     left: u32,
     /// `N − 1 − pre_n`: `left` at the trigger.
     post_n: u32,
-    /// The level trigger: its level code, the edges it fires on; the channel's code at the
-    /// last sample (the level's own at the arm: no crossing into the first sample).
-    lv_code: i32,
-    /// −1 when the trigger fires on that edge, else 0.
+    /// The level trigger: its level code for each edge ([`NO_EDGE`] apart for an edge it
+    /// does not fire on); the channel's code at the last sample (the level's own at the arm:
+    /// no crossing into the first sample).
     lv_rise: i32,
     lv_fall: i32,
     lv_prev: i32,
@@ -462,10 +461,17 @@ pub struct Capture<const N: usize> {
     buf: [[u32; 2]; N],
 }
 
-/// Trigger kinds as [`Capture::record`] tests them.
-const K_FAULT: u8 = 0;
-const K_CMD: u8 = 1;
-const K_LEVEL: u8 = 2;
+/// A level no code reaches (codes are `i16`): the level of an edge a trigger does not fire on.
+const NO_EDGE: i32 = 1 << 20;
+
+/// A capture's phases: its [`State`], and while armed the trigger's kind (what
+/// [`Capture::record`] tests: one byte, the level trigger's first).
+const P_IDLE: u8 = 0;
+const P_READY: u8 = 1;
+const P_LEVEL: u8 = 2;
+const P_TRIGGERED: u8 = 3;
+const P_CMD: u8 = 4;
+const P_FAULT: u8 = 5;
 
 impl<const N: usize> Default for Capture<N> {
     fn default() -> Self {
@@ -482,8 +488,7 @@ impl<const N: usize> Capture<N> {
         #[allow(clippy::let_unit_value)]
         let () = Self::POW2;
         Capture {
-            state: State::Idle,
-            kind: K_FAULT,
+            phase: P_IDLE,
             now: false,
             fault_prev: false,
             word: [Word::W0; CH_MAX],
@@ -492,12 +497,11 @@ impl<const N: usize> Capture<N> {
             lv_shift: Shift::S0,
             count: 0,
             div: 0,
-            fire_state: State::Idle,
+            fire_phase: P_IDLE,
             k: 0,
             pre_n: 0,
             left: 0,
             post_n: 0,
-            lv_code: 0,
             lv_rise: 0,
             lv_fall: 0,
             lv_prev: 0,
@@ -516,7 +520,12 @@ impl<const N: usize> Capture<N> {
     }
 
     pub fn state(&self) -> State {
-        self.state
+        match self.phase {
+            P_IDLE => State::Idle,
+            P_READY => State::Ready,
+            P_TRIGGERED => State::Triggered,
+            _ => State::Armed,
+        }
     }
 
     /// Samples kept from before the trigger for `pct` % of `N` (at most `N − 1`: the trigger
@@ -528,7 +537,7 @@ impl<const N: usize> Capture<N> {
     /// Armed or triggered: [`Capture::record`] has work (one compare).
     #[inline(always)]
     pub fn active(&self) -> bool {
-        (self.state as u8).wrapping_sub(1) <= 1
+        self.phase >= P_LEVEL
     }
 
     /// One period (the period routine, after its outputs): a sample when one is due, the
@@ -567,37 +576,36 @@ impl<const N: usize> Capture<N> {
         let k = self.k;
         self.buf[k as usize & (N - 1)] = [pack(r0, r1), pack(r2, r3)];
         self.k = k + 1;
-        if self.state == State::Triggered {
+        // Armed (the level trigger first: the dearest): the trigger's condition against the
+        // last sample's; triggered: the samples still to come.
+        let fired = if self.phase == P_LEVEL {
+            let c = read(words, self.lv_word, self.lv_shift);
+            let (p, lr, lf) = (self.lv_prev, self.lv_rise, self.lv_fall);
+            self.lv_prev = c;
+            // Codes within ±2^15, levels within ±2^15 or ±NO_EDGE: the differences'
+            // signs are the comparisons. Rising: p < lr ≤ c; falling: p > lf ≥ c; each in
+            // the sign bit (never for a level at ∓NO_EDGE: p < −NO_EDGE, p > NO_EDGE).
+            let rise = (p - lr) & !(c - lr);
+            let fall = (lf - p) & !(lf - c);
+            (rise | fall) < 0
+        } else if self.phase == P_TRIGGERED {
             self.left -= 1;
             if self.left == 0 {
-                self.state = State::Ready;
+                self.phase = P_READY;
             }
             return;
-        }
-        // Armed: the trigger's condition against the last sample's.
-        let fired = match self.kind {
-            K_FAULT => {
-                let f = ctl.fault().is_some();
-                let edge = f & !self.fault_prev;
-                self.fault_prev = f;
-                edge
-            }
-            K_CMD => self.now,
-            _ => {
-                let c = read(words, self.lv_word, self.lv_shift);
-                let (p, l) = (self.lv_prev, self.lv_code);
-                self.lv_prev = c;
-                // Codes within ±2^15: the differences' signs are the comparisons. Rising:
-                // p < l ≤ c; falling: p > l ≥ c; each in the sign bit, masked by the edges.
-                let rise = (p - l) & !(c - l);
-                let fall = (l - p) & !(l - c);
-                ((rise & self.lv_rise) | (fall & self.lv_fall)) < 0
-            }
+        } else if self.phase == P_CMD {
+            self.now
+        } else {
+            let f = ctl.fault().is_some();
+            let edge = f & !self.fault_prev;
+            self.fault_prev = f;
+            edge
         };
         if fired && k >= self.pre_n as u64 {
             self.k_trig = k;
             self.left = self.post_n;
-            self.state = self.fire_state;
+            self.phase = self.fire_phase;
         }
     }
 }
@@ -605,12 +613,12 @@ impl<const N: usize> Capture<N> {
 impl<const N: usize> CapPort for Capture<N> {
     fn status(&self) -> Status {
         Status {
-            state: self.state,
+            state: self.state(),
             set: self.set,
             held: self.k.min(N as u64) as u32,
             len: N as u32,
             pre_n: self.pre_n,
-            k_trig: (self.state >= State::Triggered)
+            k_trig: (self.state() >= State::Triggered)
                 .then_some(self.k_trig.min(u32::MAX as u64) as u32),
             dt_s: self.dt_s,
             decode: self.decode,
@@ -636,10 +644,10 @@ impl<const N: usize> CapPort for Capture<N> {
         self.k = 0;
         self.pre_n = Self::pre_samples(set.pre_pct);
         self.post_n = N as u32 - 1 - self.pre_n;
-        self.fire_state = if self.post_n == 0 {
-            State::Ready
+        self.fire_phase = if self.post_n == 0 {
+            P_READY
         } else {
-            State::Triggered
+            P_TRIGGERED
         };
         self.left = 0;
         self.now = false;
@@ -647,33 +655,32 @@ impl<const N: usize> CapPort for Capture<N> {
         self.k_trig = 0;
         self.dt_s = dt_s;
         match set.trig {
-            Trigger::Fault => self.kind = K_FAULT,
-            Trigger::Cmd => self.kind = K_CMD,
+            Trigger::Fault => self.phase = P_FAULT,
+            Trigger::Cmd => self.phase = P_CMD,
             Trigger::Level { ch, edge, level } => {
-                self.kind = K_LEVEL;
+                self.phase = P_LEVEL;
                 let s = source(ch, g);
                 self.lv_word = Word::of(s.word);
                 self.lv_shift = Shift::of(s.shift);
-                self.lv_code = level_code(ch, level, g);
-                self.lv_rise = -((edge != Edge::Fall) as i32);
-                self.lv_fall = -((edge != Edge::Rise) as i32);
-                self.lv_prev = self.lv_code;
+                let l = level_code(ch, level, g);
+                self.lv_rise = if edge == Edge::Fall { -NO_EDGE } else { l };
+                self.lv_fall = if edge == Edge::Rise { NO_EDGE } else { l };
+                self.lv_prev = l;
             }
         }
-        self.state = State::Armed;
     }
 
     fn trigger_now(&mut self) -> bool {
-        if self.state != State::Armed {
+        if self.state() != State::Armed {
             return false;
         }
         self.now = true;
-        self.kind = K_CMD;
+        self.phase = P_CMD;
         true
     }
 
     fn stop(&mut self) {
-        self.state = State::Idle;
+        self.phase = P_IDLE;
         self.k = 0;
     }
 

@@ -265,9 +265,10 @@ fn measure_path(cfg: &Config) {
 
 /// The running step with a capture armed: the step to its outputs, then the capture's
 /// sample as the period takes it after the outputs (`Period::finish` → `Capture::record`),
-/// counted together on a copy of the controller every step of the replay (the capture's
-/// worst case, `armed_capture`). `p` is the period's power (`Controller::p_elec` after this
-/// step, computed on another copy): the period's energy sum computes it in every period,
+/// counted together on a copy of the controller every step of the replay, for each capture of
+/// `capture_settings` (the count is the worst over them). `p` is the period's power
+/// (`Controller::p_elec` after this step, computed on another copy): the period's energy sum
+/// computes it in every period,
 /// with or without a capture (counted apart, `regen_period_power`): while a capture is
 /// active it is computed after the outputs instead of at the next period's start
 /// (`Period::finish`), as here.
@@ -294,7 +295,7 @@ pub fn regen_period_power(ctl: &Controller) -> i32 {
     ctl.p_elec().to_bits()
 }
 
-/// The capture's sample alone (`Capture::record`, a capture armed as `armed_capture`).
+/// The capture's sample alone (`Capture::record`, each capture of `capture_settings`).
 #[no_mangle]
 #[inline(never)]
 pub fn regen_cap_record(ctl: &mut Controller, cap: &mut Capture<SAMPLES>, p: i32) {
@@ -314,29 +315,50 @@ pub fn regen_cap_record_iq(ctl: &mut Controller, cap: &mut Capture<SAMPLES>, p: 
     }
 }
 
-/// A capture armed with its most expensive sample, over every channel set and trigger kind:
-/// four channels (every slot is read whatever `n_ch`, and any channel costs the same: an
-/// indexed load of the step's record, the power included, which the sample puts into the
-/// record's power word; `p`, `w`, `x` and `ia` here), and a level trigger (its channel's word
-/// read and compared, branch-free: the same count whatever the data; a fault trigger tests a
-/// flag, a command trigger a bool), here phase a's current crossing zero on either edge, no
-/// pre-trigger share: the trigger fires at the first crossing (that sample also starts the
-/// post-trigger part, the dearest sample), the ring fills (a triggered sample skips the
-/// trigger test) and the replay arms it again once it is ready, so the count covers armed,
-/// firing and triggered samples.
-fn armed_capture(cap: &mut Capture<SAMPLES>, dt_s: f32, g: &regen_fw::Gains) {
-    let set = Settings {
-        ch: [12, 10, 11, 0],
-        n_ch: 4,
-        div: 1,
-        pre_pct: 0,
-        trig: Trigger::Level {
+/// The captures counted, each armed again once ready: their samples go through the same
+/// function (`regen_cap_record`, and `regen_step_cap` after the step), so the count is the
+/// worst over them all, whichever is dearest. Every slot is read whatever `n_ch`, and any
+/// channel costs the same (an indexed load of the step's record, the power included, which
+/// the sample puts into the record's power word); the trigger kinds cost differently. 0: four
+/// channels (`p`, `w`, `x`, `ia`) and a level trigger on phase a's current crossing zero on
+/// either edge, no pre-trigger share: it fires at the first crossing (that sample also starts
+/// the post-trigger part) and at the electrical frequency after each re-arm, so armed, firing
+/// and triggered samples are all counted; 1: a fault trigger (none latches in the replay: its
+/// armed sample); 2: a command trigger, given every 700 periods; 3: a level trigger on the
+/// power (its rising edge through 0 W); 4: one channel and a level trigger on the bus voltage
+/// (its falling edge at 36 V).
+const CAPS: usize = 5;
+fn capture_settings(j: usize) -> Settings {
+    let trig = match j {
+        0 => Trigger::Level {
             ch: 0,
             edge: Edge::Both,
             level: 0.0,
         },
+        1 => Trigger::Fault,
+        2 => Trigger::Cmd,
+        3 => Trigger::Level {
+            ch: 12,
+            edge: Edge::Rise,
+            level: 0.0,
+        },
+        _ => Trigger::Level {
+            ch: 9,
+            edge: Edge::Fall,
+            level: 36.0,
+        },
     };
-    cap.arm(&set, dt_s, g);
+    Settings {
+        ch: if j == 0 {
+            [12, 10, 11, 0]
+        } else {
+            [0, 3, 7, 12]
+        },
+        n_ch: if j == 4 { 1 } else { 4 },
+        div: 1,
+        pre_pct: if j == 0 { 0 } else { 10 },
+        trig,
+    }
 }
 
 /// One protection supervision tick (1 kHz, every `supervise_every()` = 20 steps), counted
@@ -443,9 +465,12 @@ fn main() -> ! {
     let mut bad_cfg = false;
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
-    let mut cap = Capture::<SAMPLES>::new();
-    armed_capture(&mut cap, cfg.ts(), ctl.gains());
-    let mut cap_step = cap.clone();
+    let mut caps: [Capture<SAMPLES>; CAPS] = core::array::from_fn(|j| {
+        let mut c = Capture::<SAMPLES>::new();
+        c.arm(&capture_settings(j), cfg.ts(), ctl.gains());
+        c
+    });
+    let mut caps_step = caps.clone();
     let mut fired = 0u32;
     let mut cap_iq = Capture::<SAMPLES>::new();
     cap_iq.arm(
@@ -513,23 +538,30 @@ fn main() -> ! {
                 }
             }
         }
-        // The step with the capture armed, on a copy (the same step as the one below), and
-        // the capture's sample alone (each capture armed again once ready).
+        // The step with each capture armed, on a copy (the same step as the one below), and
+        // each capture's sample alone (each capture armed again once ready).
         let p_next = {
             let mut copy = c.clone();
             copy.step_outputs(s);
             copy.p_elec().to_bits()
         };
-        black_box(regen_step_cap(&mut c.clone(), s, &mut cap_step, p_next));
         let p = regen_period_power(c);
-        regen_cap_record(c, &mut cap, p);
-        regen_cap_record_iq(c, &mut cap_iq, p, k as u32);
-        for cp in [&mut cap, &mut cap_step] {
-            if cp.state() == State::Ready {
-                armed_capture(cp, c.config().ts(), c.gains());
-                fired += 1;
+        for j in 0..CAPS {
+            let (cs, cr) = (&mut caps_step[j], &mut caps[j]);
+            if j == 2 && k % 700 == 350 {
+                cs.trigger_now();
+                cr.trigger_now();
+            }
+            black_box(regen_step_cap(&mut c.clone(), s, cs, p_next));
+            regen_cap_record(c, cr, p);
+            for cp in [cs, cr] {
+                if cp.state() == State::Ready {
+                    cp.arm(&capture_settings(j), c.config().ts(), c.gains());
+                    fired += (j == 0) as u32;
+                }
             }
         }
+        regen_cap_record_iq(c, &mut cap_iq, p, k as u32);
         if cap_iq.state() != State::Armed {
             bad_cfg = true;
         }
