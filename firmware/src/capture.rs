@@ -6,20 +6,21 @@
 //! [`Capture::record`] runs in the period routine ([`crate::period::Period::finish`], after
 //! the outputs are written and the period's latch and supervision are done, so a fault that
 //! latched in this period is seen in this period's sample). A sample stores what the step
-//! already stored ([`Controller::cap_words_with_power`]), converted to nothing: each channel is resolved
-//! when the capture is armed ([`source`]) to a word of the step's record and a right shift,
-//! and its code is that word shifted and saturated to `i16` (an indexed load, one `asr` and
-//! one `ssat`): the phase currents' and the bus voltage's ADC codes as they came, the d/q currents,
-//! references and voltages as their Q16.16 bits shifted, the speed as the encoder's speed
-//! estimate (counts per period) shifted, the travel as the encoder's count shifted, and the
-//! power, which the step does not compute, as the period computes it for its energy sum
-//! ([`Capture::record`] puts it into the record's power word). `cap dump` converts each code to the channel's unit with the gains
-//! in force at the arm ([`Decode`]), by the functions `tel` uses: a phase current or the bus
-//! voltage is exactly `tel`'s value; a d/q value or the power is `tel`'s value floored to the
-//! channel's step ([`lsb`]); the speed is `tel`'s formula on the speed estimate floored to
-//! the step; the travel is `tel`'s formula on the count floored to the step (without the
-//! speed observer's sub-count part, which `tel`'s travel adds). A level trigger compares in
-//! the same codes, by the signs of their differences (no branch).
+//! already stored ([`Controller::cap_words_with_power`]), converted to nothing: each channel
+//! is resolved when the capture is armed ([`source`]) to a word of the step's record and a
+//! right shift, and its code is that word shifted and saturated to `i16` (an indexed load, one
+//! `asr` and one `ssat`): the phase currents' and the bus voltage's ADC codes as they came,
+//! the d/q currents, references and voltages as their Q16.16 bits shifted, the speed as the
+//! encoder's speed estimate (counts per period) shifted, the travel as the encoder's count
+//! shifted, and the power, which the step does not compute, as the period computes it for its
+//! energy sum ([`Capture::record`] puts it into the record's power word). `cap dump` converts
+//! each code to the channel's unit with the gains in force at the arm ([`Decode`]), by the
+//! functions `tel` uses: a phase current or the bus voltage is exactly `tel`'s value; a d/q
+//! value or the power is `tel`'s value floored to the channel's step ([`lsb`]); the speed is
+//! `tel`'s formula on the speed estimate floored to the step; the travel is `tel`'s formula on
+//! the count floored to the step (without the speed observer's sub-count part, which `tel`'s
+//! travel adds). A level trigger compares in the same codes, by the signs of their differences
+//! (no branch).
 //!
 //! States: `idle` → `arm` → `armed` (the ring fills; the trigger is looked for once
 //! `pre` samples are held) → `triggered` (the rest of the ring fills) → `ready` (the
@@ -73,8 +74,8 @@ pub struct Source {
 }
 
 /// A number below 13 or 17 as a value the compiler knows the range of (an enum's
-/// discriminant): a word index into the 13 of [`Controller::cap_words_with_power`] and a shift below 32
-/// need no bounds check or mask in [`Capture::take`].
+/// discriminant): a word index into the 13 of [`Controller::cap_words_with_power`] and a
+/// shift below 32 need no bounds check or mask in [`Capture::take`].
 macro_rules! small {
     ($name:ident, $($v:ident = $n:expr),+) => {
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -223,10 +223,10 @@ struct StepRecord {
 
 /// Words of the step's record the capture can read ([`Controller::cap_words_with_power`]).
 pub const CAP_WORDS: usize = 13;
-/// Indices into [`Controller::cap_words_with_power`]: the phase codes (0 … 2, as `ia`, `ib`, `ic`), the
-/// d/q currents, references and voltages (3 … 8, Q16.16 bits, as `id` … `vq`), the bus code
-/// (9, as `vbus`), the speed estimate (counts per period, Q16.16 bits), the count and the
-/// power (Q16.16 bits, as `p`).
+/// Indices into [`Controller::cap_words_with_power`]: the phase codes (0 … 2, as `ia`, `ib`,
+/// `ic`), the d/q currents, references and voltages (3 … 8, Q16.16 bits, as `id` … `vq`), the
+/// bus code (9, as `vbus`), the speed estimate (counts per period, Q16.16 bits), the count and
+/// the power (Q16.16 bits, as `p`).
 pub const W_ID: usize = 3;
 pub const W_IQ: usize = 4;
 pub const W_ID_REF: usize = 5;
