@@ -78,13 +78,16 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   bline=$(timeout 300 sh "$tools/count.sh" "$elf" regen_step_boot 2>&1 | grep insnwin | tail -n1)
   echo "instructions per power-up step at opt-level 3: min $(echo "$bline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$bline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_cap_record 2>&1 | grep insnwin | tail -n1)
-  echo "instructions of the capture's sample (cap armed, after the outputs are written: Period::finish -> Capture::record; the worst over channel sets and trigger kinds: four channels with a level trigger on ia firing, a fault, a command and a level trigger on p with four, one channel with a level trigger on vbus; each armed again once full) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
+  capmax=$(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
+  echo "instructions of the capture's sample (cap armed, after the outputs are written: Period::finish -> Capture::record; the worst over channel sets and trigger kinds: four channels with a level trigger on ia firing, a fault, a command and a level trigger on p with four, one channel with a level trigger on vbus; each armed again once full) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $capmax"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_cap_record_iq 2>&1 | grep insnwin | tail -n1)
   echo "  the same for a load step's channels (iq, iq_ref, trigger cmd): $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   pline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_period_power 2>&1 | grep insnwin | tail -n1)
   echo "the period's electrical power for its energy sum (every period, before the step; after the outputs while a capture is armed, then shared with it) as the board builds it: min $(echo "$pline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$pline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step_cap 2>&1 | grep insnwin | tail -n1)
   echo "instructions per current-loop step with the capture armed (the step to its outputs and that sample, counted together) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
+  zmax=$(echo "$zline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
+  echo "  the step's worst and the sample's worst added (whether or not they meet in the replay): $((zmax + capmax))"
   mline=$(timeout 600 sh "$tools/count.sh" "$zelf" regen_step_measure 2>&1 | grep insnwin | tail -n1)
   echo "instructions per commissioning period (measure: its own loop in f32, not the running step) as the board builds it: min $(echo "$mline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$mline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (a period is 8,500 cycles at 170 MHz)"
   tline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step_trip 2>&1 | grep insnwin | tail -n1)
