@@ -257,7 +257,7 @@ test("end to end: connect, set R_L, align, run, power vs harmonic balance, fault
     assert.equal(await page.locator("#cap-state").textContent(), "ready");
     assert.match(await page.locator("#cap-info").textContent(), /trigger: fault/);
     assert.match(await page.locator("#cap-msg").textContent(), new RegExp(`^read ${cn} samples of iq_ref, iq, vq, p, ${cp} before the trigger`));
-    // The pre-trigger share: ⌊1000·25/100⌋ samples before the latch's period, t < 0 exactly there.
+    // The pre-trigger share: ⌊n·25/100⌋ (n the ring's samples) samples before the latch's period, t < 0 exactly there.
     assert.equal(cp, Math.floor((cn * CPRE) / 100));
     assert.equal(c.t.filter((x) => x < 0).length, cp, "the pre-trigger samples have t < 0");
     assert.equal(c.t[cp], 0, "t = 0 is the latch's period");
