@@ -142,7 +142,7 @@ pub(crate) fn conclude(
             holdout_rss_drop: 0.0,
             delta_bic: 0.0,
             note: format!(
-                "a force of the speed that no catalogue effect explains, or none apart from it (the findings do not stand apart from smooth odd powers of the speed beyond the baseline's): {:+.3} N at the peak speed {:.3e} m/s, {:+.3} N at half of it, over the baseline's friction; carried by those powers during the search and in the model",
+                "a force of the speed that the findings leave and no catalogue effect explains (smooth odd powers of the speed beyond the baseline's cut the held-out rss by the selection's margin): {:+.3} N at the peak speed {:.3e} m/s, {:+.3} N at half of it, over the baseline's friction; carried by those powers during the search and in the model",
                 c2 + c3,
                 ctx.vmax,
                 0.25 * c2 + 0.125 * c3

@@ -13,14 +13,18 @@ pub const DRIFT_COLUMNS: [&str; 2] = ["drift.t_legendre1", "drift.t_legendre2"];
 /// 2, 3 (reported as `unexplained`).
 pub const SPEED_COLUMNS: [&str; 2] = ["speed.sgn_v_u2", "speed.sgn_v_u3"];
 
-/// The diagnosis of a checked record: the selection run once; where the findings it names do
-/// not stand apart from a smooth force of the speed outside the catalogue (`speed_force_test`),
-/// run again with that force carried by nuisance columns (`SPEED_COLUMNS`).
+/// The diagnosis of a checked record: the selection run once; where its findings leave a
+/// smooth force of the speed that no catalogue effect explains (the test before the
+/// confounded check), run again with that force carried by nuisance columns
+/// (`SPEED_COLUMNS`), choosing among the first selection's kinds only.
 pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
-    match diagnose_with(rec, opt, rest.clone(), false) {
-        Some(d) => d,
-        None => diagnose_with(rec, opt, rest, true)
-            .expect("a selection carrying the speed force is not run again"),
+    // (the second run carries the force and does not test for it: it always gives a diagnosis)
+    let mut speed: Option<Vec<EffectKind>> = None;
+    loop {
+        match diagnose_with(rec, opt, rest.clone(), speed.as_deref()) {
+            Ok(d) => return d,
+            Err(kinds) => speed = Some(kinds),
+        }
     }
 }
 
@@ -43,15 +47,17 @@ pub(crate) fn speed_columns(ctx: &effects::Context) -> Vec<(String, Vec<f64>)> {
         .collect()
 }
 
-/// The selection on `rec`; with `speed_force` a force of the speed outside the catalogue is
-/// carried by nuisance columns from the start. `None` when, without them, the selection's
-/// findings do not stand apart from that force (the caller runs it again with them).
+/// The selection on `rec`; with `speed` a force of the speed outside the catalogue is carried
+/// by nuisance columns from the start and the candidates are the kinds `speed` lists. `Err`
+/// with the kinds chosen when, without them, the selection's findings leave that force (the
+/// caller runs it again with them).
 fn diagnose_with(
     rec: &Record,
     opt: &Options,
     rest: Vec<bool>,
-    speed_force: bool,
-) -> Option<Diagnosis> {
+    speed: Option<&[EffectKind]>,
+) -> Result<Diagnosis, Vec<EffectKind>> {
+    let speed_force = speed.is_some();
     let n = rec.len();
     let ctx = effects::Context::windowed_at_rest(rec, opt.screen_window.min(n), rest);
     let mut hold = holdout_mask(n);
@@ -193,14 +199,17 @@ fn diagnose_with(
         cols.extend(z);
     }
     // A force of the speed outside the catalogue, carried as the drift is when the first
-    // selection's findings did not stand apart from it (`speed_force_test` below).
-    let speed = speed_columns(&ctx);
-    let speed_sub: Vec<Vec<f64>> = speed.iter().map(|(_, v)| gather(&sub.rows, v)).collect();
+    // selection's findings left it (the test before the confounded check).
+    let speed_cols = speed_columns(&ctx);
+    let speed_sub: Vec<Vec<f64>> = speed_cols
+        .iter()
+        .map(|(_, v)| gather(&sub.rows, v))
+        .collect();
     if speed_force {
-        let zr = refs(&speed);
+        let zr = refs(&speed_cols);
         full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         sub_cols.extend(speed_sub.iter().cloned());
-        cols.extend(speed.iter().cloned());
+        cols.extend(speed_cols);
     }
     // The screening columns of every candidate value are the same in every round: computed
     // once (on the subsample, at most `screen_samples` rows each) and kept.
@@ -210,7 +219,10 @@ fn diagnose_with(
     let grams =
         std::cell::RefCell::new(std::collections::HashMap::<(usize, u64), GramCache>::new());
     let whole_fit = whole_fit;
-    let catalogue = effects::catalogue(&ctx);
+    let mut catalogue = effects::catalogue(&ctx);
+    if let Some(kinds) = speed {
+        catalogue.retain(|c| kinds.contains(&c.kind));
+    }
     let n_fixed = sub_cols.len();
     // the screening columns of the fixed terms and of a set of effects (from the cache)
     let set_cols = |set: &[Effect], cache: &mut Cache| -> Vec<Vec<f64>> {
@@ -617,54 +629,31 @@ fn diagnose_with(
     // powers of the speed beyond the baseline's (`SPEED_COLUMNS`: two free parameters, as many
     // as a finding of one column and one scanned parameter). Where they cut the findings'
     // held-out rss by the margin with a BIC decrease, the findings leave a force of the speed
-    // unexplained; where they take a finding's place (passing the selection beside the others)
-    // and the finding's held-out rss does not beat theirs by the margin, the record does not
-    // tell the finding from a force of the speed outside the catalogue. Either way the
-    // selection runs again with them carried as nuisance columns (as a drift is), each finding
-    // selected on what they leave.
-    if !speed_force {
+    // unexplained, and what they were chosen on held it: the selection runs again with those
+    // columns carried as nuisance columns (as a drift is), among the kinds chosen here, so
+    // that each finding is kept only where it carries the margin beside that force. Only
+    // where the selection ended by itself: a set cut at `max_effects` leaves what a further
+    // finding would take.
+    if !speed_force && chosen.len() < opt.max_effects {
         let tau = lag_of(&chosen);
-        // held-out rss of the set alone and with the speed columns, and the BIC change
-        let with_speed = |set: &[Effect], cache: &mut Cache| -> (f64, f64, f64) {
-            let k0 = set_k(set, cache);
-            let mut c = set_cols(set, cache);
-            let fit = |c: &[Vec<f64>]| {
-                let r: Vec<&[f64]> = c.iter().map(|v| v.as_slice()).collect();
-                let nn = normals(&r, &sub_f, &sub_hold, 1);
-                let nn = match tau {
-                    Some(t) => change_rows(&nn, &r, &sub_f, &sub_hold, &lag_rest_sub(t), -1.0),
-                    None => nn,
-                };
-                let th = nn.0.solve();
-                (nn.1.rss(&th), nn.0.rss(&th), nn.0.n)
+        let k0 = set_k(&chosen, &mut cache);
+        let mut c = set_cols(&chosen, &mut cache);
+        let fit = |c: &[Vec<f64>]| {
+            let r: Vec<&[f64]> = c.iter().map(|v| v.as_slice()).collect();
+            let nn = normals(&r, &sub_f, &sub_hold, 1);
+            let nn = match tau {
+                Some(t) => change_rows(&nn, &r, &sub_f, &sub_hold, &lag_rest_sub(t), -1.0),
+                None => nn,
             };
-            let (h0, t0, n0) = fit(&c);
-            c.extend(speed_sub.iter().cloned());
-            let (h1, t1, n1) = fit(&c);
-            (
-                h0,
-                h1,
-                bic(t1, n1, k0 + SPEED_COLUMNS.len()) - bic(t0, n0, k0),
-            )
+            let th = nn.0.solve();
+            (nn.1.rss(&th), nn.0.rss(&th), nn.0.n)
         };
-        let (h_set, h_with, db) = with_speed(&chosen, &mut cache);
-        let mut unexplained_speed = passes(h_with, h_set, db);
-        for k in 0..chosen.len() {
-            if unexplained_speed {
-                break;
-            }
-            let others: Vec<Effect> = chosen
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != k)
-                .map(|(_, e)| e.clone())
-                .collect();
-            let (h_o, h_og, db_o) = with_speed(&others, &mut cache);
-            unexplained_speed =
-                passes(h_og, h_o, db_o) && 1.0 - h_set / h_og.max(1e-300) < opt.min_holdout_gain;
-        }
-        if unexplained_speed {
-            return None;
+        let (h0, t0, n0) = fit(&c);
+        c.extend(speed_sub.iter().cloned());
+        let (h1, t1, n1) = fit(&c);
+        let dbic = bic(t1, n1, k0 + SPEED_COLUMNS.len()) - bic(t0, n0, k0);
+        if passes(h1, h0, dbic) {
+            return Err(chosen.iter().map(|e| e.kind).collect());
         }
     }
     // Two candidates that explain the same residual, one rule for every pair: each finding is
@@ -771,7 +760,7 @@ fn diagnose_with(
         &spread,
         baseline_holdout,
     );
-    Some(conclude(
+    Ok(conclude(
         &ctx,
         opt,
         selected,
@@ -974,8 +963,9 @@ mod speed_force_tests {
     /// Over eight records with a drag growing with the square of the speed, the diagnosis
     /// names no catalogue effect and carries a force of the speed whose value at the peak
     /// speed is the drag's; over the same eight motions and devices without the drag it
-    /// carries none and names nothing. Break: the speed force test skipped (the selection not
-    /// run again) names a friction curve of the speed on the drag records and fails.
+    /// carries none and names nothing. Breaks: the selection not run again names a friction
+    /// curve of the speed on the drag records; the test firing on every record gives the
+    /// drag-free ones a speed force; both fail.
     #[test]
     fn a_drag_of_the_speed_squared_is_unexplained_and_no_catalogue_name() {
         let mut errs = Vec::new();
