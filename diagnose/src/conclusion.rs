@@ -22,6 +22,7 @@ pub(crate) fn conclude(
     selected: Selected,
     baseline: Baseline,
     drift: Option<report::SlowChange>,
+    speed_force: bool,
     dropped_notes: Vec<String>,
 ) -> Diagnosis {
     let Selected {
@@ -116,6 +117,35 @@ pub(crate) fn conclude(
                 sc.f_bound,
                 100.0 * sc.power_fraction,
                 if drift_carried { "; carried by a trend in time during the search and in the model" } else { "" }
+            ),
+            holdout_rel_error_after: ho_rel,
+            consistency: 0.0,
+            confounded_with: None,
+        });
+    }
+    // a force of the speed outside the catalogue, carried by nuisance columns
+    // (`SPEED_COLUMNS`): their force at the peak speed and at half of it
+    if speed_force {
+        let coef = |name: &str| {
+            cols.iter()
+                .position(|c| c.0 == name)
+                .map_or(0.0, |j| th_full[j])
+        };
+        let (c2, c3) = (coef(SPEED_COLUMNS[0]), coef(SPEED_COLUMNS[1]));
+        findings.push(Finding {
+            effect: "unexplained".into(),
+            parameters: vec![
+                ("peak_speed_m_s".into(), ctx.vmax),
+                ("force_at_peak_speed_N".into(), c2 + c3),
+                ("force_at_half_peak_speed_N".into(), 0.25 * c2 + 0.125 * c3),
+            ],
+            holdout_rss_drop: 0.0,
+            delta_bic: 0.0,
+            note: format!(
+                "a force of the speed that the findings leave and no catalogue effect explains (smooth odd powers of the speed beyond the baseline's cut the held-out rss by the selection's margin): {:+.3} N at the peak speed {:.3e} m/s, {:+.3} N at half of it, over the baseline's friction; carried by those powers during the search and in the model",
+                c2 + c3,
+                ctx.vmax,
+                0.25 * c2 + 0.125 * c3
             ),
             holdout_rel_error_after: ho_rel,
             consistency: 0.0,

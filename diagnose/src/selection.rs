@@ -8,7 +8,56 @@ pub const SWAP_ROUNDS: usize = 4;
 /// Nuisance columns of a slow change of the force offset over the record (not a catalogue
 /// effect: reported as `unexplained`).
 pub const DRIFT_COLUMNS: [&str; 2] = ["drift.t_legendre1", "drift.t_legendre2"];
+/// Nuisance columns of a force of the speed outside the catalogue: the odd powers beyond the
+/// baseline's (sgn v and v, degrees 0 and 1 of |v| with the sign), sgn v·(|v|/v_max)^k for k =
+/// 2, 3 (reported as `unexplained`).
+pub const SPEED_COLUMNS: [&str; 2] = ["speed.sgn_v_u2", "speed.sgn_v_u3"];
+
+/// The diagnosis of a checked record: the selection run once; where its findings leave a
+/// smooth force of the speed that no catalogue effect explains (the test before the
+/// confounded check), run again with that force carried by nuisance columns
+/// (`SPEED_COLUMNS`), choosing among the first selection's kinds only.
 pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
+    // (the second run carries the force and does not test for it: it always gives a diagnosis)
+    let mut speed: Option<Vec<EffectKind>> = None;
+    loop {
+        match diagnose_with(rec, opt, rest.clone(), speed.as_deref()) {
+            Ok(d) => return d,
+            Err(kinds) => speed = Some(kinds),
+        }
+    }
+}
+
+/// The columns `SPEED_COLUMNS` over the record (`sgn` the baseline's sign, `vmax` the peak
+/// speed).
+pub(crate) fn speed_columns(ctx: &effects::Context) -> Vec<(String, Vec<f64>)> {
+    let iv = 1.0 / ctx.vmax.max(1e-300);
+    (2..=3)
+        .zip(SPEED_COLUMNS)
+        .map(|(k, name)| {
+            let c = ctx
+                .rec
+                .v
+                .iter()
+                .zip(&ctx.sgn)
+                .map(|(v, s)| s * (v.abs() * iv).powi(k))
+                .collect();
+            (name.to_string(), c)
+        })
+        .collect()
+}
+
+/// The selection on `rec`; with `speed` a force of the speed outside the catalogue is carried
+/// by nuisance columns from the start and the candidates are the kinds `speed` lists. `Err`
+/// with the kinds chosen when, without them, the selection's findings leave that force (the
+/// caller runs it again with them).
+fn diagnose_with(
+    rec: &Record,
+    opt: &Options,
+    rest: Vec<bool>,
+    speed: Option<&[EffectKind]>,
+) -> Result<Diagnosis, Vec<EffectKind>> {
+    let speed_force = speed.is_some();
     let n = rec.len();
     let ctx = effects::Context::windowed_at_rest(rec, opt.screen_window.min(n), rest);
     let mut hold = holdout_mask(n);
@@ -149,6 +198,19 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         sub_cols.extend(z.iter().map(|(_, v)| gather(&sub.rows, v)));
         cols.extend(z);
     }
+    // A force of the speed outside the catalogue, carried as the drift is when the first
+    // selection's findings left it (the test before the confounded check).
+    let speed_cols = speed_columns(&ctx);
+    let speed_sub: Vec<Vec<f64>> = speed_cols
+        .iter()
+        .map(|(_, v)| gather(&sub.rows, v))
+        .collect();
+    if speed_force {
+        let zr = refs(&speed_cols);
+        full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
+        sub_cols.extend(speed_sub.iter().cloned());
+        cols.extend(speed_cols);
+    }
     // The screening columns of every candidate value are the same in every round: computed
     // once (on the subsample, at most `screen_samples` rows each) and kept.
     type Cache = ScreenColumns;
@@ -157,7 +219,10 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let grams =
         std::cell::RefCell::new(std::collections::HashMap::<(usize, u64), GramCache>::new());
     let whole_fit = whole_fit;
-    let catalogue = effects::catalogue(&ctx);
+    let mut catalogue = effects::catalogue(&ctx);
+    if let Some(kinds) = speed {
+        catalogue.retain(|c| kinds.contains(&c.kind));
+    }
     let n_fixed = sub_cols.len();
     // the screening columns of the fixed terms and of a set of effects (from the cache)
     let set_cols = |set: &[Effect], cache: &mut Cache| -> Vec<Vec<f64>> {
@@ -558,6 +623,39 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             }
         }
     }
+    // A force of the speed outside the catalogue (a drag growing faster than the speed, a
+    // friction curve of another shape) set against the findings by the selection's own rule,
+    // on the screening window's held-out blocks and the rows of the set's delay: the smooth odd
+    // powers of the speed beyond the baseline's (`SPEED_COLUMNS`: two free parameters, as many
+    // as a finding of one column and one scanned parameter). Where they cut the findings'
+    // held-out rss by the margin with a BIC decrease, the findings leave a force of the speed
+    // unexplained, and what they were chosen on held it: the selection runs again with those
+    // columns carried as nuisance columns (as a drift is), among the kinds chosen here, so
+    // that each finding is kept only where it carries the margin beside that force. Only
+    // where the selection ended by itself: a set cut at `max_effects` leaves what a further
+    // finding would take.
+    if !speed_force && chosen.len() < opt.max_effects {
+        let tau = lag_of(&chosen);
+        let k0 = set_k(&chosen, &mut cache);
+        let mut c = set_cols(&chosen, &mut cache);
+        let fit = |c: &[Vec<f64>]| {
+            let r: Vec<&[f64]> = c.iter().map(|v| v.as_slice()).collect();
+            let nn = normals(&r, &sub_f, &sub_hold, 1);
+            let nn = match tau {
+                Some(t) => change_rows(&nn, &r, &sub_f, &sub_hold, &lag_rest_sub(t), -1.0),
+                None => nn,
+            };
+            let th = nn.0.solve();
+            (nn.1.rss(&th), nn.0.rss(&th), nn.0.n)
+        };
+        let (h0, t0, n0) = fit(&c);
+        c.extend(speed_sub.iter().cloned());
+        let (h1, t1, n1) = fit(&c);
+        let dbic = bic(t1, n1, k0 + SPEED_COLUMNS.len()) - bic(t0, n0, k0);
+        if passes(h1, h0, dbic) {
+            return Err(chosen.iter().map(|e| e.kind).collect());
+        }
+    }
     // Two candidates that explain the same residual, one rule for every pair: each finding is
     // set against the best candidate of another kind scanned without it (the swap pass's
     // scan). Where that candidate passes the selection itself and the finding's held-out rss
@@ -662,7 +760,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         &spread,
         baseline_holdout,
     );
-    conclude(
+    Ok(conclude(
         &ctx,
         opt,
         selected,
@@ -674,8 +772,9 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             full: base_full,
         },
         drift,
+        speed_force,
         dropped_notes,
-    )
+    ))
 }
 
 /// The force less the model `cols` with coefficients `th`, 0 at rest.
@@ -784,4 +883,114 @@ pub(crate) fn confounded_terms(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod speed_force_tests {
+    use super::*;
+
+    /// A closed-form record of a device with a drag growing with the square of the speed
+    /// (outside the catalogue): a three-tone motion of random frequencies, amplitudes and
+    /// phases with its exact velocity and acceleration, the force M·a + Fv·v + Fc·sgn v +
+    /// c2·v·|v| and white noise of 0.3 N. Its own generator (xorshift, a sum of 12 uniforms for
+    /// the noise). Returns the record and the drag's force at the record's peak speed.
+    fn drag_record(seed: u64, with_drag: bool) -> (Record, f64) {
+        let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut uniform = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tones: Vec<(f64, f64, f64)> = (0..3)
+            .map(|k| {
+                let f = (0.2 + 0.3 * uniform()) * (1.0 + 1.3 * k as f64);
+                let amp = (0.004 + 0.01 * uniform()) / (1.0 + k as f64);
+                (f, amp, std::f64::consts::TAU * uniform())
+            })
+            .collect();
+        let (m, fv, fc) = (
+            20.0 + 40.0 * uniform(),
+            100.0 + 300.0 * uniform(),
+            10.0 + 20.0 * uniform(),
+        );
+        let (fs, n) = (1000.0, 12_000);
+        let motion = |t: f64| {
+            tones
+                .iter()
+                .fold((0.0, 0.0, 0.0), |(x, v, a), &(f, amp, ph)| {
+                    let w = std::f64::consts::TAU * f;
+                    let (sn, cs) = (w * t + ph).sin_cos();
+                    (x + amp * sn, v + amp * w * cs, a - amp * w * w * sn)
+                })
+        };
+        let vmax = (0..n)
+            .map(|i| motion(i as f64 / fs).1.abs())
+            .fold(0.0, f64::max);
+        // the drag's force at the peak speed: 30 … 80 N
+        let at_peak = if with_drag {
+            30.0 + 50.0 * uniform()
+        } else {
+            0.0
+        };
+        let c2 = at_peak / (vmax * vmax);
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 / fs;
+            let (x, v, a) = motion(t);
+            let noise = (0..12).map(|_| uniform()).sum::<f64>() - 6.0;
+            rec.t.push(t);
+            rec.x.push(x);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f
+                .push(m * a + fv * v + fc * v.signum() + c2 * v * v.abs() + 0.3 * noise);
+        }
+        (rec, at_peak)
+    }
+
+    /// The force at the peak speed the diagnosis gives a force of the speed it carries
+    /// (`SPEED_COLUMNS`), if it carries one.
+    fn speed_force(d: &Diagnosis) -> Option<f64> {
+        d.findings
+            .iter()
+            .filter(|f| f.effect == "unexplained")
+            .flat_map(|f| &f.parameters)
+            .find(|p| p.0 == "force_at_peak_speed_N")
+            .map(|p| p.1)
+    }
+
+    /// Over eight records with a drag growing with the square of the speed, the diagnosis
+    /// names no catalogue effect and carries a force of the speed whose value at the peak
+    /// speed is the drag's; over the same eight motions and devices without the drag it
+    /// carries none and names nothing. Breaks: the selection not run again names a friction
+    /// curve of the speed on the drag records; the test firing on every record gives the
+    /// drag-free ones a speed force; both fail.
+    #[test]
+    fn a_drag_of_the_speed_squared_is_unexplained_and_no_catalogue_name() {
+        let mut errs = Vec::new();
+        for seed in 1..=8u64 {
+            let (rec, at_peak) = drag_record(seed, true);
+            let d = diagnose(&rec, &Options::default());
+            assert!(
+                d.catalogue_names().is_empty(),
+                "record {seed}: drag named {:?}",
+                d.catalogue_names()
+            );
+            let got = speed_force(&d).unwrap_or_else(|| panic!("record {seed}: no speed force"));
+            errs.push(got / at_peak - 1.0);
+            let (rec0, _) = drag_record(seed, false);
+            let d0 = diagnose(&rec0, &Options::default());
+            assert!(
+                d0.catalogue_names().is_empty() && speed_force(&d0).is_none(),
+                "record {seed} without drag: {:?}, speed force {:?}",
+                d0.catalogue_names(),
+                speed_force(&d0)
+            );
+        }
+        let worst = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        println!("speed force at peak speed, relative error per record: {errs:.4?}");
+        // (measured at most 2.5 %: the bound twice that)
+        assert!(worst < 0.05, "worst {worst:.4}");
+    }
 }
