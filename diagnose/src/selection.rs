@@ -915,15 +915,7 @@ mod speed_force_tests {
             10.0 + 20.0 * uniform(),
         );
         let (fs, n) = (1000.0, 12_000);
-        let motion = |t: f64| {
-            tones
-                .iter()
-                .fold((0.0, 0.0, 0.0), |(x, v, a), &(f, amp, ph)| {
-                    let w = std::f64::consts::TAU * f;
-                    let (sn, cs) = (w * t + ph).sin_cos();
-                    (x + amp * sn, v + amp * w * cs, a - amp * w * w * sn)
-                })
-        };
+        let motion = |t: f64| crate::tests::tones_motion(&tones, t);
         let vmax = (0..n)
             .map(|i| motion(i as f64 / fs).1.abs())
             .fold(0.0, f64::max);

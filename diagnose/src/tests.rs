@@ -420,20 +420,24 @@ pub(super) fn unit_noise(mut seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
+/// The position, velocity and acceleration at `t` of a sum of tones (frequency in Hz,
+/// amplitude in m, phase in rad), in closed form.
+pub(crate) fn tones_motion(tones: &[(f64, f64, f64)], t: f64) -> (f64, f64, f64) {
+    tones
+        .iter()
+        .fold((0.0, 0.0, 0.0), |(x, v, a), &(f, amp, ph)| {
+            let w = std::f64::consts::TAU * f;
+            let (sn, cs) = (w * t + ph).sin_cos();
+            (x + amp * sn, v + amp * w * cs, a - amp * w * w * sn)
+        })
+}
+
 /// A closed-form record: a three-tone motion with its exact velocity and acceleration, and
 /// the force M·a + Fv·v + Fc·sign(v) of a device evaluated at t − τ, white noise 0.3 N.
 fn delayed_record(m: f64, fv: f64, fc: f64, tau: f64) -> Record {
     let (fs, n) = (1000.0, 12_000);
     let tones = [(0.31, 0.012, 0.3), (0.73, 0.008, 1.9), (1.37, 0.004, 4.1)];
-    let motion = |t: f64| {
-        tones
-            .iter()
-            .fold((0.0, 0.0, 0.0), |(x, v, a), &(f, amp, ph)| {
-                let w = std::f64::consts::TAU * f;
-                let (sn, cs) = (w * t + ph).sin_cos();
-                (x + amp * sn, v + amp * w * cs, a - amp * w * w * sn)
-            })
-    };
+    let motion = |t: f64| tones_motion(&tones, t);
     let mut noise = unit_noise(0x9E37_79B9_7F4A_7C15);
     let mut rec = Record::default();
     for i in 0..n {
