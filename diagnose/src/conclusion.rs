@@ -131,21 +131,29 @@ pub(crate) fn conclude(
                 .position(|c| c.0 == name)
                 .map_or(0.0, |j| th_full[j])
         };
-        let (c2, c3) = (coef(SPEED_COLUMNS[0]), coef(SPEED_COLUMNS[1]));
+        // the force at the share `u` of the peak speed
+        let at = |u: f64| {
+            SPEED_COLUMNS
+                .iter()
+                .zip(SPEED_POWERS)
+                .map(|(name, k)| coef(name) * u.powi(k))
+                .sum::<f64>()
+        };
+        let (peak, half) = (at(1.0), at(0.5));
         findings.push(Finding {
             effect: "unexplained".into(),
             parameters: vec![
                 ("peak_speed_m_s".into(), ctx.vmax),
-                ("force_at_peak_speed_N".into(), c2 + c3),
-                ("force_at_half_peak_speed_N".into(), 0.25 * c2 + 0.125 * c3),
+                ("force_at_peak_speed_N".into(), peak),
+                ("force_at_half_peak_speed_N".into(), half),
             ],
             holdout_rss_drop: 0.0,
             delta_bic: 0.0,
             note: format!(
                 "a force of the speed that the findings leave and no catalogue effect explains (smooth odd powers of the speed beyond the baseline's cut the held-out rss by the selection's margin): {:+.3} N at the peak speed {:.3e} m/s, {:+.3} N at half of it, over the baseline's friction; carried by those powers during the search and in the model",
-                c2 + c3,
+                peak,
                 ctx.vmax,
-                0.25 * c2 + 0.125 * c3
+                half
             ),
             holdout_rel_error_after: ho_rel,
             consistency: 0.0,

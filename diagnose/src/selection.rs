@@ -12,6 +12,8 @@ pub const DRIFT_COLUMNS: [&str; 2] = ["drift.t_legendre1", "drift.t_legendre2"];
 /// baseline's (sgn v and v, degrees 0 and 1 of |v| with the sign), sgn v·(|v|/v_max)^k for k =
 /// 2, 3 (reported as `unexplained`).
 pub const SPEED_COLUMNS: [&str; 2] = ["speed.sgn_v_u2", "speed.sgn_v_u3"];
+/// The powers of |v|/v_max of `SPEED_COLUMNS`, in their order.
+pub(crate) const SPEED_POWERS: [i32; 2] = [2, 3];
 
 /// The diagnosis of a checked record: the selection run once; where its findings leave a
 /// smooth force of the speed that no catalogue effect explains (the test before the
@@ -32,7 +34,8 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
 /// speed).
 pub(crate) fn speed_columns(ctx: &effects::Context) -> Vec<(String, Vec<f64>)> {
     let iv = 1.0 / ctx.vmax.max(1e-300);
-    (2..=3)
+    SPEED_POWERS
+        .into_iter()
         .zip(SPEED_COLUMNS)
         .map(|(k, name)| {
             let c = ctx
