@@ -2,7 +2,8 @@
 //! (parameter: the resonance frequency f_r, Hz; the damping ratio from the record,
 //! `Context::compliance_zeta`). Its variant `COMPLIANCE_BEHIND`: the force measured in front
 //! of the compliant part with the device (inertia, drive, friction) behind it, so that the
-//! device's viscous force passes through the mode too.
+//! device's whole force passes through the mode and its own viscous force damps it
+//! (`behind_mode`).
 
 use super::*;
 
@@ -34,8 +35,8 @@ impl EffectModel for Compliance {
     fn walks_history(&self) -> bool {
         true
     }
-    /// With the device behind the compliance, the other damping ratios (`BEHIND_ZETAS`) at the
-    /// frequency found.
+    /// With the device behind the compliance, the link's other damping ratios (`BEHIND_ZETAS`)
+    /// at the frequency found.
     fn variants(&self, _ctx: &Context, centre: &Effect) -> Vec<Effect> {
         if !behind(centre) {
             return Vec::new();
@@ -109,11 +110,13 @@ impl EffectModel for Compliance {
         _base: &[f64],
     ) -> Vec<(String, f64)> {
         if behind(e) {
-            let zeta = behind_zeta(e);
-            let d = behind_device(ctx, e.param, zeta).unwrap_or([f64::NAN; 3]);
+            let zl = behind_zeta(e);
+            let (d, zeta) = behind_mode(ctx, e.param, zl, None)
+                .map_or(([f64::NAN; 3], f64::NAN), |b| (b.d, b.zeta));
             return vec![
                 ("resonance_Hz".into(), e.param),
                 ("gain".into(), coef("device_through_mode")),
+                ("link_damping_ratio".into(), zl),
                 ("damping_ratio".into(), zeta),
                 ("device_inertia_kg".into(), d[0]),
                 ("device_viscous_Ns_per_m".into(), d[1]),
@@ -169,9 +172,9 @@ impl EffectModel for Compliance {
 /// damping ratio (0: a mass hung on the device, its damping ratio from the record's profile).
 pub const COMPLIANCE_BEHIND: f64 = 1.0;
 
-/// The damping ratios of a mode with the device behind it: its own drive's and friction's
-/// damping pass through the mode, so the hung mass's profile does not give it; the grid's
-/// frequencies at `BEHIND_ZETA_GRID`'s, the others as variants at the frequency found.
+/// The link's own damping ratios with the device behind it (the mode's damping adds the
+/// device's, from its fitted coefficients: `behind_mode`); the grid's frequencies at
+/// `BEHIND_ZETA_GRID`'s, the others as variants at the frequency found.
 pub const BEHIND_ZETAS: [f64; 6] = [0.03, 0.06, 0.1, 0.2, 0.35, 0.6];
 /// The damping ratio of `BEHIND_ZETAS` the frequency grid is scanned at.
 pub const BEHIND_ZETA_GRID: usize = 2;
@@ -181,16 +184,16 @@ fn behind(e: &Effect) -> bool {
     e.param2 >= COMPLIANCE_BEHIND
 }
 
-/// The damping ratio of the variant with the device behind the compliance.
+/// The link's damping ratio of the variant with the device behind the compliance.
 fn behind_zeta(e: &Effect) -> f64 {
     e.param2 - COMPLIANCE_BEHIND
 }
 
 /// `compliance` columns of several frequencies on the rows of `s`, the modes' filters in one
 /// pass (a frequency whose profile identifies no mode has a zero column). A value with the
-/// device behind the compliance has one column instead, (H − 1)·(M·a + Fv·v + Fc·sgn v): the
-/// device's force through the mode less the rigid device's (coefficient: 1), its inertia,
-/// viscous and Coulomb coefficients fitted through the mode (`behind_device`).
+/// device behind the compliance has one column instead, the device's force through the link
+/// less the rigid device's (coefficient: 1), its inertia, viscous and Coulomb coefficients and
+/// the mode's damping fitted through the link (`behind_mode`).
 pub(crate) fn compliance_batch(
     ctx: &Context,
     s: &Sig,
@@ -224,13 +227,8 @@ pub(crate) fn compliance_batch(
         .map(|(e, z)| {
             if behind(e) {
                 let c = z
-                    .and_then(|z| {
-                        let t = through_mode(ctx, (e.param, z), s.rows);
-                        let d = device_through(ctx, s.rows, &t)?;
-                        Some(map(s.len(), |j| {
-                            d[0] * t[0][j] + d[1] * t[1][j] + d[2] * t[2][j]
-                        }))
-                    })
+                    .and_then(|zl| behind_mode(ctx, e.param, zl, s.rows))
+                    .map(|b| b.col)
                     .unwrap_or_else(|| vec![0.0; s.len()]);
                 return vec![("compliance.device_through_mode".to_string(), c)];
             }
@@ -243,39 +241,107 @@ pub(crate) fn compliance_batch(
         .collect()
 }
 
-/// (H − 1)·a, (H − 1)·v and (H − 1)·sgn v of the mode (f_r, ζ) on `rows` (all when None), H
-/// the device's motion behind the compliance over the motion in front of it: a low-pass of
-/// damping ratio ζ, the device's drive and friction damping it (the link's own damping, small
-/// beside them, left out of its numerator).
-fn through_mode(ctx: &Context, mode: (f64, f64), rows: Option<&[usize]>) -> [Vec<f64>; 3] {
-    let one = |sig: &[f64]| -> Vec<f64> {
-        let kept = resonator_passes(sig, &[mode], ctx.dt, rows)
-            .pop()
-            .map(|(_, k)| k)
-            .unwrap_or_default();
-        kept.iter()
-            .enumerate()
-            .map(|(j, o)| o[0] - rows.map_or(sig[j], |r| sig[r[j]]))
-            .collect()
+/// The total damping ratios of the mode with the device behind it over which `behind_mode`
+/// finds the one the device's own damping gives (log-spaced, each 2.2× the last): from a
+/// lightly damped link to a device whose drive holds it while the link's spring gives.
+const BEHIND_TOTAL_ZETAS: [f64; 8] = [0.03, 0.066, 0.15, 0.32, 0.7, 1.5, 3.3, 7.3];
+
+/// The mode with the device behind the compliant part, as `behind_mode` finds it.
+pub(crate) struct BehindMode {
+    /// (H − 1)·(M·a + Fv·v) + Fc·(H·s_d − sgn v) on the rows: the device's force through the
+    /// link less the rigid device's.
+    col: Vec<f64>,
+    /// The device's inertia, viscous and Coulomb coefficients.
+    pub d: [f64; 3],
+    /// The mode's total damping ratio: the link's and the device's own, ζ_l + Fv/(2·M·ω).
+    pub zeta: f64,
+}
+
+/// The device (inertia M, viscous Fv, Coulomb Fc) behind a link of stiffness k = M·ω² and
+/// damping c = 2·ζ_l·M·ω, the force measured on the link's other side. The device's motion is
+/// H·x with H = (2ζ_l·ω·s + ω²)/(s² + 2ζ·ω·s + ω²), ζ = ζ_l + Fv/(2·M·ω) (its own viscous
+/// force damps the mode), and the link's force is the device's, H·(M·a + Fv·v) + Fc·H·s_d,
+/// s_d the (smoothed) sign of the device's velocity H·v. The total damping ratio is the one
+/// the device's fitted coefficients give: the fits at `BEHIND_TOTAL_ZETAS` (the device's
+/// coefficients through each mode on the training samples in motion, `device_fit`) give each
+/// an implied ζ_l + Fv/(2·M·ω); the value where it crosses the assumed one (interpolated in
+/// ln ζ between the bracketing grid values, of the crossings the one of least rss) is the
+/// mode's, and the device is fitted there with s_d from its own velocity. None when no
+/// crossing lies on the grid or the device's fit is not a device's (a coefficient below 0, no
+/// inertia, or fewer than 10 rows): the column is then zero.
+pub(crate) fn behind_mode(
+    ctx: &Context,
+    f_r: f64,
+    zl: f64,
+    rows: Option<&[usize]>,
+) -> Option<BehindMode> {
+    let r = ctx.rec;
+    let w = std::f64::consts::TAU * f_r;
+    let through = |sig: &[f64], modes: &[(f64, f64)], rows: Option<&[usize]>| {
+        let mut out: Vec<Vec<f64>> = Vec::with_capacity(modes.len());
+        for (nf, kept) in resonator_passes(sig, modes, ctx.dt, rows) {
+            for k in 0..nf {
+                out.push(kept.iter().map(|o| o[k] + 2.0 * zl * o[4 + k]).collect());
+            }
+        }
+        out
     };
-    [one(&ctx.rec.a), one(&ctx.rec.v), one(&ctx.sgn)]
+    let modes: Vec<(f64, f64)> = BEHIND_TOTAL_ZETAS.iter().map(|&z| (f_r, z)).collect();
+    let ha = through(&r.a, &modes, rows);
+    let hv = through(&r.v, &modes, rows);
+    let hs = through(&ctx.sgn, &modes, rows);
+    // per total damping ratio: the device's fit and the damping ratio it implies
+    let fits: Vec<Option<([f64; 3], f64, f64)>> = (0..modes.len())
+        .map(|k| {
+            let (d, rss) = device_fit(ctx, rows, [&ha[k], &hv[k], &hs[k]])?;
+            let implied = zl + d[1] / (2.0 * d[0] * w);
+            (d[0] > 0.0 && implied.is_finite()).then_some((d, rss, implied))
+        })
+        .collect();
+    let lz: Vec<f64> = BEHIND_TOTAL_ZETAS.iter().map(|z| z.ln()).collect();
+    let mut best: Option<(f64, f64)> = None;
+    for k in 0..modes.len() - 1 {
+        let (Some(a), Some(b)) = (&fits[k], &fits[k + 1]) else {
+            continue;
+        };
+        let (ga, gb) = (a.2.ln() - lz[k], b.2.ln() - lz[k + 1]);
+        if ga >= 0.0 && gb <= 0.0 && ga > gb {
+            let lzeta = lz[k] + ga / (ga - gb) * (lz[k + 1] - lz[k]);
+            let rss = a.1.min(b.1);
+            if best.is_none_or(|(_, br)| rss < br) {
+                best = Some((lzeta.exp(), rss));
+            }
+        }
+    }
+    let zeta = best?.0;
+    let mode = [(f_r, zeta)];
+    // the device's velocity at every sample to the last row, its friction's sign through the
+    // mode
+    let n = rows.map_or(r.len(), |rw| rw.last().map_or(0, |l| l + 1));
+    let vd = through(&r.v[..n], &mode, None).pop()?;
+    let sd: Vec<f64> = vd.iter().map(|&v| sgn(v, ctx.v_eps)).collect();
+    let at = |j: usize| rows.map_or(j, |rw| rw[j]);
+    let m = rows.map_or(n, |rw| rw.len());
+    let hv = map(m, |j| vd[at(j)]);
+    let ha = through(&r.a, &mode, rows).pop()?;
+    let hs = through(&sd, &mode, rows).pop()?;
+    let (d, _) = device_fit(ctx, rows, [&ha, &hv, &hs])?;
+    if d.iter().any(|c| *c < 0.0) || d[0] <= 0.0 {
+        return None;
+    }
+    let col = map(m, |j| {
+        let i = at(j);
+        d[0] * (ha[j] - r.a[i]) + d[1] * (hv[j] - r.v[i]) + d[2] * (hs[j] - ctx.sgn[i])
+    });
+    Some(BehindMode { col, d, zeta })
 }
 
-/// The device behind a compliance of mode (f_r, ζ): its inertia, viscous and Coulomb
-/// coefficients fitted with its motion columns taken through the mode (`device_through`) on
-/// the whole record's training samples in motion.
-pub(crate) fn behind_device(ctx: &Context, f_r: f64, zeta: f64) -> Option<[f64; 3]> {
-    let t = through_mode(ctx, (f_r, zeta), None);
-    device_through(ctx, None, &t)
-}
-
-/// The device's inertia, viscous and Coulomb coefficients fitted with its motion columns taken
-/// through the mode (H·a, H·v, H·sgn v from `t`, the (H − 1) columns on `rows`, and an offset)
-/// on the training samples in motion among `rows` (all when None; screening rows lie in the
-/// screening window and take its held-out blocks), as `lag`'s delayed device. None when the
-/// fit is not a device's (a coefficient below 0, or fewer than 10 rows): the column is then
-/// zero and the variant is not named at this frequency.
-fn device_through(ctx: &Context, rows: Option<&[usize]>, t: &[Vec<f64>; 3]) -> Option<[f64; 3]> {
+/// The device's inertia, viscous and Coulomb coefficients fitted on its motion through the
+/// mode (`h`: H·a, H·v, H·s_d on `rows`, and an offset) on the training samples in motion
+/// among `rows` (all when None; screening rows lie in the screening window and take its
+/// held-out blocks), as `lag`'s delayed device, with the fit's rss. None with fewer than 10
+/// rows or a coefficient not finite.
+fn device_fit(ctx: &Context, rows: Option<&[usize]>, h: [&[f64]; 3]) -> Option<([f64; 3], f64)> {
     let r = ctx.rec;
     let n = rows.map_or(r.len(), |rw| rw.len());
     let hold = crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() });
@@ -289,15 +355,15 @@ fn device_through(ctx: &Context, rows: Option<&[usize]>, t: &[Vec<f64>; 3]) -> O
     if fit.len() < 10 {
         return None;
     }
-    let sigs: [&[f64]; 3] = [&r.a, &r.v, &ctx.sgn];
     let mut cols: Vec<Vec<f64>> = (0..3)
-        .map(|k| fit.iter().map(|&j| sigs[k][at(j)] + t[k][j]).collect())
+        .map(|k| fit.iter().map(|&j| h[k][j]).collect())
         .collect();
     cols.push(vec![1.0; fit.len()]);
     let f: Vec<f64> = fit.iter().map(|&j| r.f[at(j)]).collect();
     let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
     let train = vec![crate::TRAIN; fit.len()];
-    let th = crate::normals(&refs, &f, &train, 1).0.solve();
+    let nq = crate::normals(&refs, &f, &train, 1).0;
+    let th = nq.solve();
     let d = [th[0], th[1], th[2]];
-    d.iter().all(|c| c.is_finite() && *c >= 0.0).then_some(d)
+    d.iter().all(|c| c.is_finite()).then(|| (d, nq.rss(&th)))
 }
