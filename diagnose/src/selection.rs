@@ -726,9 +726,9 @@ fn diagnose_with(
     // Stability: each finding is tested on STABILITY_SEGMENTS independent consecutive
     // segments of the spread subsample (the whole record; each held out in turn, the model
     // fitted on the others): it holds on a segment when removing it raises that segment's rss
-    // by at least half the selection margin and its fit there is physical; it is kept when it
-    // holds on STABILITY_MIN segments and its leading coefficient keeps its sign on all of
-    // them. Its columns are the whole-record columns (`cols`) at those rows.
+    // by the selection margin (`STABILITY_GAIN_SHARE` of it) and its fit there is physical; it
+    // is kept when it holds on STABILITY_MIN segments and its leading coefficient keeps its
+    // sign on all of them. Its columns are the whole-record columns (`cols`) at those rows.
     let mut spans = Vec::new();
     let mut at = n_fixed;
     for e in &chosen {

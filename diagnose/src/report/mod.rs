@@ -161,7 +161,7 @@ pub const STATISTICS: [(&str, &str); 6] = [
     ),
     (
         "segments",
-        "held on % of segments: the record is cut into 5 consecutive segments and each is held out in turn with the model fitted on the others; a finding holds on a segment when removing it raises that segment's error by half the selection's margin and its fit there is physical. It is kept when it holds on 4 of 5 with its coefficients agreeing (jackknife t ≥ 3: determined to within a third of their value by every part of the record).",
+        "held on % of segments: the record is cut into 5 consecutive segments and each is held out in turn with the model fitted on the others; a finding holds on a segment when removing it raises that segment's error by the selection's margin and its fit there is physical. It is kept when it holds on 4 of 5 with its coefficients agreeing (jackknife t ≥ 3: determined to within a third of their value by every part of the record).",
     ),
     (
         "Wald",
