@@ -584,8 +584,7 @@ fn sinusoid_energy_is_the_direct_sum() {
 /// several speeds: a physical device's coefficients come back as they are; forces whose least
 /// squares need a negative viscous coefficient give the viscous one at 0 and the inertia and
 /// Coulomb of the least squares on (a, sgn v, 1), solved here by Cramer's rule. Break: the
-/// fallback removed (None for a negative coefficient, as before) fails the second case; the
-/// coefficient held at 0 taken from the wrong column fails its values.
+/// fallback removed (None for a negative coefficient) fails the second case.
 #[test]
 fn device_fit_holds_friction_non_negative() {
     let n = 4000;
