@@ -77,16 +77,19 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
 /// separate at exp(−πζ/√(1 − ζ²)) = 0.16); a plastic contact at 0.
 pub const PLAY_RESTITUTIONS: [f64; 4] = [0.0, 0.15, 0.3, 0.5];
 
-/// Contact frequencies of a compliant flank scanned at the width found, as fractions of the
-/// sample rate (fs/8, fs/16: 125, 62.5 Hz at 1 kHz), when the rigid, plastic contact (e = 0)
-/// is the best restitution and passes the selection itself; coded as `backlash`'s second parameter −f_c (`play_contact`),
-/// and kept only when it cuts the rigid flank's held-out rss by the selection's margin. A
-/// gear's or a ballscrew's flank is a spring: the force it carried at a reversal unloads over
-/// f/k of the motion's travel (k = M·(2π·f_c)²), where a rigid flank drops it at once. At
-/// fs/32 (31 Hz, inside the derived acceleration's band; measured on an earlier version of
-/// the walk) the rig's point-to-point 600038 took it at a width 8 % short, its held-out
-/// error 6.4 → 15.2 %.
-pub const PLAY_CONTACT_FRACTIONS: [f64; 2] = [0.125, 0.0625];
+/// Contact frequencies of a compliant flank scanned at the width found, as multiples of the
+/// derivative filter's cutoff (`record::default_cutoff` or the record's stated one: 2.5 and
+/// 1.25 × fc, 125 and 62.5 Hz at fc = 50 Hz), when the rigid, plastic contact (e = 0) is the
+/// best restitution and passes the selection itself; coded as `backlash`'s second parameter
+/// −f_c (`play_contact`), and kept only when it cuts the rigid flank's held-out rss by the
+/// selection's margin. A gear's or a ballscrew's flank is a spring: the force it carried at a
+/// reversal unloads over f/k of the motion's travel (k = M·(2π·f_c)²), where a rigid flank
+/// drops it at once. Its mode is the device's, not the acquisition's: the scan sits just above
+/// the band the derived acceleration follows (a mode inside it is the inertia's, and one far
+/// above it unloads within a sample and is the rigid flank), whatever the sample rate. At
+/// 0.625 × fc (inside the band; measured on an earlier version of the walk) a point-to-point
+/// record took it at a width 8 % short, its held-out error 6.4 → 15.2 %.
+pub const PLAY_CONTACT_CUTOFF_MULTIPLES: [f64; 2] = [2.5, 1.25];
 
 /// Samples after each contact left out of the fit of the device behind the play
 /// (`play_device_fit`): the pulse's `IMPACT_TAPS` and as many again. A contact can only push:
@@ -169,8 +172,8 @@ pub fn play_device(
 
 /// The device's inertia, viscous and Coulomb coefficients (with the force offset) fitted by
 /// least squares on the samples where `dev` is on a flank, not at rest and not within
-/// `CONTACT_SETTLE` samples after an impact; None when a coefficient is negative or the fit is
-/// not of full rank.
+/// `CONTACT_SETTLE` samples after an impact, each held non-negative (`nonnegative_device`);
+/// None when no such fit is physical.
 pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64)> {
     let r = ctx.rec;
     let va = ctx.v_with_a();
@@ -206,25 +209,58 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
             g[j * 4 + k] = g[k * 4 + j];
         }
     }
-    let sol = crate::solve_sym(&g, &bv, 4);
-    let t = &sol.th;
-    (sol.rank == 4 && t[..3].iter().all(|c| *c >= 0.0 && c.is_finite())).then(|| (t[0], t[1], t[2]))
+    nonnegative_device(&g, &bv)
+}
+
+/// The device's (inertia, viscous, Coulomb) coefficients of the normal equations `g`, `bv`
+/// (columns a, v, sgn v, 1) with the three held non-negative: the least-squares fit, or where
+/// it gives the viscous or the Coulomb coefficient below 0, the fit with that one at 0 (a
+/// device's friction is never negative; on a motion that cruises at one speed the two are
+/// barely told apart, and a negative one pays for a larger other); None when the inertia is
+/// not positive or no fit of full rank is physical.
+pub(crate) fn nonnegative_device(g: &[f64; 16], bv: &[f64; 4]) -> Option<(f64, f64, f64)> {
+    let physical = |t: &[f64]| t[..3].iter().all(|c| *c >= 0.0 && c.is_finite()) && t[0] > 0.0;
+    let sol = crate::solve_sym(g, bv, 4);
+    if sol.rank == 4 && physical(&sol.th) {
+        return Some((sol.th[0], sol.th[1], sol.th[2]));
+    }
+    // the viscous (1) or the Coulomb (2) coefficient held at 0: the fit of the other three
+    [1usize, 2]
+        .iter()
+        .filter_map(|&drop| {
+            let keep: Vec<usize> = (0..4).filter(|&k| k != drop).collect();
+            let gs: Vec<f64> = keep
+                .iter()
+                .flat_map(|&j| keep.iter().map(move |&k| g[j * 4 + k]))
+                .collect();
+            let bs: Vec<f64> = keep.iter().map(|&j| bv[j]).collect();
+            let s = crate::solve_sym(&gs, &bs, 3);
+            let mut t = [0.0; 4];
+            for (q, &k) in keep.iter().enumerate() {
+                t[k] = s.th[q];
+            }
+            // the residual sum of squares less the force's own: t'Gt − 2t'b
+            let rss = (0..4)
+                .map(|j| t[j] * ((0..4).map(|k| g[j * 4 + k] * t[k]).sum::<f64>() - 2.0 * bv[j]))
+                .sum::<f64>();
+            (s.rank == 3 && physical(&t)).then_some((rss, (t[0], t[1], t[2])))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, c)| c)
 }
 
 /// The coefficients (inertia, viscous, Coulomb) of the device behind a play of total width
 /// `b`, walked over the first `end` samples: the device walked with the baseline's, then its
 /// own fitted where it moves with the motion (`play_device_fit`: in contact, outside the
 /// contacts' transients and the samples at rest; the baseline's, fitted on every sample, are
-/// biased low by the gap's missing force), the baseline's when that fit fails; then walked
+/// biased low by the gap's missing force), the baseline's (held non-negative) when that fit fails; then walked
 /// once more with the coefficients so fitted and fitted again (`PLAY_DEVICE_WALKS`). The
 /// column's force is the device's, not the biased baseline's, and the report gives these
 /// (the simulator walks the same device).
 pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64, e: f64) -> (f64, f64, f64) {
-    let mut c = (
-        ctx.base_th.first().copied().unwrap_or(0.0),
-        ctx.base_th.get(1).copied().unwrap_or(0.0),
-        ctx.base_th.get(2).copied().unwrap_or(0.0),
-    );
+    // the baseline's, each held non-negative (the walk holds them so)
+    let base = |k: usize| ctx.base_th.get(k).copied().unwrap_or(0.0).max(0.0);
+    let mut c = (base(0), base(1), base(2));
     for _ in 0..PLAY_DEVICE_WALKS {
         let dev = play_device_on(ctx, end, b, e, c);
         match play_device_fit(ctx, &dev) {

@@ -579,3 +579,68 @@ fn sinusoid_energy_is_the_direct_sum() {
         assert!(rel < 6e-10, "{f} Hz: {a} against {b} ({rel:e})");
     }
 }
+
+/// `nonnegative_device` on exact forces of a device (columns a, v, sgn v, 1) over a motion at
+/// several speeds: a physical device's coefficients come back as they are; forces whose least
+/// squares need a negative viscous coefficient give the viscous one at 0 and the inertia and
+/// Coulomb of the least squares on (a, sgn v, 1), solved here by Cramer's rule. Break: the
+/// fallback removed (None for a negative coefficient) fails the second case.
+#[test]
+fn device_fit_holds_friction_non_negative() {
+    let n = 4000;
+    let rows: Vec<[f64; 4]> = (0..n)
+        .map(|i| {
+            let t = i as f64 / n as f64;
+            let v = 0.1 * (std::f64::consts::TAU * 3.0 * t).sin()
+                + 0.02 * (std::f64::consts::TAU * 7.0 * t).sin();
+            let a = 0.1 * std::f64::consts::TAU * 3.0 * (std::f64::consts::TAU * 3.0 * t).cos();
+            [a, v, v.signum(), 1.0]
+        })
+        .collect();
+    let normals = |f: &dyn Fn(&[f64; 4]) -> f64| {
+        let (mut g, mut b) = ([0.0; 16], [0.0; 4]);
+        for r in &rows {
+            for j in 0..4 {
+                b[j] += r[j] * f(r);
+                for k in 0..4 {
+                    g[j * 4 + k] += r[j] * r[k];
+                }
+            }
+        }
+        (g, b)
+    };
+    let (g, b) = normals(&|r| 10.0 * r[0] + 30.0 * r[1] + 20.0 * r[2] + 1.0);
+    let (m, fv, fc) = nonnegative_device(&g, &b).expect("a physical device");
+    assert!((m - 10.0).abs() < 1e-6 && (fv - 30.0).abs() < 1e-6 && (fc - 20.0).abs() < 1e-6);
+    let f = |r: &[f64; 4]| 10.0 * r[0] - 50.0 * r[1] + 20.0 * r[2] + 1.0;
+    let (g, b) = normals(&f);
+    let (m, fv, fc) = nonnegative_device(&g, &b).expect("the viscous coefficient held at 0");
+    // the least squares on (a, sgn v, 1) by Cramer's rule
+    let idx = [0usize, 2, 3];
+    let a3: Vec<Vec<f64>> = idx
+        .iter()
+        .map(|&j| idx.iter().map(|&k| g[j * 4 + k]).collect())
+        .collect();
+    let b3: Vec<f64> = idx.iter().map(|&j| b[j]).collect();
+    let det = |m: &Vec<Vec<f64>>| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&a3);
+    let with = |c: usize| {
+        let mut m = a3.clone();
+        for r in 0..3 {
+            m[r][c] = b3[r];
+        }
+        det(&m) / d
+    };
+    let (m_ref, fc_ref) = (with(0), with(1));
+    println!("held at Fv = 0: M {m:.4} (Cramer {m_ref:.4}), Fc {fc:.4} (Cramer {fc_ref:.4})");
+    assert_eq!(fv, 0.0);
+    assert!((m - m_ref).abs() < 1e-6 * m_ref.abs() && (fc - fc_ref).abs() < 1e-6 * fc_ref.abs());
+    assert!(
+        fc_ref > 0.0 && fc_ref < 20.0,
+        "the Coulomb level takes part of the negative viscous force"
+    );
+}

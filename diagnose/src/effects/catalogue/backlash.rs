@@ -75,16 +75,18 @@ impl EffectModel for Backlash {
             })
             .collect()
     }
-    /// A compliant, plastic flank (`PLAY_CONTACT_FRACTIONS`) when the rigid, plastic one is the
-    /// best restitution (the flank's stiffness refines a play the record shows).
+    /// A compliant, plastic flank (`PLAY_CONTACT_CUTOFF_MULTIPLES` of the derivative cutoff)
+    /// when the rigid, plastic one is the best restitution (the flank's stiffness refines a
+    /// play the record shows).
     fn extended_variants(&self, ctx: &Context, centre: &Effect) -> Vec<Effect> {
         if centre.param2 != 0.0 {
             return Vec::new();
         }
-        PLAY_CONTACT_FRACTIONS
+        let fc = derivative_cutoff(ctx);
+        PLAY_CONTACT_CUTOFF_MULTIPLES
             .iter()
             .map(|&q| Effect {
-                param2: -q / ctx.dt,
+                param2: -q * fc,
                 ..centre.clone()
             })
             .collect()
