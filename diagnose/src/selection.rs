@@ -944,15 +944,21 @@ mod speed_force_tests {
         (rec, at_peak)
     }
 
-    /// The force at the peak speed the diagnosis gives a force of the speed it carries
-    /// (`SPEED_COLUMNS`), if it carries one.
-    fn speed_force(d: &Diagnosis) -> Option<f64> {
-        d.findings
-            .iter()
-            .filter(|f| f.effect == "unexplained")
-            .flat_map(|f| &f.parameters)
-            .find(|p| p.0 == "force_at_peak_speed_N")
-            .map(|p| p.1)
+    /// The force at the peak speed and at half of it the diagnosis gives a force of the speed
+    /// it carries (`SPEED_COLUMNS`), if it carries one.
+    fn speed_force(d: &Diagnosis) -> Option<(f64, f64)> {
+        let param = |name: &str| {
+            d.findings
+                .iter()
+                .filter(|f| f.effect == "unexplained")
+                .flat_map(|f| &f.parameters)
+                .find(|p| p.0 == name)
+                .map(|p| p.1)
+        };
+        Some((
+            param("force_at_peak_speed_N")?,
+            param("force_at_half_peak_speed_N")?,
+        ))
     }
 
     /// Over eight records with a drag growing with the square of the speed, the diagnosis
@@ -960,10 +966,11 @@ mod speed_force_tests {
     /// speed is the drag's; over the same eight motions and devices without the drag it
     /// carries none and names nothing. Breaks: the selection not run again names a friction
     /// curve of the speed on the drag records; the test firing on every record gives the
-    /// drag-free ones a speed force; both fail.
+    /// drag-free ones a speed force; the force at the peak speed 5 % low; the force at half
+    /// of it with each power of the share one lower; each fails.
     #[test]
     fn a_drag_of_the_speed_squared_is_unexplained_and_no_catalogue_name() {
-        let mut errs = Vec::new();
+        let (mut errs, mut errs_half) = (Vec::new(), Vec::new());
         for seed in 1..=8u64 {
             let (rec, at_peak) = drag_record(seed, true);
             let d = diagnose(&rec, &Options::default());
@@ -972,8 +979,11 @@ mod speed_force_tests {
                 "record {seed}: drag named {:?}",
                 d.catalogue_names()
             );
-            let got = speed_force(&d).unwrap_or_else(|| panic!("record {seed}: no speed force"));
-            errs.push(got / at_peak - 1.0);
+            let (peak, half) =
+                speed_force(&d).unwrap_or_else(|| panic!("record {seed}: no speed force"));
+            errs.push(peak / at_peak - 1.0);
+            // the drag at half the peak speed is a quarter of its peak force
+            errs_half.push(half / (0.25 * at_peak) - 1.0);
             let (rec0, _) = drag_record(seed, false);
             let d0 = diagnose(&rec0, &Options::default());
             assert!(
@@ -983,9 +993,45 @@ mod speed_force_tests {
                 speed_force(&d0)
             );
         }
-        let worst = errs.iter().fold(0.0f64, |m, e| m.max(e.abs()));
         println!("speed force at peak speed, relative error per record: {errs:.4?}");
-        // (measured at most 2.5 %: the bound twice that)
-        assert!(worst < 0.05, "worst {worst:.4}");
+        println!("speed force at half the peak speed, relative error per record: {errs_half:.4?}");
+        let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
+        let worst = |e: &[f64]| e.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        println!(
+            "mean {:+.4} / {:+.4}, worst {:.4} / {:.4}",
+            mean(&errs),
+            mean(&errs_half),
+            worst(&errs),
+            worst(&errs_half)
+        );
+        // Measured: at the peak speed every error +0.4 … +2.5 % (mean +1.2 %, each within
+        // 1.3 % of the mean), at half of it +0.7 … +4.5 % (mean +2.2 %, within 2.3 %). The
+        // means are bounded at about twice their measured value and the spread at 3× its own,
+        // so a 5 % error in the reported force fails the first mean, and a wrong power of the
+        // speed (a factor 2 at half the peak speed) the second.
+        let spread = |e: &[f64]| {
+            let m = mean(e);
+            e.iter().fold(0.0f64, |w, x| w.max((x - m).abs()))
+        };
+        assert!(
+            mean(&errs).abs() < 0.025,
+            "mean at peak speed {:+.4}",
+            mean(&errs)
+        );
+        assert!(
+            spread(&errs) < 0.04,
+            "spread at peak speed {:.4}",
+            spread(&errs)
+        );
+        assert!(
+            mean(&errs_half).abs() < 0.045,
+            "mean at half the peak speed {:+.4}",
+            mean(&errs_half)
+        );
+        assert!(
+            spread(&errs_half) < 0.07,
+            "spread at half the peak speed {:.4}",
+            spread(&errs_half)
+        );
     }
 }

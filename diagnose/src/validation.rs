@@ -498,8 +498,8 @@ pub(crate) fn validate(
 /// (1 + e)·M); the smaller of their jackknife t. The taps one by one are the contact pulse's
 /// shape sampled from each contact's interpolated instant: a contact the walk places a sample
 /// off in one segment moves the pulse between neighbouring taps and leaves their sum, so the
-/// shape scatters across segments while the momentum it carries does not (rounded triangle
-/// 600007: t = 3.0 on the taps, 8.7 on the momentum, 122 on the gain).
+/// shape scatters across segments while the momentum it carries does not (on a rounded
+/// triangle of the rig: t = 3.0 on the taps, 8.7 on the momentum, 122 on the gain).
 pub fn play_agreement(fits: &[Vec<f64>], held: &[bool]) -> f64 {
     let gain: Vec<Vec<f64>> = fits.iter().map(|f| f[..1].to_vec()).collect();
     let momentum: Vec<Vec<f64>> = fits.iter().map(|f| vec![f[1..].iter().sum()]).collect();

@@ -15,8 +15,8 @@ pub fn catalogue(_ctx: &Context) -> Vec<Effect> {
 /// sensor noise floor wherever the motion is band-limited well below fs/4, plus one bin width:
 /// the edge is known to the bin width only (a Hann-windowed line between two bins shows in
 /// both, its main lobe spans ±2 bins), so the motion still drives a mode up to a bin above
-/// the last bin that shows it (rig seed 300006: a 2.643 Hz mode, the last bin 2.686 Hz, the
-/// fit's optimum 2.718 Hz was above the scan's top and not bracketed).
+/// the last bin that shows it (a 2.643 Hz mode whose last bin showing it was 2.686 Hz had its
+/// fit's optimum at 2.718 Hz, above the scan's top and not bracketed).
 pub fn motion_bandwidth(x: &[f64], dt: f64) -> f64 {
     let dx: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
     if dx.len() < 64 {

@@ -279,7 +279,7 @@ pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64, e: f64) -> (f
 /// coasts too far or too short and its contacts fall off the rig's by up to 147 samples; the
 /// device fitted on those contacts is physical but its viscous/Coulomb split is barely
 /// determined where the motion cruises at one speed. Walked once more with that device the
-/// contacts are the rig's, and the split with them (600042: viscous 301 → 439 N·s/m against
+/// contacts are the rig's, and the split with them (on one rig record: viscous 301 → 439 N·s/m against
 /// the rig's 427).
 pub const PLAY_DEVICE_WALKS: usize = 2;
 
