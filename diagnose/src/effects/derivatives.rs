@@ -94,6 +94,16 @@ impl DerivNoise {
 }
 
 impl Context<'_> {
+    /// The derivative filter's cutoff of the record, Hz: its `derivative_cutoff_hz`, else the
+    /// default (`record::default_cutoff`).
+    pub fn derivative_cutoff(&self) -> f64 {
+        self.rec
+            .meta
+            .get(crate::record::DERIVATIVE_CUTOFF_KEY)
+            .copied()
+            .unwrap_or_else(|| crate::record::default_cutoff(1.0 / self.dt))
+    }
+
     /// The velocity through the same band as the acceleration (`record::derive_from_x` at
     /// the record's `derivative_cutoff_hz`), for a model that integrates a motion from v and a
     /// together (the play's device walk): the record's v when it came through that band or was

@@ -68,15 +68,5 @@ impl EffectModel for ActuatorLag {
 /// coefficient ω_c·τ is at most 1, where the first-order expansion f(t + τ) ≈ f + τ·ḟ holds
 /// over the band the derived signals carry (its error (ωτ)²/2 stays below half the term).
 pub fn actuator_tc(ctx: &Context) -> f64 {
-    1.0 / (2.0 * std::f64::consts::PI * derivative_cutoff(ctx))
-}
-
-/// The derivative filter's cutoff of the record, Hz: its `derivative_cutoff_hz`, else the
-/// default (`record::default_cutoff`).
-pub fn derivative_cutoff(ctx: &Context) -> f64 {
-    ctx.rec
-        .meta
-        .get(crate::record::DERIVATIVE_CUTOFF_KEY)
-        .copied()
-        .unwrap_or_else(|| crate::record::default_cutoff(1.0 / ctx.dt))
+    1.0 / (2.0 * std::f64::consts::PI * ctx.derivative_cutoff())
 }

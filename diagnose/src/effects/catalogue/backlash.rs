@@ -82,7 +82,7 @@ impl EffectModel for Backlash {
         if centre.param2 != 0.0 {
             return Vec::new();
         }
-        let fc = derivative_cutoff(ctx);
+        let fc = ctx.derivative_cutoff();
         PLAY_CONTACT_CUTOFF_MULTIPLES
             .iter()
             .map(|&q| Effect {

@@ -23,7 +23,7 @@ mod spring;
 mod stribeck;
 mod velocity_strengthening_friction;
 
-pub use actuator_lag::{actuator_tc, derivative_cutoff, ACTUATOR_LAG};
+pub use actuator_lag::{actuator_tc, ACTUATOR_LAG};
 pub use backlash::BACKLASH;
 pub use cogging::COGGING;
 pub use compliance::COMPLIANCE;
