@@ -189,38 +189,45 @@ pub fn play_device_fit(ctx: &Context, dev: &PlayDevice) -> Option<(f64, f64, f64
             *s = true;
         }
     }
-    let mut g = [0.0; 16];
-    let mut bv = [0.0; 4];
+    let mut nq = crate::Normal {
+        m: 4,
+        g: vec![0.0; 16],
+        b: vec![0.0; 4],
+        ff: 0.0,
+        n: 0,
+    };
     for i in 0..n {
         if dev.free[i] || skip[i] || ctx.rest.get(i).copied().unwrap_or(false) {
             continue;
         }
         let c = [r.a[i], va[i], ctx.sgn[i], 1.0];
         for j in 0..4 {
-            bv[j] += c[j] * r.f[i];
+            nq.b[j] += c[j] * r.f[i];
             for k in j..4 {
-                g[j * 4 + k] += c[j] * c[k];
+                nq.g[j * 4 + k] += c[j] * c[k];
             }
         }
+        nq.ff += r.f[i] * r.f[i];
+        nq.n += 1;
     }
     // the lower triangle: c_k·c_j = c_j·c_k exactly, summed in the same order
     for j in 1..4 {
         for k in 0..j {
-            g[j * 4 + k] = g[k * 4 + j];
+            nq.g[j * 4 + k] = nq.g[k * 4 + j];
         }
     }
-    nonnegative_device(&g, &bv)
+    nonnegative_device(&nq)
 }
 
-/// The device's (inertia, viscous, Coulomb) coefficients of the normal equations `g`, `bv`
+/// The device's (inertia, viscous, Coulomb) coefficients of the normal equations `nq`
 /// (columns a, v, sgn v, 1) with the three held non-negative: the least-squares fit, or where
 /// it gives the viscous or the Coulomb coefficient below 0, the fit with that one at 0 (a
 /// device's friction is never negative; on a motion that cruises at one speed the two are
-/// barely told apart, and a negative one pays for a larger other); None when the inertia is
-/// not positive or no fit of full rank is physical.
-pub(crate) fn nonnegative_device(g: &[f64; 16], bv: &[f64; 4]) -> Option<(f64, f64, f64)> {
+/// barely told apart, and a negative one pays for a larger other), of the two the one of
+/// least rss; None when the inertia is not positive or no fit of full rank is physical.
+pub(crate) fn nonnegative_device(nq: &crate::Normal) -> Option<(f64, f64, f64)> {
     let physical = |t: &[f64]| t[..3].iter().all(|c| *c >= 0.0 && c.is_finite()) && t[0] > 0.0;
-    let sol = crate::solve_sym(g, bv, 4);
+    let sol = nq.solve_full();
     if sol.rank == 4 && physical(&sol.th) {
         return Some((sol.th[0], sol.th[1], sol.th[2]));
     }
@@ -229,21 +236,12 @@ pub(crate) fn nonnegative_device(g: &[f64; 16], bv: &[f64; 4]) -> Option<(f64, f
         .iter()
         .filter_map(|&drop| {
             let keep: Vec<usize> = (0..4).filter(|&k| k != drop).collect();
-            let gs: Vec<f64> = keep
-                .iter()
-                .flat_map(|&j| keep.iter().map(move |&k| g[j * 4 + k]))
-                .collect();
-            let bs: Vec<f64> = keep.iter().map(|&j| bv[j]).collect();
-            let s = crate::solve_sym(&gs, &bs, 3);
+            let s = nq.select(&keep).solve_full();
             let mut t = [0.0; 4];
             for (q, &k) in keep.iter().enumerate() {
                 t[k] = s.th[q];
             }
-            // the residual sum of squares less the force's own: t'Gt − 2t'b
-            let rss = (0..4)
-                .map(|j| t[j] * ((0..4).map(|k| g[j * 4 + k] * t[k]).sum::<f64>() - 2.0 * bv[j]))
-                .sum::<f64>();
-            (s.rank == 3 && physical(&t)).then_some((rss, (t[0], t[1], t[2])))
+            (s.rank == 3 && physical(&t)).then(|| (nq.rss(&t), (t[0], t[1], t[2])))
         })
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, c)| c)
@@ -253,10 +251,10 @@ pub(crate) fn nonnegative_device(g: &[f64; 16], bv: &[f64; 4]) -> Option<(f64, f
 /// `b`, walked over the first `end` samples: the device walked with the baseline's, then its
 /// own fitted where it moves with the motion (`play_device_fit`: in contact, outside the
 /// contacts' transients and the samples at rest; the baseline's, fitted on every sample, are
-/// biased low by the gap's missing force), the baseline's (held non-negative) when that fit fails; then walked
-/// once more with the coefficients so fitted and fitted again (`PLAY_DEVICE_WALKS`). The
-/// column's force is the device's, not the biased baseline's, and the report gives these
-/// (the simulator walks the same device).
+/// biased low by the gap's missing force), the baseline's (held non-negative) when that fit
+/// fails; then walked once more with the coefficients so fitted and fitted again
+/// (`PLAY_DEVICE_WALKS`). The column's force is the device's, not the biased baseline's, and
+/// the report gives these (the simulator walks the same device).
 pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64, e: f64) -> (f64, f64, f64) {
     // the baseline's, each held non-negative (the walk holds them so)
     let base = |k: usize| ctx.base_th.get(k).copied().unwrap_or(0.0).max(0.0);
@@ -279,8 +277,8 @@ pub fn play_device_coefficients(ctx: &Context, end: usize, b: f64, e: f64) -> (f
 /// coasts too far or too short and its contacts fall off the rig's by up to 147 samples; the
 /// device fitted on those contacts is physical but its viscous/Coulomb split is barely
 /// determined where the motion cruises at one speed. Walked once more with that device the
-/// contacts are the rig's, and the split with them (on one rig record: viscous 301 → 439 N·s/m against
-/// the rig's 427).
+/// contacts are the rig's, and the split with them (on one rig record: viscous 301 → 439
+/// N·s/m against the rig's 427).
 pub const PLAY_DEVICE_WALKS: usize = 2;
 
 /// `play_device` over the record's first `end` samples, with the device's (inertia, viscous,

@@ -598,8 +598,9 @@ fn device_fit_holds_friction_non_negative() {
         })
         .collect();
     let normals = |f: &dyn Fn(&[f64; 4]) -> f64| {
-        let (mut g, mut b) = ([0.0; 16], [0.0; 4]);
+        let (mut g, mut b, mut ff) = ([0.0; 16], [0.0; 4], 0.0);
         for r in &rows {
+            ff += f(r) * f(r);
             for j in 0..4 {
                 b[j] += r[j] * f(r);
                 for k in 0..4 {
@@ -607,14 +608,21 @@ fn device_fit_holds_friction_non_negative() {
                 }
             }
         }
-        (g, b)
+        let nq = crate::Normal {
+            m: 4,
+            g: g.to_vec(),
+            b: b.to_vec(),
+            ff,
+            n: rows.len(),
+        };
+        (g, b, nq)
     };
-    let (g, b) = normals(&|r| 10.0 * r[0] + 30.0 * r[1] + 20.0 * r[2] + 1.0);
-    let (m, fv, fc) = nonnegative_device(&g, &b).expect("a physical device");
+    let (_, _, nq) = normals(&|r| 10.0 * r[0] + 30.0 * r[1] + 20.0 * r[2] + 1.0);
+    let (m, fv, fc) = nonnegative_device(&nq).expect("a physical device");
     assert!((m - 10.0).abs() < 1e-6 && (fv - 30.0).abs() < 1e-6 && (fc - 20.0).abs() < 1e-6);
     let f = |r: &[f64; 4]| 10.0 * r[0] - 50.0 * r[1] + 20.0 * r[2] + 1.0;
-    let (g, b) = normals(&f);
-    let (m, fv, fc) = nonnegative_device(&g, &b).expect("the viscous coefficient held at 0");
+    let (g, b, nq) = normals(&f);
+    let (m, fv, fc) = nonnegative_device(&nq).expect("the viscous coefficient held at 0");
     // the least squares on (a, sgn v, 1) by Cramer's rule
     let idx = [0usize, 2, 3];
     let a3: Vec<Vec<f64>> = idx
