@@ -993,45 +993,27 @@ mod speed_force_tests {
                 speed_force(&d0)
             );
         }
-        println!("speed force at peak speed, relative error per record: {errs:.4?}");
-        println!("speed force at half the peak speed, relative error per record: {errs_half:.4?}");
         let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
-        let worst = |e: &[f64]| e.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        println!(
-            "mean {:+.4} / {:+.4}, worst {:.4} / {:.4}",
-            mean(&errs),
-            mean(&errs_half),
-            worst(&errs),
-            worst(&errs_half)
-        );
+        let spread = |e: &[f64]| {
+            let m = mean(e);
+            e.iter().fold(0.0f64, |w, x| w.max((x - m).abs()))
+        };
         // Measured: at the peak speed every error +0.4 … +2.5 % (mean +1.2 %, each within
         // 1.3 % of the mean), at half of it +0.7 … +4.5 % (mean +2.2 %, within 2.3 %). The
         // means are bounded at about twice their measured value and the spread at 3× its own,
         // so a 5 % error in the reported force fails the first mean, and a wrong power of the
         // speed (a factor 2 at half the peak speed) the second.
-        let spread = |e: &[f64]| {
-            let m = mean(e);
-            e.iter().fold(0.0f64, |w, x| w.max((x - m).abs()))
-        };
-        assert!(
-            mean(&errs).abs() < 0.025,
-            "mean at peak speed {:+.4}",
-            mean(&errs)
-        );
-        assert!(
-            spread(&errs) < 0.04,
-            "spread at peak speed {:.4}",
-            spread(&errs)
-        );
-        assert!(
-            mean(&errs_half).abs() < 0.045,
-            "mean at half the peak speed {:+.4}",
-            mean(&errs_half)
-        );
-        assert!(
-            spread(&errs_half) < 0.07,
-            "spread at half the peak speed {:.4}",
-            spread(&errs_half)
-        );
+        for (at, e, mean_max, spread_max) in [
+            ("the peak speed", &errs, 0.025, 0.04),
+            ("half the peak speed", &errs_half, 0.045, 0.07),
+        ] {
+            println!(
+                "speed force at {at}, relative error per record: {e:.4?}, mean {:+.4}, spread {:.4}",
+                mean(e),
+                spread(e)
+            );
+            assert!(mean(e).abs() < mean_max, "mean at {at} {:+.4}", mean(e));
+            assert!(spread(e) < spread_max, "spread at {at} {:.4}", spread(e));
+        }
     }
 }
