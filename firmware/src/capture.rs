@@ -422,8 +422,8 @@ pub trait CapPort {
 #[derive(Clone, Debug)]
 #[repr(C)]
 pub struct Capture<const N: usize> {
-    /// The state and, while armed, the trigger's kind, in one byte (`P_…`).
-    phase: u8,
+    /// The state and, while armed, the filling or the trigger's kind.
+    phase: Phase,
     /// `cap now` pending.
     now: bool,
     /// A fault was latched at the last sample (true at the arm: a fault latched before the
@@ -435,14 +435,17 @@ pub struct Capture<const N: usize> {
     /// The level trigger's channel's source.
     lv_word: Word,
     lv_shift: Shift,
-    /// Periods until the next sample (1: this one).
-    count: u16,
-    /// `div`, the count's start.
-    div: u16,
+    /// Periods to pass before the next sample (0: this one).
+    wait: u16,
+    /// `div − 1`: the wait after a sample.
+    skip: u16,
     /// The phase a trigger starts: triggered, or ready when no sample follows the trigger's.
-    fire_phase: u8,
-    /// Samples recorded since the arm; the next one goes to ring slot `k mod N`.
-    k: u64,
+    fire_phase: Phase,
+    /// The trigger's phase (level, command or fault), which follows [`Phase::Fill`].
+    trig_phase: Phase,
+    /// Samples recorded since the arm, the next one into ring slot `k mod N`; past 2^31 it
+    /// counts on modulo 2^31 above 2^31 ([`next_k`]), so it never falls below `N` again.
+    k: u32,
     pre_n: u32,
     /// Samples still to record after the trigger sample.
     left: u32,
@@ -454,25 +457,41 @@ pub struct Capture<const N: usize> {
     lv_rise: i32,
     lv_fall: i32,
     lv_prev: i32,
-    k_trig: u64,
     set: Settings,
     dt_s: f32,
     decode: Decode,
-    /// The samples, two codes to a word (the first channel's in the low half).
-    buf: [[u32; 2]; N],
+    /// The samples, four codes to a double word (the first channel's in the low half).
+    buf: [u64; N],
+}
+
+/// The sample count after `k`: `k + 1`, but from 2^31 on modulo 2^31 above 2^31 (the ring's
+/// slot, `k mod N`, unchanged: `N` divides 2^31).
+#[inline(always)]
+fn next_k(k: u32) -> u32 {
+    k.wrapping_add(1) | (k & 1 << 31)
 }
 
 /// A level no code reaches (codes are `i16`): the level of an edge a trigger does not fire on.
 const NO_EDGE: i32 = 1 << 20;
 
-/// A capture's phases: its [`State`], and while armed the trigger's kind (what
-/// [`Capture::record`] tests: one byte, the level trigger's first).
-const P_IDLE: u8 = 0;
-const P_READY: u8 = 1;
-const P_LEVEL: u8 = 2;
-const P_TRIGGERED: u8 = 3;
-const P_CMD: u8 = 4;
-const P_FAULT: u8 = 5;
+/// A capture's phase: its [`State`], and while armed the pre-trigger share's filling or
+/// the trigger's kind (what [`Capture::record`] dispatches on: one byte, one table jump; an
+/// enum, so the jump needs no range check).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+enum Phase {
+    Idle = 0,
+    Ready = 1,
+    /// Armed, a level trigger.
+    Level = 2,
+    Triggered = 3,
+    /// Armed, a command trigger (or `cap now` given).
+    Cmd = 4,
+    /// Armed, a fault trigger.
+    Fault = 5,
+    /// Armed, the pre-trigger share not yet held: no trigger is looked for.
+    Fill = 6,
+}
 
 impl<const N: usize> Default for Capture<N> {
     fn default() -> Self {
@@ -489,16 +508,17 @@ impl<const N: usize> Capture<N> {
         #[allow(clippy::let_unit_value)]
         let () = Self::POW2;
         Capture {
-            phase: P_IDLE,
+            phase: Phase::Idle,
             now: false,
             fault_prev: false,
             word: [Word::W0; CH_MAX],
             shift: [Shift::S0; CH_MAX],
             lv_word: Word::W0,
             lv_shift: Shift::S0,
-            count: 0,
-            div: 0,
-            fire_phase: P_IDLE,
+            wait: 0,
+            skip: 0,
+            fire_phase: Phase::Idle,
+            trig_phase: Phase::Idle,
             k: 0,
             pre_n: 0,
             left: 0,
@@ -506,7 +526,6 @@ impl<const N: usize> Capture<N> {
             lv_rise: 0,
             lv_fall: 0,
             lv_prev: 0,
-            k_trig: 0,
             set: Settings {
                 ch: [0; CH_MAX],
                 n_ch: 0,
@@ -516,16 +535,16 @@ impl<const N: usize> Capture<N> {
             },
             dt_s: 0.0,
             decode: Decode::NONE,
-            buf: [[0; 2]; N],
+            buf: [0; N],
         }
     }
 
     pub fn state(&self) -> State {
         match self.phase {
-            P_IDLE => State::Idle,
-            P_READY => State::Ready,
-            P_TRIGGERED => State::Triggered,
-            _ => State::Armed,
+            Phase::Idle => State::Idle,
+            Phase::Ready => State::Ready,
+            Phase::Triggered => State::Triggered,
+            Phase::Level | Phase::Cmd | Phase::Fault | Phase::Fill => State::Armed,
         }
     }
 
@@ -538,7 +557,7 @@ impl<const N: usize> Capture<N> {
     /// Armed or triggered: [`Capture::record`] has work (one compare).
     #[inline(always)]
     pub fn active(&self) -> bool {
-        self.phase >= P_LEVEL
+        self.phase as u8 >= Phase::Level as u8
     }
 
     /// One period (the period routine, after its outputs): a sample when one is due, the
@@ -551,11 +570,11 @@ impl<const N: usize> Capture<N> {
         if !self.active() {
             return;
         }
-        self.count -= 1;
-        if self.count != 0 {
+        if self.wait != 0 {
+            self.wait -= 1;
             return;
         }
-        self.count = self.div;
+        self.wait = self.skip;
         self.take(ctl, p_bits);
     }
 
@@ -572,42 +591,73 @@ impl<const N: usize> Capture<N> {
             read(words, c[2], sh[2]),
             read(words, c[3], sh[3]),
         );
-        // Two codes to a word (one `pkhbt` each), into slot `k mod N` (no bounds check).
-        let pack = |a: i32, b: i32| (a as u16 as u32) | (b as u32) << 16;
+        // Two codes to a word (one `pkhbt` each), both words into slot `k mod N` (no bounds
+        // check).
+        let pack = |a: i32, b: i32| ((a as u16 as u32) | (b as u32) << 16) as u64;
         let k = self.k;
-        self.buf[k as usize & (N - 1)] = [pack(r0, r1), pack(r2, r3)];
-        self.k = k + 1;
+        self.buf[k as usize & (N - 1)] = pack(r0, r1) | pack(r2, r3) << 32;
+        self.k = next_k(k);
         // Armed (the level trigger first: the dearest): the trigger's condition against the
         // last sample's; triggered: the samples still to come.
-        let fired = if self.phase == P_LEVEL {
-            let c = read(words, self.lv_word, self.lv_shift);
-            let (p, lr, lf) = (self.lv_prev, self.lv_rise, self.lv_fall);
-            self.lv_prev = c;
-            // Codes within ±2^15, levels within ±2^15 or ±NO_EDGE: the differences'
-            // signs are the comparisons. Rising: p < lr ≤ c; falling: p > lf ≥ c; each in
-            // the sign bit (never for a level at ∓NO_EDGE: p < −NO_EDGE, p > NO_EDGE).
-            let rise = (p - lr) & !(c - lr);
-            let fall = (lf - p) & !(lf - c);
-            (rise | fall) < 0
-        } else if self.phase == P_TRIGGERED {
-            self.left -= 1;
-            if self.left == 0 {
-                self.phase = P_READY;
+        match self.phase {
+            Phase::Level => {
+                let c = read(words, self.lv_word, self.lv_shift);
+                let (p, lr, lf) = (self.lv_prev, self.lv_rise, self.lv_fall);
+                self.lv_prev = c;
+                // Codes within ±2^15, levels within ±2^15 or ±NO_EDGE: the differences'
+                // signs are the comparisons. Rising: p < lr ≤ c; falling: p > lf ≥ c; each in
+                // the sign bit (never for a level at ∓NO_EDGE: p < −NO_EDGE, p > NO_EDGE).
+                let rise = (p - lr) & !(c - lr);
+                let fall = (lf - p) & !(lf - c);
+                if (rise | fall) < 0 {
+                    self.fire();
+                }
             }
-            return;
-        } else if self.phase == P_CMD {
-            self.now
-        } else {
-            let f = ctl.fault().is_some();
-            let edge = f & !self.fault_prev;
-            self.fault_prev = f;
-            edge
-        };
-        if fired && k >= self.pre_n as u64 {
-            self.k_trig = k;
-            self.left = self.post_n;
-            self.phase = self.fire_phase;
+            Phase::Cmd => {
+                if self.now {
+                    self.fire();
+                }
+            }
+            Phase::Fault => {
+                let f = ctl.fault().is_some();
+                if f & !self.fault_prev {
+                    self.fire();
+                }
+                self.fault_prev = f;
+            }
+            Phase::Fill => {
+                // The last sample before the trigger is looked for: what the first trigger
+                // test compares with (the level's channel, the fault latch).
+                if k + 1 == self.pre_n {
+                    self.lv_prev = read(words, self.lv_word, self.lv_shift);
+                    self.fault_prev = ctl.fault().is_some();
+                    self.phase = self.trig_phase;
+                }
+            }
+            Phase::Triggered => {
+                self.left -= 1;
+                if self.left == 0 {
+                    self.phase = Phase::Ready;
+                }
+            }
+            Phase::Idle | Phase::Ready => {}
         }
+    }
+
+    /// The trigger: the post-trigger part starts with this sample (the pre-trigger share is
+    /// held: the trigger is looked for only after `Phase::Fill`). (The trigger sample's index is
+    /// `k` less the samples recorded after it, which `left` tells: [`Capture::k_trig`].)
+    #[inline(always)]
+    fn fire(&mut self) {
+        self.left = self.post_n;
+        self.phase = self.fire_phase;
+    }
+
+    /// The trigger sample's index counted from the arm, once triggered: the samples held
+    /// after it are `post_n − left`.
+    fn k_trig(&self) -> u32 {
+        let after = self.post_n - self.left;
+        self.k.saturating_sub(after + 1)
     }
 }
 
@@ -616,11 +666,10 @@ impl<const N: usize> CapPort for Capture<N> {
         Status {
             state: self.state(),
             set: self.set,
-            held: self.k.min(N as u64) as u32,
+            held: self.k.min(N as u32),
             len: N as u32,
             pre_n: self.pre_n,
-            k_trig: (self.state() >= State::Triggered)
-                .then_some(self.k_trig.min(u32::MAX as u64) as u32),
+            k_trig: (self.state() >= State::Triggered).then_some(self.k_trig()),
             dt_s: self.dt_s,
             decode: self.decode,
         }
@@ -629,7 +678,6 @@ impl<const N: usize> CapPort for Capture<N> {
     fn arm(&mut self, set: &Settings, dt_s: f32, g: &Gains) {
         self.set = *set;
         self.set.div = set.div.clamp(1, DIV_MAX);
-        self.div = self.set.div;
         let n_ch = set.n_ch.min(CH_MAX as u8) as usize;
         // The slots past `n_ch` read `ia`'s code (one load: [`Capture::take`] reads all four).
         for c in self.set.ch.iter_mut().skip(n_ch) {
@@ -641,33 +689,42 @@ impl<const N: usize> CapPort for Capture<N> {
             self.shift[k] = Shift::of(s.shift);
         }
         self.decode = Decode::new(self.set.ch, g);
-        self.count = 1;
+        self.wait = 0;
+        self.skip = self.set.div - 1;
         self.k = 0;
-        self.pre_n = Self::pre_samples(set.pre_pct);
-        self.post_n = N as u32 - 1 - self.pre_n;
+        let pre_n = Self::pre_samples(set.pre_pct);
+        self.pre_n = pre_n;
+        self.post_n = N as u32 - 1 - pre_n;
         self.fire_phase = if self.post_n == 0 {
-            P_READY
+            Phase::Ready
         } else {
-            P_TRIGGERED
+            Phase::Triggered
         };
         self.left = 0;
         self.now = false;
         self.fault_prev = true;
-        self.k_trig = 0;
         self.dt_s = dt_s;
-        match set.trig {
-            Trigger::Fault => self.phase = P_FAULT,
-            Trigger::Cmd => self.phase = P_CMD,
-            Trigger::Level { ch, edge, level } => {
-                self.phase = P_LEVEL;
-                let s = source(ch, g);
-                self.lv_word = Word::of(s.word);
-                self.lv_shift = Shift::of(s.shift);
-                let l = level_code(ch, level, g);
-                self.lv_rise = if edge == Edge::Fall { -NO_EDGE } else { l };
-                self.lv_fall = if edge == Edge::Rise { NO_EDGE } else { l };
-                self.lv_prev = l;
-            }
+        self.trig_phase = match set.trig {
+            Trigger::Fault => Phase::Fault,
+            Trigger::Cmd => Phase::Cmd,
+            Trigger::Level { .. } => Phase::Level,
+        };
+        self.phase = if pre_n == 0 {
+            self.trig_phase
+        } else {
+            Phase::Fill
+        };
+        // (The channel is read at the last pre-trigger sample too: `ia`'s when not a level.)
+        self.lv_word = Word::W0;
+        self.lv_shift = Shift::S0;
+        if let Trigger::Level { ch, edge, level } = set.trig {
+            let s = source(ch, g);
+            self.lv_word = Word::of(s.word);
+            self.lv_shift = Shift::of(s.shift);
+            let l = level_code(ch, level, g);
+            self.lv_rise = if edge == Edge::Fall { -NO_EDGE } else { l };
+            self.lv_fall = if edge == Edge::Rise { NO_EDGE } else { l };
+            self.lv_prev = l;
         }
     }
 
@@ -676,20 +733,29 @@ impl<const N: usize> CapPort for Capture<N> {
             return false;
         }
         self.now = true;
-        self.phase = P_CMD;
+        if self.phase == Phase::Fill {
+            self.trig_phase = Phase::Cmd;
+        } else {
+            self.phase = Phase::Cmd;
+        }
         true
     }
 
     fn stop(&mut self) {
-        self.phase = P_IDLE;
+        self.phase = Phase::Idle;
         self.k = 0;
     }
 
     fn sample(&self, k: u32) -> [i16; CH_MAX] {
         // The next slot written is the oldest once the ring is full (as it is when ready).
         let i = (self.k as usize).wrapping_add(k as usize) & (N - 1);
-        let [a, b] = self.buf[i];
-        [a as i16, (a >> 16) as i16, b as i16, (b >> 16) as i16]
+        let s = self.buf[i];
+        [
+            s as i16,
+            (s >> 16) as i16,
+            (s >> 32) as i16,
+            (s >> 48) as i16,
+        ]
     }
 }
 
@@ -702,16 +768,18 @@ mod tests {
 
     proptest! {
         /// A level trigger on the bus voltage fires at the first sample whose voltage has
-        /// reached the level on its edge (the previous one short of it), and never into the
-        /// first sample: over random walks of the bus code, levels at a code's voltage, each
-        /// edge, the trigger sample's index (`k_trig`) is the first crossing found from the
-        /// voltages themselves.
+        /// reached the level on its edge (the previous one short of it), once the pre-trigger
+        /// share is held, and never into the first sample: over random walks of the bus code,
+        /// levels at a code's voltage, each edge, pre-trigger shares from none to all but one
+        /// sample of the ring, the trigger sample's index (`k_trig`) is the first crossing
+        /// into a sample at or after the share found from the voltages themselves.
         #[test]
         fn level_trigger_fires_at_the_first_crossing(
             start in 2300u16..3100,
             steps in prop::collection::vec(-40i32..=40, 20..200),
             above in 0u16..20,
             edge in prop::sample::select(std::vec![Edge::Rise, Edge::Fall, Edge::Both]),
+            pre_pct in prop::sample::select(std::vec![0u8, 0, 2, 10, 30, 60, 100]),
         ) {
             let cfg = Config::default();
             let vpc = cfg.volts_per_count as f64;
@@ -724,7 +792,7 @@ mod tests {
             // A code's voltage near the start (a crossing is likely): reached is crossed.
             let level = ((start + above) as f64 - 10.0) * vpc;
             let mut cap = Capture::<64>::new();
-            let set = Settings { ch: [9, 0, 0, 0], n_ch: 1, div: 1, pre_pct: 0,
+            let set = Settings { ch: [9, 0, 0, 0], n_ch: 1, div: 1, pre_pct,
                 trig: Trigger::Level { ch: 9, edge, level: level as f32 } };
             cap.arm(&set, 5e-5, ctl.gains());
             let z = cfg.adc_zero_code;
@@ -737,7 +805,9 @@ mod tests {
                 }
             }
             let v: std::vec::Vec<f64> = codes.iter().map(|&c| c as f64 * vpc).collect();
-            let want = (1..v.len()).find(|&k| {
+            // The share: ⌊64·pct/100⌋ samples, at most 63.
+            let pre = (64 * pre_pct as usize / 100).min(63);
+            let want = (pre.max(1)..v.len()).find(|&k| {
                 // (Relative 1e-9: the level's own rounding to f32.)
                 let (below, above) = (|x: f64| x < level * (1.0 - 1e-9), |x: f64| x > level * (1.0 + 1e-9));
                 let rise = below(v[k - 1]) && !below(v[k]);
