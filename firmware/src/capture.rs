@@ -597,8 +597,9 @@ impl<const N: usize> Capture<N> {
         let k = self.k;
         self.buf[k as usize & (N - 1)] = pack(r0, r1) | pack(r2, r3) << 32;
         self.k = next_k(k);
-        // Armed (the level trigger first: the dearest): the trigger's condition against the
-        // last sample's; triggered: the samples still to come.
+        // One table jump on the phase. Armed: the trigger's condition against the last
+        // sample's; filling: at its last sample what the first trigger test compares with;
+        // triggered: the samples still to come.
         match self.phase {
             Phase::Level => {
                 let c = read(words, self.lv_word, self.lv_shift);
@@ -626,8 +627,7 @@ impl<const N: usize> Capture<N> {
                 self.fault_prev = f;
             }
             Phase::Fill => {
-                // The last sample before the trigger is looked for: what the first trigger
-                // test compares with (the level's channel, the fault latch).
+                // (The level's channel and the fault latch: the trigger's kind is not tested.)
                 if k + 1 == self.pre_n {
                     self.lv_prev = read(words, self.lv_word, self.lv_shift);
                     self.fault_prev = ctl.fault().is_some();
