@@ -86,6 +86,11 @@ if [ -x "$tools/count.sh" ] || [ -f "$tools/count.sh" ]; then
   echo "the period's electrical power for its energy sum (every period, before the step; after the outputs while a capture is armed, then shared with it) as the board builds it: min $(echo "$pline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$pline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')"
   cline=$(timeout 300 sh "$tools/count.sh" "$zelf" regen_step_cap 2>&1 | grep insnwin | tail -n1)
   echo "instructions per current-loop step with the capture armed (the step to its outputs and that sample, counted together) as the board builds it: min $(echo "$cline" | sed -n 's/.*min=\([0-9]*\).*/\1/p'), max $(echo "$cline" | sed -n 's/.*max=\([0-9]*\).*/\1/p') (target: at most 400)"
+  zaddr=$($nm "$zelf" | awk '$3=="regen_step_cap" {print "0x"$1}' | head -n1)
+  timeout 300 qemu-system-arm -M mps2-an386 -cpu cortex-m4 -nographic -monitor none \
+    -semihosting-config enable=on,target=native -icount shift=0 \
+    -plugin "$plug,func=$zaddr,verbose=1" -d plugin -kernel "$zelf" 2>&1 |
+    awk '/insnwin: #/ {n++; if ($3 > 400) o++} END {printf "  of its %d counted calls %d (%.0f %%) above 400\n", n, o, 100 * o / n}'
   zmax=$(echo "$zline" | sed -n 's/.*max=\([0-9]*\).*/\1/p')
   echo "  the step's worst and the sample's worst added (whether or not they meet in the replay): $((zmax + capmax))"
   mline=$(timeout 600 sh "$tools/count.sh" "$zelf" regen_step_measure 2>&1 | grep insnwin | tail -n1)
