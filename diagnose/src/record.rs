@@ -303,17 +303,14 @@ impl Record {
 /// The highest default cutoff of the derivative (and force) filter, Hz (`default_cutoff`).
 pub const DEFAULT_CUTOFF_MAX_HZ: f64 = 50.0;
 
-/// The derivative (and force) filter's default cutoff for a record sampled at `fs`: fs/10, at
-/// most `DEFAULT_CUTOFF_MAX_HZ` (the twice-applied central difference passes 97 % of the
-/// acceleration at half of fs/10, so the sample rate does not narrow the band below 50 Hz
-/// down to 500 Hz; a narrower band loses the inertial force of the motion's turns, which the
-/// residual then carries wherever the device accelerates). The band the derived acceleration must follow is the
+/// The derivative (and force) filter's default cutoff for a record sampled at `fs`: fs/20, at
+/// most `DEFAULT_CUTOFF_MAX_HZ`. The band the derived acceleration must follow is the
 /// device's motion and the forces it excites (a bench's or a structure's motion below a few
 /// hertz, its modes and contacts within tens of hertz), not a share of the sample rate: the
 /// noise a quantised position puts into the acceleration grows as fc^2.5, so a cutoff raised
 /// with the sample rate buys noise and no band.
 pub fn default_cutoff(fs: f64) -> f64 {
-    (fs / 10.0).min(DEFAULT_CUTOFF_MAX_HZ)
+    (fs / 20.0).min(DEFAULT_CUTOFF_MAX_HZ)
 }
 
 /// The derivative (and force) filter's cutoff must lie strictly between 0 and the Nyquist
