@@ -167,7 +167,7 @@ pub enum Motion {
     },
     /// The motion of a record in the `diagnose` schema (CSV `t_s, x_m, f_N`, docs/diagnose.md),
     /// replayed: read when the scenario is built, velocity and acceleration derived by the
-    /// diagnosis's reader (zero-phase Butterworth-2 at `cutoff_hz`, default fs/10 at most 50 Hz, then central
+    /// diagnosis's reader (zero-phase Butterworth-2 at `cutoff_hz`, default fs/20 at most 50 Hz, then central
     /// differences) or taken from its `v_m_s`, `a_m_s2` columns, so the replay moves as the
     /// diagnosis saw the record move.
     Record {

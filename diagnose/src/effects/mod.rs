@@ -145,9 +145,8 @@ pub fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }
 
-/// Half-width (samples) of the window over which `at_rest` looks for motion: the period of the
-/// derivative filter's cutoff at fs/20 (at least the span over which the derived velocity
-/// averages: the default cutoff is fs/10 at most).
+/// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
+/// of the derivative filter at fs/20, the span over which the derived velocity averages.
 pub const REST_HALF_WINDOW: usize = 20;
 
 /// Samples left out of every fit: at rest — the position moves by no more than its own noise

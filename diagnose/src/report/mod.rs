@@ -169,7 +169,7 @@ pub const STATISTICS: [(&str, &str); 6] = [
     ),
     (
         "derived acceleration's band",
-        "the derived acceleration's band: velocity and acceleration are derived from the position by a zero-phase low-pass filter (cutoff fs/10, at most 50 Hz, unless stated); above about half that cutoff the derived acceleration loses more than 6 %, so an inertial force M·a there is not measured and may look like an effect. A finding tested 'inside the band' is measured where the derived signals follow the motion.",
+        "the derived acceleration's band: velocity and acceleration are derived from the position by a zero-phase low-pass filter (cutoff fs/20, at most 50 Hz, unless stated); above about half that cutoff the derived acceleration loses more than 6 %, so an inertial force M·a there is not measured and may look like an effect. A finding tested 'inside the band' is measured where the derived signals follow the motion.",
     ),
 ];
 

@@ -21,7 +21,7 @@ pub struct DiagnoseArgs {
     /// Write SVG residual plots into this directory.
     #[arg(long)]
     pub plots: Option<PathBuf>,
-    /// Low-pass cutoff (Hz) for derived velocity/acceleration (default fs/10, at most 50 Hz).
+    /// Low-pass cutoff (Hz) for derived velocity/acceleration (default fs/20, at most 50 Hz).
     #[arg(long)]
     pub cutoff_hz: Option<f64>,
     /// Low-pass the force with the derivative filter too (parallel filtering, as the EMPS
