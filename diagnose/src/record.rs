@@ -87,7 +87,7 @@ fn split_byte(s: &str, sep: u8) -> impl Iterator<Item = &str> {
 }
 
 /// Parse a record from CSV text. `cutoff_hz`: low-pass cutoff for derived v and a
-/// (None = fs/20).
+/// (None = `default_cutoff`).
 pub fn parse_csv(text: &str, cutoff_hz: Option<f64>) -> Result<Record, RecordError> {
     let mut meta = BTreeMap::new();
     let mut header: Option<Vec<String>> = None;
@@ -539,7 +539,7 @@ mod tests {
     /// The velocity follows a quantised motion's near-stops (0.05 mm/s between passes at
     /// 8 mm/s every 40 ms, the turn's |a| up to 0.63 m/s², 0.4 µm encoder at 1 kHz: the rig's
     /// recorded motion's turns) to within its noise. Through the acceleration's low-pass at
-    /// fs/20 the minimum is 0.26 mm/s too high (the 25 Hz turn loses 1 − 1/(1 + (25/50)⁴) =
+    /// 50 Hz the minimum is 0.26 mm/s too high (the 25 Hz turn loses 1 − 1/(1 + (25/50)⁴) =
     /// 5.9 % of its 4 mm/s swing, 0.24 mm/s); through `velocity_cutoff`'s band (82 Hz here)
     /// the largest of the 48 near-stops' errors is 0.068 mm/s. Bound 0.1 mm/s (1.5×: the
     /// figure is already the largest of 48). Break: the velocity through the acceleration's

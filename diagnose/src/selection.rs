@@ -295,6 +295,20 @@ fn diagnose_with(
         let set_spans = effect_spans(set, n_fixed, &*cache);
         // the rows the longest delay scanned leaves out (the delays are ranked on common rows)
         let lag_common = lag_rest_sub(effects::lag_max(ctx.dt));
+        // the set's column that carries the derived signals' noise (one effect of one column),
+        // with that noise's covariance: every candidate beside it is judged on fits corrected
+        // for it, as a noisy candidate is on its own
+        let set_noise: Option<(usize, [[f64; 3]; 3])> = {
+            let noisy: Vec<_> = set
+                .iter()
+                .zip(&set_spans)
+                .filter_map(|(e, &(a, b))| e.kind.derived_noise(&ctx, e).map(|(_, sn)| (a, b, sn)))
+                .collect();
+            match noisy.as_slice() {
+                [(a, b, sn)] if b - a == 1 => Some((*a, *sn)),
+                _ => None,
+            }
+        };
         let mut best: Option<(f64, f64, Effect)> = None;
         let mut of_kind: Vec<(f64, f64, Effect)> = Vec::new();
         for cand in &catalogue {
@@ -369,45 +383,56 @@ fn diagnose_with(
                 let mut tc = None;
                 // a delay whose least-squares gain is a unit one ranks by its held-out rss, as
                 // every candidate; one whose gain only the correction brings into the range
-                // ranks after all of those, by the corrected gain's distance from 1; a τ whose
-                // column is more than half noise is not resolved by either fit
-                let noise = eff.kind.derived_noise(&ctx, eff);
-                if let Some((effects::NoiseUse::RankCorrected, sn)) = noise {
-                    {
-                        match lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) {
-                            Some(_) if effects::plausible(eff, &t[nb..], &t[..nb.min(4)]) => {}
-                            Some((c, _)) => {
-                                key = Some(CORRECTED_RANK * (1.0 + (c[nb] - 1.0).abs()));
-                                tc = Some(c);
-                            }
-                            None => return (f64::INFINITY, 0.0, f64::INFINITY),
-                        }
-                    }
-                }
-                // a resonance: a mode whose column is more than half the derived
-                // acceleration's noise on the training rows is not resolved (as a delay τ):
-                // its fit would low-pass the inertia's noisy column, not draw a mode. A mode
+                // ranks after all of those, by the corrected gain's distance from 1
+                // (`NoiseUse::RankCorrected`).
+                // Every column that carries the derived signals' noise is not resolved where
+                // it is more than half that noise on the training rows (`lag_corrected`): its
+                // fit would low-pass the baseline's noisy columns, not draw the effect. One
                 // resolved must carry the margin on error-free columns: the fits with and
                 // without it corrected for that noise (`eiv_fit`, the covariance of the
-                // inertia's, the viscous and the mode's columns `Context::compliance_noise`),
-                // the held-out rss of each less the noise's share. The column's noise near the
-                // derivative cutoff is the inertia column's noise (H − 1 ≈ −1 there), so least
-                // squares credits a modal mass near the inertia with the noise it cancels on
-                // the held-out rows as on the training rows; the corrected fit does not.
-                if let Some((effects::NoiseUse::MarginCorrected, sn)) = noise {
+                // inertia's, the viscous and its column), the held-out rss of each less the
+                // noise's share. Least squares credits a column built from the derived
+                // signals with the noise it cancels in theirs (a delayed or filtered copy of a
+                // noisy acceleration averages its noise), on the held-out rows as on the
+                // training rows; the corrected fit does not.
+                let noise = eff.kind.derived_noise(&ctx, eff);
+                if let Some((use_, sn)) = noise {
+                    let Some((c, r1)) = lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) else {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
+                    };
+                    let idx: Vec<usize> = (0..nb).collect();
+                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    // (a fit not determined carries no margin)
+                    let Some((_, r0)) = eiv_fit(&bt, &bh, &[0, 1], &sn) else {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
+                    };
+                    if 1.0 - r1 / r0.max(1e-300) < opt.min_holdout_gain {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
+                    }
+                    if use_ == effects::NoiseUse::RankCorrected
+                        && !effects::plausible(eff, &t[nb..], &t[..nb.min(4)])
                     {
-                        let Some((_, r1)) = lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) else {
-                            return (f64::INFINITY, 0.0, f64::INFINITY);
-                        };
-                        let idx: Vec<usize> = (0..nb).collect();
-                        let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
-                        // (a fit not determined carries no margin)
-                        let Some((_, r0)) = eiv_fit(&bt, &bh, &[0, 1], &sn) else {
-                            return (f64::INFINITY, 0.0, f64::INFINITY);
-                        };
-                        if 1.0 - r1 / r0.max(1e-300) < opt.min_holdout_gain {
-                            return (f64::INFINITY, 0.0, f64::INFINITY);
-                        }
+                        key = Some(CORRECTED_RANK * (1.0 + (c[nb] - 1.0).abs()));
+                        tc = Some(c);
+                    }
+                }
+                // A candidate beside a set whose column carries that noise is judged by the same
+                // rule: it must carry the margin on the fits with and without it corrected for
+                // the set's noise. Least squares biases the noisy column's coefficient (a
+                // delay's gain low) and leaves a part of the force it carries in the residual
+                // (a Coulomb switch τ long after each reversal), which a candidate of another
+                // kind would take; the corrected fit leaves it with the noisy column.
+                else if let Some((j, sn)) = set_noise {
+                    let idx: Vec<usize> = (0..nb).collect();
+                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    let (Some((_, r1)), Some((_, r0))) = (
+                        eiv_fit(&nn.0, &nn.1, &[0, 1, j], &sn),
+                        eiv_fit(&bt, &bh, &[0, 1, j], &sn),
+                    ) else {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
+                    };
+                    if 1.0 - r1 / r0.max(1e-300) < opt.min_holdout_gain {
+                        return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
                 }
                 let tp = tc.as_deref().unwrap_or(&t);

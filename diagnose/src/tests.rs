@@ -490,13 +490,13 @@ fn lag_is_the_whole_force_delayed() {
 
 /// `delayed_record`'s motion and force (M = 40 kg, Fv = 300 N·s/m, Fc = 20 N, white
 /// noise 0.3 N) delayed by `tau`, as a CSV whose position is quantised to `q` (exact when
-/// 0), read with the default derivation (v and a derived from x at fs/20).
+/// 0), read with the default derivation (v and a derived from x at the default cutoff).
 fn delayed_csv(tau: f64, q: f64) -> Record {
     quantised_csv(&delayed_record(40.0, 300.0, 20.0, tau), q)
 }
 
 /// The record `r`'s time and force with its position quantised to `q` (exact when 0), as
-/// a CSV read with the default derivation (v and a derived from x at fs/20).
+/// a CSV read with the default derivation (v and a derived from x at the default cutoff).
 fn quantised_csv(r: &Record, q: f64) -> Record {
     let mut s = String::from("t_s,x_m,f_N\n");
     for i in 0..r.len() {

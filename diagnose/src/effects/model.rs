@@ -170,14 +170,15 @@ pub trait EffectModel: Sync {
     }
 }
 
-/// How an effect's column noise from the derived signals enters the scan.
+/// How an effect's column noise from the derived signals enters the scan. Either way it must
+/// carry the selection's margin on the fits with and without it corrected for the noise, and
+/// every candidate beside it must carry the margin on the fits corrected for its noise.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NoiseUse {
-    /// Its admissibility is judged on the fit corrected for the noise, and a value whose
+    /// Its admissibility is also judged on the fit corrected for the noise, and a value whose
     /// least-squares fit is not admissible ranks behind every value whose fit is.
     RankCorrected,
-    /// It must carry the selection's margin on the fits with and without it corrected for the
-    /// noise.
+    /// The margin only.
     MarginCorrected,
 }
 
