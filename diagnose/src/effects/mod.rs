@@ -460,13 +460,20 @@ pub fn predict(cols: &[(String, Vec<f64>)], th: &[f64]) -> Vec<f64> {
     predict_on(&refs, th)
 }
 
+/// Samples `predict_on` sums at a time.
+const PREDICT_BLOCK: usize = 2048;
+
 /// `predict` of columns given as slices.
 pub(crate) fn predict_on(cols: &[&[f64]], th: &[f64]) -> Vec<f64> {
     let n = cols[0].len();
     let mut p = vec![0.0; n];
-    for (c, t) in cols.iter().zip(th) {
-        for (pi, ci) in p.iter_mut().zip(*c) {
-            *pi += t * ci;
+    // block by block (each block's sums held in cache while every column is added)
+    for (b, pb) in p.chunks_mut(PREDICT_BLOCK).enumerate() {
+        let at = b * PREDICT_BLOCK;
+        for (c, t) in cols.iter().zip(th) {
+            for (pi, ci) in pb.iter_mut().zip(c.get(at..).unwrap_or_default()) {
+                *pi += t * ci;
+            }
         }
     }
     p
