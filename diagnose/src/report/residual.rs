@@ -20,7 +20,7 @@ pub fn whiteness(r: &[f64]) -> Whiteness {
     let lags = 20usize.min(n / 4).max(1);
     let mean = r.iter().sum::<f64>() / n as f64;
     let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
-    // the autocovariances of every lag in one pass over the record, each summed over its
+    // the autocovariances at every shift in one pass over the record, each summed over its
     // samples in order
     let d: Vec<f64> = r.iter().map(|x| x - mean).collect();
     let mut cs = [0.0f64; 21];
