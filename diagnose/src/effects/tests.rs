@@ -199,9 +199,9 @@ fn lane_pairs_are_scalar_arithmetic() {
     }
 }
 
-/// `compliance_columns_at` (each column formed from its filter's outputs at each row) gives, mode
-/// by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for bit,
-/// on every sample and at chosen rows, for the nine modes (passes of eight and one).
+/// `compliance_columns_at` (each column formed from its filter's outputs at each row) gives,
+/// mode by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for
+/// bit, on every sample and at chosen rows, for the nine modes (passes of eight and one).
 /// Breaks: the band-pass taken at the low-pass's index, or each mode given the next
 /// mode's ζ, fail it.
 #[test]
