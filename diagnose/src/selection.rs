@@ -30,21 +30,23 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     }
 }
 
-/// The columns `SPEED_COLUMNS` over the record (`sgn` the baseline's sign, `vmax` the peak
-/// speed).
-pub(crate) fn speed_columns(ctx: &effects::Context) -> Vec<(String, Vec<f64>)> {
+/// The columns `SPEED_COLUMNS` at `rows` (every sample when None; `sgn` the baseline's sign,
+/// `vmax` the peak speed).
+pub(crate) fn speed_columns(
+    ctx: &effects::Context,
+    rows: Option<&[usize]>,
+) -> Vec<(String, Vec<f64>)> {
     let iv = 1.0 / ctx.vmax.max(1e-300);
+    let (v, sgn) = (&ctx.rec.v, &ctx.sgn);
     SPEED_POWERS
         .into_iter()
         .zip(SPEED_COLUMNS)
         .map(|(k, name)| {
-            let c = ctx
-                .rec
-                .v
-                .iter()
-                .zip(&ctx.sgn)
-                .map(|(v, s)| s * (v.abs() * iv).powi(k))
-                .collect();
+            let at = |i: usize| sgn[i] * (v[i].abs() * iv).powi(k);
+            let c = match rows {
+                Some(r) => r.iter().map(|&i| at(i)).collect(),
+                None => (0..v.len()).map(at).collect(),
+            };
             (name.to_string(), c)
         })
         .collect()
@@ -203,12 +205,12 @@ fn diagnose_with(
     }
     // A force of the speed outside the catalogue, carried as the drift is when the first
     // selection's findings left it (the test before the confounded check).
-    let speed_cols = speed_columns(&ctx);
-    let speed_sub: Vec<Vec<f64>> = speed_cols
-        .iter()
-        .map(|(_, v)| gather(&sub.rows, v))
+    let speed_sub: Vec<Vec<f64>> = speed_columns(&ctx, Some(&sub.rows))
+        .into_iter()
+        .map(|(_, v)| v)
         .collect();
     if speed_force {
+        let speed_cols = speed_columns(&ctx, None);
         let zr = refs(&speed_cols);
         full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
         sub_cols.extend(speed_sub.iter().cloned());
@@ -226,6 +228,11 @@ fn diagnose_with(
     if let Some(kinds) = speed {
         catalogue.retain(|c| kinds.contains(&c.kind));
     }
+    // each kind's coarse grid, a function of the record alone: built once, at its first scan
+    let coarse_grids: Vec<std::cell::OnceCell<Vec<Effect>>> = catalogue
+        .iter()
+        .map(|_| std::cell::OnceCell::new())
+        .collect();
     let n_fixed = sub_cols.len();
     // the screening columns of the fixed terms and of a set of effects (from the cache)
     let set_cols = |set: &[Effect], cache: &mut Cache| -> Vec<Vec<f64>> {
@@ -311,7 +318,7 @@ fn diagnose_with(
         };
         let mut best: Option<(f64, f64, Effect)> = None;
         let mut of_kind: Vec<(f64, f64, Effect)> = Vec::new();
-        for cand in &catalogue {
+        for (cand, coarse) in catalogue.iter().zip(&coarse_grids) {
             if set.iter().any(|c| c.kind == cand.kind) {
                 continue;
             }
@@ -478,7 +485,7 @@ fn diagnose_with(
                     cache.insert(e.key(), c);
                 }
             };
-            let coarse = effects::grid(&ctx, cand);
+            let coarse = coarse.get_or_init(|| effects::grid(&ctx, cand));
             // the scanned range: an optimum on its edge is not bracketed (the profile of the
             // fit over the parameter still falls beyond the range the record resolves), so the
             // parameter is not identified and the effect is not named
@@ -500,7 +507,7 @@ fn diagnose_with(
             };
             let mut cb: Option<(f64, f64, Effect)> = None;
             let mut cb_key = f64::INFINITY;
-            scan(&coarse, cache, &mut cb, &mut cb_key);
+            scan(coarse, cache, &mut cb, &mut cb_key);
             if cand.kind.scanned() {
                 // a resonance's residual is sharp in frequency: one more level for it
                 for &width in cand.kind.refine_widths() {
@@ -539,7 +546,7 @@ fn diagnose_with(
             }
             if cand.kind.scanned()
                 && cb.as_ref().is_some_and(|c| {
-                    let (p_lo, p_hi) = effects::scan_range(&coarse, &c.2);
+                    let (p_lo, p_hi) = effects::scan_range(coarse, &c.2);
                     coarse_len_gt1(p_lo, p_hi) && !effects::interior(c.2.param, p_lo, p_hi)
                 })
             {

@@ -285,16 +285,19 @@ impl<'a> Context<'a> {
         let med = median(&mut steps);
         c.lambda_min = (stroke / 400.0).max(8.0 * med).min(stroke / 4.0);
         // baseline fit on the whole record gives the force proxy for the pred-based effects
-        let cols = base_columns(&c);
-        let refs: Vec<&[f64]> = cols.iter().map(|(_, v)| v.as_slice()).collect();
-        let all: Vec<u8> = c
-            .rest
-            .iter()
-            .map(|&r| if r { crate::AT_REST } else { crate::TRAIN })
-            .collect();
-        let (tr, _) = crate::normals(&refs, &rec.f, &all, 1);
-        c.base_th = tr.solve();
-        c.base_pred = predict(&cols, &c.base_th);
+        (c.base_th, c.base_pred) = {
+            let cols = base_columns_borrowed(&c);
+            let refs: Vec<&[f64]> = cols.iter().map(|(_, v)| &**v).collect();
+            let all: Vec<u8> = c
+                .rest
+                .iter()
+                .map(|&r| if r { crate::AT_REST } else { crate::TRAIN })
+                .collect();
+            let (tr, _) = crate::normals(&refs, &rec.f, &all, 1);
+            let th = tr.solve();
+            let pred = predict_on(&refs, &th);
+            (th, pred)
+        };
         let r0: Vec<f64> = rec.f.iter().zip(&c.base_pred).map(|(f, p)| f - p).collect();
         let (ss, nn) = r0
             .iter()
@@ -332,15 +335,26 @@ impl<'a> Context<'a> {
 }
 
 pub(crate) fn base_columns(ctx: &Context) -> Vec<(String, Vec<f64>)> {
+    base_columns_borrowed(ctx)
+        .into_iter()
+        .map(|(name, c)| (name.into(), c.into_owned()))
+        .collect()
+}
+
+/// `base_columns`, those that are the record's own signals borrowed from it.
+pub(crate) fn base_columns_borrowed<'c>(
+    ctx: &'c Context,
+) -> Vec<(&'static str, std::borrow::Cow<'c, [f64]>)> {
+    use std::borrow::Cow;
     let r = ctx.rec;
     let mut c = vec![
-        ("inertia".into(), r.a.clone()),
-        ("viscous".into(), r.v.clone()),
-        ("coulomb".into(), ctx.sgn.clone()),
-        ("offset".into(), vec![1.0; r.len()]),
+        ("inertia", Cow::Borrowed(r.a.as_slice())),
+        ("viscous", Cow::Borrowed(r.v.as_slice())),
+        ("coulomb", Cow::Borrowed(ctx.sgn.as_slice())),
+        ("offset", Cow::Owned(vec![1.0; r.len()])),
     ];
     if let Some((name, col, _)) = em_column(r) {
-        c.push((name.into(), col));
+        c.push((name, Cow::Owned(col)));
     }
     c
 }
@@ -442,11 +456,24 @@ pub fn build_columns(ctx: &Context, chosen: &[Effect]) -> Vec<(String, Vec<f64>)
 
 /// Σ θ_k col_k.
 pub fn predict(cols: &[(String, Vec<f64>)], th: &[f64]) -> Vec<f64> {
-    let n = cols[0].1.len();
+    let refs: Vec<&[f64]> = cols.iter().map(|(_, c)| c.as_slice()).collect();
+    predict_on(&refs, th)
+}
+
+/// Samples `predict_on` sums at a time.
+const PREDICT_BLOCK: usize = 2048;
+
+/// `predict` of columns given as slices.
+pub(crate) fn predict_on(cols: &[&[f64]], th: &[f64]) -> Vec<f64> {
+    let n = cols[0].len();
     let mut p = vec![0.0; n];
-    for ((_, c), t) in cols.iter().zip(th) {
-        for (pi, ci) in p.iter_mut().zip(c) {
-            *pi += t * ci;
+    // block by block (each block's sums held in cache while every column is added)
+    for (b, pb) in p.chunks_mut(PREDICT_BLOCK).enumerate() {
+        let at = b * PREDICT_BLOCK;
+        for (c, t) in cols.iter().zip(th) {
+            for (pi, ci) in pb.iter_mut().zip(c.get(at..).unwrap_or_default()) {
+                *pi += t * ci;
+            }
         }
     }
     p

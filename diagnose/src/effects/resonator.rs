@@ -12,8 +12,7 @@ pub const COMPLIANCE_ZETAS: [f64; 9] = [
 ];
 
 /// Second-order resonators (ω = 2π·f, damping ratio ζ per pair) driven by `u`, interleaved
-/// four per pass over the record (independent recurrences, so the pass is bound by arithmetic
-/// throughput rather than by one filter's feedback chain). Each is a zero-delay-feedback
+/// up to eight per pass over the record (`resonator_each`). Each is a zero-delay-feedback
 /// state-variable filter (bilinear transform prewarped at f, unconditionally stable) started
 /// at rest on the first input. Returns per pair the low-pass `ω²/(s²+2ζωs+ω²)·u` and band-pass
 /// `ωs/(s²+2ζωs+ω²)·u` outputs at `rows` (all samples when None).
@@ -23,26 +22,29 @@ pub fn resonator_batch(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<(Vec<f64>, Vec<f64>)> {
-    let mut out = Vec::with_capacity(modes.len());
-    for (nf, kept) in resonator_passes(u, modes, dt, rows) {
-        for k in 0..nf {
-            out.push((
-                kept.iter().map(|o| o[k]).collect(),
-                kept.iter().map(|o| o[4 + k]).collect(),
-            ));
-        }
-    }
+    let cap = rows.map_or(u.len(), |r| r.len());
+    let mut out = vec![(Vec::with_capacity(cap), Vec::with_capacity(cap)); modes.len()];
+    resonator_each(u, modes, dt, rows, |k, lp, bp| {
+        out[k].0.push(lp);
+        out[k].1.push(bp);
+    });
     out
 }
 
-/// `resonator_batch`'s passes: per pass of up to four filters (the modes in order), their
-/// count and per row kept the low-pass outputs (indices 0..4) and band-pass outputs (4..8).
-pub(crate) fn resonator_passes(
+/// The resonators of `modes` (as `resonator_batch`) walked over `u`, up to eight per pass
+/// (independent recurrences, so a pass is bound by arithmetic throughput rather than by one
+/// filter's feedback chain): `emit(k, low-pass, band-pass)` of filter `k` (its index in
+/// `modes`) at each row of `rows` (every sample when None), row by row within a pass, the
+/// passes in the order of the modes. Each filter's outputs are those of the filter run alone,
+/// bit for bit. The rows are taken while they ascend within the input.
+#[inline(always)]
+pub(crate) fn resonator_each(
     u: &[f64],
     modes: &[(f64, f64)],
     dt: f64,
     rows: Option<&[usize]>,
-) -> Vec<(usize, Vec<[f64; 8]>)> {
+    mut emit: impl FnMut(usize, f64, f64),
+) {
     let ca: Vec<[f64; 3]> = modes
         .iter()
         .map(|&(f, z)| {
@@ -52,35 +54,47 @@ pub(crate) fn resonator_passes(
         })
         .collect();
     let u0 = u.first().copied().unwrap_or(0.0);
-    let cap = rows.map_or(u.len(), |r| r.len());
-    // four filters per pass, two per lane pair, their states held in registers (a pass per
-    // filter would walk the record m times; all m at once keeps their states in memory)
-    ca.chunks(4)
-        .map(|c| match c.len() {
-            3 | 4 => resonator_walk::<2>(u, c, u0, rows, cap),
-            _ => resonator_walk::<1>(u, c, u0, rows, cap),
-        })
-        .collect()
+    // up to eight filters per pass, two per lane pair, their states held in registers (a pass
+    // per filter would walk the record m times; all m at once keeps their states in memory)
+    for (c, chunk) in ca.chunks(8).enumerate() {
+        let k0 = 8 * c;
+        let nf = chunk.len();
+        macro_rules! walk {
+            ($p:literal) => {
+                resonator_walk::<$p>(u, chunk, u0, rows, |lp, bp| {
+                    for k in 0..nf {
+                        emit(k0 + k, lp[k / 2].lanes()[k % 2], bp[k / 2].lanes()[k % 2]);
+                    }
+                })
+            };
+        }
+        match nf {
+            7 | 8 => walk!(4),
+            5 | 6 => walk!(3),
+            3 | 4 => walk!(2),
+            _ => walk!(1),
+        }
+    }
 }
 
-/// `resonator_batch`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of
-/// them, each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is
-/// the scalar one, so each filter's outputs are those of the filter run alone; an odd count's
-/// last pair runs the last filter twice): the filters' count and their outputs at `rows`, per
-/// row the low-passes then the band-passes (`resonator_passes`). The samples between two rows
-/// are stepped without a test per sample, each row's outputs kept in one store. The rows are
-/// taken while they ascend within the input (the outputs end at the first that does not).
+/// `resonator_each`'s pass for the filters of coefficients `ca` (2·`P` or 2·`P` − 1 of them,
+/// each started at rest on `u0`), two per lane pair (`F64x2`: each lane's arithmetic is the
+/// scalar one, so each filter's outputs are those of the filter run alone; an odd count's
+/// last pair runs the last filter twice): at each row, `emit(low-passes, band-passes)`, lane
+/// pair `p` holding filters 2·`p` and 2·`p` + 1. The samples between two rows are stepped
+/// without a test per sample. The rows are taken while they ascend within the input (the
+/// outputs end at the first that does not).
 #[inline(always)]
 pub(crate) fn resonator_walk<const P: usize>(
     u: &[f64],
     ca: &[[f64; 3]],
     u0: f64,
     rows: Option<&[usize]>,
-    cap: usize,
-) -> (usize, Vec<[f64; 8]>) {
+    mut emit: impl FnMut(&[F64x2; P], &[F64x2; P]),
+) {
     let nf = ca.len().min(2 * P);
     if nf == 0 {
-        return (0, Vec::new());
+        return;
     }
     let coef =
         |p: usize, c: usize| F64x2::new(ca[(2 * p).min(nf - 1)][c], ca[(2 * p + 1).min(nf - 1)][c]);
@@ -106,21 +120,13 @@ pub(crate) fn resonator_walk<const P: usize>(
         }
         (lp, bp)
     };
-    // a row's outputs: low-pass k at k, band-pass k at 4 + k
-    let flat = |(lp, bp): ([F64x2; P], [F64x2; P])| -> [f64; 8] {
-        let mut o = [0.0; 8];
-        for p in 0..P {
-            let (l, b) = (lp[p].lanes(), bp[p].lanes());
-            o[2 * p] = l[0];
-            o[2 * p + 1] = l[1];
-            o[4 + 2 * p] = b[0];
-            o[4 + 2 * p + 1] = b[1];
-        }
-        o
-    };
-    let mut kept: Vec<[f64; 8]> = Vec::with_capacity(cap);
     match rows {
-        None => kept.extend(u.iter().map(|&xin| flat(step(xin)))),
+        None => {
+            for &xin in u {
+                let (lp, bp) = step(xin);
+                emit(&lp, &bp);
+            }
+        }
         Some(r) => {
             // the next sample to step
             let mut i = 0;
@@ -133,14 +139,13 @@ pub(crate) fn resonator_walk<const P: usize>(
                     last = Some(step(xin));
                 }
                 match last {
-                    Some(o) => kept.push(flat(o)),
+                    Some((lp, bp)) => emit(&lp, &bp),
                     None => break,
                 }
                 i = row + 1;
             }
         }
     }
-    (nf, kept)
 }
 
 /// Two f64 lanes with lane-wise +, − and × (`resonator_walk`'s independent filters two at a
@@ -193,26 +198,17 @@ pub fn compliance_columns_at(
     dt: f64,
     rows: Option<&[usize]>,
 ) -> Vec<Vec<f64>> {
-    // each filter's column formed from the pass's kept outputs (resonator_batch's lp, bp)
-    let mut out = Vec::with_capacity(modes.len());
-    let mut zs = modes.iter().map(|&(_, z)| z);
-    for (nf, kept) in resonator_passes(a, modes, dt, rows) {
-        for k in 0..nf {
-            let z = zs.next().unwrap_or(0.0);
-            out.push(
-                kept.iter()
-                    .enumerate()
-                    .map(|(j, o)| {
-                        let aj = match rows {
-                            None => a[j],
-                            Some(r) => a[r[j]],
-                        };
-                        o[k] + 2.0 * z * o[4 + k] - aj
-                    })
-                    .collect(),
-            );
-        }
-    }
+    // each filter's column formed from its outputs at each row (resonator_batch's lp, bp)
+    let cap = rows.map_or(a.len(), |r| r.len());
+    let mut out = vec![Vec::with_capacity(cap); modes.len()];
+    resonator_each(a, modes, dt, rows, |k, lp, bp| {
+        let c = &mut out[k];
+        let aj = match rows {
+            None => a[c.len()],
+            Some(r) => a[r[c.len()]],
+        };
+        c.push(lp + 2.0 * modes[k].1 * bp - aj);
+    });
     out
 }
 
@@ -270,7 +266,7 @@ impl Context<'_> {
             let cols: Vec<Vec<f64>> = if rows.len() < 10 || self.base_pred.len() != n {
                 Vec::new()
             } else {
-                base_columns(self)
+                base_columns_borrowed(self)
                     .into_iter()
                     .map(|(_, c)| rows.iter().map(|&i| c[i]).collect())
                     .collect()

@@ -101,7 +101,7 @@ const RESONATOR_MODES: [(f64, f64); 9] = [
     (120.0, 0.04),
 ];
 
-/// The resonators interleaved in a pass (six: a pass of four and one of two) give, mode by
+/// The resonators interleaved in a pass (six, three lane pairs) give, mode by
 /// mode, exactly the resonator run alone, on every sample and at chosen rows.
 #[test]
 fn batched_resonators_match_single_ones() {
@@ -199,9 +199,9 @@ fn lane_pairs_are_scalar_arithmetic() {
     }
 }
 
-/// `compliance_columns_at` (each column formed from its pass's kept outputs) gives, mode
-/// by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for bit,
-/// on every sample and at chosen rows, for the nine modes (passes of four, four and one).
+/// `compliance_columns_at` (each column formed from its filter's outputs at each row) gives,
+/// mode by mode, LP + 2ζ·BP − a from `resonator_batch`'s low-pass and band-pass, bit for
+/// bit, on every sample and at chosen rows, for the nine modes (passes of eight and one).
 /// Breaks: the band-pass taken at the low-pass's index, or each mode given the next
 /// mode's ζ, fail it.
 #[test]

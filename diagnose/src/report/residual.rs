@@ -20,13 +20,21 @@ pub fn whiteness(r: &[f64]) -> Whiteness {
     let lags = 20usize.min(n / 4).max(1);
     let mean = r.iter().sum::<f64>() / n as f64;
     let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
+    // the autocovariances at every shift in one pass over the record, each summed over its
+    // samples in order
+    let d: Vec<f64> = r.iter().map(|x| x - mean).collect();
+    let mut cs = [0.0f64; 21];
+    let cs = &mut cs[..=lags];
+    for i in 1..n {
+        let di = d[i];
+        for (k, c) in cs.iter_mut().enumerate().take(i.min(lags) + 1).skip(1) {
+            *c += di * d[i - k];
+        }
+    }
     let mut q = 0.0;
     let mut lag1 = 0.0;
     for k in 1..=lags {
-        let mut c = 0.0;
-        for i in k..n {
-            c += (r[i] - mean) * (r[i - k] - mean);
-        }
+        let c = cs[k];
         let rho = if var > 0.0 { c / var } else { 0.0 };
         if k == 1 {
             lag1 = rho;

@@ -229,3 +229,49 @@ mod summary_tests {
         assert_eq!(statistics("no statistic here"), "");
     }
 }
+
+/// `whiteness` (every lag's autocovariance summed in one pass) gives, bit for bit, the
+/// Ljung–Box statistic and lag-1 autocorrelation of the sums written out lag by lag, on
+/// residuals of several lengths (shorter than the lags, around them, long) and colours.
+/// Breaks: a lag's sum started at its own lag + 1, or the last lag dropped, fail it.
+#[test]
+fn whiteness_is_the_lag_by_lag_sums() {
+    let mut s = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for n in [3usize, 7, 40, 81, 84, 1000, 20_000] {
+        for colour in [0.0, 0.6, 0.97] {
+            let mut prev = 0.0;
+            let r: Vec<f64> = (0..n)
+                .map(|_| {
+                    prev = colour * prev + next() + 0.3;
+                    prev
+                })
+                .collect();
+            let lags = 20usize.min(n / 4).max(1);
+            let mean = r.iter().sum::<f64>() / n as f64;
+            let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
+            let (mut q, mut lag1) = (0.0, 0.0);
+            for k in 1..=lags {
+                let mut c = 0.0;
+                for i in k..n {
+                    c += (r[i] - mean) * (r[i - k] - mean);
+                }
+                let rho = if var > 0.0 { c / var } else { 0.0 };
+                if k == 1 {
+                    lag1 = rho;
+                }
+                q += rho * rho / (n - k) as f64;
+            }
+            q *= n as f64 * (n as f64 + 2.0);
+            let w = crate::report::whiteness(&r);
+            assert_eq!(w.lags, lags);
+            assert_eq!(w.q.to_bits(), q.to_bits(), "n {n}, colour {colour}");
+            assert_eq!(w.lag1_autocorr.to_bits(), lag1.to_bits(), "n {n}");
+        }
+    }
+}

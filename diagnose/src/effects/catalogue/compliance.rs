@@ -263,7 +263,7 @@ pub(crate) struct BehindMode {
 /// force damps the mode), and the link's force is the device's, H·(M·a + Fv·v) + Fc·H·s_d,
 /// s_d the (smoothed) sign of the device's velocity H·v. The total damping ratio is the one
 /// the device's fitted coefficients give: the fits at `BEHIND_TOTAL_ZETAS` (the device's
-/// coefficients through each mode on the training samples in motion, `device_fit`) give each
+/// coefficients through each mode on the training samples in motion, `DeviceRows::fit`) give each
 /// an implied ζ_l + Fv/(2·M·ω); the value where it crosses the assumed one (interpolated in
 /// ln ζ between the bracketing grid values, of the crossings the one of least rss) is the
 /// mode's, and the device is fitted there with s_d from its own velocity. None when no
@@ -278,14 +278,15 @@ pub(crate) fn behind_mode(
     let r = ctx.rec;
     let w = std::f64::consts::TAU * f_r;
     let through = |sig: &[f64], modes: &[(f64, f64)], rows: Option<&[usize]>| {
-        let mut out: Vec<Vec<f64>> = Vec::with_capacity(modes.len());
-        for (nf, kept) in resonator_passes(sig, modes, ctx.dt, rows) {
-            for k in 0..nf {
-                out.push(kept.iter().map(|o| o[k] + 2.0 * zl * o[4 + k]).collect());
-            }
-        }
+        let cap = rows.map_or(sig.len(), |rw| rw.len());
+        let mut out: Vec<Vec<f64>> = vec![Vec::with_capacity(cap); modes.len()];
+        resonator_each(sig, modes, ctx.dt, rows, |k, lp, bp| {
+            out[k].push(lp + 2.0 * zl * bp)
+        });
         out
     };
+    // the rows the device is fitted on, the same at every damping ratio
+    let dr = DeviceRows::new(ctx, rows)?;
     let modes: Vec<(f64, f64)> = BEHIND_TOTAL_ZETAS.iter().map(|&z| (f_r, z)).collect();
     let ha = through(&r.a, &modes, rows);
     let hv = through(&r.v, &modes, rows);
@@ -293,7 +294,7 @@ pub(crate) fn behind_mode(
     // per total damping ratio: the device's fit and the damping ratio it implies
     let fits: Vec<Option<([f64; 3], f64, f64)>> = (0..modes.len())
         .map(|k| {
-            let (d, rss) = device_fit(ctx, rows, [&ha[k], &hv[k], &hs[k]])?;
+            let (d, rss) = dr.fit([&ha[k], &hv[k], &hs[k]])?;
             let implied = zl + d[1] / (2.0 * d[0] * w);
             (d[0] > 0.0 && implied.is_finite()).then_some((d, rss, implied))
         })
@@ -325,7 +326,7 @@ pub(crate) fn behind_mode(
     let hv = map(m, |j| vd[at(j)]);
     let ha = through(&r.a, &mode, rows).pop()?;
     let hs = through(&sd, &mode, rows).pop()?;
-    let (d, _) = device_fit(ctx, rows, [&ha, &hv, &hs])?;
+    let (d, _) = dr.fit([&ha, &hv, &hs])?;
     if d.iter().any(|c| *c < 0.0) || d[0] <= 0.0 {
         return None;
     }
@@ -336,34 +337,48 @@ pub(crate) fn behind_mode(
     Some(BehindMode { col, d, zeta })
 }
 
-/// The device's inertia, viscous and Coulomb coefficients fitted on its motion through the
-/// mode (`h`: H·a, H·v, H·s_d on `rows`, and an offset) on the training samples in motion
-/// among `rows` (all when None; screening rows lie in the screening window and take its
-/// held-out blocks), as `lag`'s delayed device, with the fit's rss. None with fewer than 10
-/// rows or a coefficient not finite.
-fn device_fit(ctx: &Context, rows: Option<&[usize]>, h: [&[f64]; 3]) -> Option<([f64; 3], f64)> {
-    let r = ctx.rec;
-    let n = rows.map_or(r.len(), |rw| rw.len());
-    let hold = crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() });
-    let at = |j: usize| rows.map_or(j, |rw| rw[j]);
-    let fit: Vec<usize> = (0..n)
-        .filter(|&j| {
-            let i = at(j);
-            !ctx.rest[i] && hold.get(i).is_some_and(|h| *h == crate::TRAIN)
-        })
-        .collect();
-    if fit.len() < 10 {
-        return None;
+/// The rows the device behind the compliance is fitted on (`DeviceRows::fit`): the training
+/// samples in motion among `rows` (all when None; screening rows lie in the screening window
+/// and take its held-out blocks), as indices into `rows`, with the force there.
+struct DeviceRows {
+    fit: Vec<usize>,
+    f: Vec<f64>,
+    train: Vec<u8>,
+}
+
+impl DeviceRows {
+    /// None with fewer than 10 rows.
+    fn new(ctx: &Context, rows: Option<&[usize]>) -> Option<Self> {
+        let r = ctx.rec;
+        let n = rows.map_or(r.len(), |rw| rw.len());
+        let hold = crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() });
+        let at = |j: usize| rows.map_or(j, |rw| rw[j]);
+        let fit: Vec<usize> = (0..n)
+            .filter(|&j| {
+                let i = at(j);
+                !ctx.rest[i] && hold.get(i).is_some_and(|h| *h == crate::TRAIN)
+            })
+            .collect();
+        if fit.len() < 10 {
+            return None;
+        }
+        let f = fit.iter().map(|&j| r.f[at(j)]).collect();
+        let train = vec![crate::TRAIN; fit.len()];
+        Some(DeviceRows { fit, f, train })
     }
-    let mut cols: Vec<Vec<f64>> = (0..3)
-        .map(|k| fit.iter().map(|&j| h[k][j]).collect())
-        .collect();
-    cols.push(vec![1.0; fit.len()]);
-    let f: Vec<f64> = fit.iter().map(|&j| r.f[at(j)]).collect();
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let train = vec![crate::TRAIN; fit.len()];
-    let nq = crate::normals(&refs, &f, &train, 1).0;
-    let th = nq.solve();
-    let d = [th[0], th[1], th[2]];
-    d.iter().all(|c| c.is_finite()).then(|| (d, nq.rss(&th)))
+
+    /// The device's inertia, viscous and Coulomb coefficients fitted on its motion through the
+    /// mode (`h`: H·a, H·v, H·s_d on the rows, and an offset), as `lag`'s delayed device, with
+    /// the fit's rss. None with a coefficient not finite.
+    fn fit(&self, h: [&[f64]; 3]) -> Option<([f64; 3], f64)> {
+        let mut cols: Vec<Vec<f64>> = (0..3)
+            .map(|k| self.fit.iter().map(|&j| h[k][j]).collect())
+            .collect();
+        cols.push(vec![1.0; self.fit.len()]);
+        let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+        let nq = crate::normals(&refs, &self.f, &self.train, 1).0;
+        let th = nq.solve();
+        let d = [th[0], th[1], th[2]];
+        d.iter().all(|c| c.is_finite()).then(|| (d, nq.rss(&th)))
+    }
 }
