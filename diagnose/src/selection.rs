@@ -279,6 +279,8 @@ fn diagnose_with(
     let passes = |rh: f64, rss_h0: f64, dbic: f64| {
         1.0 - rh / rss_h0.max(1e-300) >= opt.min_holdout_gain && dbic < 0.0
     };
+    // a fit of held-out rss `rh` falls short of that margin over one of `r0`
+    let short_of_margin = |rh: f64, r0: f64| 1.0 - rh / r0.max(1e-300) < opt.min_holdout_gain;
     // The best candidate to add to a set (every kind not in it, every grid value, refined):
     // (held-out rss of the set, and of the best candidate with its training BIC change).
     // (and the best value of each kind: its held-out rss, BIC change and value)
@@ -346,11 +348,15 @@ fn diagnose_with(
                 } else {
                     base_refs.iter().chain(&zr).copied().collect()
                 };
+                // the normals of the fit without the candidate (the set's columns, the first `nb`)
+                let base_of = |nn: &(Normal, Normal)| {
+                    let idx: Vec<usize> = (0..nb).collect();
+                    (nn.0.select(&idx), nn.1.select(&idx))
+                };
                 // the held-out rss of the fit with the candidate over the baseline's on the
                 // same rows, carried to the set's rows
                 let ratio = |nn: &(Normal, Normal)| {
-                    let idx: Vec<usize> = (0..nb).collect();
-                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    let (bt, bh) = base_of(nn);
                     let th0 = bt.solve();
                     (rss_h0 / bh.rss(&th0).max(1e-300), bt.rss(&th0))
                 };
@@ -407,13 +413,12 @@ fn diagnose_with(
                     let Some((c, r1)) = lag_corrected(&nn.0, &nn.1, [0, 1, nb], &sn) else {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     };
-                    let idx: Vec<usize> = (0..nb).collect();
-                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    let (bt, bh) = base_of(&nn);
                     // (a fit not determined carries no margin)
                     let Some((_, r0)) = eiv_fit(&bt, &bh, &[0, 1], &sn) else {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     };
-                    if 1.0 - r1 / r0.max(1e-300) < opt.min_holdout_gain {
+                    if short_of_margin(r1, r0) {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
                     if use_ == effects::NoiseUse::RankCorrected
@@ -430,15 +435,14 @@ fn diagnose_with(
                 // (a Coulomb switch τ long after each reversal), which a candidate of another
                 // kind would take; the corrected fit leaves it with the noisy column.
                 else if let Some((j, sn)) = set_noise {
-                    let idx: Vec<usize> = (0..nb).collect();
-                    let (bt, bh) = (nn.0.select(&idx), nn.1.select(&idx));
+                    let (bt, bh) = base_of(&nn);
                     let (Some((_, r1)), Some((_, r0))) = (
                         eiv_fit(&nn.0, &nn.1, &[0, 1, j], &sn),
                         eiv_fit(&bt, &bh, &[0, 1, j], &sn),
                     ) else {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     };
-                    if 1.0 - r1 / r0.max(1e-300) < opt.min_holdout_gain {
+                    if short_of_margin(r1, r0) {
                         return (f64::INFINITY, 0.0, f64::INFINITY);
                     }
                 }
@@ -617,7 +621,7 @@ fn diagnose_with(
                     chosen[k] = eff;
                     changed = true;
                 }
-                _ if 1.0 - cur / h0.max(1e-300) < opt.min_holdout_gain => {
+                _ if short_of_margin(cur, h0) => {
                     chosen.remove(k);
                     changed = true;
                     continue;
@@ -704,7 +708,7 @@ fn diagnose_with(
             .filter(|(rh, db, e)| e.kind != chosen[k].kind && passes(*rh, h0, *db))
             .min_by(|a, b| a.0.total_cmp(&b.0));
         if let Some((rh, _, e)) = rival {
-            if 1.0 - cur / rh.max(1e-300) < opt.min_holdout_gain {
+            if short_of_margin(cur, *rh) {
                 confounded_with[k] = Some(e.kind.name());
             }
         }
