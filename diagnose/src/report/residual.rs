@@ -15,15 +15,18 @@ pub struct Whiteness {
     pub white: bool,
 }
 
+/// The most lags the portmanteau test sums (fewer on a record shorter than four times that).
+const WHITENESS_LAGS: usize = 20;
+
 pub fn whiteness(r: &[f64]) -> Whiteness {
     let n = r.len();
-    let lags = 20usize.min(n / 4).max(1);
+    let lags = WHITENESS_LAGS.min(n / 4).max(1);
     let mean = r.iter().sum::<f64>() / n as f64;
-    let var: f64 = r.iter().map(|x| (x - mean).powi(2)).sum::<f64>();
+    let d: Vec<f64> = r.iter().map(|x| x - mean).collect();
+    let var: f64 = d.iter().map(|x| x * x).sum::<f64>();
     // the autocovariances at every shift in one pass over the record, each summed over its
     // samples in order
-    let d: Vec<f64> = r.iter().map(|x| x - mean).collect();
-    let mut cs = [0.0f64; 21];
+    let mut cs = [0.0f64; WHITENESS_LAGS + 1];
     let cs = &mut cs[..=lags];
     for i in 1..n {
         let di = d[i];
