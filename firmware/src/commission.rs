@@ -16,13 +16,19 @@
 //!    pulse as the voltage took effect (the PWM's one-period delay counted),
 //!    `L·Δi = ∫(v − v₀) dt − R·∫(i − i₀) dt` against the hold before it (`v₀`, `i₀`):
 //!    exact for any pulse shape, the resistance's share taken out with the R just measured.
+//!    The q loop holds zero current but not exactly: the d current's step turns into the q
+//!    axis as `p·ω·L_d·Δi_d`, the q current it moves turns back as `p·ω·L_q·i_q`; that
+//!    cross-coupling's integral `p·∫(ω·i_q − (ω·i_q)₀) dt` is kept per unit of L_q (not yet
+//!    measured) and taken in at the end.
 //! 3. **K_e**: zero current commanded on both axes for `meas_ke_time_s` while the structure
 //!    moves on its own: the loop's voltages are then the back-emf,
 //!    `K_e = |Σ(v − R·i)·ω_m| / Σω_m²` (both axes: an angle error does not shrink it), in 8
 //!    blocks; refused (`ke_no_motion`) below an r.m.s. speed of `meas_speed_min_rad_s`.
 //! 4. **L_q**: as L_d on the q axis from zero q current, the d current held at
-//!    `meas_i_a/2`; the emf's change over the pulse, `(K_e + p·L_d·i_d)·Δω_m`, is taken out
-//!    with the K_e and L_d just measured. The pulse's own torque moves the rotor by less than
+//!    `meas_i_a/2`; the emf's change over the pulse, `K_e·Δω_m`, and the cross-coupling's,
+//!    `p·L_d·(ω·i_d − (ω·i_d)₀)`, are taken out with the K_e and L_d just measured; at the
+//!    end L_d and L_q are solved together for the cross-coupling ([`Measure`]'s
+//!    `cross_corrected`). The pulse's own torque moves the rotor by less than
 //!    a count, and the speed estimate misses part of that emf: the same integral taken again
 //!    at the end of a window after the pulse (the current back near i₀) gives a second
 //!    equation, and L_q and that emf's gain are solved together (the tracking loop's response
@@ -215,14 +221,16 @@ pub struct Measure {
     /// interval that ended at this sample is two periods old.
     v1: [f32; 2],
     v2: [f32; 2],
-    /// Last period's current on the pulsed axis and speed.
-    i_prev: f32,
+    /// Last period's currents (the pulsed axis's, the other's) and speed.
+    i_prev: [f32; 2],
     w_prev: f32,
-    /// Sums: a step's or a hold's voltage, current, speed, count; a pulse's integrals.
-    s: [f32; 4],
-    /// Start values of a pulse (v₀, i₀, ω₀); its integrals of v − v₀, i − i₀, ω − ω₀.
-    base: [f32; 3],
-    acc: [f32; 3],
+    /// Sums: a step's or a hold's voltage, current, speed, count, and the speed times the
+    /// other axis's current.
+    s: [f32; 5],
+    /// Start values of a pulse (v₀, i₀, ω₀, (ω·i_o)₀); its integrals of v − v₀, i − i₀,
+    /// ω − ω₀ and ω·i_o − (ω·i_o)₀ (the cross-coupling's, `i_o` the other axis's current).
+    base: [f32; 4],
+    acc: [f32; 4],
     /// K_e block sums: Σv_d·ω, Σi_d·ω, Σv_q·ω, Σi_q·ω, Σω².
     ke: [f32; 5],
     ke_w2: f32,
@@ -233,17 +241,20 @@ pub struct Measure {
     pub ld: Stats,
     pub ke_est: Stats,
     pub lq: Stats,
-    /// The d current held during L_q (for its cross term).
-    id_hold: f32,
+    /// The cross-coupling's share of L: per d pulse `p·∫(ω·i_q − (ω·i_q)₀)dt/Δi` summed
+    /// (L_d's is L_q times its mean); per q pulse `∂L_q/∂L_d` summed (L_q's estimate is
+    /// made with the L_d then measured, and moves by this times L_d's correction).
+    xd: f32,
+    yq: f32,
     /// L_q's window after each pulse (the loop bringing the current back), periods; the
     /// speed-tracking loop's gains per period (`kp = 2ω_b·T_s`, `ki = (ω_b·T_s)²`).
     n_post: u32,
     pll: [f32; 2],
     /// The pulse-torque model (unit gain): the speed `u = ∫(i − i₀)`, its position, the
     /// tracking loop's position and speed on it, `Σ(u − v̂)` to the window's end; at the
-    /// pulse's end `Σ(u − v̂)`, the integral `S_T` and `Δi`.
+    /// pulse's end `Σ(u − v̂)`, the integral `S_T`, `Δi` and the cross-coupling's integral.
     model: [f32; 4],
-    at_end: [f32; 3],
+    at_end: [f32; 4],
     /// The configured K_e (L_q's emf term when K_e was refused) and pole pairs; K_e's least
     /// r.m.s. speed and the r.m.s. speed found.
     ke_cfg: f32,
@@ -409,7 +420,7 @@ impl Measure {
             } else {
                 self.lo = [vm, im];
             }
-            self.s = [0.0; 4];
+            self.s = [0.0; 5];
             self.n = 0;
             self.rep += 1;
             if self.rep == 2 * REPEATS {
@@ -438,16 +449,14 @@ impl Measure {
                 self.s[1] += i[ax];
                 self.s[2] += w;
                 self.s[3] += 1.0;
+                self.s[4] += w * i[other];
             }
         } else {
             if n == gap {
                 let k = 1.0 / self.s[3];
-                self.base = [self.s[0] * k, self.s[1] * k, self.s[2] * k];
-                self.acc = [0.0; 3];
-                self.s = [0.0; 4];
-                if ax == 1 {
-                    self.id_hold = i[0];
-                }
+                self.base = [self.s[0] * k, self.s[1] * k, self.s[2] * k, self.s[4] * k];
+                self.acc = [0.0; 4];
+                self.s = [0.0; 5];
             }
             v[ax] = if n < gap + nl {
                 (self.base[0] + sign * dv).clamp(-vmax, vmax)
@@ -461,8 +470,10 @@ impl Measure {
             }
             if n >= gap + 2 {
                 self.acc[0] += self.v2[ax] - self.base[0];
-                self.acc[1] += 0.5 * (i[ax] + self.i_prev) - self.base[1];
-                self.acc[2] += 0.5 * (w + self.w_prev) - self.base[2];
+                let wm = 0.5 * (w + self.w_prev);
+                self.acc[1] += 0.5 * (i[ax] + self.i_prev[0]) - self.base[1];
+                self.acc[2] += wm - self.base[2];
+                self.acc[3] += wm * 0.5 * (i[other] + self.i_prev[1]) - self.base[3];
                 if ax == 1 {
                     // The pulse's own torque moves the rotor as `u = ∫(i − i₀)` (to a gain);
                     // the speed estimate sees it through its tracking loop (`v̂`): the emf
@@ -481,16 +492,21 @@ impl Measure {
                 let di = i[ax] - self.base[1];
                 let r = self.r.mean();
                 // The emf's change over the pulse: on d the frame's share (`kd`), on q the
-                // rest (`kq`) and the d flux's `p·L_d·i_d`.
+                // rest (`kq`). The cross-coupling's change, `∓p·L_o·(ω·i_o − (ω·i_o)₀)` (the
+                // other axis's flux turning into this one: `+p·L_q·ω·i_q` on d, `−p·L_d·ω·i_d`
+                // on q), integrated as `z`: on q with the L_d measured, on d (L_q not yet
+                // measured) kept per unit of L_q for the end.
                 let c = if ax == 0 {
                     self.kd.mean()
                 } else {
-                    self.kq_value() + self.pole_pairs * self.ld.mean() * self.id_hold
+                    self.kq_value()
                 };
-                let s_n = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts;
+                let z = self.pole_pairs * self.acc[3] * self.ts;
+                let s_n = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts
+                    - if ax == 1 { self.ld.mean() * z } else { 0.0 };
                 if post > 0 && n == gap + nl + 1 {
-                    self.at_end = [self.model[3], s_n, di];
-                    self.i_prev = i[ax];
+                    self.at_end = [self.model[3], s_n, di, z];
+                    self.i_prev = [i[ax], i[other]];
                     self.w_prev = w;
                     self.n += 1;
                     return v;
@@ -499,26 +515,32 @@ impl Measure {
                 // pulse's end and at the window's (the current back near i₀), U the model's
                 // `Σ(u − v̂)`, β the emf the speed estimate missed per unit of it: both
                 // unknowns solved (`docs/commissioning.md`).
-                let l = if post > 0 {
-                    let [u_t, s_t, di_t] = self.at_end;
+                let (l, dl) = if post > 0 {
+                    let [u_t, s_t, di_t, z_t] = self.at_end;
                     let u_w = self.model[3];
-                    (s_t * u_w - s_n * u_t) / (di_t * u_w - di * u_t)
+                    let den = di_t * u_w - di * u_t;
+                    ((s_t * u_w - s_n * u_t) / den, (z * u_t - z_t * u_w) / den)
                 } else {
-                    s_n / di
+                    (s_n / di, z / di)
                 };
                 let di = if post > 0 { self.at_end[2] } else { di };
                 if di.abs() > 0.1 * SWING * self.i_hi {
                     if ax == 0 {
                         self.ld.add(l, 1.0);
+                        self.xd += dl;
                     } else {
                         self.lq.add(l, 1.0);
+                        self.yq += dl;
                     }
                 }
                 self.n = 0;
                 self.rep += 1;
-                self.i_prev = i[ax];
+                self.i_prev = [i[ax], i[other]];
                 self.w_prev = w;
                 if self.rep == REPEATS {
+                    if ax == 1 {
+                        self.cross_corrected();
+                    }
                     if ax == 1 && self.ke_est.count() > 0 {
                         let (md, mq) = (self.ld.mean(), self.lq.mean());
                         let (ld, lq) = frame_corrected(md, mq, self.kd.mean(), self.kq.mean());
@@ -530,10 +552,27 @@ impl Measure {
                 return v;
             }
         }
-        self.i_prev = i[ax];
+        self.i_prev = [i[ax], i[other]];
         self.w_prev = w;
         self.n += 1;
         v
+    }
+
+    /// L_d and L_q with the cross-coupling's share solved together: each d pulse's estimate
+    /// lacks `L_q·x` (x its `p·∫(ω·i_q − (ω·i_q)₀)dt/Δi`), each q pulse's was made with the
+    /// L_d measured then and moves by `y·ΔL_d` (y its `∂L_q/∂L_d`). With the means `x̄`, `ȳ`:
+    /// `L_q = L_q' + ȳ·x̄·L_q` gives `L_q = L_q'/(1 − x̄·ȳ)`, then `L_d = L_d' + x̄·L_q`.
+    fn cross_corrected(&mut self) {
+        let (nd, nq) = (self.ld.count(), self.lq.count());
+        if nd == 0 || nq == 0 {
+            return;
+        }
+        let x = self.xd / nd as f32;
+        let y = self.yq / nq as f32;
+        let lq0 = self.lq.mean();
+        let lq = lq0 / (1.0 - x * y);
+        self.lq.shift(lq - lq0);
+        self.ld.shift(x * lq);
     }
 
     /// K_e: zero current on both axes; per block `K = |(Σv·ω − R·Σi·ω)|/Σω²` over both axes,
@@ -593,7 +632,7 @@ impl Measure {
         self.phase = p;
         self.n = 0;
         self.rep = 0;
-        self.s = [0.0; 4];
+        self.s = [0.0; 5];
     }
 
     /// The q axis's emf per rad/s as L_q's emf term takes it: measured, else configured.

@@ -57,10 +57,10 @@ fn measure(sc: &Scenario) -> (SimDrive, String) {
 
 /// The tolerance of each measured value (R, L_d, L_q, K_e), relative to the plant's, from
 /// the largest error of the 100 salient plants with their sensors' gain errors
-/// (`measured_within_tolerance_of_the_plant`): R +2.58 %, L_d +3.40 %, L_q +3.40 %, K_e
+/// (`measured_within_tolerance_of_the_plant`): R +2.58 %, L_d −2.55 %, L_q +3.25 %, K_e
 /// +1.23 %; each bound 1.3–1.4× that (3× would pass a 5 % error in the arithmetic, which
 /// must fail: tried on L_q's quotient, it fails).
-const TOL: [f64; 4] = [0.035, 0.046, 0.045, 0.016];
+const TOL: [f64; 4] = [0.035, 0.035, 0.045, 0.016];
 
 /// Relative errors (measured/plant − 1) of R, L_d, L_q, K_e for `seeds`, each plant drawn
 /// within ±20 % of the nameplate.
@@ -148,10 +148,9 @@ fn measured_within_tolerance_of_the_plant() {
         );
         // The stated uncertainty is a standard one: 68 % of a normal error within 1 of it,
         // 95 % within 2; 100 plants put the share within ±4.7 % (1) and ±2.2 % (2) of those
-        // (binomial): bounds 3 of that. Measured R 65/95 %, L_d 68/98 %, L_q 56/93 %, K_e
+        // (binomial): bounds 3 of that. Measured R 65/95 %, L_d 69/97 %, L_q 62/95 %, K_e
         // 71/100 %. The repeats' spread alone (the gain errors left out) covers R 27 %,
-        // L_d 36 %, L_q 32 %, K_e 20 % within 1; L_q without its pulse-torque term (the
-        // window after each pulse, `docs/commissioning.md`) 34 % and 68 %.
+        // L_d 37 %, L_q 34 %, K_e 20 % within 1.
         assert!(
             (0.54..=0.82).contains(&c1) && c2 >= 0.88,
             "{name}: coverage {c1} within 1, {c2} within 2"
@@ -380,4 +379,142 @@ fn board_scenarios_plants() {
         );
         assert!(p.salient(), "{f}: the plant is not salient");
     }
+}
+
+/// The reference TMD (320 V) at `a0` m/s² with the apply test's salient machine (L_q =
+/// 1.6·L_d), the firmware told the plant's R, K_e and L_d; idle for `wait` s, then
+/// `measure`: the L_d and L_q errors against the plant's, and the r.m.s. electrical speed
+/// over the L pulses, rad/s.
+fn tmd_l_errors(a0: f64, wait: f64) -> Option<[f64; 3]> {
+    let mut sc = Scenario::tmd(306.0);
+    sc.record.channels.clear();
+    sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
+    if let Drive::Structure { excitation, .. } = &mut sc.drive {
+        *excitation = Excitation::Sine {
+            a0_m_s2: a0,
+            freq_hz: 0.5,
+        };
+    }
+    let m = sc.plant_machine();
+    let mut d = SimDrive::from_scenario(&sc).expect("build");
+    exec(&mut d, "mode idle");
+    run(&mut d, wait);
+    l_errors(&mut d, &m)
+}
+
+/// `measure` on `d` (idle) against the plant `m`: the L_d and L_q errors and the r.m.s.
+/// electrical speed over the L pulses.
+fn l_errors(d: &mut SimDrive, m: &hal_sim::plant::Machine) -> Option<[f64; 3]> {
+    exec(d, "measure");
+    let mut tel = String::new();
+    let (mut w2, mut n) = (0.0, 0.0);
+    let we = m.pole_pairs as f64 / d.sim().rig().screw.lead_m_per_rad;
+    while d.sim().controller().mode() == Mode::Measure {
+        d.step(&mut tel);
+        if matches!(
+            d.sim().controller().measurement().phase(),
+            Phase::Ld | Phase::Lq
+        ) {
+            let v = d.sim().motion().1 * we;
+            w2 += v * v;
+            n += 1.0;
+        }
+    }
+    let me = *d.sim().controller().measurement();
+    if me.phase() != Phase::Done {
+        return None;
+    }
+    Some([
+        me.ld.mean() as f64 / m.l_d() - 1.0,
+        me.lq.mean() as f64 / m.l_q() - 1.0,
+        (w2 / n).sqrt(),
+    ])
+}
+
+/// The board's TMD (`board`) at `a0` m/s², plant `seed`: as [`tmd_l_errors`].
+fn board_l_errors(a0: f64, seed: u64) -> Option<[f64; 3]> {
+    let mut sc = board(seed, 0.2);
+    if let Drive::Structure { excitation, .. } = &mut sc.drive {
+        *excitation = Excitation::Sine {
+            a0_m_s2: a0,
+            freq_hz: 0.5,
+        };
+    }
+    let m = sc.plant_machine();
+    let mut d = SimDrive::from_scenario(&sc).expect("build");
+    exec(&mut d, "mode idle");
+    l_errors(&mut d, &m)
+}
+
+/// L_d and L_q against the structure's motion: per excitation level (0 … 2 m/s²) the
+/// reference TMD (320 V, the salient machine, 8 start times from rest, 0.25 s apart) and 8
+/// board plants (72 V, drawn ±20 %, their sensors' gain errors); printed: the r.m.s.
+/// electrical speed over the pulses, each axis's error mean ± standard deviation and largest,
+/// and the measurements the travel limit or a fault stopped. Judged at 1 m/s², where the
+/// cross-coupling's share (`p·L_o·ω·Δi_o` from the other axis's current, which moves during
+/// a pulse) was +4.4 % on L_d and +3.6 % on L_q of the TMD (`docs/commissioning.md`).
+#[test]
+fn l_unbiased_by_the_structures_motion() {
+    use rayon::prelude::*;
+    // (mean, standard deviation, largest |error|) of column k.
+    let st = |e: &[[f64; 3]], k: usize| {
+        let v: Vec<f64> = e.iter().map(|x| x[k]).collect();
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        (mean, sd, v.iter().fold(0.0f64, |a, x| a.max(x.abs())))
+    };
+    println!(
+        "| plant | a0 m/s² | r.m.s. ω_e rad/s | L_d error mean ± sd (largest) | L_q error mean ± sd (largest) | stopped |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- |");
+    let mut at_1 = Vec::new();
+    for a0 in [0.0, 0.25, 0.5, 1.0, 2.0] {
+        let tmd: Vec<Option<[f64; 3]>> = (0..8)
+            .into_par_iter()
+            .map(|k| tmd_l_errors(a0, 0.25 * k as f64))
+            .collect();
+        let brd: Vec<Option<[f64; 3]>> = (0..8)
+            .into_par_iter()
+            .map(|s| board_l_errors(a0, s))
+            .collect();
+        for (name, e) in [("TMD 320 V", &tmd), ("board 72 V", &brd)] {
+            let stopped = e.iter().filter(|x| x.is_none()).count();
+            let e: Vec<[f64; 3]> = e.iter().flatten().copied().collect();
+            let ((md, sd, xd), (mq, sq, xq), (w, _, _)) = (st(&e, 0), st(&e, 1), st(&e, 2));
+            println!(
+                "| {name} | {a0} | {w:.0} | {:+.2} ± {:.2} % ({:.2} %) | {:+.2} ± {:.2} % ({:.2} %) | {stopped} of 8 |",
+                100.0 * md,
+                100.0 * sd,
+                100.0 * xd,
+                100.0 * mq,
+                100.0 * sq,
+                100.0 * xq
+            );
+            if a0 == 1.0 {
+                // A stop by travel (the TMD's stroke at 1 m/s² passes `meas_travel_m` while
+                // the d current flows) is the measurement's own refusal, not an error.
+                assert!(stopped <= 2, "{name}: {stopped} of 8 stopped");
+                at_1.extend(e);
+            }
+        }
+    }
+    // At 1 m/s² (15 measurements, 7 TMD and 8 board): measured L_d mean −0.04 %, largest
+    // |error| 2.29 %; L_q −0.12 %, 1.99 % (the board's spread is its current sensors' ±2 %
+    // gains, ±1.1 % at rest). The mean's standard error is ≈ 0.3 % (a standard deviation of
+    // ≈ 1.2 % over √15): bound 3 of it, 0.9 %; each error within 3 %, 1.3–1.5× the largest
+    // (3× would pass the bias this test is for: +4.4 % mean on the TMD without the term).
+    let ((md, _, xd), (mq, _, xq), _) = (st(&at_1, 0), st(&at_1, 1), st(&at_1, 2));
+    println!(
+        "1 m/s²: L_d mean {:+.2} %, largest {:.2} %; L_q mean {:+.2} %, largest {:.2} %",
+        100.0 * md,
+        100.0 * xd,
+        100.0 * mq,
+        100.0 * xq
+    );
+    assert!(
+        md.abs() < 0.009 && mq.abs() < 0.009,
+        "mean L_d {md}, L_q {mq}"
+    );
+    assert!(xd < 0.03 && xq < 0.03, "largest L_d {xd}, L_q {xq}");
 }
