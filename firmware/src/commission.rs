@@ -235,8 +235,17 @@ pub struct Measure {
     ke: [f32; 5],
     ke_w2: f32,
     ke_n: u32,
-    /// R: the low step's mean voltage and current.
-    lo: [f32; 2],
+    /// R: the low step's mean voltage, current and `p·ω·i_q`.
+    lo: [f32; 3],
+    /// R's cross-coupling: the provisional L_q its pairs were computed with (the configured
+    /// `l_phase_h`), and per pair `p·Δ(ω·i_q)/ΔI` summed (R moves by its mean times L_q's
+    /// difference from the provisional one).
+    l_cfg: f32,
+    xr: f32,
+    /// Per d and q pulse `∂L/∂R` summed (the pulses are computed with R before its
+    /// cross-coupling's correction).
+    bd: f32,
+    bq: f32,
     pub r: Stats,
     pub ld: Stats,
     pub ke_est: Stats,
@@ -254,7 +263,7 @@ pub struct Measure {
     /// tracking loop's position and speed on it, `Σ(u − v̂)` to the window's end; at the
     /// pulse's end `Σ(u − v̂)`, the integral `S_T`, `Δi` and the cross-coupling's integral.
     model: [f32; 4],
-    at_end: [f32; 4],
+    at_end: [f32; 5],
     /// The configured K_e (L_q's emf term when K_e was refused) and pole pairs; K_e's least
     /// r.m.s. speed and the r.m.s. speed found.
     ke_cfg: f32,
@@ -325,6 +334,7 @@ impl Measure {
             dv_q: dv,
             x0: x,
             ke_cfg: cfg.ke_v_s_per_rad,
+            l_cfg: cfg.l_phase_h,
             r_cfg: cfg.r_phase_ohm,
             pole_pairs: cfg.pole_pairs as f32,
             speed_min: cfg.meas_speed_min_rad_s,
@@ -397,19 +407,29 @@ impl Measure {
     fn step_r(&mut self, i: [f32; 2], w: f32, vmax: f32) -> [f32; 2] {
         let hi = self.rep & 1 == 1;
         self.i_ref = [if hi { self.i_hi } else { 0.5 * self.i_hi }, 0.0];
-        let v = [self.pi(0, i[0], vmax), self.pi(1, i[1], vmax)];
+        // The modulation's circle, the d axis first: the d voltage is applied as commanded
+        // (beyond the circle the phases' duties clip and the d voltage applied is not the
+        // one summed); the q axis gets what is left.
+        let vd = self.pi(0, i[0], vmax);
+        let vq_max = sqrt(vmax * vmax - vd * vd);
+        let v = [vd, self.pi(1, i[1], vq_max)];
         self.n += 1;
         if self.n > self.n_r / 2 {
             self.s[0] += v[0];
             self.s[1] += i[0];
             self.s[2] += w;
             self.s[3] += 1.0;
+            self.s[4] += w * i[1];
         }
         if self.n >= self.n_r {
             // The d voltage less the emf the frame puts on the d axis (`kd·ω`, from K_e's
-            // window: the encoder's frame is the rotor's to the alignment's error).
+            // window: the encoder's frame is the rotor's to the alignment's error), plus the
+            // cross-coupling `p·ω·L_q·i_q` (the q current the loop does not hold at zero
+            // against a fast-changing emf, or at the circle) with the provisional L_q.
             let k = 1.0 / self.s[3];
-            let (vm, im) = ((self.s[0] - self.kd.mean() * self.s[2]) * k, self.s[1] * k);
+            let x = self.pole_pairs * self.s[4] * k;
+            let vm = (self.s[0] - self.kd.mean() * self.s[2]) * k + self.l_cfg * x;
+            let im = self.s[1] * k;
             if hi {
                 let di = im - self.lo[1];
                 if di < 0.25 * self.i_hi {
@@ -417,8 +437,9 @@ impl Measure {
                     return v;
                 }
                 self.r.add((vm - self.lo[0]) / di, 1.0);
+                self.xr += (x - self.lo[2]) / di;
             } else {
-                self.lo = [vm, im];
+                self.lo = [vm, im, x];
             }
             self.s = [0.0; 5];
             self.n = 0;
@@ -504,8 +525,9 @@ impl Measure {
                 let z = self.pole_pairs * self.acc[3] * self.ts;
                 let s_n = (self.acc[0] - r * self.acc[1] - c * self.acc[2]) * self.ts
                     - if ax == 1 { self.ld.mean() * z } else { 0.0 };
+                let a = self.acc[1] * self.ts;
                 if post > 0 && n == gap + nl + 1 {
-                    self.at_end = [self.model[3], s_n, di, z];
+                    self.at_end = [self.model[3], s_n, di, z, a];
                     self.i_prev = [i[ax], i[other]];
                     self.w_prev = w;
                     self.n += 1;
@@ -515,22 +537,29 @@ impl Measure {
                 // pulse's end and at the window's (the current back near i₀), U the model's
                 // `Σ(u − v̂)`, β the emf the speed estimate missed per unit of it: both
                 // unknowns solved (`docs/commissioning.md`).
-                let (l, dl) = if post > 0 {
-                    let [u_t, s_t, di_t, z_t] = self.at_end;
+                // (`dl`: ∂L/∂L_o through the cross-coupling; `dr`: ∂L/∂R.)
+                let (l, dl, dr) = if post > 0 {
+                    let [u_t, s_t, di_t, z_t, a_t] = self.at_end;
                     let u_w = self.model[3];
                     let den = di_t * u_w - di * u_t;
-                    ((s_t * u_w - s_n * u_t) / den, (z * u_t - z_t * u_w) / den)
+                    (
+                        (s_t * u_w - s_n * u_t) / den,
+                        (z * u_t - z_t * u_w) / den,
+                        (a * u_t - a_t * u_w) / den,
+                    )
                 } else {
-                    (s_n / di, z / di)
+                    (s_n / di, z / di, -a / di)
                 };
                 let di = if post > 0 { self.at_end[2] } else { di };
                 if di.abs() > 0.1 * SWING * self.i_hi {
                     if ax == 0 {
                         self.ld.add(l, 1.0);
                         self.xd += dl;
+                        self.bd += dr;
                     } else {
                         self.lq.add(l, 1.0);
                         self.yq += dl;
+                        self.bq += dr;
                     }
                 }
                 self.n = 0;
@@ -558,21 +587,40 @@ impl Measure {
         v
     }
 
-    /// L_d and L_q with the cross-coupling's share solved together: each d pulse's estimate
-    /// lacks `L_q·x` (x its `p·∫(ω·i_q − (ω·i_q)₀)dt/Δi`), each q pulse's was made with the
-    /// L_d measured then and moves by `y·ΔL_d` (y its `∂L_q/∂L_d`). With the means `x̄`, `ȳ`:
-    /// `L_q = L_q' + ȳ·x̄·L_q` gives `L_q = L_q'/(1 − x̄·ȳ)`, then `L_d = L_d' + x̄·L_q`.
-    fn cross_corrected(&mut self) {
+    /// The means of the cross-coupling's and R's partial derivatives: R's `c = p·Δ(ω·i_q)/ΔI`,
+    /// L_d's `x = ∂L_d/∂L_q` and `b_d = ∂L_d/∂R`, L_q's `y = ∂L_q/∂L_d` and `b_q = ∂L_q/∂R`
+    /// (zeros without repeats).
+    fn partials(&self) -> [f32; 5] {
+        let mean = |sum: f32, n: u32| if n > 0 { sum / n as f32 } else { 0.0 };
         let (nd, nq) = (self.ld.count(), self.lq.count());
-        if nd == 0 || nq == 0 {
+        [
+            mean(self.xr, self.r.count()),
+            mean(self.xd, nd),
+            mean(self.bd, nd),
+            mean(self.yq, nq),
+            mean(self.bq, nq),
+        ]
+    }
+
+    /// R, L_d and L_q with the cross-coupling's shares solved together. R's pairs were
+    /// computed with the provisional L_q `L_c` and move by `D = c·(L_q − L_c)`; each d
+    /// pulse's estimate lacks `x·L_q` and was made with R before that (`b_d·D`); each q
+    /// pulse's was made with the L_d and R measured then and moves by `y·ΔL_d + b_q·D`. With
+    /// the means: `L_q = L_q' + y·(x·L_q + b_d·D) + b_q·D` is linear in L_q,
+    /// `L_q = (L_q' − g·L_c)/(1 − x·y − g)`, g = (y·b_d + b_q)·c; then D and
+    /// `L_d = L_d' + x·L_q + b_d·D`.
+    fn cross_corrected(&mut self) {
+        if self.ld.count() == 0 || self.lq.count() == 0 {
             return;
         }
-        let x = self.xd / nd as f32;
-        let y = self.yq / nq as f32;
+        let [c, x, bd, y, bq] = self.partials();
+        let g = (y * bd + bq) * c;
         let lq0 = self.lq.mean();
-        let lq = lq0 / (1.0 - x * y);
+        let lq = (lq0 - g * self.l_cfg) / (1.0 - x * y - g);
+        let d = c * (lq - self.l_cfg);
         self.lq.shift(lq - lq0);
-        self.ld.shift(x * lq);
+        self.ld.shift(x * lq + bd * d);
+        self.r.shift(d);
     }
 
     /// K_e: zero current on both axes; per block `K = |(Σv·ω − R·Σi·ω)|/Σω²` over both axes,
@@ -653,18 +701,24 @@ impl Measure {
     /// measurement does not choose with the gain error `ḡ + ⅓·Σ g_k·cos 2(φ − 2πk/3)`
     /// (three phases through the amplitude-invariant Clarke), of standard deviation
     /// (t/√3)/√2 = t/√6; the bus's gain uniform within ±t_v, t_v/√3.
+    ///
+    /// R, L_d and L_q are solved together (the cross-coupling, `cross_corrected`): each
+    /// also carries the others' repeats' standard errors through its partial derivatives
+    /// (R through `c·σ(L_q)`, L_d through `b_d·σ(R)`, L_q through `(b_q + y·b_d)·σ(R)`).
     pub fn uncertainty(&self) -> [f32; 4] {
         let (ti, tv) = (I_GAIN_TOL, V_GAIN_TOL);
         let (ui2, uv2) = (ti * ti / 6.0, tv * tv / 3.0);
-        let u = |s: &Stats, rel2: f32| {
+        let u = |s: &Stats, rel2: f32, other: f32| {
             let (m, e) = (s.mean(), s.sigma());
-            sqrt(e * e + m * m * rel2)
+            sqrt(e * e + other * other + m * m * rel2)
         };
+        let [c, _, bd, y, bq] = self.partials();
+        let (sr, sq) = (self.r.sigma(), self.lq.sigma());
         [
-            u(&self.r, ui2 + uv2),
-            u(&self.ld, ui2 + uv2),
-            u(&self.lq, ui2 + uv2),
-            u(&self.ke_est, uv2),
+            u(&self.r, ui2 + uv2, c * sq),
+            u(&self.ld, ui2 + uv2, bd * sr),
+            u(&self.lq, ui2 + uv2, (bq + y * bd) * sr),
+            u(&self.ke_est, uv2, 0.0),
         ]
     }
 
