@@ -99,6 +99,10 @@ pub enum Failure {
     BusLow,
     /// Another mode was chosen while it ran.
     Aborted,
+    /// R, L_d and L_q: fewer than half of an axis's L pulses counted, the others' d/q
+    /// voltage beyond the modulation's reach (the bus over √3) while they were integrated,
+    /// where the phases' duties clip and the voltage applied is not the one integrated.
+    VLimit,
 }
 
 impl Failure {
@@ -111,6 +115,7 @@ impl Failure {
             Failure::NoCurrent => "measure_no_current",
             Failure::BusLow => "bus_low",
             Failure::Aborted => "aborted",
+            Failure::VLimit => "meas_v_limit",
         }
     }
 }
@@ -199,6 +204,10 @@ pub struct Measure {
     failure: Option<Failure>,
     /// K_e alone refused (the rest measured).
     ke_refused: Option<Failure>,
+    /// R, L_d and L_q refused (K_e measured).
+    rl_refused: Option<Failure>,
+    /// The present pulse's voltage left the modulation's reach while it was integrated.
+    clip: bool,
     /// Periods into the present repeat; the repeat.
     n: u32,
     rep: u32,
@@ -301,6 +310,10 @@ impl Measure {
     pub fn ke_refused(&self) -> Option<Failure> {
         self.ke_refused
     }
+    /// Why R, L_d and L_q were not measured (K_e was).
+    pub fn rl_refused(&self) -> Option<Failure> {
+        self.rl_refused
+    }
     /// Running (its phase is one of the four measurements).
     pub fn running(&self) -> bool {
         matches!(self.phase, Phase::R | Phase::Ld | Phase::Ke | Phase::Lq)
@@ -391,9 +404,9 @@ impl Measure {
         let vmax = v_bus * cfg.m_max * crate::config::INV_SQRT3;
         let v = match self.phase {
             Phase::R => self.step_r(i, w, vmax),
-            Phase::Ld => self.step_l(0, i, w, vmax),
+            Phase::Ld => self.step_l(0, i, w, vmax, v_bus),
             Phase::Ke => self.step_ke(i, w, vmax),
-            _ => self.step_l(1, i, w, vmax),
+            _ => self.step_l(1, i, w, vmax, v_bus),
         };
         self.v2 = self.v1;
         self.v1 = v;
@@ -454,7 +467,7 @@ impl Measure {
     /// A pulse on axis `ax` (0: d, 1: q): the hold (both loops on, the start values averaged
     /// over its last [`N_BASE`] periods), the pulse (`ax` open loop at `v₀ ± ΔV`), and the
     /// integrals over the samples the pulse's voltage acted on.
-    fn step_l(&mut self, ax: usize, i: [f32; 2], w: f32, vmax: f32) -> [f32; 2] {
+    fn step_l(&mut self, ax: usize, i: [f32; 2], w: f32, vmax: f32, v_bus: f32) -> [f32; 2] {
         let hold = 0.5 * self.i_hi;
         self.i_ref = [hold, 0.0];
         let (n, gap, nl) = (self.n, self.n_gap, self.n_l);
@@ -474,6 +487,7 @@ impl Measure {
             }
         } else {
             if n == gap {
+                self.clip = false;
                 let k = 1.0 / self.s[3];
                 self.base = [self.s[0] * k, self.s[1] * k, self.s[2] * k, self.s[4] * k];
                 self.acc = [0.0; 4];
@@ -488,6 +502,11 @@ impl Measure {
             // the voltage in force over [k − 1, k] was commanded at k − 2.
             if n == gap + 2 {
                 self.model = [0.0; 4];
+            }
+            // The modulation's reach: the circle inscribed in its hexagon, the bus over √3.
+            let reach = v_bus * crate::config::INV_SQRT3;
+            if v[0] * v[0] + v[1] * v[1] > reach * reach {
+                self.clip = true;
             }
             if n >= gap + 2 {
                 self.acc[0] += self.v2[ax] - self.base[0];
@@ -551,7 +570,7 @@ impl Measure {
                     (s_n / di, z / di, -a / di)
                 };
                 let di = if post > 0 { self.at_end[2] } else { di };
-                if di.abs() > 0.1 * SWING * self.i_hi {
+                if di.abs() > 0.1 * SWING * self.i_hi && !self.clip {
                     if ax == 0 {
                         self.ld.add(l, 1.0);
                         self.xd += dl;
@@ -567,7 +586,10 @@ impl Measure {
                 self.i_prev = [i[ax], i[other]];
                 self.w_prev = w;
                 if self.rep == REPEATS {
-                    if ax == 1 {
+                    let few = |s: &Stats| s.count() < REPEATS / 2;
+                    if ax == 1 && (few(&self.ld) || few(&self.lq)) {
+                        self.rl_refused = Some(Failure::VLimit);
+                    } else if ax == 1 {
                         self.cross_corrected();
                     }
                     if ax == 1 && self.ke_est.count() > 0 {
@@ -760,57 +782,71 @@ fn put_row<W: Write>(out: &mut W, r: &Row) {
     let _ = out.write_str("\r\n");
 }
 
-/// The results as rows (K_e only if measured).
-fn rows(m: &Measure, c: &Config) -> ([Row; 4], usize) {
+/// The results as rows, each with whether it was measured (R and L unless refused, K_e
+/// unless refused).
+fn rows(m: &Measure, c: &Config) -> [(Row, bool); 4] {
     let u = m.uncertainty();
-    let rows = [
-        Row {
-            name: "r_phase_ohm",
-            what: "",
-            unit: "ohm",
-            est: m.r,
-            u: u[0],
-            cfg: c.r_phase_ohm,
-        },
-        Row {
-            name: "l_d_h",
-            what: "",
-            unit: "H",
-            est: m.ld,
-            u: u[1],
-            cfg: c.l_d(),
-        },
-        Row {
-            name: "l_phase_h",
-            what: " (q)",
-            unit: "H",
-            est: m.lq,
-            u: u[2],
-            cfg: c.l_phase_h,
-        },
-        Row {
-            name: "ke_v_s_per_rad",
-            what: "",
-            unit: "V*s/rad",
-            est: m.ke_est,
-            u: u[3],
-            cfg: c.ke_v_s_per_rad,
-        },
-    ];
-    let n = if m.ke_refused.is_some() { 3 } else { 4 };
-    (rows, n)
+    let rl = m.rl_refused.is_none();
+    [
+        (
+            Row {
+                name: "r_phase_ohm",
+                what: "",
+                unit: "ohm",
+                est: m.r,
+                u: u[0],
+                cfg: c.r_phase_ohm,
+            },
+            rl,
+        ),
+        (
+            Row {
+                name: "l_d_h",
+                what: "",
+                unit: "H",
+                est: m.ld,
+                u: u[1],
+                cfg: c.l_d(),
+            },
+            rl,
+        ),
+        (
+            Row {
+                name: "l_phase_h",
+                what: " (q)",
+                unit: "H",
+                est: m.lq,
+                u: u[2],
+                cfg: c.l_phase_h,
+            },
+            rl,
+        ),
+        (
+            Row {
+                name: "ke_v_s_per_rad",
+                what: "",
+                unit: "V*s/rad",
+                est: m.ke_est,
+                u: u[3],
+                cfg: c.ke_v_s_per_rad,
+            },
+            m.ke_refused.is_none(),
+        ),
+    ]
 }
 
 /// The configuration with the results in it: `r_phase_ohm`, `l_phase_h` (L_q: the loop's PI
 /// has one inductance, and with i_d* = 0 in every law the q loop carries the commanded
 /// current and the d loop's decoupling `−ω_e·L·i_q` is L_q's; `docs/commissioning.md`),
 /// `l_d_h` (L_d: the short's peak bound, flux braking's voltage circle, the encoder's emf
-/// check) and `ke_v_s_per_rad` (if measured).
+/// check) and `ke_v_s_per_rad`, each if measured (not refused).
 pub fn applied(m: &Measure, c: &Config) -> Config {
     let mut n = *c;
-    n.r_phase_ohm = m.r.mean();
-    n.l_phase_h = m.lq.mean();
-    n.l_d_h = m.ld.mean();
+    if m.rl_refused.is_none() {
+        n.r_phase_ohm = m.r.mean();
+        n.l_phase_h = m.lq.mean();
+        n.l_d_h = m.ld.mean();
+    }
     if m.ke_refused.is_none() {
         n.ke_v_s_per_rad = m.ke_est.mean();
     }
@@ -880,9 +916,16 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
                 Phase::None => fail(out, &[": none run (measure)"]),
                 Phase::Failed => fail(out, &[" failed: ", m.failure.map_or("", |f| f.name())]),
                 _ => {
-                    let (rows, n) = rows(&m, ctl.config());
-                    for r in &rows[..n] {
-                        put_row(out, r);
+                    for (r, measured) in &rows(&m, ctl.config()) {
+                        if *measured {
+                            put_row(out, r);
+                        }
+                    }
+                    if let Some(f) = m.rl_refused {
+                        for name in ["r_phase_ohm", "l_d_h", "l_phase_h"] {
+                            say(out, &[name, " refused: ", f.name()]);
+                            say(out, &[", L pulses at the modulation's limit\r\n"]);
+                        }
                     }
                     if let Some(f) = m.ke_refused {
                         say(out, &["ke_v_s_per_rad refused: ", f.name(), ", rms speed "]);
@@ -901,10 +944,16 @@ pub fn command<W: Write>(ctl: &mut Controller, arg: Option<&str>, out: &mut W) -
             if ctl.mode() == Mode::Run {
                 return fail(out, &[" apply refused: running (mode idle first)"]);
             }
+            if m.rl_refused.is_some() && m.ke_refused.is_some() {
+                return fail(out, &[" apply: nothing measured"]);
+            }
             let c = applied(&m, ctl.config());
             match ctl.set_config(&c) {
                 Ok(()) => {
-                    say(out, &["ok applied r_phase_ohm l_phase_h l_d_h"]);
+                    say(out, &["ok applied"]);
+                    if m.rl_refused.is_none() {
+                        say(out, &[" r_phase_ohm l_phase_h l_d_h"]);
+                    }
                     if m.ke_refused.is_none() {
                         say(out, &[" ke_v_s_per_rad"]);
                     }

@@ -518,3 +518,106 @@ fn l_unbiased_by_the_structures_motion() {
     );
     assert!(xd < 0.03 && xq < 0.03, "largest L_d {xd}, L_q {xq}");
 }
+
+/// `measure` at `a0` m/s²: on the reference TMD (320 V, the apply test's salient machine, the
+/// firmware told the plant's R, K_e and L_d) after `k·0.25 s` idle for k < `n`, else on
+/// board plant `k − n` (72 V, drawn ±20 %); per run the `measure show` reply and, if R and L
+/// were given, their errors against the plant's in units of their stated uncertainty.
+fn strong_motion(a0: f64, k: u64, n: u64) -> (String, Option<[f64; 3]>) {
+    let mut sc = if k < n {
+        let mut sc = Scenario::tmd(306.0);
+        sc.record.channels.clear();
+        sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
+        sc
+    } else {
+        board(k - n, 0.2)
+    };
+    if let Drive::Structure { excitation, .. } = &mut sc.drive {
+        *excitation = Excitation::Sine {
+            a0_m_s2: a0,
+            freq_hz: 0.5,
+        };
+    }
+    let m = sc.plant_machine();
+    let mut d = SimDrive::from_scenario(&sc).expect("build");
+    exec(&mut d, "mode idle");
+    if k < n {
+        run(&mut d, 0.25 * k as f64);
+    }
+    exec(&mut d, "measure");
+    let mut tel = String::new();
+    while d.sim().controller().mode() == Mode::Measure {
+        d.step(&mut tel);
+    }
+    let mut shown = String::new();
+    let _ = d.execute("measure show", &mut shown);
+    let me = *d.sim().controller().measurement();
+    if me.phase() != Phase::Done || me.rl_refused().is_some() {
+        return (shown, None);
+    }
+    let u = me.uncertainty();
+    let z = |x: f32, y: f64, u: f32| (x as f64 - y) / u as f64;
+    (
+        shown,
+        Some([
+            z(me.r.mean(), m.r_ohm, u[0]),
+            z(me.ld.mean(), m.l_d(), u[1]),
+            z(me.lq.mean(), m.l_q(), u[2]),
+        ]),
+    )
+}
+
+/// Under the structure's strong motion (2 m/s²: the TMD's emf near its bus, the board's
+/// beyond it; and 1 m/s²) every R, L_d and L_q `measure` gives lies within 3 of its stated
+/// uncertainty of the plant's, or the run is refused or stopped by name (`measure show`
+/// says why: `meas_v_limit`, `measure_moving`, a fault). 8 TMD start times and 16 board
+/// plants per level. Measured at 2 m/s²: the largest |error|/u 2.5 (R, L_q), at 1 m/s² 2.0;
+/// the bound 3 is the brief's (a standard uncertainty's 99.7 %), 1.2× the largest. Without
+/// R's cross-coupling term R came out +33 … +74 % (4–7 u) at 2 m/s².
+#[test]
+fn r_and_l_within_their_uncertainty_under_strong_motion() {
+    use rayon::prelude::*;
+    let n = 8;
+    for a0 in [1.0, 2.0] {
+        let runs: Vec<(String, Option<[f64; 3]>)> = (0..n + 16)
+            .into_par_iter()
+            .map(|k| strong_motion(a0, k, n))
+            .collect();
+        let mut worst = [0.0f64; 3];
+        let mut refused = Vec::new();
+        for (k, (shown, z)) in runs.iter().enumerate() {
+            match z {
+                Some(z) => {
+                    for j in 0..3 {
+                        worst[j] = worst[j].max(z[j].abs());
+                    }
+                    assert!(
+                        z.iter().all(|z| z.abs() <= 3.0),
+                        "{a0} m/s², run {k}: R, L_d, L_q off by {z:.2?} of their uncertainty\n{shown}"
+                    );
+                }
+                None => {
+                    // Refused or stopped: by name, one line saying why.
+                    let why = shown
+                        .lines()
+                        .find(|l| l.contains("refused: ") || l.starts_with("error: measure"))
+                        .unwrap_or_else(|| panic!("{a0} m/s², run {k}: no reason\n{shown}"));
+                    refused.push(why.to_string());
+                }
+            }
+        }
+        println!(
+            "{a0} m/s²: {} of {} given, largest |error|/u: R {:.2}, L_d {:.2}, L_q {:.2}",
+            runs.len() - refused.len(),
+            runs.len(),
+            worst[0],
+            worst[1],
+            worst[2]
+        );
+        for r in &refused {
+            println!("  {r}");
+        }
+        // Most runs are given (not everything refused): 16 board plants and most TMD starts.
+        assert!(refused.len() <= runs.len() / 2, "{a0} m/s²: {refused:?}");
+    }
+}
