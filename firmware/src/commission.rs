@@ -220,8 +220,7 @@ pub struct Measure {
     n_l: u32,
     n_gap: u32,
     n_ke: u32,
-    dv_d: f32,
-    dv_q: f32,
+    dv: f32,
     x0: f32,
     /// The current loop: integrators and references (d, q).
     integ: [f32; 2],
@@ -244,12 +243,8 @@ pub struct Measure {
     ke: [f32; 5],
     ke_w2: f32,
     ke_n: u32,
-    /// R: the low step's mean voltage, current and `p·ω·i_q`.
-    lo: [f32; 3],
-    /// R's cross-coupling: the provisional L_q its pairs were computed with (the configured
-    /// `l_phase_h`), and per pair `p·Δ(ω·i_q)/ΔI` summed (R moves by its mean times L_q's
-    /// difference from the provisional one).
-    l_cfg: f32,
+    /// R's cross-coupling: per pair `p·Δ(ω·i_q)/ΔI` summed (R moves by its mean times L_q's
+    /// difference from the provisional one its pairs were computed with, [`Self::l_cfg`]).
     xr: f32,
     /// Per d and q pulse `∂L/∂R` summed (the pulses are computed with R before its
     /// cross-coupling's correction).
@@ -270,9 +265,11 @@ pub struct Measure {
     pll: [f32; 2],
     /// The pulse-torque model (unit gain): the speed `u = ∫(i − i₀)`, its position, the
     /// tracking loop's position and speed on it, `Σ(u − v̂)` to the window's end; at the
-    /// pulse's end `Σ(u − v̂)`, the integral `S_T`, `Δi` and the cross-coupling's integral.
+    /// pulse's end `Σ(u − v̂)`, the integral `S_T`, `Δi`, the cross-coupling's integral and
+    /// `∫(i − i₀)dt`. While R runs `held` keeps the low step's mean voltage, current and
+    /// `p·ω·i_q`.
     model: [f32; 4],
-    at_end: [f32; 5],
+    held: [f32; 5],
     /// The configured K_e (L_q's emf term when K_e was refused) and pole pairs; K_e's least
     /// r.m.s. speed and the r.m.s. speed found.
     ke_cfg: f32,
@@ -343,11 +340,9 @@ impl Measure {
             n_l,
             n_gap: periods(0.02, cfg).max(2 * N_BASE),
             n_ke: periods(cfg.meas_ke_time_s / REPEATS as f32, cfg),
-            dv_d: dv,
-            dv_q: dv,
+            dv,
             x0: x,
             ke_cfg: cfg.ke_v_s_per_rad,
-            l_cfg: cfg.l_phase_h,
             r_cfg: cfg.r_phase_ohm,
             pole_pairs: cfg.pole_pairs as f32,
             speed_min: cfg.meas_speed_min_rad_s,
@@ -441,18 +436,18 @@ impl Measure {
             // against a fast-changing emf, or at the circle) with the provisional L_q.
             let k = 1.0 / self.s[3];
             let x = self.pole_pairs * self.s[4] * k;
-            let vm = (self.s[0] - self.kd.mean() * self.s[2]) * k + self.l_cfg * x;
+            let vm = (self.s[0] - self.kd.mean() * self.s[2]) * k + self.l_cfg() * x;
             let im = self.s[1] * k;
             if hi {
-                let di = im - self.lo[1];
+                let di = im - self.held[1];
                 if di < 0.25 * self.i_hi {
                     self.fail(Failure::NoCurrent);
                     return v;
                 }
-                self.r.add((vm - self.lo[0]) / di, 1.0);
-                self.xr += (x - self.lo[2]) / di;
+                self.r.add((vm - self.held[0]) / di, 1.0);
+                self.xr += (x - self.held[2]) / di;
             } else {
-                self.lo = [vm, im, x];
+                self.held = [vm, im, x, 0.0, 0.0];
             }
             self.s = [0.0; 5];
             self.n = 0;
@@ -475,7 +470,7 @@ impl Measure {
         let mut v = [0.0; 2];
         v[other] = self.pi(other, i[other], vmax);
         let sign = if self.rep & 1 == 0 { 1.0 } else { -1.0 };
-        let dv = if ax == 0 { self.dv_d } else { self.dv_q };
+        let dv = self.dv;
         if n < gap {
             v[ax] = self.pi(ax, i[ax], vmax);
             if n >= gap - N_BASE {
@@ -546,7 +541,7 @@ impl Measure {
                     - if ax == 1 { self.ld.mean() * z } else { 0.0 };
                 let a = self.acc[1] * self.ts;
                 if post > 0 && n == gap + nl + 1 {
-                    self.at_end = [self.model[3], s_n, di, z, a];
+                    self.held = [self.model[3], s_n, di, z, a];
                     self.i_prev = [i[ax], i[other]];
                     self.w_prev = w;
                     self.n += 1;
@@ -558,7 +553,7 @@ impl Measure {
                 // unknowns solved (`docs/commissioning.md`).
                 // (`dl`: ∂L/∂L_o through the cross-coupling; `dr`: ∂L/∂R.)
                 let (l, dl, dr) = if post > 0 {
-                    let [u_t, s_t, di_t, z_t, a_t] = self.at_end;
+                    let [u_t, s_t, di_t, z_t, a_t] = self.held;
                     let u_w = self.model[3];
                     let den = di_t * u_w - di * u_t;
                     (
@@ -569,7 +564,7 @@ impl Measure {
                 } else {
                     (s_n / di, z / di, -a / di)
                 };
-                let di = if post > 0 { self.at_end[2] } else { di };
+                let di = if post > 0 { self.held[2] } else { di };
                 if di.abs() > 0.1 * SWING * self.i_hi && !self.clip {
                     if ax == 0 {
                         self.ld.add(l, 1.0);
@@ -638,8 +633,9 @@ impl Measure {
         let [c, x, bd, y, bq] = self.partials();
         let g = (y * bd + bq) * c;
         let lq0 = self.lq.mean();
-        let lq = (lq0 - g * self.l_cfg) / (1.0 - x * y - g);
-        let d = c * (lq - self.l_cfg);
+        let lc = self.l_cfg();
+        let lq = (lq0 - g * lc) / (1.0 - x * y - g);
+        let d = c * (lq - lc);
         self.lq.shift(lq - lq0);
         self.ld.shift(x * lq + bd * d);
         self.r.shift(d);
@@ -695,6 +691,12 @@ impl Measure {
             }
         }
         v
+    }
+
+    /// The configured `l_phase_h` the pulses' ΔV was sized from (`ΔV·T = L·SWING·i_hi`):
+    /// R's provisional L_q.
+    fn l_cfg(&self) -> f32 {
+        self.dv * self.n_l as f32 * self.ts / (SWING * self.i_hi)
     }
 
     /// The next phase, its counters from zero (the loop's integrators kept).
