@@ -11,6 +11,10 @@
 //!    the rotor. Per pair `R = ΔV_d/ΔI_d` over the last half of each step: what the inverter
 //!    adds at a given current (dead time, the switches' drop) is the same at both levels and
 //!    cancels.
+//!    The d voltage is kept inside the modulation's circle (the q axis gets what is left), and
+//!    the cross-coupling `p·ω·L_q·i_q` (the q current the loop does not hold at zero against
+//!    a fast-changing emf) is added with the configured L as a provisional L_q; at the end R,
+//!    L_d and L_q are solved together with the measured L_q (`cross_corrected`).
 //! 2. **L_d**: 8 open-loop voltage pulses `±ΔV` on the d axis of `meas_l_time_s`, from the
 //!    held `meas_i_a/2`, sized to swing the current by `0.4·meas_i_a`. Integrated over the
 //!    pulse as the voltage took effect (the PWM's one-period delay counted),
@@ -42,6 +46,8 @@
 //! in every repeat: the current and bus-voltage sensors' stated gain tolerances
 //! ([`I_GAIN_TOL`], [`V_GAIN_TOL`]). Travel beyond `meas_travel_m` while the d current flows
 //! stops it (`measure_moving`), as does any fault (its name) or a mode change (`aborted`).
+//! An L pulse whose d/q voltage left the modulation's reach while it was integrated is not
+//! counted; fewer than half counted on an axis refuses R, L_d and L_q (`meas_v_limit`).
 
 use core::fmt::Write;
 
