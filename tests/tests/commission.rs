@@ -608,13 +608,21 @@ fn r_and_l_within_their_uncertainty_under_strong_motion() {
                 }
             }
         }
+        // Coverage: the share of the values given within 1 and 2 of their uncertainty.
+        let given: Vec<f64> = runs.iter().filter_map(|r| r.1).flatten().collect();
+        let within = |c: f64| {
+            given.iter().filter(|z| z.abs() <= c).count() as f64 / given.len().max(1) as f64
+        };
         println!(
-            "{a0} m/s²: {} of {} given, largest |error|/u: R {:.2}, L_d {:.2}, L_q {:.2}",
+            "{a0} m/s²: {} of {} given, largest |error|/u: R {:.2}, L_d {:.2}, L_q {:.2}; \
+             coverage {:.0} % within 1, {:.0} % within 2",
             runs.len() - refused.len(),
             runs.len(),
             worst[0],
             worst[1],
-            worst[2]
+            worst[2],
+            100.0 * within(1.0),
+            100.0 * within(2.0)
         );
         for r in &refused {
             println!("  {r}");
