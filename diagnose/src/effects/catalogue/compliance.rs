@@ -60,7 +60,8 @@ impl EffectModel for Compliance {
     /// derived acceleration is
     /// attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so a
     /// mode's force cannot be told from the filter's loss; and to a quarter of the derivative
-    /// filter's cutoff when the record states it (24 values, log-spaced). With the device
+    /// filter's cutoff when the record states it (24 values, log-spaced, from twice the lowest,
+    /// and below it at their spacing). With the device
     /// behind the compliance (`COMPLIANCE_BEHIND`) the mode is driven by the device's own
     /// force, whose friction steps at every reversal: its values reach above the motion
     /// bandwidth, to the same caps (24 more).
@@ -73,16 +74,31 @@ impl EffectModel for Compliance {
             .map_or(f64::INFINITY, |fc| 0.25 * fc)
             .min(0.025 / ctx.dt);
         let lo = MODE_MIN_PERIODS / t;
+        let mid = 2.0 * lo;
         let mut g = Vec::new();
         let behind_p2 = COMPLIANCE_BEHIND + BEHIND_ZETAS[BEHIND_ZETA_GRID];
         for (hi, p2) in [(ctx.f_motion.min(cap), 0.0), (cap, behind_p2)] {
-            if hi > 1.5 * lo {
-                g.extend(logspace(lo, hi, 24).into_iter().map(|p| Effect {
-                    kind: cand.kind,
-                    param: p,
-                    param2: p2,
-                }));
-            }
+            let values = if hi > 1.5 * mid {
+                // 24 values from twice the lowest, continued below at their spacing (a sharp
+                // mode falls between coarser values)
+                let r = (hi / mid).powf(1.0 / 23.0);
+                let below = (1..)
+                    .map(|k| mid / r.powi(k))
+                    .take_while(|p| *p >= lo * (1.0 - 1e-9));
+                let mut v: Vec<f64> = below.collect();
+                v.reverse();
+                v.extend(logspace(mid, hi, 24));
+                v
+            } else if hi > 1.5 * lo {
+                logspace(lo, hi, 24)
+            } else {
+                Vec::new()
+            };
+            g.extend(values.into_iter().map(|p| Effect {
+                kind: cand.kind,
+                param: p,
+                param2: p2,
+            }));
         }
         g
     }
