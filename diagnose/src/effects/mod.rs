@@ -135,8 +135,9 @@ pub const LAG_ROWS: usize = 20_000;
 pub const PROFILE_ROWS: usize = 4000;
 /// Samples from the record's start over which the profile's rows are taken: the profile's
 /// resonators run up to its last row, so on a long record they walk this window instead of the
-/// whole record (200 s at 1 kHz, 40 periods of the lowest mode the 10-periods-per-record scan
-/// admits on a 20 s record; records up to this length are profiled over all their samples).
+/// whole record (200 s at 1 kHz, at least 50 periods of the lowest mode the compliance grid
+/// scans, `MODE_MIN_PERIODS` over a record of up to 20 s; records up to this length are profiled
+/// over all their samples).
 pub const PROFILE_WINDOW: usize = 200_000;
 
 /// The median of `v` (the upper one of an even count), reordering `v`. `v` is not empty.

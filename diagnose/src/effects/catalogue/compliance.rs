@@ -55,11 +55,13 @@ impl EffectModel for Compliance {
     fn variant_refine(&self, centre: &Effect) -> Option<f64> {
         behind(centre).then_some(0.03)
     }
-    /// From 10 periods over the screening window to the motion bandwidth, and at most half the
-    /// derivative filter's default cutoff (`record::default_cutoff`): above it the derived acceleration is
+    /// From `MODE_MIN_PERIODS` periods over the screening window to the motion bandwidth, and at
+    /// most half the derivative filter's default cutoff (`record::default_cutoff`): above it the
+    /// derived acceleration is
     /// attenuated by more than 6 % (forward-backward Butterworth-2: 1/(1 + (f/fc)⁴)), so a
     /// mode's force cannot be told from the filter's loss; and to a quarter of the derivative
-    /// filter's cutoff when the record states it (24 values, log-spaced). With the device
+    /// filter's cutoff when the record states it (24 values, log-spaced, from twice the lowest,
+    /// and below it at their spacing). With the device
     /// behind the compliance (`COMPLIANCE_BEHIND`) the mode is driven by the device's own
     /// force, whose friction steps at every reversal: its values reach above the motion
     /// bandwidth, to the same caps (24 more).
@@ -71,17 +73,32 @@ impl EffectModel for Compliance {
             .get(crate::record::DERIVATIVE_CUTOFF_KEY)
             .map_or(f64::INFINITY, |fc| 0.25 * fc)
             .min(0.025 / ctx.dt);
-        let lo = 10.0 / t;
+        let lo = MODE_MIN_PERIODS / t;
+        let mid = 2.0 * lo;
         let mut g = Vec::new();
         let behind_p2 = COMPLIANCE_BEHIND + BEHIND_ZETAS[BEHIND_ZETA_GRID];
         for (hi, p2) in [(ctx.f_motion.min(cap), 0.0), (cap, behind_p2)] {
-            if hi > 1.5 * lo {
-                g.extend(logspace(lo, hi, 24).into_iter().map(|p| Effect {
-                    kind: cand.kind,
-                    param: p,
-                    param2: p2,
-                }));
-            }
+            let values = if hi > 1.5 * mid {
+                // 24 values from twice the lowest, continued below at their spacing (a sharp
+                // mode falls between coarser values)
+                let r = (hi / mid).powf(1.0 / 23.0);
+                let below = (1..)
+                    .map(|k| mid / r.powi(k))
+                    .take_while(|p| *p >= lo * (1.0 - 1e-9));
+                let mut v: Vec<f64> = below.collect();
+                v.reverse();
+                v.extend(logspace(mid, hi, 24));
+                v
+            } else if hi > 1.5 * lo {
+                logspace(lo, hi, 24)
+            } else {
+                Vec::new()
+            };
+            g.extend(values.into_iter().map(|p| Effect {
+                kind: cand.kind,
+                param: p,
+                param2: p2,
+            }));
         }
         g
     }
@@ -167,6 +184,10 @@ impl EffectModel for Compliance {
             .map(|c| (NoiseUse::MarginCorrected, c))
     }
 }
+
+/// The fewest periods of a mode over the screening window the grid scans (its lowest
+/// frequency).
+pub const MODE_MIN_PERIODS: f64 = 5.0;
 
 /// `compliance`'s second parameter for the device behind the compliant part is this plus its
 /// damping ratio (0: a mass hung on the device, its damping ratio from the record's profile).
@@ -260,13 +281,17 @@ pub(crate) struct BehindMode {
 /// The device (inertia M, viscous Fv, Coulomb Fc) behind a link of stiffness k = M·ω² and
 /// damping c = 2·ζ_l·M·ω, the force measured on the link's other side. The device's motion is
 /// H·x with H = (2ζ_l·ω·s + ω²)/(s² + 2ζ·ω·s + ω²), ζ = ζ_l + Fv/(2·M·ω) (its own viscous
-/// force damps the mode), and the link's force is the device's, H·(M·a + Fv·v) + Fc·H·s_d,
-/// s_d the (smoothed) sign of the device's velocity H·v. The total damping ratio is the one
+/// force damps the mode), less its friction's response, and the link's force is the device's,
+/// H·(M·a + Fv·v) + Fc·H·s_d, s_d the friction over its Coulomb level (for any friction the
+/// device feels). The total damping ratio is the one
 /// the device's fitted coefficients give: the fits at `BEHIND_TOTAL_ZETAS` (the device's
 /// coefficients through each mode on the training samples in motion, `DeviceRows::fit`) give each
 /// an implied ζ_l + Fv/(2·M·ω); the value where it crosses the assumed one (interpolated in
 /// ln ζ between the bracketing grid values, of the crossings the one of least rss) is the
-/// mode's, and the device is fitted there with s_d from its own velocity. None when no
+/// mode's, and the device is fitted there with s_d the (smoothed) sign of its velocity H·v,
+/// then refitted `STICK_PASSES` times with s_d the friction of its walk behind the link at the
+/// last fit's coefficients (`friction_behind_link`: it sticks where the link's force does not
+/// overcome its Coulomb level, so the force through the link there is the spring's). None when no
 /// crossing lies on the grid or the device's fit is not a device's (a coefficient below 0, no
 /// inertia, or fewer than 10 rows): the column is then zero.
 pub(crate) fn behind_mode(
@@ -325,8 +350,18 @@ pub(crate) fn behind_mode(
     let m = rows.map_or(n, |rw| rw.len());
     let hv = map(m, |j| vd[at(j)]);
     let ha = through(&r.a, &mode, rows).pop()?;
-    let hs = through(&sd, &mode, rows).pop()?;
-    let (d, _) = dr.fit([&ha, &hv, &hs])?;
+    let mut hs = through(&sd, &mode, rows).pop()?;
+    let (mut d, _) = dr.fit([&ha, &hv, &hs])?;
+    // the device refitted through the friction of its walk behind the link (it sticks where
+    // the link's force does not overcome its Coulomb level), at the coefficients of the last fit
+    for _ in 0..STICK_PASSES {
+        if !(d[0] > 0.0 && d[2] > 0.0) {
+            break;
+        }
+        let s = friction_behind_link(&r.x[..n], &r.v[..n], ctx.dt, w, zeta, zl, d[2] / d[0]);
+        hs = through(&s, &mode, rows).pop()?;
+        d = dr.fit([&ha, &hv, &hs])?.0;
+    }
     if d.iter().any(|c| *c < 0.0) || d[0] <= 0.0 {
         return None;
     }
@@ -335,6 +370,53 @@ pub(crate) fn behind_mode(
         d[0] * (ha[j] - r.a[i]) + d[1] * (hv[j] - r.v[i]) + d[2] * (hs[j] - ctx.sgn[i])
     });
     Some(BehindMode { col, d, zeta })
+}
+
+/// Passes of `behind_mode`'s refit of the device through the friction of its walk behind the
+/// link (`friction_behind_link`, at the coefficients of the previous fit).
+const STICK_PASSES: usize = 2;
+
+/// The friction force, over its Coulomb level, on a device behind a link (the device's motion
+/// walked over the record, semi-implicit Euler at the sample period `dt`), per unit of the
+/// device's mass: the link's stiffness ω², its damping 2ζ_l·ω (on the relative velocity),
+/// the device's own damping 2(ζ − ζ_l)·ω, its Coulomb level `mu`; the link's end moves
+/// with `x`, `v`. Sliding, the friction is ∓1 against the device's velocity; at rest (started
+/// at rest, or stopped where its velocity reverses) it holds the link's force while that stays
+/// within the Coulomb level (stick: the friction is the link's force over the level, in
+/// [−1, 1]) and slides off when it does not. The measured force through the link is then
+/// H·(M·a + Fv·v) + Fc·H·s for any friction s the device feels, so this s is the one its column
+/// filters.
+fn friction_behind_link(
+    x: &[f64],
+    v: &[f64],
+    dt: f64,
+    w: f64,
+    zeta: f64,
+    zl: f64,
+    mu: f64,
+) -> Vec<f64> {
+    let (w2, cl, ct) = (w * w, 2.0 * zl * w, 2.0 * zeta * w);
+    let mut xm = x.first().copied().unwrap_or(0.0);
+    let mut vm = 0.0f64;
+    let mut out = Vec::with_capacity(x.len());
+    for (&xi, &vi) in x.iter().zip(v) {
+        // the link's force on the device at rest, per unit mass
+        let push = w2 * (xi - xm) + cl * vi;
+        let s = if vm != 0.0 {
+            vm.signum()
+        } else if push.abs() <= mu {
+            out.push(push / mu);
+            continue;
+        } else {
+            push.signum()
+        };
+        let vn = (vm + dt * (push - mu * s)) / (1.0 + dt * ct);
+        // the device stops where its velocity would turn against the friction that slows it
+        vm = if vn * s < 0.0 { 0.0 } else { vn };
+        xm += dt * vm;
+        out.push(s);
+    }
+    out
 }
 
 /// The rows the device behind the compliance is fitted on (`DeviceRows::fit`): the training
@@ -380,5 +462,67 @@ impl DeviceRows {
         let th = nq.solve();
         let d = [th[0], th[1], th[2]];
         d.iter().all(|c| c.is_finite()).then(|| (d, nq.rss(&th)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::friction_behind_link;
+
+    /// The link's end pulled from rest at a constant speed V (no link damping): the device
+    /// holds, its friction the spring's force ω²·V·t over the Coulomb level μ, until that
+    /// reaches μ at t* = μ/(ω²·V), and slides from there on (it never reverses), the friction
+    /// at its level. Pulled back, it stops and holds again (its friction following the
+    /// spring's force, ω²·Δx/μ over the end's travel Δx, with the device still) until the
+    /// spring's force reaches −μ, and slides back. Break tried: the device sliding off at once
+    /// (no stick) gives 1 on the first sample and no hold after the reversal.
+    #[test]
+    fn the_device_behind_the_link_sticks_until_the_spring_overcomes_its_friction() {
+        let (dt, w, mu, vel) = (1e-3, std::f64::consts::TAU * 3.0, 2.0, 0.05);
+        let n = 2000;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        let x: Vec<f64> = t.iter().map(|t| vel * t).collect();
+        let v = vec![vel; n];
+        let s = friction_behind_link(&x, &v, dt, w, 0.5, 0.0, mu);
+        let t_star = mu / (w * w * vel);
+        let k_star = (t_star / dt).floor() as usize;
+        for (i, si) in s.iter().enumerate().take(k_star) {
+            let want = w * w * vel * t[i] / mu;
+            assert!((si - want).abs() < 1e-9, "sample {i}: {si} against {want}");
+        }
+        assert!(s[k_star + 1..].iter().all(|&si| si == 1.0));
+        // and back: the end reverses at its last position
+        let x_top = x[n - 1];
+        let xb: Vec<f64> = x
+            .iter()
+            .copied()
+            .chain(t.iter().map(|t| x_top - vel * t))
+            .collect();
+        let vb: Vec<f64> = v
+            .iter()
+            .copied()
+            .chain(std::iter::repeat_n(-vel, n))
+            .collect();
+        let sb = friction_behind_link(&xb, &vb, dt, w, 0.5, 0.0, mu);
+        let turned = sb[n..]
+            .iter()
+            .position(|&si| si == -1.0)
+            .expect("slides back")
+            + n;
+        let held: Vec<usize> = (n..turned).filter(|&i| sb[i].abs() < 1.0).collect();
+        println!(
+            "held {} samples after the reversal, the end's travel {:.5} m (2μ/ω² = {:.5} m)",
+            held.len(),
+            held.len() as f64 * dt * vel,
+            2.0 * mu / (w * w)
+        );
+        assert!(held.len() > 10);
+        // one hold, the device still: the friction follows the spring's force
+        assert_eq!(held.last().unwrap() - held[0] + 1, held.len());
+        assert_eq!(*held.last().unwrap() + 1, turned);
+        for p in held.windows(2) {
+            let want = w * w * (xb[p[1]] - xb[p[0]]) / mu;
+            assert!((sb[p[1]] - sb[p[0]] - want).abs() < 1e-9);
+        }
     }
 }
