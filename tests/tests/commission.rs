@@ -8,18 +8,32 @@ use hal_sim::Scenario;
 use regen_fw::commission::Phase;
 use regen_fw::Mode;
 
+/// The structure of `sc` excited by a 0.5 Hz sine of `a0` m/s².
+fn excite(sc: &mut Scenario, a0: f64) {
+    if let Drive::Structure { excitation, .. } = &mut sc.drive {
+        *excitation = Excitation::Sine {
+            a0_m_s2: a0,
+            freq_hz: 0.5,
+        };
+    }
+}
+
+/// The reference TMD (320 V) at `r_l` with the apply test's salient machine (L_q =
+/// 1.6·L_d), no record channels.
+fn salient_tmd(r_l: f64) -> Scenario {
+    let mut sc = Scenario::tmd(r_l);
+    sc.record.channels.clear();
+    sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
+    sc
+}
+
 /// The board's reference TMD (`board-72v-tmd-306.toml`: power-up, shunt sampling) at
 /// 0.4 m/s² (below the 72 V bus's diode onset), its plant drawn by `seed` within ±`tol`.
 fn board(seed: u64, tol: f64) -> Scenario {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hal-sim/scenarios");
     let mut sc = Scenario::from_file(&dir.join("board-72v-tmd-306.toml")).expect("scenario");
     sc.record.channels.clear();
-    if let Drive::Structure { excitation, .. } = &mut sc.drive {
-        *excitation = Excitation::Sine {
-            a0_m_s2: 0.4,
-            freq_hz: 0.5,
-        };
-    }
+    excite(&mut sc, 0.4);
 
     sc.plant_draw = PlantDraw {
         r_rel: tol,
@@ -202,9 +216,7 @@ const SALIENCY: f64 = 1.6;
 /// apply`, run; the emulated load before and after, the measurement's reply and the mean
 /// power over 4 s after `SETTLE_S`.
 fn measured_drive(r_l: f64, err: f64, meas: bool) -> (f64, f64, String, f64) {
-    let mut sc = Scenario::tmd(r_l);
-    sc.record.channels.clear();
-    sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
+    let mut sc = salient_tmd(r_l);
     let m = sc.plant_machine();
     sc.firmware.ke_v_s_per_rad = Some((m.ke_v_s_per_rad * (1.0 + err)) as f32);
     sc.firmware.r_phase_ohm = Some((m.r_ohm * (1.0 + err)) as f32);
@@ -388,15 +400,8 @@ fn board_scenarios_plants() {
 /// `measure`: the L_d and L_q errors against the plant's, and the r.m.s. electrical speed
 /// over the L pulses, rad/s.
 fn tmd_l_errors(a0: f64, wait: f64) -> Option<[f64; 3]> {
-    let mut sc = Scenario::tmd(306.0);
-    sc.record.channels.clear();
-    sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
-    if let Drive::Structure { excitation, .. } = &mut sc.drive {
-        *excitation = Excitation::Sine {
-            a0_m_s2: a0,
-            freq_hz: 0.5,
-        };
-    }
+    let mut sc = salient_tmd(306.0);
+    excite(&mut sc, a0);
     let m = sc.plant_machine();
     let mut d = SimDrive::from_scenario(&sc).expect("build");
     exec(&mut d, "mode idle");
@@ -436,12 +441,7 @@ fn l_errors(d: &mut SimDrive, m: &hal_sim::plant::Machine) -> Option<[f64; 3]> {
 /// The board's TMD (`board`) at `a0` m/s², plant `seed`: as [`tmd_l_errors`].
 fn board_l_errors(a0: f64, seed: u64) -> Option<[f64; 3]> {
     let mut sc = board(seed, 0.2);
-    if let Drive::Structure { excitation, .. } = &mut sc.drive {
-        *excitation = Excitation::Sine {
-            a0_m_s2: a0,
-            freq_hz: 0.5,
-        };
-    }
+    excite(&mut sc, a0);
     let m = sc.plant_machine();
     let mut d = SimDrive::from_scenario(&sc).expect("build");
     exec(&mut d, "mode idle");
@@ -527,19 +527,11 @@ fn l_unbiased_by_the_structures_motion() {
 /// were given, their errors against the plant's in units of their stated uncertainty.
 fn strong_motion(a0: f64, k: u64, n: u64) -> (String, Option<[f64; 3]>) {
     let mut sc = if k < n {
-        let mut sc = Scenario::tmd(306.0);
-        sc.record.channels.clear();
-        sc.machine.l_q_h = Some(SALIENCY * sc.machine.l_h);
-        sc
+        salient_tmd(306.0)
     } else {
         board(k - n, 0.2)
     };
-    if let Drive::Structure { excitation, .. } = &mut sc.drive {
-        *excitation = Excitation::Sine {
-            a0_m_s2: a0,
-            freq_hz: 0.5,
-        };
-    }
+    excite(&mut sc, a0);
     let m = sc.plant_machine();
     let mut d = SimDrive::from_scenario(&sc).expect("build");
     exec(&mut d, "mode idle");
