@@ -88,13 +88,8 @@ mod residual_tests {
     /// rounding of N log N against N terms).
     #[test]
     fn fft_matches_direct_dft() {
-        let mut st = 0x1234_5678_9abc_def1u64;
-        let mut rnd = || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = crate::synth::Rng::new(1);
+        let mut rnd = || rng.range(-0.5, 0.5);
         for n in [256usize, 243] {
             let x: Vec<f64> = (0..n).map(|_| rnd()).collect();
             let l1: f64 = x.iter().map(|v| v.abs()).sum();
@@ -236,13 +231,8 @@ mod summary_tests {
 /// Breaks: a lag's sum started at its own lag + 1, or the last lag dropped, fail it.
 #[test]
 fn whiteness_is_the_lag_by_lag_sums() {
-    let mut s = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
+    let mut rng = crate::synth::Rng::new(2);
+    let mut next = || rng.range(-0.5, 0.5);
     for n in [3usize, 7, 40, 81, 84, 1000, 20_000] {
         for colour in [0.0, 0.6, 0.97] {
             let mut prev = 0.0;
