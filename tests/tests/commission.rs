@@ -52,21 +52,23 @@ fn board(seed: u64, tol: f64) -> Scenario {
 /// Boot (the build's), `mode idle`, `measure`, run until it ends; the measurement.
 fn measure(sc: &Scenario) -> (SimDrive, String) {
     let mut d = SimDrive::from_scenario(sc).expect("build");
-    let mut out = String::new();
-    d.execute("mode idle", &mut out).expect("idle");
-    out.clear();
+    exec(&mut d, "mode idle");
+    let shown = measure_on(&mut d);
+    (d, shown)
+}
 
-    d.execute("measure", &mut out)
-        .unwrap_or_else(|_| panic!("{out}"));
+/// `measure` on `d` (idle), run until it ends (at most 20 s at 20 kHz); `measure show`'s reply.
+fn measure_on(d: &mut SimDrive) -> String {
+    exec(d, "measure");
     let mut tel = String::new();
     let mut n = 0u64;
     while d.sim().controller().mode() == Mode::Measure && n < 20 * 20_000 {
         d.step(&mut tel);
         n += 1;
     }
-    out.clear();
+    let mut out = String::new();
     let _ = d.execute("measure show", &mut out);
-    (d, out)
+    out
 }
 
 /// The tolerance of each measured value (R, L_d, L_q, K_e), relative to the plant's, from
@@ -538,13 +540,7 @@ fn strong_motion(a0: f64, k: u64, n: u64) -> (String, Option<[f64; 3]>) {
     if k < n {
         run(&mut d, 0.25 * k as f64);
     }
-    exec(&mut d, "measure");
-    let mut tel = String::new();
-    while d.sim().controller().mode() == Mode::Measure {
-        d.step(&mut tel);
-    }
-    let mut shown = String::new();
-    let _ = d.execute("measure show", &mut shown);
+    let shown = measure_on(&mut d);
     let me = *d.sim().controller().measurement();
     if me.phase() != Phase::Done || me.rl_refused().is_some() {
         return (shown, None);
