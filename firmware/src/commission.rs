@@ -658,14 +658,18 @@ impl Measure {
         let den = 1.0 - x * y - g;
         let lq = (lq0 - g * lc) / den;
         let d = c * (lq - lc);
-        let (ld, r) = (self.ld.mean() + x * lq + bd * d, self.r.mean() + d);
+        let dld = x * lq + bd * d;
         // `!(a > 0)` also refuses a NaN.
-        if !((0.5..=1.5).contains(&den) && lq > 0.0 && ld > 0.0 && r > 0.0) {
+        if !((0.5..=1.5).contains(&den)
+            && lq > 0.0
+            && self.ld.mean() + dld > 0.0
+            && self.r.mean() + d > 0.0)
+        {
             self.rl_refused = Some(Failure::Coupled);
             return;
         }
         self.lq.shift(lq - lq0);
-        self.ld.shift(x * lq + bd * d);
+        self.ld.shift(dld);
         self.r.shift(d);
     }
 
