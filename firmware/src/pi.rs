@@ -29,33 +29,37 @@ pub struct CurrentPi {
 pub struct PiOutput {
     /// Voltage command, limited to `v_max`.
     pub v: Dq,
-    /// The unlimited command exceeded `v_max` and was scaled down.
+    /// The unlimited command was not within `7.2e-7·v_max` inside `v_max` and was scaled
+    /// into it.
     pub saturated: bool,
 }
 
-/// The allowed voltage circle: radius `r ≥ 0` (LSB of [`Q`]), `r²` and `r·(1 − 2^-20)` as an
-/// `f32`, so the per-period test is two products and a compare and the scaling needs no
-/// conversion of `r` (the loop holds it between bus refreshes).
+/// The allowed voltage circle: radius `r ≥ 0` (LSB of [`Q`]), and as `f32` the test's
+/// threshold `r²·(1 − 2^-20)` and the scaling's radius `r·(1 − 2^-19)` (the loop holds them
+/// between bus refreshes; as bits, so that the struct stays `Eq`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct VLimit {
     r: u32,
-    r2: u64,
-    /// The bits of the `f32` `r·(1 − 2^-20)` (bits, so that the struct stays `Eq`).
+    r2_in: u32,
     r_in: u32,
 }
 
-/// The limiter's target radius, `1 − 2^-20` of the circle's (exact in `f32`): it covers the
-/// scaling's rounding, so that a limited vector never lies outside the circle.
-const R_IN: f32 = 1.0 - 1.0 / 1_048_576.0;
+/// The test's threshold on `|v|²` and the scaling's target radius, relative to the circle's
+/// (`1 − 2^-20` and `1 − 2^-19`, exact in `f32`): they cover the roundings (`limit_slow`), so
+/// that a vector the test passes lies inside the circle and a limited one is inside it and
+/// never longer than it was.
+const R2_IN: f32 = 1.0 - 1.0 / 1_048_576.0;
+const R_IN: f32 = 1.0 - 1.0 / 524_288.0;
 
 impl VLimit {
     /// The circle of radius `v_max` (negative radii count as zero).
     pub fn new(v_max: Q) -> VLimit {
         let r = v_max.to_bits().max(0) as u32;
+        let rf = r as f32;
         VLimit {
             r,
-            r2: r as u64 * r as u64,
-            r_in: (r as f32 * R_IN).to_bits(),
+            r2_in: (rf * rf * R2_IN).to_bits(),
+            r_in: (rf * R_IN).to_bits(),
         }
     }
 
@@ -64,19 +68,16 @@ impl VLimit {
         Q::from_bits(self.r as i32)
     }
 
-    /// `v` scaled onto the circle when it lies outside; `None` when inside.
+    /// `v` scaled into the circle when it does not lie within `7.2e-7·r` inside it; `None`
+    /// when it does (then it lies inside: `limit_slow`).
     #[inline(always)]
     pub fn limit(&self, v: Dq) -> Option<Dq> {
-        let (d, q) = (v.d.to_bits() as i64, v.q.to_bits() as i64);
-        // Each square ≤ 2^62: the sum fits a u64.
-        if (d * d) as u64 + (q * q) as u64 <= self.r2 {
+        let (x, y) = (v.d.to_bits() as f32, v.q.to_bits() as f32);
+        let s = x * x + y * y;
+        if s <= f32::from_bits(self.r2_in) {
             return None;
         }
-        Some(limit_slow(
-            v.d.to_bits(),
-            v.q.to_bits(),
-            f32::from_bits(self.r_in),
-        ))
+        Some(limit_slow(x, y, s, f32::from_bits(self.r_in)))
     }
 }
 
@@ -134,28 +135,28 @@ pub fn limit_vector(v: Dq, r: Q) -> Option<Dq> {
     VLimit::new(r).limit(v)
 }
 
-/// The scaling itself (taken only while limiting; inlined: it is short): `k = r'/|v|` in
-/// `f32` (`r' = r·(1 − 2^-20)`, held by [`VLimit`]; `|v|` by two Newton steps,
-/// [`sqrt_newton`]) and each component `x·k` truncated toward zero. IEEE 754 rounds `+ × ÷`
-/// and the conversions correctly, and Rust contracts no `a·b + c`, so the host and the
+/// The test and the scaling, in `f32` (the scaling taken only while limiting; inlined: it is
+/// short): `s = x² + y²` of the converted components against `r²·(1 − 2^-20)`, and `k =
+/// r'/|v|` (`r' = r·(1 − 2^-19)`, both held by [`VLimit`]; `|v|` by two Newton steps,
+/// [`sqrt_newton`]), each component `x·k` truncated toward zero. IEEE 754 rounds `+ × ÷` and
+/// the conversions correctly, and Rust contracts no `a·b + c`, so the host and the
 /// Cortex-M4F give the same bits.
 ///
-/// The vector is never outside the circle, and within `2e-6·r + √2` LSB of it. With
-/// `u = 2^-24`: the conversions of d and q are within `u` of them (exact below 2^24), the
-/// sum `s = d² + q²` within `4u` of `|v|²`, its square root within `[−3.5u, +10.9u]` of `|v|`
-/// (the two steps' error, [`sqrt_newton`], and half of `s`'s), `r'` within `2u` of
-/// `r·(1 − 16u)`, `k` within `[−13.9u, +6.5u]` of `r·(1 − 16u)/|v|`, each product within
-/// `[−15.9u, +8.5u]` of the exact scaled component times `1 − 16u`: the scaled vector's
-/// length lies in `r·[1 − 32u, 1 − 7.5u]`, inside the circle. Truncation toward zero moves
-/// each component by less than 1 LSB toward zero (never longer, never across zero): the
-/// result's length is in `(r·(1 − 32u) − √2, r)`. No NaN or overflow: the caller limits only
-/// when `d² + q² > r² ≥ 0`, so `s ≥ 1` and finite (at most 2^63), `k` is in `[0, 1)`, and
-/// `|x·k| < r ≤ 2^31 − 1` converts exactly (`i32::MIN` components included; the conversion
-/// saturates anyway).
+/// With `u = 2^-24`, to first order: the conversions of d, q and r are within `u` of them
+/// (exact below 2^24), `s` within `4u` of `|v|²`, the threshold within `4u` of
+/// `r²·(1 − 16u)`: a vector the test passes has `|v|² ≤ r²(1 − 12u)/(1 − 4u)`, inside the
+/// circle, and a limited one `|v| > r(1 − 12u)` (so `s ≥ 1`: no NaN). The square root is
+/// within `[−3.5u, +10.9u]` of `|v|` (the two steps' error and half of `s`'s), `r'` within `2u`
+/// of `r(1 − 32u)`, `k` within `[−13.9u, +6.5u]` of `r(1 − 32u)/|v|`, each product within
+/// `[−15.9u, +8.5u]` of the exact scaled component times `1 − 32u`: each component is scaled by
+/// at most `(1 − 32u)(1 + 8.5u)/(1 − 12u) < 1` (never longer than it was), and the length lies
+/// in `r·[1 − 48u, 1 − 23.5u]`, inside the circle. Truncation toward zero moves each component
+/// by less than 1 LSB toward zero: the result's length is in `(r·(1 − 48u) − √2, r)`, within
+/// `2.9e-6·r + √2` LSB of the circle. `|x·k| < r ≤ 2^31 − 1` converts exactly (`i32::MIN`
+/// components included; the conversion saturates anyway).
 #[inline(always)]
-fn limit_slow(d: i32, q: i32, r_in: f32) -> Dq {
-    let (x, y) = (d as f32, q as f32);
-    let k = r_in / sqrt_newton::<2>(x * x + y * y);
+fn limit_slow(x: f32, y: f32, s: f32, r_in: f32) -> Dq {
+    let k = r_in / sqrt_newton::<2>(s);
     Dq {
         d: Q::from_bits((x * k) as i32),
         q: Q::from_bits((y * k) as i32),
@@ -285,9 +286,11 @@ mod tests {
     }
 
     /// The limiter's proven bounds (`limit_slow`), checked on one input, in LSB and in `f64`
-    /// from the bits (the reference shares nothing with the `f32` code): the result inside the
-    /// circle, within `2^-19·r + √2` of it, never longer than the input, the direction kept
-    /// (the component across the input within `2u·r + 1.5`, `u = 2^-24`: only the roundings
+    /// from the bits (the reference shares nothing with the `f32` code): a vector passed
+    /// inside the circle, a limited one not within `12u·r` inside it (`u = 2^-24`), the
+    /// result inside the circle, within `48u·r + √2` of it, never longer than the input, the
+    /// direction kept
+    /// (the component across the input within `2u·r + 1.5`: only the roundings
     /// that differ between the components turn it, the conversions' and the products', each
     /// ≤ `u` of its component, and the truncations). Returns how far inside the circle the result lies,
     /// relative to `r`, and its component across the input in LSB.
@@ -309,10 +312,15 @@ mod tests {
         let (ld, lq) = (l.d.to_bits() as f64, l.q.to_bits() as f64);
         let m = (ld * ld + lq * lq).sqrt();
         let v2 = d as i128 * d as i128 + qq as i128 * qq as i128;
-        assert!(v2 > rf as i128 * rf as i128, "{d} {qq} {r}: limited inside");
+        // Limited only when not within 12u of the circle inside it.
+        let _ = v2;
+        assert!(
+            vm > rf * (1.0 - 12.0 * 0.5f64.powi(24)),
+            "{d} {qq} {r}: limited inside"
+        );
         assert!(m <= rf, "{d} {qq} {r}: {m} outside");
         assert!(
-            m >= rf * (1.0 - 0.5f64.powi(19)) - 2f64.sqrt(),
+            m >= rf * (1.0 - 3.0 * 0.5f64.powi(20)) - 2f64.sqrt(),
             "{d} {qq} {r}: {m}"
         );
         assert!(m <= vm, "{d} {qq} {r}: longer");
@@ -372,8 +380,8 @@ mod tests {
         // Seeded inputs of every size (a component of up to 31 bits, a radius below it),
         // each through `check_limited`; printed: how far inside the circle the limited
         // vector lies relative to r, for r ≥ 2^24 (where the truncation's ≤ √2 LSB is below
-        // 8.5e-8 of r: the deliberate 2^-20 = 9.5e-7 and the roundings; the bound 2^-19 =
-        // 1.9e-6), and the largest component across the input (bound 2u·r + 1.5 LSB).
+        // 8.5e-8 of r: the deliberate 2^-19 = 1.9e-6 and the roundings; the bound 48u =
+        // 2.9e-6), and the largest component across the input (bound 2u·r + 1.5 LSB).
         let mut s = 0x9e37_79b9_7f4a_7c15u64;
         let mut next = move || {
             s ^= s << 13;

@@ -166,7 +166,7 @@ fn measured_within_tolerance_of_the_plant() {
         );
         // The stated uncertainty is a standard one: 68 % of a normal error within 1 of it,
         // 95 % within 2; 100 plants put the share within ±4.7 % (1) and ±2.2 % (2) of those
-        // (binomial): bounds 3 of that. Measured R 68/98 %, L_d 69/99 %, L_q 67/94 %, K_e
+        // (binomial): bounds 3 of that. Measured R 68/98 %, L_d 69/98 %, L_q 68/94 %, K_e
         // 71/100 %. The repeats' spread alone (the gain errors left out) covers R 35 %,
         // L_d 43 %, L_q 38 %, K_e 20 % within 1.
         assert!(
