@@ -1,15 +1,17 @@
 //! Capture at the loop rate (`cap`, `docs/console.md`, "Capture"): up to [`CH_MAX`] of
-//! `tel`'s channels recorded every `div`-th period into a static ring of `i16` samples, with a
-//! trigger (a fault latching, a command, a channel crossing a level) and a share of the
-//! samples kept from before it.
+//! `tel`'s channels recorded every `div`-th period into a static ring, with a trigger (a
+//! fault latching, a command, a channel crossing a level) and a share of the samples kept
+//! from before it.
 //!
 //! [`Capture::record`] runs in the period routine ([`crate::period::Period::finish`], after
 //! the outputs are written and the period's latch and supervision are done, so a fault that
 //! latched in this period is seen in this period's sample). A sample stores what the step
 //! already stored ([`Controller::cap_words_with_power`]), converted to nothing: each channel
 //! is resolved when the capture is armed ([`source`]) to a word of the step's record and a
-//! right shift, and its code is that word shifted and saturated to `i16` (an indexed load, one
-//! `asr` and one `ssat`): the phase currents' and the bus voltage's ADC codes as they came,
+//! right shift; the sample holds the word as it is (an indexed load and a store), and its code
+//! is that word shifted and saturated to `i16` when it is read ([`CapPort::sample`]; the level
+//! trigger's channel in the sample itself): the phase currents' and the bus voltage's ADC
+//! codes as they came,
 //! the d/q currents, references and voltages as their Q16.16 bits shifted, the speed as the
 //! encoder's speed estimate (counts per period) shifted, the travel as the encoder's count
 //! shifted, and the power, which the step does not compute, as the period computes it for its
@@ -43,8 +45,10 @@ const _: () = assert!(CAP_WORDS == 13);
 /// Channels a capture records at most.
 pub const CH_MAX: usize = 4;
 
-/// Samples of the G474's capture ring (and the simulator's): 51.2 ms of 4 channels at 20 kHz
-/// (a power of two: the ring's index is the sample count's low bits).
+/// Samples of the G474's capture ring (and the simulator's): 51.2 ms of 4 channels at 20 kHz,
+/// 16 KiB of 32-bit words (a power of two: the ring's index is the sample count's low bits).
+/// A 32 KiB G431 beside the rest of the image's static RAM (≈ 16 KiB) holds 512 (8 KiB):
+/// 25.6 ms at 20 kHz.
 pub const SAMPLES: usize = 1024;
 
 /// Channel indices into [`crate::console::CHANNELS`] the capture treats apart: the phase
@@ -460,8 +464,9 @@ pub struct Capture<const N: usize> {
     set: Settings,
     dt_s: f32,
     decode: Decode,
-    /// The samples, four codes to a double word (the first channel's in the low half).
-    buf: [u64; N],
+    /// The samples: each the four slots' record words as the step stored them (shifted and
+    /// saturated to codes when read, [`Capture::sample`]).
+    buf: [[i32; CH_MAX]; N],
 }
 
 /// The sample count after `k`: `k + 1`, but from 2^31 on modulo 2^31 above 2^31 (the ring's
@@ -535,7 +540,7 @@ impl<const N: usize> Capture<N> {
             },
             dt_s: 0.0,
             decode: Decode::NONE,
-            buf: [0; N],
+            buf: [[0; CH_MAX]; N],
         }
     }
 
@@ -582,20 +587,16 @@ impl<const N: usize> Capture<N> {
     #[inline(always)]
     fn take(&mut self, ctl: &mut Controller, p_bits: i32) {
         // All four slots, unrolled (a loop over `n_ch` costs more than the unused reads; the
-        // slots past `n_ch` are never shown).
+        // slots past `n_ch` are never shown): the words as they are, into slot `k mod N` (no
+        // bounds check), one by one (a copy of the array is a `memcpy` call at opt-level z).
         let words = ctl.cap_words_with_power(p_bits);
-        let (c, sh) = (&self.word, &self.shift);
-        let (r0, r1, r2, r3) = (
-            read(words, c[0], sh[0]),
-            read(words, c[1], sh[1]),
-            read(words, c[2], sh[2]),
-            read(words, c[3], sh[3]),
-        );
-        // Two codes to a word (one `pkhbt` each), both words into slot `k mod N` (no bounds
-        // check).
-        let pack = |a: i32, b: i32| ((a as u16 as u32) | (b as u32) << 16) as u64;
+        let c = &self.word;
         let k = self.k;
-        self.buf[k as usize & (N - 1)] = pack(r0, r1) | pack(r2, r3) << 32;
+        let slot = &mut self.buf[k as usize & (N - 1)];
+        slot[0] = words[c[0] as usize];
+        slot[1] = words[c[1] as usize];
+        slot[2] = words[c[2] as usize];
+        slot[3] = words[c[3] as usize];
         self.k = next_k(k);
         // One table jump on the phase. Armed: the trigger's condition against the last
         // sample's; filling: at its last sample what the first trigger test compares with;
@@ -749,13 +750,8 @@ impl<const N: usize> CapPort for Capture<N> {
     fn sample(&self, k: u32) -> [i16; CH_MAX] {
         // The next slot written is the oldest once the ring is full (as it is when ready).
         let i = (self.k as usize).wrapping_add(k as usize) & (N - 1);
-        let s = self.buf[i];
-        [
-            s as i16,
-            (s >> 16) as i16,
-            (s >> 32) as i16,
-            (s >> 48) as i16,
-        ]
+        let (s, sh) = (&self.buf[i], &self.shift);
+        [0, 1, 2, 3].map(|j| code(s[j], sh[j] as u8) as i16)
     }
 }
 

@@ -54,6 +54,7 @@ use core::fmt::Write;
 use crate::config::Config;
 use crate::console::{CmdResult, Refused};
 use crate::control::{Boot, Controller, Mode, ModeError};
+use crate::fx::sqrt_newton;
 use crate::numtext::Num;
 use crate::protect::Fault;
 
@@ -202,17 +203,13 @@ fn frame_corrected(md: f32, mq: f32, kd: f32, kq: f32) -> (f32, f32) {
     ((md * c - mq * s) / den, (mq * c - md * s) / den)
 }
 
-/// √x for x ≥ 0 (`f32::sqrt` is not in `core`): Newton's iteration from the exponent halved,
-/// to the last bit or one (used on results, never in the loop).
+/// √x for x ≥ 0 (0 for x ≤ 0 or not finite): four Newton steps, to the last bit or one (used
+/// on results, never in the loop).
 fn sqrt(x: f32) -> f32 {
     if x <= 0.0 || !x.is_finite() {
         return 0.0;
     }
-    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1fbd_1df5);
-    for _ in 0..4 {
-        y = 0.5 * (y + x / y);
-    }
-    y
+    sqrt_newton::<4>(x)
 }
 
 /// The measurement's state and results ([`Controller::measurement`]).

@@ -237,6 +237,33 @@ pub fn mul(a: Q, b: Q) -> Q {
     Q::from_bits(((hi as u32) << 16 | lo >> 16) as i32)
 }
 
+/// √x for a finite x > 0 by `N` Newton (Heron) steps `y ← (y + x/y)/2` from the exponent
+/// halved (`f32` `+ × ÷` only, so the same bits on every IEEE 754 target; `f32::sqrt` is not
+/// in `core`). The seed is within [−2.2 %, +4.5 %] of √x; every step after the first lands
+/// above √x (`(y + x/y)/2 ≥ √x`), but for the roundings. Seed and steps commute with scaling x by
+/// 4 (for normal x), so every `f32` of one even and one odd binade covers all normal x:
+/// measured so, the relative error after one step is in [−7.4e-8, 9.6e-4], after two in
+/// [−8.8e-8, 5.3e-7], after three within ±9e-8 (a rounding of the last step).
+/// (Written out step by step: at opt-level `z` a loop stays a loop.)
+#[inline(always)]
+pub fn sqrt_newton<const N: usize>(x: f32) -> f32 {
+    let step = |y: f32| 0.5 * (y + x / y);
+    let y = f32::from_bits((x.to_bits() >> 1) + 0x1fbd_1df5);
+    match N {
+        0 => y,
+        1 => step(y),
+        2 => step(step(y)),
+        3 => step(step(step(y))),
+        _ => {
+            let mut y = step(step(step(step(y))));
+            for _ in 4..N {
+                y = step(y);
+            }
+            y
+        }
+    }
+}
+
 /// Clamp `x` to `[-lim, lim]` (`lim ≥ 0`).
 #[inline(always)]
 pub fn clamp_sym(x: Q, lim: Q) -> Q {
@@ -354,6 +381,33 @@ fn sin_cos_turn(a: u32) -> (Q, Q) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sqrt_newton_error_over_two_binades() {
+        // Every f32 of [1, 2) and [2, 4) (with scaling by 4 that is every normal x), against
+        // the f64 square root: the ranges `sqrt_newton`'s documentation states, rounded out.
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for bits in 0x3f80_0000u32..0x4080_0000 {
+            let x = f32::from_bits(bits);
+            let ex = (x as f64).sqrt();
+            let e = [
+                sqrt_newton::<1>(x) as f64 / ex - 1.0,
+                sqrt_newton::<2>(x) as f64 / ex - 1.0,
+                sqrt_newton::<3>(x) as f64 / ex - 1.0,
+            ];
+            for i in 0..3 {
+                lo[i] = lo[i].min(e[i]);
+                hi[i] = hi[i].max(e[i]);
+            }
+        }
+        for i in 0..3 {
+            std::println!("after {} steps: from {:.2e} to {:.2e}", i + 1, lo[i], hi[i]);
+        }
+        assert!(lo[0] >= -7.5e-8 && hi[0] <= 9.6e-4, "{lo:?} {hi:?}");
+        assert!(lo[1] >= -8.8e-8 && hi[1] <= 5.3e-7, "{lo:?} {hi:?}");
+        assert!(lo[2] >= -9e-8 && hi[2] <= 9e-8, "{lo:?} {hi:?}");
+    }
 
     #[test]
     fn sin_cos_table_accuracy() {

@@ -111,7 +111,7 @@ pub struct LoopState {
 
 pub static LOOP: Mutex<RefCell<Slot<LoopState>>> = Mutex::new(RefCell::new(Slot::Empty));
 
-/// Samples of the board's capture ring (`regen_fw::capture`): 1,024 × 4 channels × 2 bytes.
+/// Samples of the board's capture ring (`regen_fw::capture`): 1,024 × 4 channels × 4 bytes.
 pub const CAP_SAMPLES: usize = regen_fw::capture::SAMPLES;
 
 /// The capture the period records into (zero-initialised, in `.bss`). The console task

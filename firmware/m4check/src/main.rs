@@ -328,6 +328,9 @@ pub fn regen_cap_record_iq(ctl: &mut Controller, cap: &mut Capture<SAMPLES>, p: 
 /// power (its rising edge through 0 W); 4: one channel and a level trigger on the bus voltage
 /// (its falling edge at 36 V).
 const CAPS: usize = 5;
+/// The captures of the replay: `CAPS` counted alone, `CAPS` counted with the step, the load
+/// step's.
+static mut RINGS: [Capture<SAMPLES>; 2 * CAPS + 1] = [const { Capture::new() }; 2 * CAPS + 1];
 fn capture_settings(j: usize) -> Settings {
     let trig = match j {
         0 => Trigger::Level {
@@ -465,14 +468,16 @@ fn main() -> ! {
     let mut bad_cfg = false;
     let mut enc = Encoder::default();
     let mut pi = CurrentPi::default();
-    let mut caps: [Capture<SAMPLES>; CAPS] = core::array::from_fn(|j| {
-        let mut c = Capture::<SAMPLES>::new();
-        c.arm(&capture_settings(j), cfg.ts(), ctl.gains());
-        c
-    });
-    let mut caps_step = caps.clone();
+    // The eleven captures (16 KiB each) in static RAM, not on the stack.
+    // SAFETY: `main` runs once, on the only thread, and takes the only reference.
+    let rings = unsafe { &mut *core::ptr::addr_of_mut!(RINGS) };
+    let (caps, rest) = rings.split_at_mut(CAPS);
+    let (caps_step, rest) = rest.split_at_mut(CAPS);
+    let cap_iq = &mut rest[0];
+    for (j, c) in caps.iter_mut().chain(caps_step.iter_mut()).enumerate() {
+        c.arm(&capture_settings(j % CAPS), cfg.ts(), ctl.gains());
+    }
     let mut fired = 0u32;
-    let mut cap_iq = Capture::<SAMPLES>::new();
     cap_iq.arm(
         &Settings {
             ch: [4, 6, 0, 0],
@@ -561,7 +566,7 @@ fn main() -> ! {
                 }
             }
         }
-        regen_cap_record_iq(c, &mut cap_iq, p, k as u32);
+        regen_cap_record_iq(c, cap_iq, p, k as u32);
         if cap_iq.state() != State::Armed {
             bad_cfg = true;
         }
