@@ -163,28 +163,6 @@ fn limit_slow(x: f32, y: f32, s: f32, r_in: f32) -> Dq {
     }
 }
 
-/// Integer square root (floor) by Newton's iteration with hardware division: from an
-/// estimate above √n the iterates decrease monotonically to ⌊√n⌋ (stop when they no longer
-/// decrease). The start, one Newton step from 2^⌈bits/2⌉ done by shifts, is within 25 % of
-/// √n, so three to four divisions follow.
-#[inline]
-pub fn isqrt(n: u32) -> u32 {
-    if n < 2 {
-        return n;
-    }
-    // k = ⌈bits/2⌉ ≥ 1, so 2^k > √n; (2^k + n/2^k)/2 ≥ √n (AM–GM) and < 2^16 + 2^15, so
-    // no overflow below.
-    let k = (33 - n.leading_zeros()) / 2;
-    let mut x = (1u32 << (k - 1)) + (n >> (k + 1));
-    loop {
-        let y = (x + n / x) >> 1;
-        if y >= x {
-            return x;
-        }
-        x = y;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -311,9 +289,7 @@ mod tests {
         };
         let (ld, lq) = (l.d.to_bits() as f64, l.q.to_bits() as f64);
         let m = (ld * ld + lq * lq).sqrt();
-        let v2 = d as i128 * d as i128 + qq as i128 * qq as i128;
         // Limited only when not within 12u of the circle inside it.
-        let _ = v2;
         assert!(
             vm > rf * (1.0 - 12.0 * 0.5f64.powi(24)),
             "{d} {qq} {r}: limited inside"
@@ -418,31 +394,5 @@ mod tests {
             at(0.99),
             at(1.0)
         );
-    }
-
-    #[test]
-    fn isqrt_exact() {
-        let mut ns = std::vec![
-            0u32,
-            1,
-            2,
-            3,
-            4,
-            15,
-            16,
-            17,
-            1 << 20,
-            u32::MAX,
-            u32::MAX - 1
-        ];
-        ns.extend((0..32).map(|b| 1u32 << b));
-        ns.extend((1..32).map(|b| (1u32 << b) - 1));
-        ns.extend((1..=65_535u32).map(|r| r * r));
-        ns.extend((1..=65_535u32).map(|r| r * r - 1));
-        ns.extend((0..100_000u32).map(|k| k.wrapping_mul(2_654_435_761)));
-        for n in ns {
-            let r = isqrt(n) as u64;
-            assert!(r * r <= n as u64 && (r + 1) * (r + 1) > n as u64, "{n}");
-        }
     }
 }
