@@ -13,7 +13,10 @@ use rig_seeds::*;
 /// cargo test -p regen-tests --test diagnose_rig_tools rig_true_acceleration -- --ignored
 /// --nocapture`; `RIG_TRUE=v` or `RIG_TRUE=a` gives only that one the rig's, the other derived):
 /// the inertial error M·(a − a_derived) at the reversals and what the diagnosis names without
-/// the derived signals' errors.
+/// the derived signals' errors. The derived record's options: `RIG_CUT=Hz` the derivative
+/// filter's cutoff (`--cutoff-hz`), `RIG_VBAND=1` its velocity through the acceleration's band
+/// (`record::v_through_accel_band`), `RIG_FF=1` its force through the same filter
+/// (`--filter-force`).
 #[test]
 #[ignore]
 fn rig_true_acceleration() {
@@ -23,7 +26,23 @@ fn rig_true_acceleration() {
         let spec = long_run_spec(seed, &emps);
         let (v_true, a_true) = spec.true_motion();
         let text = spec.csv();
-        let rec = parse_csv(&text, None).expect("rig record parses");
+        let cut: Option<f64> = std::env::var("RIG_CUT").ok().and_then(|c| c.parse().ok());
+        let mut rec = parse_csv(&text, cut).expect("rig record parses");
+        if std::env::var("RIG_VBAND").is_ok() {
+            use hal_sim::diagnose::record::{
+                v_through_accel_band, DERIVATIVE_CUTOFF_KEY, VELOCITY_CUTOFF_KEY,
+            };
+            if let (Some(v), Some(&fc)) = (
+                v_through_accel_band(&rec),
+                rec.meta.get(DERIVATIVE_CUTOFF_KEY),
+            ) {
+                rec.v = v;
+                rec.meta.insert(VELOCITY_CUTOFF_KEY.to_string(), fc);
+            }
+        }
+        if std::env::var("RIG_FF").is_ok() {
+            rec.filter_force(cut);
+        }
         let err: Vec<f64> = rec
             .a
             .iter()

@@ -51,6 +51,22 @@ impl EffectModel for ActuatorLag {
     fn describe(&self, _ctx: &Context, _e: &Effect) -> String {
         "the force channel leads the force: a drive's command, followed through the actuator's delay".into()
     }
+    /// Carried by the samples where the baseline's prediction, the column's source, lies inside
+    /// the derived signals' band (`Context::prediction_in_band`), with one amplitude there and
+    /// outside it: outside, the derived acceleration loses the inertial force and a column
+    /// built from the prediction fits that loss.
+    fn in_band(&self, ctx: &Context, _e: &Effect) -> Option<(Vec<bool>, InBandWords)> {
+        ctx.prediction_in_band().map(|m| {
+            (
+                m,
+                InBandWords {
+                    not: "a force channel leading the force",
+                    band: "where the baseline's prediction changes slowly enough for the derived signals (|df̂₀/dt| ≤ π·fc·max|f̂₀|)",
+                    outside: "at the turns and reversals the motion passes faster",
+                },
+            )
+        })
+    }
     /// The recording's force channel, not the device: the plant carries the force the motion
     /// needs.
     fn fragment(
