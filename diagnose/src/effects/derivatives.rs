@@ -119,41 +119,6 @@ impl Context<'_> {
         }
     }
 
-    /// The samples (true) at which the baseline's prediction f̂₀ (`base_pred`, whose inertial
-    /// part M·a is the derived acceleration's) changes slowly enough for the derived signals to
-    /// follow it: its rate |df̂₀/dt| (central differences) at most π·fc times its peak |f̂₀| over
-    /// the samples in motion, the rate of a ripple of that amplitude at half the derivative
-    /// filter's cutoff (`ripple_in_band`'s band). Where f̂₀ changes faster (the motion's turns,
-    /// the Coulomb switch at a reversal) the derived acceleration loses the inertial force
-    /// (1/(1 + (f/fc)⁴)) and the force the record measures there is not the one the baseline's
-    /// columns carry; a column built from f̂₀ (a scaled or differentiated prediction) there
-    /// fits that loss (the in-band test of a column differentiated from f̂₀). `None` when the
-    /// acceleration is measured (no derivative cutoff in the metadata) or no sample is in
-    /// motion.
-    pub fn prediction_in_band(&self) -> Option<Vec<bool>> {
-        let fc = *self.rec.meta.get(crate::record::DERIVATIVE_CUTOFF_KEY)?;
-        let p = &self.base_pred;
-        let n = p.len();
-        let peak = p
-            .iter()
-            .zip(&self.rest)
-            .filter(|(_, r)| !**r)
-            .fold(0.0f64, |m, (f, _)| m.max(f.abs()));
-        if n < 3 || peak <= 0.0 || !peak.is_finite() {
-            return None;
-        }
-        // the largest change per sample: π·fc·peak·dt
-        let lim = std::f64::consts::PI * fc * peak * self.dt;
-        Some(
-            (0..n)
-                .map(|i| {
-                    let (lo, hi) = (i.saturating_sub(1), (i + 1).min(n - 1));
-                    (p[hi] - p[lo]).abs() <= lim * (hi - lo) as f64
-                })
-                .collect(),
-        )
-    }
-
     /// The noise of the record's derived v and a (`DerivNoise`), when they are derived from a
     /// quantised position (the record states its derivative cutoff and a quantum shows).
     pub fn deriv_noise(&self) -> Option<&DerivNoise> {
@@ -212,68 +177,5 @@ impl Context<'_> {
             }
         }
         Some(s)
-    }
-}
-
-#[cfg(test)]
-mod prediction_band_tests {
-    use super::*;
-
-    /// A 1 kHz record (the derivative cutoff fs/20 = 50 Hz) of a device on a 0.5 Hz sinusoid
-    /// of 20 mm, its force M·a + c·v + Fc·sgn v exact (the position unquantised). Returns the
-    /// parsed record (v and a derived).
-    fn sine_record(fc_n: f64) -> Record {
-        let (fs, n, m, c) = (1000.0, 8000, 30.0, 200.0);
-        let mut csv = String::from("t_s,x_m,f_N\n");
-        for i in 0..n {
-            let t = i as f64 / fs;
-            let w = std::f64::consts::TAU * 0.5;
-            let (x, v, a) = (
-                0.02 * (w * t).sin(),
-                0.02 * w * (w * t).cos(),
-                -0.02 * w * w * (w * t).sin(),
-            );
-            let f = m * a + c * v + fc_n * v.signum();
-            csv.push_str(&format!("{t},{x:.12e},{f:.12e}\n"));
-        }
-        crate::record::parse_csv(&csv, None).expect("record parses")
-    }
-
-    /// Without a Coulomb switch the prediction of a 0.5 Hz motion changes far inside the
-    /// derived signals' band: every sample in motion is in band. With a Coulomb level the
-    /// switch at each reversal is a step: the samples out of band are the few around the
-    /// reversals (within 10 ms of one: the sign's linear band and the central difference),
-    /// and there are some. Breaks: the limit ×10 (π·fc·10) leaves no sample out of band; the
-    /// comparison reversed marks every sample in motion out of band; each fails.
-    #[test]
-    fn prediction_out_of_band_only_at_the_coulomb_switch() {
-        let rec = sine_record(0.0);
-        let ctx = Context::new(&rec);
-        let band = ctx.prediction_in_band().expect("derived acceleration");
-        let moving: Vec<usize> = (0..rec.len()).filter(|&i| !ctx.rest[i]).collect();
-        let out = moving.iter().filter(|&&i| !band[i]).count();
-        println!(
-            "no Coulomb: {out} of {} samples in motion out of band",
-            moving.len()
-        );
-        assert_eq!(out, 0);
-        let rec = sine_record(10.0);
-        let ctx = Context::new(&rec);
-        let band = ctx.prediction_in_band().expect("derived acceleration");
-        let out: Vec<usize> = (20..rec.len() - 20).filter(|&i| !band[i]).collect();
-        // reversals of the 0.5 Hz sinusoid at t = 0.5 s + k·1 s
-        let far = out
-            .iter()
-            .filter(|&&i| {
-                let t = i as f64 / 1000.0;
-                ((t - 0.5) - (t - 0.5).round()).abs() > 0.010
-            })
-            .count();
-        println!(
-            "Coulomb 10 N: {} samples out of band, {far} beyond 10 ms of a reversal",
-            out.len()
-        );
-        assert!(!out.is_empty());
-        assert_eq!(far, 0);
     }
 }

@@ -52,11 +52,11 @@ impl EffectModel for ActuatorLag {
         "the force channel leads the force: a drive's command, followed through the actuator's delay".into()
     }
     /// Carried by the samples where the baseline's prediction, the column's source, lies inside
-    /// the derived signals' band (`Context::prediction_in_band`), with one amplitude there and
+    /// the derived signals' band (`prediction_in_band`), with one amplitude there and
     /// outside it: outside, the derived acceleration loses the inertial force and a column
     /// built from the prediction fits that loss.
     fn in_band(&self, ctx: &Context, _e: &Effect) -> Option<(Vec<bool>, InBandWords)> {
-        ctx.prediction_in_band().map(|m| {
+        prediction_in_band(ctx).map(|m| {
             (
                 m,
                 InBandWords {
