@@ -373,9 +373,9 @@ pub fn bus_action(r: Dq, omega_m: Q, p: &Protection) -> Dq {
     }
 }
 
-/// √x for x ≥ 0 (0 for anything else, NaN included) in `f32` without libm: a bit-level first
-/// guess (≤ 6 % off) and four Newton steps (quadratic: 4e-3, 8e-6, below 1 ULP), with
-/// correctly rounded `+ ÷ ×` only, so host and board agree bit for bit.
+/// √x for x ≥ 0 (0 for anything else, NaN included; +∞ for +∞) in `f32` without libm:
+/// [`crate::fx::sqrt_newton`]'s four Newton steps (below 1 ULP), with correctly rounded
+/// `+ ÷ ×` only, so host and board agree bit for bit.
 pub(crate) fn sqrt_f32(x: f32) -> f32 {
     if x.is_nan() || x <= 0.0 {
         return 0.0;
@@ -383,11 +383,7 @@ pub(crate) fn sqrt_f32(x: f32) -> f32 {
     if x == f32::INFINITY {
         return x;
     }
-    let mut y = f32::from_bits((x.to_bits() >> 1) + 0x1fc0_0000);
-    for _ in 0..4 {
-        y = 0.5 * (y + x / y);
-    }
-    y
+    crate::fx::sqrt_newton::<4>(x)
 }
 
 /// Flux braking's d current, A (≤ 0), from the bus voltage `v_bus`, the shaft speed `omega`
