@@ -80,6 +80,7 @@ pub fn impact_travel(ctx: &Context) -> Option<f64> {
 /// struck sooner, so the travels spread below the width and their median misses it, while the
 /// reversals from a flank recur at the width, the largest of them.
 fn recurring_travel(travels: &[f64]) -> Option<f64> {
+    let need = RECURRING_IMPACTS.max((RECURRING_SHARE * travels.len() as f64).ceil() as usize);
     travels
         .iter()
         .copied()
@@ -89,8 +90,7 @@ fn recurring_travel(travels: &[f64]) -> Option<f64> {
                     .iter()
                     .filter(|&&u| (u / t - 1.0).abs() <= RECURRING_SPREAD)
                     .count()
-                    >= RECURRING_IMPACTS
-                        .max((RECURRING_SHARE * travels.len() as f64).ceil() as usize)
+                    >= need
         })
         .max_by(f64::total_cmp)
 }
