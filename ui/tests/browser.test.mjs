@@ -521,10 +521,12 @@ test("smoothness: 8 channels at the highest tel rate for 60 s; round trip", asyn
     // directly: each bucket's min and max over its samples, the buckets back to back, every
     // sample of the window in one.
     await page.waitForFunction(() => window.__regen.stats.plotted() === window.__regen.stats.telReceived());
+    // The frame's own end (the samples it was cut from), read in the same turn as its points:
+    // lines still in flight after the stop may arrive between the wait and this look.
     const dec = await page.evaluate(() => {
       const { store: s, plot } = window.__regen;
       const d = plot.points, M = s.t.length - 1;
-      const [a, b] = s.held();
+      const a = s.held()[0], b = plot.drawnUpTo;
       let j = a;
       while (j < b && s.t[j & M] < d[0][0]) j++;
       const first = j;
