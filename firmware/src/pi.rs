@@ -129,7 +129,9 @@ impl CurrentPi {
     /// 2^47 LSB and `|v|²` below 2^96, far inside `f32`'s range; unvalidated gains at worst
     /// give an infinite or NaN sum, which the limiter and the conversions turn into finite
     /// bits (no panic). Each value back to [`Q`] is truncated toward zero and saturates
-    /// (`as i32`): a `next` beyond ±32,768 V holds there, as a saturating sum would.
+    /// (`as i32`): a `next` beyond ±32,768 V holds there, as a saturating sum would. Below
+    /// 256 V (2^24 LSB) the integrators convert exactly and keep Q16.16's resolution; above
+    /// it theirs is `f32`'s, 2^-24 of their value.
     /// IEEE 754 rounds each `+` and `×` correctly and Rust contracts no `a·b + c`, so the
     /// host and the Cortex-M4F give the same bits.
     #[inline(always)]
