@@ -574,10 +574,7 @@ impl Gains {
             amps_per_count: Gain::from_f32(c.amps_per_count),
             adc_zero: c.adc_zero_code as i32,
             volts_per_count: Gain::from_f32(c.volts_per_count),
-            pi: PiGains {
-                kp: Gain::from_f32(c.l_phase_h * wc),
-                ki_ts: Gain::from_f32(c.r_phase_ohm * wc * ts),
-            },
+            pi: PiGains::new(c.l_phase_h * wc, c.r_phase_ohm * wc * ts),
             enc: EncoderGains {
                 cpr: c.encoder_cpr,
                 turn_per_count,
@@ -756,7 +753,7 @@ mod tests {
         let c = Config::default();
         let g = Gains::new(&c).unwrap();
         let wc = TAU * c.current_bw_hz;
-        assert!((g.pi.kp.to_f32() - c.l_phase_h * wc).abs() < 1e-6 * c.l_phase_h * wc);
-        assert!((g.pi.ki_ts.to_f32() - c.r_phase_ohm * wc / c.pwm_hz).abs() < 1e-6);
+        assert!((g.pi.kp() - c.l_phase_h * wc).abs() < 1e-6 * c.l_phase_h * wc);
+        assert!((g.pi.ki_ts() - c.r_phase_ohm * wc / c.pwm_hz).abs() < 1e-6);
     }
 }

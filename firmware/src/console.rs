@@ -837,6 +837,8 @@ impl Console {
         cap: Option<&mut C>,
         out: &mut W,
     ) -> CmdResult {
+        // A line received while a `cap dump` is being written ends that dump first.
+        self.dump_abort(out);
         let (id, line) = match self.split_id(line) {
             Some(x) => x,
             None => {
@@ -1615,6 +1617,27 @@ impl Console {
     /// Whether a `cap dump` is under way ([`Console::dump_more`] has more to write).
     pub fn dumping(&self) -> bool {
         self.dump.is_some()
+    }
+
+    /// End a `cap dump` under way, because input came in while it was being written (the
+    /// board's console task calls it at the first byte received, so a command such as `mode
+    /// idle` is never kept waiting behind the dump, and no echo lands among its lines): its
+    /// final line in place of `ok N samples`, `error: cap dump stopped after N samples: input
+    /// received` (`R <id> err …` in machine mode, under the dump's id). `true` if a dump was
+    /// under way (nothing is written otherwise).
+    pub fn dump_abort<W: Write>(&mut self, out: &mut W) -> bool {
+        let Some(d) = self.dump.take() else {
+            return false;
+        };
+        let id = self.id.clone();
+        let mut o = Out::new(out, self.machine, &id);
+        o.fin(false)
+            .s("cap dump stopped after ")
+            .uint(d.next)
+            .s(" samples: input received");
+        o.raw = true;
+        o.s("\r\n");
+        true
     }
 
     /// The next piece of a `cap dump`: whole sample lines (`D <id>` lines in machine mode)
@@ -2600,6 +2623,39 @@ mod tests {
                 assert!(text.ends_with(&std::format!("R x1 ok {n} samples\r\n")));
                 assert!(text.lines().rev().skip(1).all(|l| l.starts_with("D x1 ")));
             }
+            // A line after the first piece ends the dump under its own id, saying how many
+            // samples were sent, and is then executed under its id.
+            let head = exec(
+                &mut con,
+                &mut ctl,
+                &mut cap,
+                if machine { "#x1 cap dump" } else { "cap dump" },
+            );
+            let mut first = String::new();
+            assert!(con.dump_more(&cap, REPLY_MAX, &mut first));
+            let sent = first.lines().count();
+            let next = exec(
+                &mut con,
+                &mut ctl,
+                &mut cap,
+                if machine { "#x2 cap" } else { "cap" },
+            );
+            assert!(!con.dumping());
+            let (end, want) = next.split_once("\r\n").unwrap();
+            let tag = if machine { "R x1 err " } else { "error: " };
+            assert_eq!(
+                end,
+                std::format!("{tag}cap dump stopped after {sent} samples: input received")
+            );
+            assert!(sent > 0 && sent < n && head.lines().count() == 2, "{sent}");
+            assert!(
+                want.starts_with(if machine {
+                    "D x2 cap ready"
+                } else {
+                    "cap ready"
+                }),
+                "{want}"
+            );
         }
     }
 

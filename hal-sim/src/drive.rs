@@ -123,8 +123,11 @@ impl SimDrive {
     }
 
     /// Execute one console line (between two periods). Writes the reply, whose last line is
-    /// `ok …` or `error: …`, to `out`.
+    /// `ok …` or `error: …`, to `out`; a `cap dump` writes its header only, its samples and
+    /// final line follow in pieces ([`SimDrive::dump_more`]). A line while a dump is under
+    /// way ends that dump first ([`SimDrive::dump_abort`]).
     pub fn execute(&mut self, line: &str, out: &mut String) -> CmdResult {
+        self.dump_abort(out);
         // In machine mode a line may carry a command id (`#ID sim`); a malformed one is the
         // console's to refuse.
         let (id, cmd) = self.console.split_id(line).unwrap_or(("-", ""));
@@ -151,8 +154,6 @@ impl SimDrive {
             Some(self.sim.capture_mut()),
             &mut reply,
         );
-        // A `cap dump`: the rest of its reply in the pieces the board's reply buffer takes.
-        while con.dump_more(self.sim.capture(), regen_fw::console::REPLY_MAX, &mut reply) {}
         if ctl.config().pwm_hz != pwm {
             let text = format!(
                 "pwm_hz is the simulated hardware's period, fixed at {pwm} Hz by the scenario"
@@ -164,6 +165,25 @@ impl SimDrive {
         self.console = con;
         out.push_str(&reply);
         r
+    }
+
+    /// Whether a `cap dump` is under way ([`SimDrive::dump_more`] has more to write).
+    pub fn dumping(&self) -> bool {
+        self.console.dumping()
+    }
+
+    /// The next piece of a `cap dump` under way, as the board's console task writes it (at
+    /// most the board's reply buffer, [`regen_fw::console::REPLY_MAX`], of whole lines; the
+    /// last piece ends with the final line); `true` while more is to come.
+    pub fn dump_more(&mut self, out: &mut String) -> bool {
+        self.console
+            .dump_more(self.sim.capture(), regen_fw::console::REPLY_MAX, out)
+    }
+
+    /// End a `cap dump` under way because input came in: its final line, an `error:` that
+    /// says how many samples were written ([`Console::dump_abort`]); `true` if one was.
+    pub fn dump_abort(&mut self, out: &mut String) -> bool {
+        self.console.dump_abort(out)
     }
 
     /// `sim`: simulated time, the plant's harvested energy (into the inverter, the emulated

@@ -2093,7 +2093,8 @@ impl Pre {
 /// Make the controller's current loop proportional-only (integral gain zero), like the
 /// reference bench's analog drive. Call again after every `set_config`.
 pub fn p_only(ctl: &mut Controller) {
-    ctl.gains_mut().pi.ki_ts = regen_fw::fx::Gain::ZERO;
+    let pi = &mut ctl.gains_mut().pi;
+    *pi = regen_fw::pi::PiGains::new(pi.kp(), 0.0);
 }
 
 /// The plant side of the hardware boundary.

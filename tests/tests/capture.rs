@@ -8,10 +8,11 @@ use hal_sim::Scenario;
 use regen_fw::capture::State;
 use regen_tests::stats;
 
-/// A console line that must be accepted; its reply.
+/// A console line that must be accepted; its whole reply (a `cap dump`'s pieces included).
 fn ok(d: &mut SimDrive, line: &str) -> String {
     let mut out = String::new();
     let r = d.execute(line, &mut out);
+    while d.dump_more(&mut out) {}
     assert!(r.is_ok(), "> {line}\n{out}");
     out
 }
@@ -20,6 +21,7 @@ fn ok(d: &mut SimDrive, line: &str) -> String {
 fn refused(d: &mut SimDrive, line: &str) -> String {
     let mut out = String::new();
     let r = d.execute(line, &mut out);
+    assert!(!d.dumping(), "> {line} started a dump:\n{out}");
     assert!(r.is_err(), "> {line} was accepted:\n{out}");
     out
 }

@@ -158,12 +158,31 @@ pub async fn console_task(
     let _ = tx.write_all(&reply.b).await;
 
     loop {
-        match select(rx.read(&mut inbuf), ticker.next()).await {
+        // A `cap dump` under way: its next piece per pass, unless a byte came in, which ends
+        // the dump (`Console::dump_abort`: its final line says so) and is read as any other,
+        // so a command typed meanwhile (`mode idle`) waits for one piece at most.
+        let event = if con.dumping() {
+            match embassy_futures::poll_once(rx.read(&mut inbuf)) {
+                core::task::Poll::Ready(r) => Either::First(r),
+                core::task::Poll::Pending => {
+                    reply.clear();
+                    if !con.dump_more(&drive::BoardCap, REPLY_MAX, reply) {
+                        let _ = reply.write_str(con.prompt());
+                    }
+                    let _ = tx.write_all(&reply.b).await;
+                    continue;
+                }
+            }
+        } else {
+            select(rx.read(&mut inbuf), ticker.next()).await
+        };
+        match event {
             Either::First(Ok(n)) => {
                 // The console's line editor echoes and edits; a whole line is executed and
                 // its reply, then the prompt, sent before the next line is read.
                 reply.clear();
                 for &c in &inbuf[..n] {
+                    con.dump_abort(reply);
                     ed.set_machine(con.machine());
                     let Some(text) = ed.feed(c, reply) else {
                         continue;
@@ -198,13 +217,10 @@ pub async fn console_task(
                         let _ = con.save_done(r, reply);
                     }
                     // A `cap dump`: its header is in the reply; the samples and the final
-                    // line follow piece by piece, each sent before the next is written.
-                    while con.dumping() {
-                        let _ = tx.write_all(&reply.b).await;
-                        reply.clear();
-                        con.dump_more(&drive::BoardCap, REPLY_MAX, reply);
+                    // line follow piece by piece at the top of the loop, then the prompt.
+                    if !con.dumping() {
+                        let _ = reply.write_str(con.prompt());
                     }
-                    let _ = reply.write_str(con.prompt());
                     if reply.overflow {
                         reply.b.truncate(REPLY_MAX - 40);
                         let _ = reply.write_str("\r\n");

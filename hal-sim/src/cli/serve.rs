@@ -254,6 +254,15 @@ impl<L: Link> Server<L> {
             if self.drive.notice(&mut tel) {
                 self.out.extend_from_slice(tel.as_bytes());
             }
+            // A `cap dump` under way: one piece per pass, as the board's console task sends
+            // one between reads, so a line typed meanwhile is read (and ends the dump).
+            if self.drive.dumping() {
+                tel.clear();
+                if !self.drive.dump_more(&mut tel) {
+                    tel.push_str(self.drive.console().prompt());
+                }
+                self.out.extend_from_slice(tel.as_bytes());
+            }
             self.flush();
             if self.speed.is_finite() {
                 let target = n as f64 * ts / self.speed;
@@ -291,9 +300,11 @@ impl<L: Link> Server<L> {
     }
 
     /// One received byte, through the console's line editor; a complete line is executed and
-    /// answered, then the prompt.
+    /// answered, then the prompt (after a `cap dump`'s last piece, [`Self::run`]). A byte
+    /// received while a dump is under way ends it first, as on the board.
     fn byte(&mut self, b: u8) {
         let mut text = String::new();
+        self.drive.dump_abort(&mut text);
         self.ed.set_machine(self.drive.console().machine());
         if let Some(line) = self.ed.feed(b, &mut text) {
             if !line.is_empty() {
@@ -301,7 +312,9 @@ impl<L: Link> Server<L> {
                 let _ = self.drive.execute(&line, &mut text);
                 self.lines += 1;
             }
-            text.push_str(self.drive.console().prompt());
+            if !self.drive.dumping() {
+                text.push_str(self.drive.console().prompt());
+            }
         }
         self.out.extend_from_slice(text.as_bytes());
     }
@@ -499,5 +512,92 @@ mod tests {
             out.contains("R 1 ok"),
             "status answered in machine form: {out}"
         );
+    }
+
+    /// A reader that sends each of its lines once the output holds the text the line waits
+    /// for (after where the previous line was sent).
+    struct Scripted {
+        script: Vec<(&'static str, &'static str)>,
+        from: usize,
+        output: Vec<u8>,
+    }
+
+    impl Link for Scripted {
+        fn read(&mut self, buf: &mut [u8]) -> usize {
+            let Some(&(wait, line)) = self.script.first() else {
+                return 0;
+            };
+            let seen = String::from_utf8_lossy(&self.output[self.from..]).contains(wait);
+            if !seen || buf.len() < line.len() {
+                return 0;
+            }
+            buf[..line.len()].copy_from_slice(line.as_bytes());
+            self.script.remove(0);
+            self.from = self.output.len();
+            line.len()
+        }
+        fn connected(&mut self) -> bool {
+            true
+        }
+        fn write(&mut self, bytes: &[u8]) -> usize {
+            self.output.extend_from_slice(bytes);
+            bytes.len()
+        }
+    }
+
+    /// A `cap dump` is written one piece per pass of the serving loop, and a line typed while
+    /// it is under way is not kept waiting: its first byte ends the dump (`error: cap dump
+    /// stopped after N samples: input received`, N the sample lines written), then the line
+    /// (`mode idle`) is executed and answered. A dump nobody interrupts ends `ok 1024
+    /// samples`, then the prompt.
+    #[test]
+    fn a_line_during_a_cap_dump_ends_it_and_is_executed() {
+        let sc = scenario(None).unwrap();
+        let n = regen_fw::capture::SAMPLES;
+        let link = Scripted {
+            script: vec![
+                ("console.", "cap ch ia,iq\ncap arm\ncap now\n"),
+                ("# cap ready", "cap dump\n"),
+                ("\r\nt,ia,iq\r\n", "mode idle\n"),
+                ("ok", "cap dump\n"),
+            ],
+            from: 0,
+            output: Vec::new(),
+        };
+        let mut srv =
+            Server::new(SimDrive::from_scenario(&sc).unwrap(), link, f64::INFINITY).unwrap();
+        srv.run(&AtomicBool::new(false), Some(2.0));
+        let out = String::from_utf8_lossy(&srv.link().output).into_owned();
+        assert!(srv.link().script.is_empty(), "a line never sent:\n{out}");
+        let at = |from: usize, what: &str| {
+            from + out[from..]
+                .find(what)
+                .unwrap_or_else(|| panic!("no {what:?} after byte {from}:\n{out}"))
+        };
+        // The first dump: its header, whole sample lines, the line that ends it.
+        let h1 = at(0, "\r\nt,ia,iq\r\n") + "\r\nt,ia,iq\r\n".len();
+        let stop = at(h1, "error: cap dump stopped after ");
+        let rows = out[h1..stop].lines().count();
+        let said: usize = out[stop..].split(' ').nth(5).unwrap().parse().unwrap();
+        std::println!("the dump stopped after {rows} of {n} samples");
+        assert!(rows >= 1 && rows < n, "{rows} rows before the line");
+        assert_eq!(said, rows, "{}", &out[stop..stop + 80]);
+        assert!(
+            out[h1..stop].lines().all(|l| l.split(',').count() == 3),
+            "a partial or foreign line among the samples"
+        );
+        assert!(!out[h1..stop].contains("samples"));
+        // Then the line itself, answered, and in force.
+        let ok = at(stop, "ok");
+        assert!(out[stop..ok].contains("mode idle"), "{}", &out[stop..ok]);
+        assert_eq!(
+            srv.drive().sim().controller().mode(),
+            regen_fw::control::Mode::Idle
+        );
+        // The second dump, left alone: every sample, `ok N samples`, then the prompt.
+        let h2 = at(ok, "\r\nt,ia,iq\r\n") + "\r\nt,ia,iq\r\n".len();
+        let end = at(h2, &format!("ok {n} samples\r\n"));
+        assert_eq!(out[h2..end].lines().count(), n);
+        assert!(out[end..].contains(srv.drive().console().prompt()));
     }
 }
