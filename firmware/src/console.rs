@@ -517,12 +517,13 @@ pub struct Console {
     dump: Option<Dump>,
 }
 
-/// A `cap dump` under way: the next sample (the rest, the settings and the codes' units, is
-/// the capture's status, read per piece: kept here it would be ≈ 110 bytes of the board's
-/// console task).
-#[derive(Clone, Copy, Debug)]
+/// A `cap dump` under way: the next sample and the id its lines carry (the rest, the
+/// settings and the codes' units, is the capture's status, read per piece: kept here it would
+/// be ≈ 110 bytes of the board's console task).
+#[derive(Clone, Debug)]
 struct Dump {
     next: u32,
+    id: Id,
 }
 
 /// The longest line of a `cap dump` (a machine-mode `D` line with an 8-character id, the
@@ -837,8 +838,8 @@ impl Console {
         cap: Option<&mut C>,
         out: &mut W,
     ) -> CmdResult {
-        // A line received while a `cap dump` is being written ends that dump first.
-        self.dump_abort(out);
+        // A line received while a `cap dump` is being written: see `dump_interrupt`.
+        self.dump_interrupt(line, out);
         let (id, line) = match self.split_id(line) {
             Some(x) => x,
             None => {
@@ -1575,8 +1576,10 @@ impl Console {
                     out.s(",").s(CHANNELS.get(c as usize).map_or("?", |c| c.0));
                 }
                 out.s("\r\n");
-                let d = Dump { next: 0 };
-                self.dump = Some(d);
+                self.dump = Some(Dump {
+                    next: 0,
+                    id: self.id.clone(),
+                });
                 return None;
             }
             _ => {}
@@ -1619,18 +1622,43 @@ impl Console {
         self.dump.is_some()
     }
 
-    /// End a `cap dump` under way, because input came in while it was being written (the
-    /// board's console task calls it at the first byte received, so a command such as `mode
-    /// idle` is never kept waiting behind the dump, and no echo lands among its lines): its
+    /// A line received while a `cap dump` is under way. For a person (not in machine mode)
+    /// it ends the dump ([`Console::dump_abort`]). In machine mode every line is tagged, so
+    /// the line is executed and its reply sent between two of the dump's pieces, which go on
+    /// under the dump's id; only a line that could change what the dump reads ends it first:
+    /// a `cap` command other than `cap [show]` (an `arm` refills the ring, a `stop` or a new
+    /// `dump` ends it) and `machine` (the lines' form). `true` if the dump was ended.
+    pub fn dump_interrupt<W: Write>(&mut self, line: &str, out: &mut W) -> bool {
+        if self.dump.is_none() {
+            return false;
+        }
+        let cmd = self.split_id(line).map_or("", |(_, c)| c);
+        let mut w = cmd.split_ascii_whitespace();
+        let ends = match (w.next(), w.next()) {
+            (Some("cap"), None | Some("show")) => false,
+            (Some("cap"), _) | (Some("machine"), _) => true,
+            _ => false,
+        };
+        if !self.machine || ends {
+            return self.dump_abort(out);
+        }
+        false
+    }
+
+    /// End a `cap dump` under way, because input came in while it was being written: its
     /// final line in place of `ok N samples`, `error: cap dump stopped after N samples: input
     /// received` (`R <id> err …` in machine mode, under the dump's id). `true` if a dump was
-    /// under way (nothing is written otherwise).
+    /// under way (nothing is written otherwise). For a person (not in machine mode) the
+    /// board's console task and `regen serve` call it at the first byte received, so a
+    /// command such as `mode idle` is never kept waiting behind the dump and no echo lands
+    /// among its lines; in machine mode [`Console::dump_interrupt`] decides per line.
+    ///
+    /// [`Console::dump_interrupt`]: Console::dump_interrupt
     pub fn dump_abort<W: Write>(&mut self, out: &mut W) -> bool {
         let Some(d) = self.dump.take() else {
             return false;
         };
-        let id = self.id.clone();
-        let mut o = Out::new(out, self.machine, &id);
+        let mut o = Out::new(out, self.machine, &d.id);
         o.fin(false)
             .s("cap dump stopped after ")
             .uint(d.next)
@@ -1645,10 +1673,10 @@ impl Console {
     /// last sample the final line (`ok N samples`). `true` while more is to come; the pieces
     /// written one after the other are the whole reply, whatever the budget.
     pub fn dump_more<W: Write, C: CapPort>(&mut self, cap: &C, budget: usize, out: &mut W) -> bool {
-        let Some(mut d) = self.dump else {
+        let Some(mut d) = self.dump.take() else {
             return false;
         };
-        let id = self.id.clone();
+        let id = d.id.clone();
         let mut c = Counted { w: out, n: 0 };
         let mut o = Out::new(&mut c, self.machine, &id);
         let st = cap.status();
@@ -2623,8 +2651,9 @@ mod tests {
                 assert!(text.ends_with(&std::format!("R x1 ok {n} samples\r\n")));
                 assert!(text.lines().rev().skip(1).all(|l| l.starts_with("D x1 ")));
             }
-            // A line after the first piece ends the dump under its own id, saying how many
-            // samples were sent, and is then executed under its id.
+            // A person's line after the first piece ends the dump, saying how many samples
+            // were sent, and is then executed; in machine mode a `cap` command that changes
+            // the capture does the same under the dump's id.
             let head = exec(
                 &mut con,
                 &mut ctl,
@@ -2638,7 +2667,7 @@ mod tests {
                 &mut con,
                 &mut ctl,
                 &mut cap,
-                if machine { "#x2 cap" } else { "cap" },
+                if machine { "#x2 cap stop" } else { "cap" },
             );
             assert!(!con.dumping());
             let (end, want) = next.split_once("\r\n").unwrap();
@@ -2650,11 +2679,60 @@ mod tests {
             assert!(sent > 0 && sent < n && head.lines().count() == 2, "{sent}");
             assert!(
                 want.starts_with(if machine {
-                    "D x2 cap ready"
+                    "D x2 cap idle"
                 } else {
                     "cap ready"
                 }),
                 "{want}"
+            );
+            if !machine {
+                continue;
+            }
+            // Machine mode: a line that leaves the capture alone (`status`, `cap show`) is
+            // answered under its own id between two pieces, and the dump goes on under its
+            // id to the same whole reply.
+            exec(&mut con, &mut ctl, &mut cap, "#x3 cap arm");
+            exec(&mut con, &mut ctl, &mut cap, "#x4 cap now");
+            for _ in 0..crate::capture::SAMPLES {
+                ctl.step_outputs(&crate::io::RawSample {
+                    i_abc: [z, z, z],
+                    v_bus: 2400,
+                    encoder: 0,
+                });
+                let p = ctl.p_elec().to_bits();
+                cap.record(&mut ctl, p);
+            }
+            assert_eq!(cap.state(), State::Ready);
+            let one = whole(&mut con, &mut ctl, &mut cap, usize::MAX).concat();
+            let mut pieces = std::vec![exec(&mut con, &mut ctl, &mut cap, "#x1 cap dump")];
+            let mut asked = 0;
+            loop {
+                let mut p = String::new();
+                let more = con.dump_more(&cap, REPLY_MAX, &mut p);
+                pieces.push(p);
+                if !more {
+                    break;
+                }
+                if asked < 2 {
+                    let l = ["#y1 status", "#y2 cap show"][asked];
+                    let r = exec(&mut con, &mut ctl, &mut cap, l);
+                    let id = &l[1..3];
+                    assert!(
+                        r.lines().all(|l| l.contains(&std::format!(" {id} ")))
+                            && r.lines()
+                                .last()
+                                .unwrap()
+                                .starts_with(&std::format!("R {id} ok")),
+                        "{r}"
+                    );
+                    asked += 1;
+                }
+            }
+            assert_eq!(asked, 2);
+            assert_eq!(
+                pieces.concat(),
+                one,
+                "the dump, interleaved, is the whole dump"
             );
         }
     }

@@ -125,9 +125,10 @@ impl SimDrive {
     /// Execute one console line (between two periods). Writes the reply, whose last line is
     /// `ok …` or `error: …`, to `out`; a `cap dump` writes its header only, its samples and
     /// final line follow in pieces ([`SimDrive::dump_more`]). A line while a dump is under
-    /// way ends that dump first ([`SimDrive::dump_abort`]).
+    /// way ends that dump first unless the console keeps it going (machine mode:
+    /// [`regen_fw::console::Console::dump_interrupt`]).
     pub fn execute(&mut self, line: &str, out: &mut String) -> CmdResult {
-        self.dump_abort(out);
+        self.console.dump_interrupt(line, out);
         // In machine mode a line may carry a command id (`#ID sim`); a malformed one is the
         // console's to refuse.
         let (id, cmd) = self.console.split_id(line).unwrap_or(("-", ""));

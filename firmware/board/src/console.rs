@@ -182,7 +182,11 @@ pub async fn console_task(
                 // its reply, then the prompt, sent before the next line is read.
                 reply.clear();
                 for &c in &inbuf[..n] {
-                    con.dump_abort(reply);
+                    // A person's byte ends a dump under way (its echo would land among the
+                    // samples); in machine mode the line decides (`Console::dump_interrupt`).
+                    if !con.machine() {
+                        con.dump_abort(reply);
+                    }
                     ed.set_machine(con.machine());
                     let Some(text) = ed.feed(c, reply) else {
                         continue;

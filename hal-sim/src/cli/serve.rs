@@ -300,11 +300,14 @@ impl<L: Link> Server<L> {
     }
 
     /// One received byte, through the console's line editor; a complete line is executed and
-    /// answered, then the prompt (after a `cap dump`'s last piece, [`Self::run`]). A byte
-    /// received while a dump is under way ends it first, as on the board.
+    /// answered, then the prompt (after a `cap dump`'s last piece, [`Self::run`]). As on the
+    /// board, a person's byte received while a dump is under way ends it first; in machine
+    /// mode the line decides ([`regen_fw::console::Console::dump_interrupt`]).
     fn byte(&mut self, b: u8) {
         let mut text = String::new();
-        self.drive.dump_abort(&mut text);
+        if !self.drive.console().machine() {
+            self.drive.dump_abort(&mut text);
+        }
         self.ed.set_machine(self.drive.console().machine());
         if let Some(line) = self.ed.feed(b, &mut text) {
             if !line.is_empty() {
