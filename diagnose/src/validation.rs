@@ -369,6 +369,59 @@ pub(crate) fn validate(
         .iter()
         .map(|h| h.is_none_or(|(_, w)| w >= AGREEMENT_T * AGREEMENT_T))
         .collect();
+    // A finding names a force of the device, not a difference between derivations of its
+    // motion: beside what the derived signals would change by under the other derivations the
+    // record supports (`record::derivation_alternatives`: the acceleration through twice and
+    // half its cutoff, the velocity through the acceleration's band) and of its Coulomb sign (a
+    // band a quarter as wide, the sign of the position's steps), carried as nuisance columns with free coefficients, it must still cut
+    // the held-out rss of the spread subsample by the selection's margin. What those columns
+    // explain is the baseline's own modelling error, which any candidate whose columns change
+    // at the motion's turns would otherwise be credited with.
+    let beside_derivation: Vec<Option<f64>> = if chosen.is_empty() {
+        Vec::new()
+    } else {
+        let mut alt: Vec<Vec<f64>> = record::derivation_alternatives(rec)
+            .iter()
+            .map(|c| gather(spread_rows, c))
+            .collect();
+        alt.push(
+            spread_rows
+                .iter()
+                .map(|&i| {
+                    effects::sgn(rec.v[i], 0.25 * ctx.v_eps) - effects::sgn(rec.v[i], ctx.v_eps)
+                })
+                .collect(),
+        );
+        // the Coulomb sign as the position's steps give it: a friction switching over the
+        // shortest displacement the record resolves (`effects::displacement_range`)
+        let x_res = effects::displacement_range(ctx).0;
+        if x_res > 0.0 {
+            let z = effects::dahl(&rec.x, x_res);
+            alt.push(spread_rows.iter().map(|&i| z[i] - ctx.sgn[i]).collect());
+        }
+        let m = sub_refs.len();
+        let mut all_refs = sub_refs.clone();
+        all_refs.extend(alt.iter().map(|c| c.as_slice()));
+        let (tr, ho) = normals(&all_refs, spread_f, &lag_hold, 1);
+        let rss_with = ho.rss(&tr.solve());
+        spans
+            .iter()
+            .map(|&(a, b)| {
+                let keep: Vec<usize> = (0..m + alt.len()).filter(|i| *i < a || *i >= b).collect();
+                let rss_without = ho.select(&keep).rss(&tr.select(&keep).solve());
+                (rss_without > 0.0).then(|| 1.0 - rss_with / rss_without)
+            })
+            .collect()
+    };
+    let derivation_apart: Vec<bool> = (0..chosen.len())
+        .map(|k| {
+            beside_derivation
+                .get(k)
+                .copied()
+                .flatten()
+                .is_none_or(|g| g >= opt.min_holdout_gain)
+        })
+        .collect();
     let kept: Vec<usize> = (0..chosen.len())
         .filter(|&k| {
             holds[k] >= STABILITY_MIN
@@ -378,6 +431,7 @@ pub(crate) fn validate(
                 && ripple_locked[k]
                 && ripple_apart[k]
                 && hum_apart[k]
+                && derivation_apart[k]
         })
         .collect();
     let mut dropped_notes = Vec::new();
@@ -417,6 +471,16 @@ pub(crate) fn validate(
                     chosen[k].kind.name(),
                     effects::describe(ctx, &chosen[k]),
                     AGREEMENT_T * AGREEMENT_T,
+                ));
+                continue;
+            }
+            if !derivation_apart[k] {
+                dropped_notes.push(format!(
+                    "{} ({}) selected, but beside what the derived signals would change by under another derivation of the motion (its acceleration through twice or half the filter's cutoff, its velocity through the acceleration's band, its Coulomb sign a quarter as wide or from the position's steps) it cuts the held-out rss by {:.2} % (at least {:.0} % needed): the baseline's modelling error of the motion, not a force of the device: not kept",
+                    chosen[k].kind.name(),
+                    effects::describe(ctx, &chosen[k]),
+                    100.0 * beside_derivation[k].unwrap_or(0.0),
+                    100.0 * opt.min_holdout_gain,
                 ));
                 continue;
             }
