@@ -7,8 +7,11 @@ use super::*;
 /// (within 0.5 % of v̂: 20,000 samples per period). A
 /// motion cruising at v̂ for 90 % of the time with linear ramps (a triangle's flanks): the
 /// time quantiles all lie at v̂, the crossing quantiles at q·v̂, so the grid still reaches
-/// down to 0.2·v̂. Break: without the crossing quantiles the cruise grid's lowest value is
-/// v̂ (and the sinusoid misses q·v̂).
+/// down to 0.2·v̂. No two neighbours of either grid lie more than `SPEED_GAP` apart (values
+/// inserted log-spaced: the sinusoid's 0.02 → 0.03 and 0.0309 → 0.0454 get one each, so the
+/// grid holds the 12 time quantiles, 2 crossing quantiles and two inserted values). Break:
+/// without the crossing quantiles the cruise grid's lowest value is v̂ (and the sinusoid
+/// misses q·v̂); without the insertion the cruise grid's 0.2·v̂ → 0.3·v̂ is a gap of 1.5.
 #[test]
 fn speed_levels_span_the_speeds_crossed() {
     let n = 100_000;
@@ -18,7 +21,12 @@ fn speed_levels_span_the_speeds_crossed() {
     let rest = vec![false; n];
     let g = speed_levels(&v, &rest);
     let has = |g: &[f64], x: f64| g.iter().any(|y| (y - x).abs() < 5e-4);
-    assert_eq!(g.len(), SPEED_QUANTILES.len() + 2, "{g:?}");
+    let gaps_within = |g: &[f64]| {
+        g.windows(2)
+            .all(|w| w[1] / w[0] <= SPEED_GAP * (1.0 + 1e-12))
+    };
+    assert_eq!(g.len(), SPEED_QUANTILES.len() + 4, "{g:?}");
+    assert!(gaps_within(&g), "{g:?}");
     for q in SPEED_QUANTILES {
         if q < 0.309 {
             assert!(has(&g, 0.1 * q), "crossing quantile {q}: {g:?}");
@@ -41,6 +49,7 @@ fn speed_levels_span_the_speeds_crossed() {
     for q in SPEED_QUANTILES {
         assert!(has(&g, 0.1 * q), "cruise crossing quantile {q}: {g:?}");
     }
+    assert!(gaps_within(&g), "{g:?}");
 }
 
 /// Monotone motion from z = 0: the Dahl state is the closed form 1 − exp(−x/x_c); after a
