@@ -474,33 +474,13 @@ pub fn run(a: &ServeArgs) -> Result<(), String> {
 mod tests {
     use super::*;
 
-    /// A reader that is there from the start and whose first line is already waiting.
-    struct EagerReader {
-        input: Vec<u8>,
-        output: Vec<u8>,
-    }
-
-    impl Link for EagerReader {
-        fn read(&mut self, buf: &mut [u8]) -> usize {
-            let k = self.input.len().min(buf.len());
-            buf[..k].copy_from_slice(&self.input[..k]);
-            self.input.drain(..k);
-            k
-        }
-        fn connected(&mut self) -> bool {
-            true
-        }
-        fn write(&mut self, bytes: &[u8]) -> usize {
-            self.output.extend_from_slice(bytes);
-            bytes.len()
-        }
-    }
-
     #[test]
     fn a_new_readers_first_command_is_not_undone_by_its_greeting() {
         let sc = scenario(None).unwrap();
-        let link = EagerReader {
-            input: b"machine on\n#1 status\n".to_vec(),
+        // A reader there from the start, its first lines already waiting.
+        let link = Scripted {
+            script: vec![("", "machine on\n#1 status\n")],
+            from: 0,
             output: Vec::new(),
         };
         let mut srv =
