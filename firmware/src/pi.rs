@@ -216,6 +216,16 @@ mod tests {
     use proptest::prelude::*;
     use std::vec::Vec;
 
+    /// The seeded tests' 64-bit xorshift stream from `s` (not 0).
+    fn xorshift(mut s: u64) -> impl FnMut() -> u64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        }
+    }
+
     /// Discrete simulation of one axis: plant L di/dt = v − R i (exact zero-order-hold
     /// discretisation), controller gains from R, L and ωc.
     fn step_response(
@@ -398,13 +408,7 @@ mod tests {
         // vector lies relative to r, for r ≥ 2^24 (where the truncation's ≤ √2 LSB is below
         // 8.5e-8 of r: the deliberate 2^-19 = 1.9e-6 and the roundings; the bound 48u =
         // 2.9e-6), and the largest component across the input (bound 2u·r + 1.5 LSB).
-        let mut s = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let (mut inside, mut across) = (std::vec::Vec::new(), 0.0f64);
         while inside.len() < 100_000 {
             let (a, b) = (next(), next());
@@ -450,13 +454,7 @@ mod tests {
     /// to the radius. Printed: the largest `(|got − exact| − 1)/(u·T)` measured.
     #[test]
     fn update_is_the_pi_within_its_roundings() {
-        let mut s = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            s
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let mut unit = move || (next() >> 11) as f64 / (1u64 << 53) as f64;
         let any_i32 = |n: u64| (n as i32) >> (n >> 59) as u32;
         let u = 0.5f64.powi(24);
