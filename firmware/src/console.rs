@@ -1623,7 +1623,7 @@ impl Console {
     }
 
     /// A line received while a `cap dump` is under way. For a person (not in machine mode)
-    /// it ends the dump ([`Console::dump_abort`]). In machine mode every line is tagged, so
+    /// it ends the dump (`dump_abort`). In machine mode every line is tagged, so
     /// the line is executed and its reply sent between two of the dump's pieces, which go on
     /// under the dump's id; only a line that could change what the dump reads ends it first:
     /// a `cap` command other than `cap [show]` (an `arm` refills the ring, a `stop` or a new
@@ -1645,16 +1645,20 @@ impl Console {
         false
     }
 
+    /// A byte received while a `cap dump` is under way (the board's console task and `regen
+    /// serve` call it for each byte, before the line editor): a person's ends the dump
+    /// (`dump_abort`), so a command such as `mode idle` is never kept waiting
+    /// behind the dump and no echo lands among its lines; in machine mode nothing (the whole
+    /// line decides: [`Console::dump_interrupt`]). `true` if the dump was ended.
+    pub fn dump_byte<W: Write>(&mut self, out: &mut W) -> bool {
+        !self.machine && self.dump_abort(out)
+    }
+
     /// End a `cap dump` under way, because input came in while it was being written: its
     /// final line in place of `ok N samples`, `error: cap dump stopped after N samples: input
     /// received` (`R <id> err …` in machine mode, under the dump's id). `true` if a dump was
-    /// under way (nothing is written otherwise). For a person (not in machine mode) the
-    /// board's console task and `regen serve` call it at the first byte received, so a
-    /// command such as `mode idle` is never kept waiting behind the dump and no echo lands
-    /// among its lines; in machine mode [`Console::dump_interrupt`] decides per line.
-    ///
-    /// [`Console::dump_interrupt`]: Console::dump_interrupt
-    pub fn dump_abort<W: Write>(&mut self, out: &mut W) -> bool {
+    /// under way (nothing is written otherwise).
+    fn dump_abort<W: Write>(&mut self, out: &mut W) -> bool {
         let Some(d) = self.dump.take() else {
             return false;
         };

@@ -181,10 +181,10 @@ impl SimDrive {
             .dump_more(self.sim.capture(), regen_fw::console::REPLY_MAX, out)
     }
 
-    /// End a `cap dump` under way because input came in: its final line, an `error:` that
-    /// says how many samples were written ([`Console::dump_abort`]); `true` if one was.
-    pub fn dump_abort(&mut self, out: &mut String) -> bool {
-        self.console.dump_abort(out)
+    /// A byte received while a `cap dump` is under way: a person's ends it, with an `error:`
+    /// line saying how many samples were written ([`Console::dump_byte`]); `true` if it did.
+    pub fn dump_byte(&mut self, out: &mut String) -> bool {
+        self.console.dump_byte(out)
     }
 
     /// `sim`: simulated time, the plant's harvested energy (into the inverter, the emulated

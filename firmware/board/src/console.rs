@@ -158,9 +158,9 @@ pub async fn console_task(
     let _ = tx.write_all(&reply.b).await;
 
     loop {
-        // A `cap dump` under way: its next piece per pass, unless a byte came in, which ends
-        // the dump (`Console::dump_abort`: its final line says so) and is read as any other,
-        // so a command typed meanwhile (`mode idle`) waits for one piece at most.
+        // A `cap dump` under way: its next piece per pass, unless a byte came in, which is
+        // read as any other (a person's ends the dump first: `Console::dump_byte`), so a
+        // command sent meanwhile (`mode idle`) waits for one piece at most.
         let event = if con.dumping() {
             match embassy_futures::poll_once(rx.read(&mut inbuf)) {
                 core::task::Poll::Ready(r) => Either::First(r),
@@ -182,11 +182,7 @@ pub async fn console_task(
                 // its reply, then the prompt, sent before the next line is read.
                 reply.clear();
                 for &c in &inbuf[..n] {
-                    // A person's byte ends a dump under way (its echo would land among the
-                    // samples); in machine mode the line decides (`Console::dump_interrupt`).
-                    if !con.machine() {
-                        con.dump_abort(reply);
-                    }
+                    con.dump_byte(reply);
                     ed.set_machine(con.machine());
                     let Some(text) = ed.feed(c, reply) else {
                         continue;

@@ -255,7 +255,7 @@ impl<L: Link> Server<L> {
                 self.out.extend_from_slice(tel.as_bytes());
             }
             // A `cap dump` under way: one piece per pass, as the board's console task sends
-            // one between reads, so a line typed meanwhile is read (and ends the dump).
+            // one between reads, so a line typed meanwhile is read without waiting for it.
             if self.drive.dumping() {
                 tel.clear();
                 if !self.drive.dump_more(&mut tel) {
@@ -305,9 +305,7 @@ impl<L: Link> Server<L> {
     /// mode the line decides ([`regen_fw::console::Console::dump_interrupt`]).
     fn byte(&mut self, b: u8) {
         let mut text = String::new();
-        if !self.drive.console().machine() {
-            self.drive.dump_abort(&mut text);
-        }
+        self.drive.dump_byte(&mut text);
         self.ed.set_machine(self.drive.console().machine());
         if let Some(line) = self.ed.feed(b, &mut text) {
             if !line.is_empty() {
