@@ -369,6 +369,12 @@ pub(crate) fn behind_mode(
     // (`STICK_PASSES` fits in all)
     let mut lo: Option<(f64, f64)> = None; // (ln ζ, ln implied − ln ζ) with the gap above 0
     let mut hi: Option<(f64, f64)> = None; // the gap below 0
+                                           // the total damping ratio a fit of the device implies, and the search's range
+    let implied = |d: &[f64]| zl + d[1] / (2.0 * d[0] * w);
+    let (zmin, zmax) = (
+        BEHIND_TOTAL_ZETAS[0],
+        BEHIND_TOTAL_ZETAS[BEHIND_TOTAL_ZETAS.len() - 1],
+    );
     for pass in 0..STICK_PASSES {
         if !(d[0] > 0.0 && d[2] > 0.0) {
             break;
@@ -376,12 +382,8 @@ pub(crate) fn behind_mode(
         if pass > 0 {
             let next = match (lo, hi) {
                 (Some((l0, g0)), Some((l1, g1))) => (l0 + g0 / (g0 - g1) * (l1 - l0)).exp(),
-                _ => zl + d[1] / (2.0 * d[0] * w),
+                _ => implied(&d),
             };
-            let (zmin, zmax) = (
-                BEHIND_TOTAL_ZETAS[0],
-                BEHIND_TOTAL_ZETAS[BEHIND_TOTAL_ZETAS.len() - 1],
-            );
             if !next.is_finite() || !(zmin..=zmax).contains(&next) {
                 break;
             }
@@ -391,7 +393,7 @@ pub(crate) fn behind_mode(
         let s = friction_behind_link(&r.x[..n], &r.v[..n], ctx.dt, w, zeta, zl, d[2] / d[0]);
         hs = through(&s, &[(f_r, zeta)], rows).pop()?;
         d = dr.fit([&ha, &hv, &hs])?.0;
-        let gap = (zl + d[1] / (2.0 * d[0] * w)).ln() - zeta.ln();
+        let gap = implied(&d).ln() - zeta.ln();
         if gap.is_nan() {
             break;
         }
