@@ -184,9 +184,7 @@ pub(crate) fn validate(
                 continue;
             }
             let rss_with = ho.rss(th);
-            let keep: Vec<usize> = (0..sub_refs.len()).filter(|i| *i < a || *i >= b).collect();
-            let (t2, h2) = (tr.select(&keep), ho.select(&keep));
-            let rss_without = h2.rss(&t2.solve());
+            let rss_without = rss_without_span(tr, ho, sub_refs.len(), (a, b));
             // (a delay's range on its least-squares fit or, failing that, on its fit corrected for
             // the derived signals' noise, as in the scan)
             let corrected = match chosen[k].kind.derived_noise(ctx, &chosen[k]) {
@@ -407,8 +405,7 @@ pub(crate) fn validate(
         spans
             .iter()
             .map(|&(a, b)| {
-                let keep: Vec<usize> = (0..m + alt.len()).filter(|i| *i < a || *i >= b).collect();
-                let rss_without = ho.select(&keep).rss(&tr.select(&keep).solve());
+                let rss_without = rss_without_span(&tr, &ho, m + alt.len(), (a, b));
                 (rss_without > 0.0).then(|| 1.0 - rss_with / rss_without)
             })
             .collect()
@@ -554,6 +551,13 @@ pub(crate) fn validate(
         ho_rel,
     };
     (selected, dropped_notes)
+}
+
+/// The held-out rss of the fit on `tr` (normal equations of `n` columns) with the columns
+/// `a..b` (a finding's) left out.
+fn rss_without_span(tr: &Normal, ho: &Normal, n: usize, (a, b): (usize, usize)) -> f64 {
+    let keep: Vec<usize> = (0..n).filter(|i| *i < a || *i >= b).collect();
+    ho.select(&keep).rss(&tr.select(&keep).solve())
 }
 
 /// A play's agreement across the segment fits where it holds (`agreement_of_held`), asked of
