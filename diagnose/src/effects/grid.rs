@@ -95,11 +95,8 @@ pub fn speed_levels(v: &[f64], rest: &[bool]) -> Vec<f64> {
     // cruise speeds was reached by no refinement.
     let mut filled = Vec::with_capacity(out.len());
     for w in out.windows(2) {
-        filled.push(w[0]);
-        let k = ((w[1] / w[0]).ln() / SPEED_GAP.ln()).ceil() as usize;
-        for j in 1..k {
-            filled.push(w[0] * (w[1] / w[0]).powf(j as f64 / k as f64));
-        }
+        let k = (((w[1] / w[0]).ln() / SPEED_GAP.ln()).ceil() as usize).max(1);
+        filled.extend(&logspace(w[0], w[1], k + 1)[..k]);
     }
     filled.extend(out.last());
     filled
