@@ -441,7 +441,7 @@ fn rig_long_run() {
     if std::env::var("RIG_KINDS").is_ok() {
         return;
     }
-    assert!(missed.is_empty(), "targets missed: {missed:#?}");
+    assert!(missed.is_empty(), "targets missed: {}", missed.join("; "));
 }
 
 /// The sampled held-out subset CI runs (`.ci/run`; `cargo test -p regen-tests --test

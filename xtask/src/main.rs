@@ -1,14 +1,16 @@
 //! `cargo xtask figures [--quick]`: run the measurements behind the project's figures (the
-//! emulated Cortex-M4 check, the board image's size, the benches, the console tests and fuzz)
+//! emulated Cortex-M4 check, the board image's size, the benches, the diagnosis's held-out
+//! long run and its real record, the console tests and fuzz)
 //! and write them as one table to `docs/figures.md`, so that no figure is typed by hand.
 //!
 //! Each measurement is a command and the markers of the output lines that carry its figures;
 //! the table quotes those lines as printed. A command that fails or prints no such line gives
 //! a row saying so (with its exit status and last line), and the others still run: the table
 //! is always written. The commands run one after another (the machine is shared; the benches
-//! compare figures measured in the same run). Without `--quick` it takes ≈ 10–20 min on a
-//! loaded 2-core machine, most of it the release builds (fat LTO) and the board image;
-//! `--quick` skips the board image, QEMU and the benches (≈ 2 min) and keeps their rows as the
+//! compare figures measured in the same run). Without `--quick` it takes ≈ 30 min on a
+//! loaded 2-core machine, most of it the release builds (fat LTO), the board image and the
+//! diagnosis's held-out long run; `--quick` skips the board image, QEMU, the benches and the
+//! long run (≈ 2 min) and keeps their rows as the
 //! previous run wrote them.
 
 use std::path::{Path, PathBuf};
@@ -74,6 +76,43 @@ const MEASURES: &[Measure] = &[
         dir: ".",
         markers: &["total:", "record:"],
         slow: true,
+    },
+    Measure {
+        what: "model diagnosis on the independent bench rig, held-out records (the long run)",
+        target: "≥ 95 % exactly right; ≤ 2 % of effect-free records named; ≥ 90 % of out-of-catalogue effects unexplained (504 held-out records a rig)",
+        program: "cargo",
+        args: &[
+            "test",
+            "--release",
+            "-p",
+            "regen-tests",
+            "--test",
+            "diagnose_rig",
+            "rig_long_run",
+            "--",
+            "--ignored",
+            "--nocapture",
+        ],
+        dir: ".",
+        markers: &[" held-out: ", "targets missed"],
+        slow: true,
+    },
+    Measure {
+        what: "model diagnosis of the EMPS ballscrew record (real data)",
+        target: "held-out error ≤ 2.9 %, every finding physical",
+        program: "cargo",
+        args: &[
+            "test",
+            "-p",
+            "regen-tests",
+            "--test",
+            "diagnose_emps",
+            "--",
+            "--nocapture",
+        ],
+        dir: ".",
+        markers: &["EMPS estimation:"],
+        slow: false,
     },
     Measure {
         what: "console fuzz",
@@ -324,7 +363,8 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
         if quick { " --quick" } else { "" },
         t_all.elapsed().as_secs_f64(),
         if quick {
-            " The rows `--quick` does not measure (board image, M4 check, benches) are kept as \
+            " The rows `--quick` does not measure (board image, M4 check, benches, the diagnosis's \
+             long run) are kept as \
              the previous run wrote them."
         } else {
             ""
