@@ -523,13 +523,24 @@ fn diagnose_with(
                 }
             }
             // a second parameter at the best first one, ranked by the held-out key as the
-            // first is (`EffectModel::variants`); a further one when that value itself passes
+            // first is (`EffectModel::variants`), bisected towards its optimum
+            // (`EffectModel::variant_fine`); a further one when that value itself passes
             // the selection, one parameter more, so it must cut the held-out rss by the
             // selection's margin, as an added effect must (`EffectModel::extended_variants`);
             // then the first refined once more at the variant chosen
             if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {
                 let alt = cand.kind.variants(&ctx, &centre);
                 scan(&alt, cache, &mut cb, &mut cb_key);
+                for level in 0.. {
+                    let Some(centre) = cb.as_ref().map(|c| c.2.clone()) else {
+                        break;
+                    };
+                    let fine = cand.kind.variant_fine(&centre, level);
+                    if fine.is_empty() {
+                        break;
+                    }
+                    scan(&fine, cache, &mut cb, &mut cb_key);
+                }
             }
             let best_passes = cb.as_ref().is_some_and(|c| passes(c.0, rss_h0, c.1));
             if let Some(centre) = cb.as_ref().map(|c| c.2.clone()) {

@@ -68,6 +68,14 @@ pub trait EffectModel: Sync {
         Vec::new()
     }
 
+    /// Values of the second parameter around the variant chosen, at refinement level `level`
+    /// (0, 1, …): each level is scanned around the best value so far, ranked as the variants
+    /// are, until a level gives none (a second parameter on a coarse grid bisected towards its
+    /// optimum).
+    fn variant_fine(&self, _centre: &Effect, _level: usize) -> Vec<Effect> {
+        Vec::new()
+    }
+
     /// The relative half-width of a last refinement of the first parameter at the variant
     /// chosen (None: none).
     fn variant_refine(&self, _centre: &Effect) -> Option<f64> {
