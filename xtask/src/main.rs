@@ -10,8 +10,9 @@
 //! compare figures measured in the same run). Without `--quick` it takes ≈ 30 min on a
 //! loaded 2-core machine, most of it the release builds (fat LTO), the board image and the
 //! diagnosis's held-out long run; `--quick` skips the board image, QEMU, the benches and the
-//! long run (≈ 2 min) and keeps their rows as the
-//! previous run wrote them.
+//! long run (≈ 2 min) and keeps their rows as the previous run wrote them; `--only TEXT`
+//! measures the rows whose name contains TEXT (`--only "model diagnosis"`: the diagnosis's
+//! time, long run and real record) and keeps the others.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -271,20 +272,20 @@ fn previous_row(text: &str, what: &str) -> Option<String> {
         .map(str::to_string)
 }
 
-fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
+fn figures(quick: bool, only: Option<&str>, out_path: &Path) -> Result<(), String> {
     let root = root();
     let t_all = Instant::now();
     let mut rows = Vec::new();
     let previous = std::fs::read_to_string(out_path).unwrap_or_default();
     for m in MEASURES {
-        if quick && m.slow {
+        if (quick && m.slow) || only.is_some_and(|o| !m.what.contains(o)) {
             // The row the previous run wrote, as it was; or a row saying it was skipped.
             if let Some(r) = previous_row(&previous, m.what) {
                 rows.push(r);
                 continue;
             }
             rows.push(format!(
-                "| {} | {} | skipped (`--quick`) | `{}{} {}` | |",
+                "| {} | {} | skipped (`--quick` or `--only`) | `{}{} {}` | |",
                 m.what,
                 m.target,
                 cd(m.dir),
@@ -360,10 +361,14 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
          printed; speeds depend on the machine and its load (best of several runs where the \
          bench says so).{}\n\n\
          | what | target | measured | command | time |\n| --- | --- | --- | --- | --- |\n{}\n",
-        if quick { " --quick" } else { "" },
+        match (quick, only) {
+            (_, Some(o)) => format!(" --only '{o}'"),
+            (true, None) => " --quick".to_string(),
+            (false, None) => String::new(),
+        },
         t_all.elapsed().as_secs_f64(),
-        if quick {
-            " The rows `--quick` does not measure (board image, M4 check, benches, the diagnosis's \
+        if quick || only.is_some() {
+            " The rows `--quick` or `--only` does not measure (board image, M4 check, benches, the diagnosis's \
              long run) are kept as \
              the previous run wrote them."
         } else {
@@ -382,16 +387,21 @@ fn figures(quick: bool, out_path: &Path) -> Result<(), String> {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: cargo xtask figures [--quick] [--out FILE]  (default docs/figures.md)";
+    let usage = "usage: cargo xtask figures [--quick] [--only TEXT] [--out FILE]  (default docs/figures.md; --only: measure the rows whose name contains TEXT, keep the others)";
     let r = match args.first().map(String::as_str) {
         Some("figures") => {
             let mut quick = false;
+            let mut only = None;
             let mut out = root().join("docs/figures.md");
             let mut it = args[1..].iter();
             let mut bad = None;
             while let Some(a) = it.next() {
                 match a.as_str() {
                     "--quick" => quick = true,
+                    "--only" => match it.next() {
+                        Some(t) => only = Some(t.clone()),
+                        None => bad = Some("--only: the text of the rows to measure".to_string()),
+                    },
                     "--out" => match it.next() {
                         Some(p) => out = PathBuf::from(p),
                         None => bad = Some("--out: a file path".to_string()),
@@ -401,7 +411,7 @@ fn main() {
             }
             match bad {
                 Some(e) => Err(e),
-                None => figures(quick, &out),
+                None => figures(quick, only.as_deref(), &out),
             }
         }
         _ => Err(usage.to_string()),
