@@ -206,7 +206,7 @@ pub(crate) fn conclude(
     if n_rest > 0 {
         verdicts.push(format!(
             "{n_rest} of {n} samples at rest (position still within its noise over ±{} samples), within that window of rest or at the record's ends: left out of every fit (friction at rest is static, anywhere within its breakaway level)",
-            effects::REST_HALF_WINDOW
+            effects::rest_half_window(ctx.dt)
         ));
     }
     if let (Some(tau), false) = (lag_of(&chosen), lag_rows_full.is_empty()) {

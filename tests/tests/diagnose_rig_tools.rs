@@ -289,3 +289,54 @@ fn rig_specs() {
         }
     }
 }
+
+/// The widened rig's tuning records (`RIG_WIDE=kind:j,kind:j …`, record j of the kind in the
+/// tuning range) without the diagnosis's selection: sample rate, quantum, the samples the
+/// diagnosis leaves out as at rest (`effects::at_rest`) against the rig's own rest set, and the
+/// rest rule's threshold (the quantum and 3σ of the position noise) as a speed over its
+/// window, beside the record's peak speed.
+#[test]
+#[ignore]
+fn rig_wide_rest() {
+    use hal_sim::bench_rig::RigSpec;
+    let emps = emps_x();
+    for item in std::env::var("RIG_WIDE").unwrap_or_default().split(',') {
+        let Some((kind, j)) = item.split_once(':') else {
+            continue;
+        };
+        let Ok(j) = j.parse::<u64>() else { continue };
+        let Some(k) = Hidden::WIDE_KINDS.iter().position(|x| *x == kind) else {
+            continue;
+        };
+        let seed = WIDE_TUNING_BASE + 100_000 * k as u64 + j;
+        assert!(TUNING.contains(&seed));
+        let spec = RigSpec::widened(seed, kind, Some((&emps, 1000.0)));
+        let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+        let rest = hal_sim::diagnose::effects::at_rest(&rec.x, &rec.v, rec.dt());
+        let rig_rest = spec.rest();
+        let x = &rec.x;
+        let q = x
+            .windows(2)
+            .map(|p| (p[1] - p[0]).abs())
+            .filter(|d| *d > 0.0)
+            .fold(f64::MAX, f64::min);
+        let mut d2: Vec<f64> = x
+            .windows(3)
+            .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
+            .collect();
+        d2.sort_by(f64::total_cmp);
+        let sigma = d2[d2.len() / 2] / 0.6745 / 6f64.sqrt();
+        let thr = q + 3.0 * sigma;
+        let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        println!(
+            "{kind} {j} ({}, {} Hz, {} samples): quantum {:.2e} m (record's smallest step {q:.2e}), σ {sigma:.2e} m, threshold {thr:.2e} m = {:.3e} m/s over the window; peak speed {vmax:.3e} m/s; at rest: diagnosis {}, rig {}",
+            spec.trajectory.name(),
+            spec.fs,
+            spec.samples,
+            spec.quantum_m,
+            thr / (20.0 * rec.dt()),
+            rest.iter().filter(|r| **r).count(),
+            rig_rest.iter().filter(|r| **r).count()
+        );
+    }
+}

@@ -146,19 +146,35 @@ pub fn median(v: &mut [f64]) -> f64 {
     *v.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
 }
 
-/// Half-width (samples) of the window over which `at_rest` looks for motion: the time constant
-/// of the derivative filter at fs/20, the span over which the derived velocity averages.
+/// Half-width (samples) of the window over which `at_rest` looks for motion at a derivative
+/// cutoff of fs/20: the span over which the derived velocity averages (`rest_half_window`).
 pub const REST_HALF_WINDOW: usize = 20;
 
+/// Half-width (samples) of `at_rest`'s window on a record sampled every `dt`: the span of the
+/// derivative filter at its default cutoff (`record::default_cutoff`), fs/fc samples:
+/// `REST_HALF_WINDOW` up to 1 kHz, where the cutoff is fs/20, and longer above, where the
+/// cutoff stays at its 50 Hz ceiling and the filter averages the velocity over more samples
+/// (a fixed count of samples would shrink the window in time, and with it the slowest speed a
+/// position quantum resolves over it would rise above the motion's at a high sample rate).
+pub fn rest_half_window(dt: f64) -> usize {
+    let fs = 1.0 / dt;
+    let w = fs / crate::record::default_cutoff(fs);
+    if w.is_finite() && w > REST_HALF_WINDOW as f64 {
+        w.round() as usize
+    } else {
+        REST_HALF_WINDOW
+    }
+}
+
 /// Samples left out of every fit: at rest — the position moves by no more than its own noise
-/// over ±`REST_HALF_WINDOW` samples, or the derived speed is below the slowest the sensor
+/// over ±`rest_half_window` samples, or the derived speed is below the slowest the sensor
 /// resolves over that window (the threshold is the position quantum, the smallest non-zero
 /// step, plus 3 σ of the position noise, σ from the median absolute second difference, σ·√6
 /// for white noise) — or within the window of rest (the zero-phase derivative spreads a start
 /// over it) or of the record's ends.
 pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
     let n = x.len();
-    let w = REST_HALF_WINDOW;
+    let w = rest_half_window(dt);
     if n < 2 * w + 1 {
         return vec![false; n];
     }

@@ -661,3 +661,38 @@ fn device_fit_holds_friction_non_negative() {
         "the Coulomb level takes part of the negative viscous force"
     );
 }
+
+/// `at_rest` on a quantised ramp slower than a quantum per `REST_HALF_WINDOW` samples: 200
+/// ramps drawn at 2 … 20 kHz (the derivative cutoff at its 50 Hz ceiling), quanta 0.1 … 30 µm,
+/// at speeds of one quantum per 3 … 9 ms against a 50 Hz filter's 20 ms span (over ±20 ms the ramp
+/// moves 2.2–6.7 quanta, more than the threshold of one quantum for a noise-free encoder), 4000
+/// samples or more: no sample but the record's ends is at rest (measured 0 of every draw; the
+/// bound is 0, the rule is exact for these ramps). At 0.1 … 1 kHz the window is 20 samples.
+/// Break: `at_rest` over a fixed 20 samples (2 ms at 10 kHz, under one quantum of these
+/// ramps) leaves every sample at rest and the first assert fails.
+#[test]
+fn rest_window_spans_the_derivative_filter() {
+    let mut rng = crate::synth::Rng::new(5);
+    for _ in 0..200 {
+        let fs = rng.range(2e3, 2e4);
+        let dt = 1.0 / fs;
+        let q = rng.range(1e-7, 3e-5);
+        // one quantum per 3 … 9 ms
+        let u = q / rng.range(3e-3, 9e-3);
+        let n = (fs * 0.5) as usize + 4000;
+        let x: Vec<f64> = (0..n)
+            .map(|i| (u * i as f64 * dt / q).floor() * q)
+            .collect();
+        let v = vec![u; n];
+        let w = rest_half_window(dt);
+        let rest = at_rest(&x, &v, dt);
+        let inner = rest[w..n - w].iter().filter(|r| **r).count();
+        assert_eq!(
+            inner, 0,
+            "fs {fs:.0} Hz, quantum {q:.2e} m, speed {u:.2e} m/s"
+        );
+    }
+    for fs in [100.0, 500.0, 999.0, 1000.0] {
+        assert_eq!(rest_half_window(1.0 / fs), REST_HALF_WINDOW, "{fs}");
+    }
+}
