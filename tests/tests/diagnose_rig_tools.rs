@@ -334,7 +334,7 @@ fn rig_wide_rest() {
             spec.fs,
             spec.samples,
             spec.quantum_m,
-            thr / (20.0 * rec.dt()),
+            thr / (hal_sim::diagnose::effects::rest_half_window(rec.dt()) as f64 * rec.dt()),
             rest.iter().filter(|r| **r).count(),
             rig_rest.iter().filter(|r| **r).count()
         );
