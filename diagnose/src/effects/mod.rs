@@ -160,7 +160,8 @@ pub fn rest_half_window(dt: f64) -> usize {
     let fs = 1.0 / dt;
     let w = fs / crate::record::default_cutoff(fs);
     if w.is_finite() && w > REST_HALF_WINDOW as f64 {
-        w.round() as usize
+        // (bounded far above any record's length, so 2·w + 1 cannot overflow)
+        w.round().min(1e12) as usize
     } else {
         REST_HALF_WINDOW
     }
