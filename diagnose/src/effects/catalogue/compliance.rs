@@ -393,7 +393,8 @@ pub(crate) fn behind_mode(
     // (`STICK_PASSES` fits in all)
     let mut lo: Option<(f64, f64)> = None; // (ln ζ, ln implied − ln ζ) with the gap above 0
     let mut hi: Option<(f64, f64)> = None; // the gap below 0
-                                           // the total damping ratio a fit of the device implies, and the search's range
+
+    // the total damping ratio a fit of the device implies, and the search's range
     let implied = |d: &[f64]| zl + d[1] / (2.0 * d[0] * w);
     let (zmin, zmax) = (
         BEHIND_TOTAL_ZETAS[0],
