@@ -314,22 +314,10 @@ fn rig_wide_rest() {
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
         let rest = hal_sim::diagnose::effects::at_rest(&rec.x, &rec.v, rec.dt());
         let rig_rest = spec.rest();
-        let x = &rec.x;
-        let q = x
-            .windows(2)
-            .map(|p| (p[1] - p[0]).abs())
-            .filter(|d| *d > 0.0)
-            .fold(f64::MAX, f64::min);
-        let mut d2: Vec<f64> = x
-            .windows(3)
-            .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
-            .collect();
-        d2.sort_by(f64::total_cmp);
-        let sigma = d2[d2.len() / 2] / 0.6745 / 6f64.sqrt();
-        let thr = q + 3.0 * sigma;
+        let thr = hal_sim::diagnose::effects::rest_threshold(&rec.x);
         let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         println!(
-            "{kind} {j} ({}, {} Hz, {} samples): quantum {:.2e} m (record's smallest step {q:.2e}), σ {sigma:.2e} m, threshold {thr:.2e} m = {:.3e} m/s over the window; peak speed {vmax:.3e} m/s; at rest: diagnosis {}, rig {}",
+            "{kind} {j} ({}, {} Hz, {} samples): quantum {:.2e} m, threshold {thr:.2e} m = {:.3e} m/s over the window; peak speed {vmax:.3e} m/s; at rest: diagnosis {}, rig {}",
             spec.trajectory.name(),
             spec.fs,
             spec.samples,

@@ -167,18 +167,10 @@ pub fn rest_half_window(dt: f64) -> usize {
     }
 }
 
-/// Samples left out of every fit: at rest — the position moves by no more than its own noise
-/// over ±`rest_half_window` samples, or the derived speed is below the slowest the sensor
-/// resolves over that window (the threshold is the position quantum, the smallest non-zero
-/// step, plus 3 σ of the position noise, σ from the median absolute second difference, σ·√6
-/// for white noise) — or within the window of rest (the zero-phase derivative spreads a start
-/// over it) or of the record's ends.
-pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
-    let n = x.len();
-    let w = rest_half_window(dt);
-    if n < 2 * w + 1 {
-        return vec![false; n];
-    }
+/// The position change `at_rest` takes as no motion: the position quantum (the smallest
+/// non-zero step; 0 when the position never moves) plus 3 σ of the position noise, σ from the
+/// median absolute second difference (σ·√6 for white noise).
+pub fn rest_threshold(x: &[f64]) -> f64 {
     let q = x
         .windows(2)
         .map(|p| (p[1] - p[0]).abs())
@@ -191,7 +183,20 @@ pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
         .collect();
     let med = median(&mut d2);
     let sigma = med / 0.6745 / 6f64.sqrt();
-    let thr = q + 3.0 * sigma;
+    q + 3.0 * sigma
+}
+
+/// Samples left out of every fit: at rest — the position moves by no more than its own noise
+/// over ±`rest_half_window` samples, or the derived speed is below the slowest the sensor
+/// resolves over that window (the threshold `rest_threshold`) — or within the window of rest (the zero-phase derivative spreads a start
+/// over it) or of the record's ends.
+pub fn at_rest(x: &[f64], v: &[f64], dt: f64) -> Vec<bool> {
+    let n = x.len();
+    let w = rest_half_window(dt);
+    if n < 2 * w + 1 {
+        return vec![false; n];
+    }
+    let thr = rest_threshold(x);
     // the slowest speed the sensor resolves: thr over the window
     let v_res = thr / (w as f64 * dt);
     let still: Vec<bool> = (0..n)
