@@ -23,16 +23,17 @@ impl DerivNoise {
     const D: isize = 128;
 
     /// The noise of a record whose v and a are derived from a position of quantum `q` through
-    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s. None
-    /// when there is no quantum.
-    pub fn new(q: f64, fc: f64, fc_v: f64, dt: f64) -> Option<DerivNoise> {
+    /// low-passes at `fc_v` and `fc` (Hz, `record::derive_from_x`), sampled every `dt` s, over
+    /// `n` samples. None when there is no quantum.
+    pub fn new(q: f64, fc: f64, fc_v: f64, dt: f64, n: usize) -> Option<DerivNoise> {
         let fs = 1.0 / dt;
         if !(q > 0.0 && fc > 0.0 && fc < 0.5 * fs) {
             return None;
         }
         // the filter's impulse response has decayed to rounding well within 12 periods of its
-        // cutoff each way; the tabulated shifts beside it
-        let half = (12.0 * fs / fc).ceil() as usize + Self::D as usize;
+        // cutoff each way, and a record of n samples holds no more of it than n each way; the
+        // tabulated shifts beside it
+        let half = (12.0 * fs / fc).ceil().min(n as f64) as usize + Self::D as usize;
         let mut x = vec![0.0; 2 * half + 1];
         x[half] = 1.0;
         let (v, a, _) = crate::record::derive_from_x(&x, fc, Some(fc_v), dt);
@@ -129,7 +130,7 @@ impl Context<'_> {
                 let fc_v = meta
                     .get(crate::record::VELOCITY_CUTOFF_KEY)
                     .map_or(fc, |&f| f);
-                DerivNoise::new(self.x_quantum, fc, fc_v, self.dt)
+                DerivNoise::new(self.x_quantum, fc, fc_v, self.dt, self.rec.len())
             })
             .as_ref()
     }
