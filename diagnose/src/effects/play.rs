@@ -407,11 +407,6 @@ pub fn play_columns_with(
     let free_force = |i: usize| {
         dev.spring.get(i).copied().unwrap_or(0.0) - (mi * r.a[i] + fv * va[i] + fc * ctx.sgn[i])
     };
-    // position of sample i among the rows (None when not a row)
-    let slot = |i: usize| match rows {
-        None => Some(i),
-        Some(rw) => rw.binary_search(&i).ok(),
-    };
     match rows {
         None => {
             for i in 0..n {
@@ -433,10 +428,18 @@ pub fn play_columns_with(
     let m = tap_samples(ctx.dt);
     let fs = 1.0 / (ctx.dt * m as f64);
     for &(i, delta, vr) in &dev.impacts {
-        for jj in 0..=IMPACT_TAPS * m {
-            let Some(q) = slot(i + jj).filter(|_| i + jj < end) else {
-                continue;
-            };
+        if i >= end {
+            continue;
+        }
+        // the samples the taps span that are walked (before `end`), and their slots among the
+        // rows
+        let last = i + IMPACT_TAPS.saturating_mul(m).min(end - 1 - i);
+        let slots = match rows {
+            None => i..last + 1,
+            Some(rw) => rw.partition_point(|&r| r < i)..rw.partition_point(|&r| r <= last),
+        };
+        for q in slots {
+            let jj = rows.map_or(q, |rw| rw[q]) - i;
             // the sample lies (jj + delta) sample periods after the contact; tap k stands for
             // the pulse k + ½ taps after it
             let t = ((jj as f64 + delta) / m as f64 - 0.5).max(0.0);
