@@ -210,7 +210,7 @@ fn held_out_gain_is_reproduced_by_the_simulator() {
         100.0 * e_drop,
         100.0 * e_vs_pred
     );
-    // Measured (2026-11-24): diagnosis 19.697 % → 5.146 % (3.83×), its whole-record model's
+    // Measured: diagnosis 19.697 % → 5.146 % (3.83×), its whole-record model's
     // prediction 5.099 %; replay 19.070 % → 5.094 % (3.74×), stribeck dropped 25.78 %; the
     // replayed force against the prediction 0.033 % (bound 3×, 0.1 %).
     // The replay and the prediction of the same model differ by the simulator's own path
@@ -269,7 +269,7 @@ fn compliance_is_reproduced_by_the_simulator() {
         100.0 * e_drop,
         100.0 * e_vs_pred
     );
-    // Measured (2026-11-24): hidden 13.496 kg, 1.3891 Hz, ζ 0.1138; found 13.769 kg (+2.0 %),
+    // Measured: hidden 13.496 kg, 1.3891 Hz, ζ 0.1138; found 13.769 kg (+2.0 %),
     // 1.3888 Hz (−0.02 %), ζ 0.1160 (+1.9 %); diagnosis 33.534 % → 1.063 % (31.6×), its
     // prediction 1.059 %; replay 30.203 % → 1.060 % (28.5×: the replayed baseline is the
     // whole-record fit, the diagnosis's the training fit), compliance dropped 42.30 %; replay
@@ -357,7 +357,7 @@ fn backlash_is_reproduced_by_the_simulator() {
         "the model stepped on the record's samples: {:.3} %",
         100.0 * e_series
     );
-    // Measured (2026-11-24): width 0.8661 mm against the rig's 0.8704 (−0.50 %); diagnosis
+    // Measured: width 0.8661 mm against the rig's 0.8704 (−0.50 %); diagnosis
     // 57.708 % → 11.436 % (5.05×), its prediction 11.327 %; the model on the record's samples
     // 11.734 %; replay 57.707 % → 11.396 % (5.06×), backlash dropped 57.744 %; the replayed
     // force against the prediction 0.72 %. Bounds 3× the measured deviations: width 1.5 %,

@@ -161,8 +161,8 @@ fn short_wavelength_ripple_is_named_through_the_spatial_seeding() {
     // A ripple of many periods over the stroke (λ 1.5-2.5 mm over ≈ 0.07 m: 30-45 periods)
     // decorrelates from a wavelength a few % off, and the catalogue's log grid is ≈ 13 %
     // apart: whether the coarse grid catches it depends on where λ falls. The baseline
-    // residual's spatial peaks seed the grid (as the 2.5 mm ripple on EMPS). Measured
-    // 2026-11-23: 12/12 named with the seeding, 10/12 without it (two cogging records at
+    // residual's spatial peaks seed the grid (as the 2.5 mm ripple on EMPS). Measured:
+    // 12/12 named with the seeding, 10/12 without it (two cogging records at
     // 2.01 and 1.99 mm, not named at all), so this test fails without the seeding. 12 seeds,
     // cogging and position_periodic_friction alternately, 15-35 % of Coulomb.
     let seeds = 12u64;

@@ -147,7 +147,7 @@ fn hidden_compliance_is_named() {
     // Bound: 14 of 16 (87.5 %). A diagnosis whose true rate were 60 % would reach it with
     // probability about 2 % (binomial tail), so a lucky pass is unlikely.
     assert!(named * 16 >= 14 * seeds as usize, "{named}/{seeds}");
-    // The other effects: 6/8 measured (2026-11-24) with the resonance hidden as the physical
+    // The other effects: 6/8 measured with the resonance hidden as the physical
     // mode (`effects::compliance_columns_at` at its own damping ratio). The two missed are
     // built on the baseline's force proxy f̂₀, which carries none of the mode: a 4.6 ms lag
     // taken by `presliding_hysteresis`, a `screw_efficiency` taken by `reflected_inertia`.
