@@ -370,17 +370,20 @@ pub(crate) fn behind_mode(
     let n = rows.map_or(r.len(), |rw| rw.last().map_or(0, |l| l + 1));
     let at = |j: usize| rows.map_or(j, |rw| rw[j]);
     let m = rows.map_or(n, |rw| rw.len());
-    // the device's velocity at every sample to the last row, and its velocity and acceleration
-    // on the rows, through the mode of total damping ratio ζ
-    let motion = |zeta: f64| -> Option<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+    // the device's velocity and acceleration on the rows through the mode of total damping
+    // ratio ζ (a filter's output at a row is the same whichever other samples it emits)
+    let motion = |zeta: f64| -> Option<(Vec<f64>, Vec<f64>)> {
         let mode = [(f_r, zeta)];
-        let vd = through(&r.v[..n], &mode, None).pop()?;
-        let hv = map(m, |j| vd[at(j)]);
-        let ha = through(&r.a, &mode, rows).pop()?;
-        Some((vd, hv, ha))
+        Some((
+            through(&r.v, &mode, rows).pop()?,
+            through(&r.a, &mode, rows).pop()?,
+        ))
     };
     let mut zeta = best?.0;
-    let (vd, mut hv, mut ha) = motion(zeta)?;
+    // and at the first ζ its velocity at every sample to the last row (its friction's sign)
+    let vd = through(&r.v[..n], &[(f_r, zeta)], None).pop()?;
+    let mut hv = map(m, |j| vd[at(j)]);
+    let mut ha = through(&r.a, &[(f_r, zeta)], rows).pop()?;
     // the device fitted with its friction's sign through the mode
     let sd: Vec<f64> = vd.iter().map(|&v| sgn(v, ctx.v_eps)).collect();
     let mut hs = through(&sd, &[(f_r, zeta)], rows).pop()?;
@@ -413,7 +416,7 @@ pub(crate) fn behind_mode(
                 break;
             }
             zeta = next;
-            (_, hv, ha) = motion(zeta)?;
+            (hv, ha) = motion(zeta)?;
         }
         let s = friction_behind_link(&r.x[..n], &r.v[..n], ctx.dt, w, zeta, zl, d[2] / d[0]);
         hs = through(&s, &[(f_r, zeta)], rows).pop()?;
