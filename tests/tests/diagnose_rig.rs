@@ -151,14 +151,19 @@ fn outcome(rig: Rig, kind: &'static str, j: usize, seed: u64, emps: &[f64]) -> O
     let (exact, detected, false_names) = judge(&spec.hidden, &d);
     let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
     let mut text = format!(
-        "{kind:>20} {:>16} seed {seed} ({} Hz, {} samples, quantum {:.1e} m): hidden {:?} (rms {:.2} N, unexplained by a refit {:.2} N, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}\n",
+        "{kind:>20} {:>16} seed {seed} ({} Hz, {} samples, quantum {:.1e} m): hidden {:?} (rms {:.2} N, {}, noise {:.2} N, observable {}{}) -> {:?}{} held-out {:.2} % -> {:.2} %{}\n",
         spec.trajectory.name(),
         spec.fs,
         spec.samples,
         spec.quantum_m,
         spec.hidden,
         spec.effect_rms_n,
-        spec.effect_unexplained_n,
+        // the classic rig's observability has no refit clause: nothing to print
+        if spec.refit_rule {
+            format!("unexplained by a refit {:.2} N", spec.effect_unexplained_n)
+        } else {
+            "no refit clause".to_string()
+        },
         spec.noise_n,
         spec.observable,
         if spec.requested != spec.trajectory.name() {
