@@ -92,7 +92,7 @@ pub struct Context<'a> {
     pub rest: Vec<bool>,
     /// Baseline coefficients fitted on the whole record (columns of `base_columns`).
     pub base_th: Vec<f64>,
-    /// Position quantum: the smallest non-zero step of x_m.
+    /// Position quantum (`position_quantum`): the smallest non-zero step of x_m, 0 when none.
     pub x_quantum: f64,
     /// rms of the baseline residual on the fitted samples.
     pub base_resid_rms: f64,
@@ -167,16 +167,25 @@ pub fn rest_half_window(dt: f64) -> usize {
     }
 }
 
-/// The position change `at_rest` takes as no motion: the position quantum (the smallest
-/// non-zero step; 0 when the position never moves) plus 3 σ of the position noise, σ from the
-/// median absolute second difference (σ·√6 for white noise).
-pub fn rest_threshold(x: &[f64]) -> f64 {
+/// The position's quantum: its smallest non-zero step (0 when the position never moves).
+pub fn position_quantum(x: &[f64]) -> f64 {
     let q = x
         .windows(2)
         .map(|p| (p[1] - p[0]).abs())
         .filter(|d| *d > 0.0)
         .fold(f64::MAX, f64::min);
-    let q = if q == f64::MAX { 0.0 } else { q };
+    if q == f64::MAX {
+        0.0
+    } else {
+        q
+    }
+}
+
+/// The position change `at_rest` takes as no motion: the position quantum
+/// (`position_quantum`) plus 3 σ of the position noise, σ from the
+/// median absolute second difference (σ·√6 for white noise).
+pub fn rest_threshold(x: &[f64]) -> f64 {
+    let q = position_quantum(x);
     let mut d2: Vec<f64> = x
         .windows(3)
         .map(|p| (p[2] - 2.0 * p[1] + p[0]).abs())
@@ -284,12 +293,7 @@ impl<'a> Context<'a> {
             spatial_wavelengths: Vec::new(),
             rest,
             base_th: Vec::new(),
-            x_quantum: rec
-                .x
-                .windows(2)
-                .map(|p| (p[1] - p[0]).abs())
-                .filter(|d| *d > 0.0)
-                .fold(f64::MAX, f64::min),
+            x_quantum: position_quantum(&rec.x),
             base_resid_rms: 0.0,
             zeta_cache: Default::default(),
             profile_rows: Default::default(),
@@ -299,9 +303,6 @@ impl<'a> Context<'a> {
             v_with_a: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
         };
-        if c.x_quantum == f64::MAX {
-            c.x_quantum = 0.0;
-        }
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;
         let mut steps: Vec<f64> = rec.x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
