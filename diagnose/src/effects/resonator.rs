@@ -283,8 +283,32 @@ impl Context<'_> {
                 .flat_map(|&f_hz| COMPLIANCE_ZETAS.iter().map(move |&z| (f_hz, z)))
                 .collect();
             let all = compliance_columns_at(&self.rec.a, &modes, self.dt, Some(rows));
-            all.chunks(COMPLIANCE_ZETAS.len())
-                .map(|cols| zeta_of_profile(base, f, cols))
+            let coarse: Vec<f64> = all
+                .chunks(COMPLIANCE_ZETAS.len())
+                .map(|cols| zeta_of_profile(&profile_rss(base, f, cols)))
+                .collect();
+            // the second parabola about each vertex inside the grid
+            let h = PROFILE_FINE_STEP * (COMPLIANCE_ZETAS[1] / COMPLIANCE_ZETAS[0]).ln();
+            let inside = |z: f64| {
+                z > COMPLIANCE_ZETAS[0] && z < COMPLIANCE_ZETAS[COMPLIANCE_ZETAS.len() - 1]
+            };
+            let fine_modes: Vec<(f64, f64)> = fs
+                .iter()
+                .zip(&coarse)
+                .filter(|(_, &z)| inside(z))
+                .flat_map(|(&f_hz, &z)| [-h, 0.0, h].map(|d| (f_hz, (z.ln() + d).exp())))
+                .collect();
+            let fine = compliance_columns_at(&self.rec.a, &fine_modes, self.dt, Some(rows));
+            let mut fine = fine.chunks(3);
+            coarse
+                .iter()
+                .map(|&z| match (inside(z), fine.next()) {
+                    (true, Some(cols)) => {
+                        let r = profile_rss(base, f, cols);
+                        (z.ln() + vertex_step([r[0], r[1], r[2]], h)).exp()
+                    }
+                    _ => z,
+                })
                 .collect()
         };
         if let Ok(mut c) = self.zeta_cache.lock() {
@@ -296,10 +320,9 @@ impl Context<'_> {
     }
 }
 
-/// The damping ratio of `compliance_zeta`'s profile from the mode's columns `cols` (one per
-/// value of `COMPLIANCE_ZETAS`, at the profile's rows) beside the baseline columns `base`,
-/// the force `f` at those rows.
-pub(crate) fn zeta_of_profile(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -> f64 {
+/// The rss of the joint fit of the baseline columns `base` and each of the mode's columns
+/// `cols` (one per damping ratio, at the profile's rows) to the force `f` at those rows.
+pub(crate) fn profile_rss(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -> Vec<f64> {
     // the joint fit of the baseline columns and the mode's column (what the selection fits),
     // per damping ratio
     let ff: f64 = f.iter().map(|v| v * v).sum();
@@ -318,8 +341,7 @@ pub(crate) fn zeta_of_profile(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -
         }
         bb0[p] = dot(&base[p], f);
     }
-    let rss: Vec<f64> = cols
-        .iter()
+    cols.iter()
         .map(|c| {
             let (mut g, mut bb) = (g0.clone(), bb0.clone());
             for p in 0..nb {
@@ -339,22 +361,38 @@ pub(crate) fn zeta_of_profile(base: &[Vec<f64>], f: &[f64], cols: &[Vec<f64>]) -
             }
             r
         })
-        .collect();
+        .collect()
+}
+
+/// ln ζ at the vertex of the parabola through the rss at ln ζ − h, ln ζ, ln ζ + h (`y`),
+/// moved by at most h (0 where the three do not curve upwards).
+fn vertex_step(y: [f64; 3], h: f64) -> f64 {
+    let den = y[0] - 2.0 * y[1] + y[2];
+    let d = if den > 0.0 {
+        0.5 * (y[0] - y[2]) / den
+    } else {
+        0.0
+    };
+    d.clamp(-1.0, 1.0) * h
+}
+
+/// The damping ratio of `compliance_zeta`'s profile from the rss over `COMPLIANCE_ZETAS`
+/// (`profile_rss`): the grid's least, or inside the grid the vertex of the parabola in ln ζ
+/// through it and its neighbours.
+pub(crate) fn zeta_of_profile(rss: &[f64]) -> f64 {
     let k = (0..rss.len())
         .min_by(|&i, &j| rss[i].total_cmp(&rss[j]))
         .unwrap_or(4);
     if k == 0 || k + 1 == rss.len() {
         COMPLIANCE_ZETAS[k]
     } else {
-        // vertex of the parabola through (ln ζ, rss) at k−1, k, k+1 (equal spacing h)
-        let (y0, y1, y2) = (rss[k - 1], rss[k], rss[k + 1]);
-        let den = y0 - 2.0 * y1 + y2;
         let h = (COMPLIANCE_ZETAS[k + 1] / COMPLIANCE_ZETAS[k]).ln();
-        let d = if den > 0.0 {
-            0.5 * (y0 - y2) / den
-        } else {
-            0.0
-        };
-        (COMPLIANCE_ZETAS[k].ln() + d.clamp(-1.0, 1.0) * h).exp()
+        (COMPLIANCE_ZETAS[k].ln() + vertex_step([rss[k - 1], rss[k], rss[k + 1]], h)).exp()
     }
 }
+
+/// The step (in ln ζ) of the profile's second parabola, about the first's vertex: a quarter
+/// of the grid's. The rss is not a parabola in ln ζ over the grid's step (a mode's column
+/// changes shape with ζ), so the first vertex lies a few per cent off the optimum; over a
+/// quarter step it is close to one.
+pub const PROFILE_FINE_STEP: f64 = 0.25;
