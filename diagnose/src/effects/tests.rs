@@ -700,3 +700,75 @@ fn rest_window_spans_the_derivative_filter() {
     let x: Vec<f64> = (0..100).map(|i| i as f64).collect();
     assert!(at_rest(&x, &x, 1e-300).iter().all(|r| !r));
 }
+
+/// `compliance_zeta` finds a mode's damping ratio between the profile's grid values: 24
+/// devices with a modal mass (1 … 5 kg) on a spring-damper (2 … 20 Hz, ζ log-uniform over
+/// 0.03 … 0.18, so mostly off the grid) driven by a linear chirp (0.5 → 40 Hz over 20 s,
+/// 1 kHz, its velocity and acceleration exact), the mode integrated by the test's own
+/// semi-implicit Euler steps, ten per sample (not the resonator of the profile), beside
+/// inertia and viscous friction, no noise. The relative error of ζ: median and worst over the
+/// devices. Measured: median 0.28 %, worst 1.12 %; bounds 0.8 % and 3 %, about 3× each (the
+/// test's own integration is not the resonator's bilinear filter). Broken: the coarse
+/// parabola alone (`PROFILE_FINE_STEP`'s second one skipped) gives median 2.5 %, worst 10 %,
+/// and the test fails.
+#[test]
+fn the_damping_ratio_is_found_between_the_profile_grid() {
+    let (fs_hz, n, sub) = (1000.0, 20_000, 10);
+    let dt = 1.0 / fs_hz;
+    let mut rng = crate::synth::Rng::new(7);
+    let mut errs = Vec::new();
+    for _ in 0..24 {
+        let f0 = 2.0 * 10f64.powf(rng.uniform());
+        let z0 = 0.03 * 6f64.powf(rng.uniform());
+        let m2 = 1.0 + 4.0 * rng.uniform();
+        let w0 = std::f64::consts::TAU * f0;
+        // a linear chirp of constant amplitude, its velocity and acceleration exact
+        let motion = |t: f64| {
+            let (amp, k) = (2e-4, 39.5 / 20.0);
+            let ph = std::f64::consts::TAU * (0.5 * t + 0.5 * k * t * t);
+            let w = std::f64::consts::TAU * (0.5 + k * t);
+            let (s, c) = ph.sin_cos();
+            (
+                amp * s,
+                amp * w * c,
+                -amp * w * w * s + amp * std::f64::consts::TAU * k * c,
+            )
+        };
+        let (mut y, mut yd) = (0.0, 0.0);
+        let mut rec = Record::default();
+        for i in 0..n {
+            let t = i as f64 * dt;
+            let (x, v, a) = motion(t);
+            let ydd = -2.0 * z0 * w0 * (yd - v) - w0 * w0 * (y - x);
+            rec.t.push(t);
+            rec.x.push(x);
+            rec.v.push(v);
+            rec.a.push(a);
+            rec.f.push(3.0 * a + 50.0 * v + m2 * (ydd - a));
+            for k in 0..sub {
+                let (xs, vs, _) = motion(t + k as f64 * dt / sub as f64);
+                let ydd = -2.0 * z0 * w0 * (yd - vs) - w0 * w0 * (y - xs);
+                yd += ydd * dt / sub as f64;
+                y += yd * dt / sub as f64;
+            }
+        }
+        let z = Context::new(&rec).compliance_zeta(f0);
+        let e = z.map_or(f64::INFINITY, |z| (z / z0 - 1.0).abs());
+        println!(
+            "f {f0:.2} Hz, ζ {z0:.4}, m {m2:.2} kg: found {z:?} ({:+.2} %)",
+            100.0 * e
+        );
+        errs.push(e);
+    }
+    errs.sort_by(f64::total_cmp);
+    let (median, worst) = (errs[errs.len() / 2], errs[errs.len() - 1]);
+    println!(
+        "ζ error: median {:.2} %, worst {:.2} %",
+        100.0 * median,
+        100.0 * worst
+    );
+    assert!(
+        median < 0.008 && worst < 0.03,
+        "median {median}, worst {worst}"
+    );
+}
