@@ -216,7 +216,8 @@ impl Context<'_> {
     /// The damping ratio of a mode at `f_hz` that the record shows: the profile of the
     /// least-squares fit of the force by the baseline columns and m2·(H − 1)·a over
     /// `COMPLIANCE_ZETAS`, on at most 4,000 training samples in motion (strided), refined by a
-    /// parabola in ln ζ through the best value and its neighbours (clamped to the grid's range).
+    /// parabola in ln ζ through the best value and its neighbours (clamped to the grid's range),
+    /// then inside the grid by a second one over `PROFILE_FINE_STEP` of its step about that vertex.
     /// Cached per frequency: the columns, the report and the stability check use one value.
     /// None when the optimum is at the grid's upper end (no resonance peak: not a mode the
     /// record identifies; the candidate then has a zero column and is not named).
