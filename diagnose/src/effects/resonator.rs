@@ -303,12 +303,13 @@ impl Context<'_> {
             let mut fine = fine.chunks(3);
             coarse
                 .iter()
-                .map(|&z| match (inside(z), fine.next()) {
-                    (true, Some(cols)) => {
+                .map(|&z| match inside(z).then(|| fine.next()).flatten() {
+                    // the fine columns were taken for the frequencies inside the grid only
+                    Some(cols) => {
                         let r = profile_rss(base, f, cols);
                         (z.ln() + vertex_step([r[0], r[1], r[2]], h)).exp()
                     }
-                    _ => z,
+                    None => z,
                 })
                 .collect()
         };
