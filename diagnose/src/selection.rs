@@ -125,81 +125,22 @@ fn diagnose_with(
     let spread_hold: Vec<u8> = spread_rows.iter().map(|&i| hold[i]).collect();
     let baseline_holdout = rel(ho.rss(&th), ho.ff);
     let baseline_train = rel(tr.rss(&th), tr.ff);
-    // Baseline term significance: drop each in turn (on the spread subsample).
     let spread_base: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&spread_rows, v)).collect();
-    let mut baseline_terms = Vec::new();
-    for drop in 0..n_base {
-        let keep: Vec<&[f64]> = spread_base
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| *i != drop)
-            .map(|(_, c)| c.as_slice())
-            .collect();
-        let (t2, h2) = normals(&keep, &spread_f, &spread_hold, 1);
-        let th2 = t2.solve();
-        let without = rel(h2.rss(&th2), h2.ff);
-        let (name, unit) = effects::baseline_term(&cols[drop].0);
-        baseline_terms.push(BaselineTerm {
-            effect: name.to_string(),
-            value: th[drop],
-            unit: unit.to_string(),
-            holdout_rel_error_without: without,
-            // kept when dropping it makes the held-out rss grow by the same margin an
-            // extension must bring
-            significant: without * without
-                > baseline_holdout * baseline_holdout / (1.0 - opt.min_holdout_gain),
-        });
-    }
+    let baseline_terms = baseline_terms(
+        &cols,
+        &spread_base,
+        (&spread_f, &spread_hold),
+        &th,
+        baseline_holdout,
+        opt.min_holdout_gain,
+    );
     // Baseline terms the record cannot tell apart: columns whose centred correlation over
     // the samples in motion reaches CONFOUNDED_R (the coefficients' standard errors then grow
     // by 1/√(1 − r²) ≥ 7× over independent columns: only their combination is identified).
     let confounded = confounded_terms(&cols[..n_base], &spread_base, &spread_hold);
-    // A slow change of the residual's mean over the record (a drifting offset: temperature,
-    // a load cell's zero) is outside the catalogue. Checked on the baseline residual before
-    // the search: when it shows, it is reported as `unexplained` with where it shows and
-    // carried during the search and in the final fit by two nuisance columns (the record's
-    // time as Legendre polynomials of degree 1 and 2 on [−1, 1]), so that no catalogue effect
-    // takes it (a drift correlates with whatever the motion does slowly: a position, a
-    // direction, a dwell) and the effects are fitted on the rest.
-    let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| resid_of(&ctx, cols, th);
-    let (t0, t1) = (rec.t[0], rec.t[n - 1]);
-    let tn: Vec<f64> = rec
-        .t
-        .iter()
-        .map(|t| 2.0 * (t - t0) / (t1 - t0).max(1e-300) - 1.0)
-        .collect();
-    let z = vec![
-        (DRIFT_COLUMNS[0].to_string(), tn.clone()),
-        (
-            DRIFT_COLUMNS[1].to_string(),
-            tn.iter().map(|t| 1.5 * t * t - 0.5).collect(),
-        ),
-    ];
-    let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
-    let drift = report::slow_change(
-        &rec.t,
-        &resid_of(&cols, &th),
-        &ctx.rest,
-        opt.min_holdout_gain,
-    )
-    .or_else(|| {
-        // the baseline's coefficients fitted beside the trend: a Coulomb term or an offset
-        // that took part of a drift (a direction or a dwell that correlates with time: the
-        // moves of a point-to-point record running one way early and the other way late)
-        // does not hide it; the residual tested is the force minus the baseline's part of
-        // that joint fit (the trend left in it), the test the same
-        let joint = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w)
-            .0
-            .solve();
-        report::slow_change(
-            &rec.t,
-            &resid_of(&cols, &joint[..cols.len()]),
-            &ctx.rest,
-            opt.min_holdout_gain,
-        )
-    });
+    let (drift, z) = drift_test(&ctx, &cols, &th, &full, &full_w, opt.min_holdout_gain);
     if drift.is_some() {
-        full = extend_normals_dense(&full, &refs(&cols), &zr, &rec.f, &full_w);
+        full = extend_normals_dense(&full, &refs(&cols), &refs(&z), &rec.f, &full_w);
         sub_cols.extend(z.iter().map(|(_, v)| gather(&sub.rows, v)));
         cols.extend(z);
     }
@@ -938,3 +879,98 @@ pub(crate) fn confounded_terms(
 #[cfg(test)]
 #[path = "selection_tests.rs"]
 mod speed_force_tests;
+
+/// Baseline term significance: each of the baseline's terms (`cols`, their values `th` on the
+/// whole record) dropped in turn and the rest refitted on the spread subsample (`spread_base`,
+/// its force and held-out split `spread`); a term is significant when dropping it makes the
+/// held-out rss grow by the same margin an extension must bring (`min_holdout_gain` over the
+/// baseline's held-out error `baseline_holdout`).
+fn baseline_terms(
+    cols: &[(String, Vec<f64>)],
+    spread_base: &[Vec<f64>],
+    spread: (&[f64], &[u8]),
+    th: &[f64],
+    baseline_holdout: f64,
+    min_holdout_gain: f64,
+) -> Vec<BaselineTerm> {
+    let (spread_f, spread_hold) = spread;
+    (0..spread_base.len())
+        .map(|drop| {
+            let keep: Vec<&[f64]> = spread_base
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != drop)
+                .map(|(_, c)| c.as_slice())
+                .collect();
+            let (t2, h2) = normals(&keep, spread_f, spread_hold, 1);
+            let th2 = t2.solve();
+            let without = rel(h2.rss(&th2), h2.ff);
+            let (name, unit) = effects::baseline_term(&cols[drop].0);
+            BaselineTerm {
+                effect: name.to_string(),
+                value: th[drop],
+                unit: unit.to_string(),
+                holdout_rel_error_without: without,
+                significant: without * without
+                    > baseline_holdout * baseline_holdout / (1.0 - min_holdout_gain),
+            }
+        })
+        .collect()
+}
+
+/// A slow change of the residual's mean over the record (a drifting offset: temperature, a
+/// load cell's zero) is outside the catalogue. Checked on the baseline residual (`cols` with
+/// coefficients `th`; `full` its normals, `full_w` their held-out weights) before the search:
+/// when it shows, it is reported as `unexplained` with where it shows and carried during the
+/// search and in the final fit by two nuisance columns (the record's time as Legendre
+/// polynomials of degree 1 and 2 on [−1, 1]), so that no catalogue effect takes it (a drift
+/// correlates with whatever the motion does slowly: a position, a direction, a dwell) and the
+/// effects are fitted on the rest. Returns the slow change found and those two columns.
+fn drift_test(
+    ctx: &effects::Context,
+    cols: &[(String, Vec<f64>)],
+    th: &[f64],
+    full: &(Normal, Normal),
+    full_w: &HoldWeights,
+    min_holdout_gain: f64,
+) -> (Option<report::SlowChange>, Vec<(String, Vec<f64>)>) {
+    let rec = ctx.rec;
+    let n = rec.len();
+    let (t0, t1) = (rec.t[0], rec.t[n - 1]);
+    let tn: Vec<f64> = rec
+        .t
+        .iter()
+        .map(|t| 2.0 * (t - t0) / (t1 - t0).max(1e-300) - 1.0)
+        .collect();
+    let z = vec![
+        (DRIFT_COLUMNS[0].to_string(), tn.clone()),
+        (
+            DRIFT_COLUMNS[1].to_string(),
+            tn.iter().map(|t| 1.5 * t * t - 0.5).collect(),
+        ),
+    ];
+    let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
+    let drift = report::slow_change(
+        &rec.t,
+        &resid_of(ctx, cols, th),
+        &ctx.rest,
+        min_holdout_gain,
+    )
+    .or_else(|| {
+        // the baseline's coefficients fitted beside the trend: a Coulomb term or an offset
+        // that took part of a drift (a direction or a dwell that correlates with time: the
+        // moves of a point-to-point record running one way early and the other way late)
+        // does not hide it; the residual tested is the force minus the baseline's part of
+        // that joint fit (the trend left in it), the test the same
+        let joint = extend_normals_dense(full, &refs(cols), &zr, &rec.f, full_w)
+            .0
+            .solve();
+        report::slow_change(
+            &rec.t,
+            &resid_of(ctx, cols, &joint[..cols.len()]),
+            &ctx.rest,
+            min_holdout_gain,
+        )
+    });
+    (drift, z)
+}
