@@ -126,10 +126,15 @@ fn diagnose_with(
     let baseline_holdout = rel(ho.rss(&th), ho.ff);
     let baseline_train = rel(tr.rss(&th), tr.ff);
     let spread_base: Vec<Vec<f64>> = cols.iter().map(|(_, v)| gather(&spread_rows, v)).collect();
+    let spread = Spread {
+        rows: &spread_rows,
+        f: &spread_f,
+        hold: &spread_hold,
+    };
     let baseline_terms = baseline_terms(
         &cols,
         &spread_base,
-        (&spread_f, &spread_hold),
+        &spread,
         &th,
         baseline_holdout,
         opt.min_holdout_gain,
@@ -736,11 +741,6 @@ fn diagnose_with(
         lag_rows_full,
         ho_rel,
     };
-    let spread = Spread {
-        rows: &spread_rows,
-        f: &spread_f,
-        hold: &spread_hold,
-    };
     let (selected, dropped_notes) = validate(
         &ctx,
         opt,
@@ -882,18 +882,17 @@ mod speed_force_tests;
 
 /// Baseline term significance: each of the baseline's terms (`cols`, their values `th` on the
 /// whole record) dropped in turn and the rest refitted on the spread subsample (`spread_base`,
-/// its force and held-out split `spread`); a term is significant when dropping it makes the
+/// the terms at `spread`'s rows, with its force and held-out split); a term is significant when dropping it makes the
 /// held-out rss grow by the same margin an extension must bring (`min_holdout_gain` over the
 /// baseline's held-out error `baseline_holdout`).
 fn baseline_terms(
     cols: &[(String, Vec<f64>)],
     spread_base: &[Vec<f64>],
-    spread: (&[f64], &[u8]),
+    spread: &Spread,
     th: &[f64],
     baseline_holdout: f64,
     min_holdout_gain: f64,
 ) -> Vec<BaselineTerm> {
-    let (spread_f, spread_hold) = spread;
     (0..spread_base.len())
         .map(|drop| {
             let keep: Vec<&[f64]> = spread_base
@@ -902,7 +901,7 @@ fn baseline_terms(
                 .filter(|(i, _)| *i != drop)
                 .map(|(_, c)| c.as_slice())
                 .collect();
-            let (t2, h2) = normals(&keep, spread_f, spread_hold, 1);
+            let (t2, h2) = normals(&keep, spread.f, spread.hold, 1);
             let th2 = t2.solve();
             let without = rel(h2.rss(&th2), h2.ff);
             let (name, unit) = effects::baseline_term(&cols[drop].0);
