@@ -17,7 +17,9 @@ fn cpu_s() -> Option<f64> {
     Some(ns * 1e-9)
 }
 
-fn one_run() {
+/// The record's size and seed from `BENCH_N` and `BENCH_SEED` (a message for a bad value,
+/// its default used).
+fn record_settings() -> (usize, u64) {
     let n = match std::env::var("BENCH_N").map(|s| s.parse::<usize>()) {
         Ok(Ok(k)) if k >= 1000 => k,
         Ok(_) => {
@@ -36,6 +38,12 @@ fn one_run() {
         }
         Err(_) => 42,
     };
+    (n, seed)
+}
+
+/// One run in this process: the record of `n` samples and `seed` generated, parsed and
+/// diagnosed, its figures printed.
+fn one_run(n: usize, seed: u64) {
     let spec = SynthSpec::random_hidden(seed, n, 2);
     let csv = synth::generate_csv(&spec);
     let c0 = cpu_s();
@@ -85,8 +93,10 @@ fn total_of(out: &str) -> Option<f64> {
 }
 
 fn main() {
+    // (a bad value's message once, here; the runs are given the values used)
+    let (n, seed) = record_settings();
     if std::env::var_os("BENCH_ONE_RUN").is_some() {
-        return one_run();
+        return one_run(n, seed);
     }
     let reps = match std::env::var("BENCH_REPS").map(|s| s.parse::<usize>()) {
         Ok(Ok(k)) if (1..=100).contains(&k) => k,
@@ -100,7 +110,7 @@ fn main() {
         Ok(e) => e,
         Err(e) => {
             eprintln!("diagnose bench: cannot find its own executable ({e}); one run here");
-            return one_run();
+            return one_run(n, seed);
         }
     };
     let mut runs: Vec<(f64, String)> = Vec::with_capacity(reps);
@@ -108,6 +118,9 @@ fn main() {
         let out = std::process::Command::new(&exe)
             .args(std::env::args_os().skip(1))
             .env("BENCH_ONE_RUN", "1")
+            .env("BENCH_N", n.to_string())
+            .env("BENCH_SEED", seed.to_string())
+            .stderr(std::process::Stdio::inherit())
             .output();
         match out {
             Ok(o) if o.status.success() => {
@@ -117,11 +130,7 @@ fn main() {
                     None => eprintln!("diagnose bench: a run printed no total:\n{text}"),
                 }
             }
-            Ok(o) => eprintln!(
-                "diagnose bench: a run failed ({}): {}",
-                o.status,
-                String::from_utf8_lossy(&o.stderr)
-            ),
+            Ok(o) => eprintln!("diagnose bench: a run failed ({})", o.status),
             Err(e) => eprintln!("diagnose bench: a run could not start: {e}"),
         }
     }
