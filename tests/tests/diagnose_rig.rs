@@ -146,7 +146,17 @@ fn judge(hidden: &Hidden, d: &Diagnosis) -> (bool, bool, bool) {
 fn outcome(rig: Rig, kind: &'static str, j: usize, seed: u64, emps: &[f64]) -> Outcome {
     use std::fmt::Write;
     let spec = rig.spec(seed, kind, j, emps);
-    let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
+    let csv = spec.csv();
+    // `RIG_DUMP=DIR` writes the record as DIR/rec_SEED.csv (the CSV the diagnosis reads, the
+    // rig's device and hidden effect in its header), to open with `regen diagnose` or another
+    // tool
+    if let Ok(dir) = std::env::var("RIG_DUMP") {
+        let path = std::path::Path::new(&dir).join(format!("rec_{seed}.csv"));
+        if let Err(e) = std::fs::write(&path, &csv) {
+            eprintln!("RIG_DUMP: cannot write {}: {e}", path.display());
+        }
+    }
+    let rec = parse_csv(&csv, None).expect("rig record parses");
     let d = diagnose(&rec, &Options::default());
     let (exact, detected, false_names) = judge(&spec.hidden, &d);
     let unexpl = d.findings.iter().any(|f| f.effect == "unexplained");
@@ -507,7 +517,10 @@ fn rig_held_out_sample() {
 /// regen-tests --test diagnose_rig rig_tuning_sample -- --ignored --nocapture`): the records
 /// the diagnosis is developed on. `RIG_TUNE_N` tuning records per kind (8 by default) of the
 /// rigs `RIG_RIGS` names (`widened` by default; `classic,widened` for both), `RIG_TUNE_J0`
-/// the first record of each kind; `RIG_KINDS` narrows, `RIG_VERBOSE` prints every record.
+/// the first record of each kind; `RIG_KINDS` narrows, `RIG_VERBOSE` prints every record,
+/// `RIG_EVIDENCE` each finding's evidence and every verdict with it, `RIG_DUMP=DIR` writes
+/// every record's CSV into DIR. One record: `RIG_TUNE_J0=j RIG_TUNE_N=1` (its seed is the
+/// kind's first seed plus j).
 #[test]
 #[ignore]
 fn rig_tuning_sample() {
