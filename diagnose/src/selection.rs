@@ -143,12 +143,15 @@ fn diagnose_with(
     // the samples in motion reaches CONFOUNDED_R (the coefficients' standard errors then grow
     // by 1/√(1 − r²) ≥ 7× over independent columns: only their combination is identified).
     let confounded = confounded_terms(&cols[..n_base], &spread_base, &spread_hold);
-    let (drift, z) = drift_test(&ctx, &cols, &th, &full, &full_w, opt.min_holdout_gain);
-    if drift.is_some() {
-        full = extend_normals_dense(&full, &refs(&cols), &refs(&z), &rec.f, &full_w);
-        sub_cols.extend(z.iter().map(|(_, v)| gather(&sub.rows, v)));
-        cols.extend(z);
-    }
+    let drift = match drift_test(&ctx, &cols, &th, &full, &full_w, opt.min_holdout_gain) {
+        Some((drift, z, extended)) => {
+            full = extended;
+            sub_cols.extend(z.iter().map(|(_, v)| gather(&sub.rows, v)));
+            cols.extend(z);
+            Some(drift)
+        }
+        None => None,
+    };
     // A force of the speed outside the catalogue, carried as the drift is when the first
     // selection's findings left it (the test before the confounded check).
     let speed_sub: Vec<Vec<f64>> = speed_columns(&ctx, Some(&sub.rows))
@@ -917,6 +920,14 @@ fn baseline_terms(
         .collect()
 }
 
+/// A slow change found by `drift_test`, its two nuisance columns and the whole record's
+/// normals extended by them.
+type Drift = (
+    report::SlowChange,
+    Vec<(String, Vec<f64>)>,
+    (Normal, Normal),
+);
+
 /// A slow change of the residual's mean over the record (a drifting offset: temperature, a
 /// load cell's zero) is outside the catalogue. Checked on the baseline residual (`cols` with
 /// coefficients `th`; `full` its normals, `full_w` their held-out weights) before the search:
@@ -924,7 +935,8 @@ fn baseline_terms(
 /// search and in the final fit by two nuisance columns (the record's time as Legendre
 /// polynomials of degree 1 and 2 on [−1, 1]), so that no catalogue effect takes it (a drift
 /// correlates with whatever the motion does slowly: a position, a direction, a dwell) and the
-/// effects are fitted on the rest. Returns the slow change found and those two columns.
+/// effects are fitted on the rest. Returns the slow change found, those two columns and
+/// `full` extended by them.
 fn drift_test(
     ctx: &effects::Context,
     cols: &[(String, Vec<f64>)],
@@ -932,7 +944,7 @@ fn drift_test(
     full: &(Normal, Normal),
     full_w: &HoldWeights,
     min_holdout_gain: f64,
-) -> (Option<report::SlowChange>, Vec<(String, Vec<f64>)>) {
+) -> Option<Drift> {
     let rec = ctx.rec;
     let n = rec.len();
     let (t0, t1) = (rec.t[0], rec.t[n - 1]);
@@ -941,14 +953,15 @@ fn drift_test(
         .iter()
         .map(|t| 2.0 * (t - t0) / (t1 - t0).max(1e-300) - 1.0)
         .collect();
+    let p2: Vec<f64> = tn.iter().map(|t| 1.5 * t * t - 0.5).collect();
     let z = vec![
-        (DRIFT_COLUMNS[0].to_string(), tn.clone()),
-        (
-            DRIFT_COLUMNS[1].to_string(),
-            tn.iter().map(|t| 1.5 * t * t - 0.5).collect(),
-        ),
+        (DRIFT_COLUMNS[0].to_string(), tn),
+        (DRIFT_COLUMNS[1].to_string(), p2),
     ];
     let zr: Vec<&[f64]> = z.iter().map(|(_, v)| v.as_slice()).collect();
+    let extend = || extend_normals_dense(full, &refs(cols), &zr, &rec.f, full_w);
+    // (the normals extended by the trend, when the joint fit below has built them)
+    let mut extended = None;
     let drift = report::slow_change(
         &rec.t,
         &resid_of(ctx, cols, th),
@@ -961,15 +974,15 @@ fn drift_test(
         // moves of a point-to-point record running one way early and the other way late)
         // does not hide it; the residual tested is the force minus the baseline's part of
         // that joint fit (the trend left in it), the test the same
-        let joint = extend_normals_dense(full, &refs(cols), &zr, &rec.f, full_w)
-            .0
-            .solve();
+        let normals = extended.insert(extend());
+        let joint = normals.0.solve();
         report::slow_change(
             &rec.t,
             &resid_of(ctx, cols, &joint[..cols.len()]),
             &ctx.rest,
             min_holdout_gain,
         )
-    });
-    (drift, z)
+    })?;
+    let extended = extended.unwrap_or_else(extend);
+    Some((drift, z, extended))
 }
