@@ -17,27 +17,37 @@ fn cpu_s() -> Option<f64> {
     Some(ns * 1e-9)
 }
 
+/// The number in the environment variable `key` when it parses and `ok` accepts it; its
+/// `default` when the variable is not set, and with one message naming what is `expected`
+/// when its value is bad.
+fn env_number<T: std::str::FromStr + std::fmt::Display + Copy>(
+    key: &str,
+    default: T,
+    ok: impl Fn(&T) -> bool,
+    expected: &str,
+) -> T {
+    match std::env::var(key).map(|s| s.parse::<T>()) {
+        Ok(Ok(v)) if ok(&v) => v,
+        Ok(_) => {
+            eprintln!("{key}: {expected} expected; {default} used");
+            default
+        }
+        Err(_) => default,
+    }
+}
+
 /// The record's size and seed from `BENCH_N` and `BENCH_SEED` (a message for a bad value,
 /// its default used).
 fn record_settings() -> (usize, u64) {
-    let n = match std::env::var("BENCH_N").map(|s| s.parse::<usize>()) {
-        Ok(Ok(k)) if k >= 1000 => k,
-        Ok(_) => {
-            eprintln!("BENCH_N: a number of samples of at least 1000 expected; 1000000 used");
-            1_000_000
-        }
-        Err(_) => 1_000_000,
-    };
+    let n = env_number(
+        "BENCH_N",
+        1_000_000usize,
+        |&k| k >= 1000,
+        "a number of samples of at least 1000",
+    );
     // BENCH_SEED: another record of the same generator (42 by default: the one the < 1 s
     // target is measured on)
-    let seed = match std::env::var("BENCH_SEED").map(|s| s.parse::<u64>()) {
-        Ok(Ok(s)) => s,
-        Ok(Err(_)) => {
-            eprintln!("BENCH_SEED: an unsigned integer expected; 42 used");
-            42
-        }
-        Err(_) => 42,
-    };
+    let seed = env_number("BENCH_SEED", 42u64, |_| true, "an unsigned integer");
     (n, seed)
 }
 
@@ -98,14 +108,12 @@ fn main() {
     if std::env::var_os("BENCH_ONE_RUN").is_some() {
         return one_run(n, seed);
     }
-    let reps = match std::env::var("BENCH_REPS").map(|s| s.parse::<usize>()) {
-        Ok(Ok(k)) if (1..=100).contains(&k) => k,
-        Ok(_) => {
-            eprintln!("BENCH_REPS: a number of runs from 1 to 100 expected; 5 used");
-            5
-        }
-        Err(_) => 5,
-    };
+    let reps = env_number(
+        "BENCH_REPS",
+        5usize,
+        |k| (1..=100).contains(k),
+        "a number of runs from 1 to 100",
+    );
     let exe = match std::env::current_exe() {
         Ok(e) => e,
         Err(e) => {
