@@ -9,31 +9,15 @@ use hal_sim::diagnose::synth::{self, SynthSpec};
 use hal_sim::diagnose::{diagnose, parse_csv, Options};
 use std::time::Instant;
 
+mod common;
+use common::env_number;
+
 /// CPU time of this thread so far (s), from /proc (Linux); None elsewhere. On a shared
 /// machine the wall time includes waiting for a core; the CPU time does not.
 fn cpu_s() -> Option<f64> {
     let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
     let ns: f64 = s.split_whitespace().next()?.parse().ok()?;
     Some(ns * 1e-9)
-}
-
-/// The number in the environment variable `key` when it parses and `ok` accepts it; its
-/// `default` when the variable is not set, and with one message naming what is `expected`
-/// when its value is bad.
-fn env_number<T: std::str::FromStr + std::fmt::Display + Copy>(
-    key: &str,
-    default: T,
-    ok: impl Fn(&T) -> bool,
-    expected: &str,
-) -> T {
-    match std::env::var(key).map(|s| s.parse::<T>()) {
-        Ok(Ok(v)) if ok(&v) => v,
-        Ok(_) => {
-            eprintln!("{key}: {expected} expected; {default} used");
-            default
-        }
-        Err(_) => default,
-    }
 }
 
 /// The record's size and seed from `BENCH_N` and `BENCH_SEED` (a message for a bad value,

@@ -21,6 +21,9 @@ use regen_fw::io::{Actuation, RawSample};
 use std::hint::black_box;
 use std::time::Instant;
 
+mod common;
+use common::env_number;
+
 /// Best (least disturbed) of `reps` timings of `f`, seconds: the machine is shared.
 fn best_of(reps: usize, mut f: impl FnMut() -> f64) -> f64 {
     (0..reps).map(|_| f()).fold(f64::MAX, f64::min)
@@ -29,20 +32,22 @@ fn best_of(reps: usize, mut f: impl FnMut() -> f64) -> f64 {
 /// Interleaved slices per repetition of the realism comparison (a).
 const CHUNKS: u64 = 10;
 
-fn env_or(name: &str, default: f64) -> f64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .filter(|s: &f64| *s > 0.0)
-        .unwrap_or(default)
-}
-
 fn main() {
     // Each timed run covers RTF_SIM_S simulated seconds of the TMD in its steady state (after
     // the 8 s the reference sweep also discards); the figure is the best of RTF_REPS runs,
     // which on a shared machine is the one least disturbed by other processes.
-    let sim_s = env_or("RTF_SIM_S", 1.0);
-    let reps = env_or("RTF_REPS", 15.0) as usize;
+    let sim_s = env_number(
+        "RTF_SIM_S",
+        1.0f64,
+        |s| (0.01..=3600.0).contains(s),
+        "simulated seconds from 0.01 to 3600",
+    );
+    let reps = env_number(
+        "RTF_REPS",
+        15usize,
+        |k| (1..=1000).contains(k),
+        "a number of runs from 1 to 1000",
+    );
     let mut sc = Scenario::tmd(306.0);
     sc.record.channels.clear();
     let settle_s = sc.settle_s;
