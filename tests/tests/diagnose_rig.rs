@@ -236,14 +236,11 @@ fn run(
     emps: &[f64],
 ) -> BTreeMap<&'static str, Tally> {
     use rayon::prelude::*;
-    let only = std::env::var("RIG_KINDS").ok();
+    let only = env_kinds();
     let verbose = std::env::var("RIG_VERBOSE").is_ok();
     let mut jobs = Vec::new();
     for (k, kind) in rig.kinds().iter().enumerate() {
-        if only
-            .as_ref()
-            .is_some_and(|o| !o.split(',').any(|x| x == *kind))
-        {
+        if only.as_ref().is_some_and(|o| !o.iter().any(|x| x == kind)) {
             continue;
         }
         for j in j0..j0 + per_kind {
@@ -422,13 +419,16 @@ fn targets_missed(rig: Rig, f: &Figures) -> Vec<String> {
 
 /// Records per kind of the long run: `RIG_N` for the classic rig (56 by default: 504
 /// records, the tuned run's size), `RIG_N_WIDE` for the widened one (36: 504 records);
-/// `RIG_N_TUNING` tuning records per kind beside them (as many as held-out by default).
+/// `RIG_N_TUNING` tuning records per kind beside them (as many as held-out by default). The
+/// first record's number (`RIG_TUNE_J0`, `RIG_SAMPLE_J0`) reads alike; each is at most
+/// `RECORDS`, and a value outside fails the run with a message naming it.
 fn per_kind(var: &str, default: usize) -> usize {
-    std::env::var(var)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+    env_number(var, default, 0..=RECORDS)
 }
+
+/// Seeds a kind has in the tuning range (its stride between kinds; the held-out range's is
+/// larger).
+const RECORDS: usize = 100_000;
 
 /// The long run: both rigs, the held-out range judged against the targets and the
 /// tuning range beside it (`cargo test --release -p regen-tests --test diagnose_rig
@@ -453,7 +453,7 @@ fn rig_long_run() {
         let f = table(rig, &held, &tune);
         missed.extend(targets_missed(rig, &f));
     }
-    if std::env::var("RIG_KINDS").is_ok() {
+    if env_kinds().is_some() {
         return;
     }
     assert!(missed.is_empty(), "targets missed: {}", missed.join("; "));
@@ -483,7 +483,7 @@ fn rig_held_out_sample() {
         for m in targets_missed(rig, &f) {
             println!("target missed on the sample: {m}");
         }
-        if std::env::var("RIG_KINDS").is_ok() || (n, j0) != (4, 0) {
+        if env_kinds().is_some() || (n, j0) != (4, 0) {
             continue;
         }
         assert!(
@@ -527,9 +527,9 @@ fn rig_tuning_sample() {
     let emps = emps_x();
     let n = per_kind("RIG_TUNE_N", 8);
     let j0 = per_kind("RIG_TUNE_J0", 0);
-    let rigs = std::env::var("RIG_RIGS").unwrap_or_else(|_| "widened".into());
+    let rigs = env_choice("RIG_RIGS", &["classic", "widened"]).unwrap_or(vec!["widened".into()]);
     for rig in [Rig::Classic, Rig::Widened] {
-        if !rigs.split(',').any(|r| r == rig.name()) {
+        if !rigs.iter().any(|r| r == rig.name()) {
             continue;
         }
         let tune = run(rig, false, n, j0, &emps);

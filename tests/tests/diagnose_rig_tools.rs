@@ -26,7 +26,8 @@ fn rig_true_acceleration() {
         let spec = long_run_spec(seed, &emps);
         let (v_true, a_true) = spec.true_motion();
         let text = spec.csv();
-        let cut: Option<f64> = std::env::var("RIG_CUT").ok().and_then(|c| c.parse().ok());
+        // the classic rig's records are sampled at 1 kHz: the cutoff below their Nyquist rate
+        let cut: Option<f64> = env_number_set("RIG_CUT", 0.1..=499.0);
         let mut rec = parse_csv(&text, cut).expect("rig record parses");
         if std::env::var("RIG_VBAND").is_ok() {
             use hal_sim::diagnose::record::{
@@ -82,9 +83,9 @@ fn rig_true_acceleration() {
             }
         }
         // RIG_TRUE=v (or a): only that signal the rig's, the other the record's derived one
-        let only = std::env::var("RIG_TRUE").unwrap_or_default();
-        let v_in = if only == "a" { &rec.v } else { &v_true };
-        let a_in = if only == "v" { &rec.a } else { &a_true };
+        let only = env_choice("RIG_TRUE", &["v", "a"]).unwrap_or_default();
+        let v_in = if only == ["a"] { &rec.v } else { &v_true };
+        let a_in = if only == ["v"] { &rec.a } else { &a_true };
         for ((l, v), a) in lines.zip(v_in).zip(a_in) {
             with_a.push_str(&format!("{l},{v:.9e},{a:.9e}\n"));
         }
@@ -162,10 +163,7 @@ fn rig_play_width_profile() {
             spec.coulomb,
         );
         // the contact's restitution walked (`RIG_E`, default 0: the plastic contact)
-        let e: f64 = std::env::var("RIG_E")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(0.0);
+        let e: f64 = env_number("RIG_E", 0.0, 0.0..=1.0);
         let fitted = play_device_coefficients(&ctx, n, width_m, e);
         // the device walked once more, from the one fitted (None: that fit fails)
         let refit = hal_sim::diagnose::effects::play_device_fit(
@@ -257,17 +255,11 @@ fn rig_effect_at_rest() {
 #[ignore]
 fn rig_specs() {
     let emps = emps_x();
-    let n: u64 = std::env::var("RIG_N")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(56);
-    let only = std::env::var("RIG_KINDS").ok();
+    let n: u64 = env_number("RIG_N", 56, 0..=100_000);
+    let only = env_kinds();
     let seeds = env_seeds();
     for (ki, kind) in Hidden::KINDS.iter().enumerate() {
-        if only
-            .as_ref()
-            .is_some_and(|o| !o.split(',').any(|k| k == *kind))
-        {
+        if only.as_ref().is_some_and(|o| !o.iter().any(|k| k == kind)) {
             continue;
         }
         for j in 0..n {
@@ -300,13 +292,17 @@ fn rig_specs() {
 fn rig_wide_rest() {
     use hal_sim::bench_rig::RigSpec;
     let emps = emps_x();
-    for item in std::env::var("RIG_WIDE").unwrap_or_default().split(',') {
-        let Some((kind, j)) = item.split_once(':') else {
-            continue;
-        };
-        let Ok(j) = j.parse::<u64>() else { continue };
-        let Some(k) = Hidden::WIDE_KINDS.iter().position(|x| *x == kind) else {
-            continue;
+    for item in env_items("RIG_WIDE").unwrap_or_default() {
+        let parsed = item.split_once(':').and_then(|(kind, j)| {
+            let k = Hidden::WIDE_KINDS.iter().position(|x| *x == kind)?;
+            let j = j.parse::<u64>().ok().filter(|j| *j < 100_000)?;
+            Some((kind, k, j))
+        });
+        let Some((kind, k, j)) = parsed else {
+            panic!(
+                "RIG_WIDE entry \"{item}\": kind:record expected, the kind one of {} and the record from 0 to 99999",
+                Hidden::WIDE_KINDS.join(", ")
+            );
         };
         let seed = WIDE_TUNING_BASE + 100_000 * k as u64 + j;
         assert!(TUNING.contains(&seed));
