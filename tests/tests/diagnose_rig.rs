@@ -44,8 +44,8 @@ impl Rig {
     /// Seed of record `j` of kind number `k` in the tuning or the held-out range.
     fn seed(self, held_out: bool, k: usize, j: usize) -> u64 {
         let (base, stride) = match (self, held_out) {
-            (Rig::Classic, false) => (CLASSIC_TUNING_BASE, 100_000),
-            (Rig::Widened, false) => (WIDE_TUNING_BASE, 100_000),
+            (Rig::Classic, false) => (CLASSIC_TUNING_BASE, TUNING_STRIDE),
+            (Rig::Widened, false) => (WIDE_TUNING_BASE, TUNING_STRIDE),
             (Rig::Classic, true) => (CLASSIC_HELD_OUT_BASE, 1_000_000),
             (Rig::Widened, true) => (WIDE_HELD_OUT_BASE, 1_000_000),
         };
@@ -74,7 +74,10 @@ fn seed_ranges_are_disjoint() {
     for rig in [Rig::Classic, Rig::Widened] {
         let k = rig.kinds().len() - 1;
         for held_out in [false, true] {
-            let (lo, hi) = (rig.seed(held_out, 0, 0), rig.seed(held_out, k, 99_999));
+            let (lo, hi) = (
+                rig.seed(held_out, 0, 0),
+                rig.seed(held_out, k, TUNING_STRIDE as usize - 1),
+            );
             let range = if held_out { &HELD_OUT } else { &TUNING };
             assert!(
                 range.contains(&lo) && range.contains(&hi),
@@ -421,14 +424,11 @@ fn targets_missed(rig: Rig, f: &Figures) -> Vec<String> {
 /// records, the tuned run's size), `RIG_N_WIDE` for the widened one (36: 504 records);
 /// `RIG_N_TUNING` tuning records per kind beside them (as many as held-out by default). The
 /// first record's number (`RIG_TUNE_J0`, `RIG_SAMPLE_J0`) reads alike; each is at most
-/// `RECORDS`, and a value outside fails the run with a message naming it.
+/// `TUNING_STRIDE` (a kind's seeds in the tuning range), and a value outside fails the run
+/// with a message naming it.
 fn per_kind(var: &str, default: usize) -> usize {
-    env_number(var, default, 0..=RECORDS)
+    env_number(var, default, 0..=TUNING_STRIDE as usize)
 }
-
-/// Seeds a kind has in the tuning range (its stride between kinds; the held-out range's is
-/// larger).
-const RECORDS: usize = 100_000;
 
 /// The long run: both rigs, the held-out range judged against the targets and the
 /// tuning range beside it (`cargo test --release -p regen-tests --test diagnose_rig

@@ -22,7 +22,7 @@ use rig_seeds::*;
 fn rig_true_acceleration() {
     let emps = emps_x();
     for seed in env_seeds() {
-        let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
+        let kind = Hidden::KINDS[((seed - 1) / TUNING_STRIDE) as usize];
         let spec = long_run_spec(seed, &emps);
         let (v_true, a_true) = spec.true_motion();
         let text = spec.csv();
@@ -216,7 +216,7 @@ fn rig_play_width_profile() {
 fn rig_effect_at_rest() {
     let emps = emps_x();
     for seed in env_seeds() {
-        let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
+        let kind = Hidden::KINDS[((seed - 1) / TUNING_STRIDE) as usize];
         let spec = long_run_spec(seed, &emps);
         let mut free = spec.clone();
         free.hidden = Hidden::None;
@@ -255,7 +255,7 @@ fn rig_effect_at_rest() {
 #[ignore]
 fn rig_specs() {
     let emps = emps_x();
-    let n: u64 = env_number("RIG_N", 56, 0..=100_000);
+    let n: u64 = env_number("RIG_N", 56, 0..=TUNING_STRIDE);
     let only = env_kinds();
     let seeds = env_seeds();
     for (ki, kind) in Hidden::KINDS.iter().enumerate() {
@@ -263,7 +263,7 @@ fn rig_specs() {
             continue;
         }
         for j in 0..n {
-            let seed = 1 + ki as u64 * 100_000 + j;
+            let seed = CLASSIC_TUNING_BASE + ki as u64 * TUNING_STRIDE + j;
             if !seeds.is_empty() && !seeds.contains(&seed) {
                 continue;
             }
@@ -295,16 +295,17 @@ fn rig_wide_rest() {
     for item in env_items("RIG_WIDE").unwrap_or_default() {
         let parsed = item.split_once(':').and_then(|(kind, j)| {
             let k = Hidden::WIDE_KINDS.iter().position(|x| *x == kind)?;
-            let j = j.parse::<u64>().ok().filter(|j| *j < 100_000)?;
+            let j = j.parse::<u64>().ok().filter(|j| *j < TUNING_STRIDE)?;
             Some((kind, k, j))
         });
         let Some((kind, k, j)) = parsed else {
             panic!(
-                "RIG_WIDE entry \"{item}\": kind:record expected, the kind one of {} and the record from 0 to 99999",
-                Hidden::WIDE_KINDS.join(", ")
+                "RIG_WIDE entry \"{item}\": kind:record expected, the kind one of {} and the record from 0 to {}",
+                Hidden::WIDE_KINDS.join(", "),
+                TUNING_STRIDE - 1
             );
         };
-        let seed = WIDE_TUNING_BASE + 100_000 * k as u64 + j;
+        let seed = WIDE_TUNING_BASE + TUNING_STRIDE * k as u64 + j;
         assert!(TUNING.contains(&seed));
         let spec = RigSpec::widened(seed, kind, Some((&emps, 1000.0)));
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");

@@ -16,6 +16,9 @@ pub const HELD_OUT: Range<u64> = 1_000_000_000..2_000_000_000;
 // the ranges do not overlap (checked when the file compiles)
 const _: () = assert!(TUNING.end <= HELD_OUT.start);
 pub const CLASSIC_TUNING_BASE: u64 = 1;
+/// Seeds a kind has in the tuning range: record j of kind k is the rig's base
+/// + `TUNING_STRIDE`·k + j.
+pub const TUNING_STRIDE: u64 = 100_000;
 pub const WIDE_TUNING_BASE: u64 = 10_000_001;
 pub const CLASSIC_HELD_OUT_BASE: u64 = 1_000_000_001;
 pub const WIDE_HELD_OUT_BASE: u64 = 1_500_000_001;
@@ -45,8 +48,8 @@ pub fn trajectory(j: usize, emps: &[f64], samples: usize) -> Trajectory {
 /// tools below take these.
 pub fn long_run_spec(seed: u64, emps: &[f64]) -> RigSpec {
     assert!(TUNING.contains(&seed), "the tools take tuning seeds only");
-    let kind = Hidden::KINDS[((seed - 1) / 100_000) as usize];
-    let j = ((seed - 1) % 100_000) as usize;
+    let kind = Hidden::KINDS[((seed - 1) / TUNING_STRIDE) as usize];
+    let j = ((seed - 1) % TUNING_STRIDE) as usize;
     RigSpec::random(seed, kind, trajectory(j, emps, 12_000), 12_000)
 }
 
@@ -57,7 +60,8 @@ pub fn env_seeds() -> Vec<u64> {
     let Some(items) = env_items("RIG_SEEDS") else {
         return Vec::new();
     };
-    let seeds = CLASSIC_TUNING_BASE..CLASSIC_TUNING_BASE + 100_000 * Hidden::KINDS.len() as u64;
+    let seeds =
+        CLASSIC_TUNING_BASE..CLASSIC_TUNING_BASE + TUNING_STRIDE * Hidden::KINDS.len() as u64;
     items
         .iter()
         .map(|s| match s.parse::<u64>() {
