@@ -18,16 +18,52 @@ pub(crate) const SPEED_POWERS: [i32; 2] = [2, 3];
 /// The diagnosis of a checked record: the selection run once; where its findings leave a
 /// smooth force of the speed that no catalogue effect explains (the test before the
 /// confounded check), run again with that force carried by nuisance columns
-/// (`SPEED_COLUMNS`), choosing among the first selection's kinds only.
+/// (`SPEED_COLUMNS`), choosing among the first selection's kinds only; where its validation
+/// rejects findings, run again without their kinds (`RESELECTIONS`).
 pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
-    // (the second run carries the force and does not test for it: it always gives a diagnosis)
-    let mut speed: Option<Vec<EffectKind>> = None;
+    // (the run that carries the force of the speed does not test for it again, and the last
+    // run allowed gives its diagnosis whatever its validation drops: the loop ends)
+    let mut again = Again {
+        speed: None,
+        without: Vec::new(),
+        notes: Vec::new(),
+        rounds_left: RESELECTIONS,
+        earlier: None,
+    };
     loop {
-        match diagnose_with(rec, opt, rest.clone(), speed.as_deref()) {
+        match diagnose_with(rec, opt, rest.clone(), again) {
             Ok(d) => return d,
-            Err(kinds) => speed = Some(kinds),
+            Err(next) => again = next,
         }
     }
+}
+
+/// Times the selection runs again without the kinds its validation did not keep. A finding
+/// the validation rejects (not stable across the record's segments, not apart from another
+/// derivation of the motion, from a hum or from a locked ripple) was chosen over the other
+/// candidates on the screening window; the candidates it displaced were never weighed
+/// without it. So the selection runs again among the kinds not rejected, each of whose
+/// findings faces the same validation; the rejected ones' verdicts are kept for the report.
+/// Where a run's validation rejects a kind that the run before it kept, the two validations
+/// disagree on a finding, and the run before it stands: a run without a rejected kind can
+/// lose what that kind's columns held apart from a finding that was kept. (A run that does
+/// not choose a kept kind again is given: its selection weighed that kind and preferred
+/// others.)
+pub const RESELECTIONS: usize = 2;
+
+/// What a run of the selection is given by the runs before it.
+pub(crate) struct Again {
+    /// The kinds chosen by the run that found a force of the speed beside them: the selection
+    /// runs among them with that force carried (`speed_columns`).
+    speed: Option<Vec<EffectKind>>,
+    /// The kinds the validation of an earlier run did not keep.
+    without: Vec<EffectKind>,
+    /// Those runs' verdicts on the findings not kept.
+    notes: Vec<String>,
+    /// Runs without the rejected kinds still allowed.
+    rounds_left: usize,
+    /// The run before's diagnosis and the kinds its validation kept.
+    earlier: Option<(Box<Diagnosis>, Vec<EffectKind>)>,
 }
 
 /// The columns `SPEED_COLUMNS` at `rows` (every sample when None; `sgn` the baseline's sign,
@@ -60,8 +96,9 @@ fn diagnose_with(
     rec: &Record,
     opt: &Options,
     rest: Vec<bool>,
-    speed: Option<&[EffectKind]>,
-) -> Result<Diagnosis, Vec<EffectKind>> {
+    mut again: Again,
+) -> Result<Diagnosis, Again> {
+    let speed = again.speed.as_deref();
     let speed_force = speed.is_some();
     let n = rec.len();
     let ctx = effects::Context::windowed_at_rest(rec, opt.screen_window.min(n), rest);
@@ -177,6 +214,7 @@ fn diagnose_with(
     if let Some(kinds) = speed {
         catalogue.retain(|c| kinds.contains(&c.kind));
     }
+    catalogue.retain(|c| !again.without.contains(&c.kind));
     // each kind's coarse grid, a function of the record alone: built once, at its first scan
     let coarse_grids: Vec<std::cell::OnceCell<Vec<Effect>>> = catalogue
         .iter()
@@ -518,7 +556,7 @@ fn diagnose_with(
             }
             if let Some(c) = cb {
                 if c.0.is_finite() {
-                    if best.as_ref().is_none_or(|b| c.0 < b.0) {
+                    if passes(c.0, rss_h0, c.1) && best.as_ref().is_none_or(|b| c.0 < b.0) {
                         best = Some(c.clone());
                     }
                     of_kind.push(c);
@@ -652,7 +690,10 @@ fn diagnose_with(
         let (h1, t1, n1) = fit(&c);
         let dbic = bic(t1, n1, k0 + SPEED_COLUMNS.len()) - bic(t0, n0, k0);
         if passes(h1, h0, dbic) {
-            return Err(chosen.iter().map(|e| e.kind).collect());
+            return Err(Again {
+                speed: Some(chosen.iter().map(|e| e.kind).collect()),
+                ..again
+            });
         }
     }
     // Two candidates that explain the same residual, one rule for every pair: each finding is
@@ -735,6 +776,7 @@ fn diagnose_with(
         spans.push((at, at + k));
         at += k;
     }
+    let before: Vec<EffectKind> = chosen.iter().map(|e| e.kind).collect();
     let selected = Selected {
         chosen,
         findings,
@@ -754,7 +796,19 @@ fn diagnose_with(
         &spread,
         baseline_holdout,
     );
-    Ok(conclude(
+    let rejected: Vec<EffectKind> = before
+        .into_iter()
+        .filter(|k| !selected.chosen.iter().any(|e| e.kind == *k))
+        .collect();
+    let kept: Vec<EffectKind> = selected.chosen.iter().map(|e| e.kind).collect();
+    if let Some((d, earlier_kept)) = again.earlier.take() {
+        if rejected.iter().any(|k| earlier_kept.contains(k)) {
+            return Ok(*d);
+        }
+    }
+    let mut notes = std::mem::take(&mut again.notes);
+    notes.extend(dropped_notes);
+    let d = conclude(
         &ctx,
         opt,
         selected,
@@ -767,8 +821,19 @@ fn diagnose_with(
         },
         drift,
         speed_force,
-        dropped_notes,
-    ))
+        notes.clone(),
+    );
+    if !rejected.is_empty() && again.rounds_left > 0 {
+        again.without.extend(rejected);
+        return Err(Again {
+            speed: None,
+            notes,
+            rounds_left: again.rounds_left - 1,
+            earlier: Some((Box::new(d), kept)),
+            ..again
+        });
+    }
+    Ok(d)
 }
 
 /// The force less the model `cols` with coefficients `th`, 0 at rest.
