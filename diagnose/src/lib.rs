@@ -11,12 +11,14 @@ pub mod effects;
 mod fit;
 pub mod record;
 pub mod report;
+mod runs;
 mod selection;
 pub mod synth;
 mod validation;
 
 pub(crate) use conclusion::*;
 pub use fit::*;
+pub use runs::*;
 pub use selection::*;
 pub use validation::*;
 

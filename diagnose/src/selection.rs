@@ -15,57 +15,6 @@ pub const SPEED_COLUMNS: [&str; 2] = ["speed.sgn_v_u2", "speed.sgn_v_u3"];
 /// The powers of |v|/v_max of `SPEED_COLUMNS`, in their order.
 pub(crate) const SPEED_POWERS: [i32; 2] = [2, 3];
 
-/// The diagnosis of a checked record: the selection run once; where its findings leave a
-/// smooth force of the speed that no catalogue effect explains (the test before the
-/// confounded check), run again with that force carried by nuisance columns
-/// (`SPEED_COLUMNS`), choosing among the first selection's kinds only; where its validation
-/// rejects findings, run again without their kinds (`RESELECTIONS`).
-pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
-    // (the run that carries the force of the speed does not test for it again, and the last
-    // run allowed gives its diagnosis whatever its validation drops: the loop ends)
-    let mut again = Again {
-        speed: None,
-        without: Vec::new(),
-        notes: Vec::new(),
-        rounds_left: RESELECTIONS,
-        earlier: None,
-    };
-    loop {
-        match diagnose_with(rec, opt, rest.clone(), again) {
-            Ok(d) => return d,
-            Err(next) => again = next,
-        }
-    }
-}
-
-/// Times the selection runs again without the kinds its validation did not keep. A finding
-/// the validation rejects (not stable across the record's segments, not apart from another
-/// derivation of the motion, from a hum or from a locked ripple) was chosen over the other
-/// candidates on the screening window; the candidates it displaced were never weighed
-/// without it. So the selection runs again among the kinds not rejected, each of whose
-/// findings faces the same validation; the rejected ones' verdicts are kept for the report.
-/// Where a run's validation rejects a kind that the run before it kept, the two validations
-/// disagree on a finding, and the run before it stands: a run without a rejected kind can
-/// lose what that kind's columns held apart from a finding that was kept. (A run that does
-/// not choose a kept kind again is given: its selection weighed that kind and preferred
-/// others.)
-pub const RESELECTIONS: usize = 2;
-
-/// What a run of the selection is given by the runs before it.
-pub(crate) struct Again {
-    /// The kinds chosen by the run that found a force of the speed beside them: the selection
-    /// runs among them with that force carried (`speed_columns`).
-    speed: Option<Vec<EffectKind>>,
-    /// The kinds the validation of an earlier run did not keep.
-    without: Vec<EffectKind>,
-    /// Those runs' verdicts on the findings not kept.
-    notes: Vec<String>,
-    /// Runs without the rejected kinds still allowed.
-    rounds_left: usize,
-    /// The run before's diagnosis and the kinds its validation kept.
-    earlier: Option<(Box<Diagnosis>, Vec<EffectKind>)>,
-}
-
 /// The columns `SPEED_COLUMNS` at `rows` (every sample when None; `sgn` the baseline's sign,
 /// `vmax` the peak speed).
 pub(crate) fn speed_columns(
@@ -88,11 +37,13 @@ pub(crate) fn speed_columns(
         .collect()
 }
 
-/// The selection on `rec`; with `speed` a force of the speed outside the catalogue is carried
-/// by nuisance columns from the start and the candidates are the kinds `speed` lists. `Err`
-/// with the kinds chosen when, without them, the selection's findings leave that force (the
-/// caller runs it again with them).
-fn diagnose_with(
+/// One run of the selection on `rec` (`runs`); with `again.speed` a force of the speed outside
+/// the catalogue is carried by nuisance columns from the start and the candidates are the
+/// kinds it lists; the kinds `again.without` lists are not candidates. `Err` with what the
+/// next run is given when, without them, the selection's findings leave that force, or when
+/// its validation rejects findings and a run without them is still allowed (the caller runs
+/// it again).
+pub(crate) fn diagnose_with(
     rec: &Record,
     opt: &Options,
     rest: Vec<bool>,
