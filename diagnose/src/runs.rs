@@ -50,6 +50,6 @@ pub(crate) struct Again {
     pub(crate) notes: Vec<String>,
     /// Runs without the rejected kinds still allowed.
     pub(crate) rounds_left: usize,
-    /// The run before's diagnosis and the kinds its validation kept.
-    pub(crate) earlier: Option<(Box<Diagnosis>, Vec<EffectKind>)>,
+    /// The run before's diagnosis (its `effects` the findings its validation kept).
+    pub(crate) earlier: Option<Box<Diagnosis>>,
 }

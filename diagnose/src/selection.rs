@@ -751,9 +751,11 @@ pub(crate) fn diagnose_with(
         .into_iter()
         .filter(|k| !selected.chosen.iter().any(|e| e.kind == *k))
         .collect();
-    let kept: Vec<EffectKind> = selected.chosen.iter().map(|e| e.kind).collect();
-    if let Some((d, earlier_kept)) = again.earlier.take() {
-        if rejected.iter().any(|k| earlier_kept.contains(k)) {
+    if let Some(d) = again.earlier.take() {
+        if rejected
+            .iter()
+            .any(|k| d.effects.iter().any(|e| e.kind == *k))
+        {
             return Ok(*d);
         }
     }
@@ -780,7 +782,7 @@ pub(crate) fn diagnose_with(
             speed: None,
             notes,
             rounds_left: again.rounds_left - 1,
-            earlier: Some((Box::new(d), kept)),
+            earlier: Some(Box::new(d)),
             ..again
         });
     }
