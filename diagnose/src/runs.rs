@@ -53,3 +53,57 @@ pub(crate) struct Again {
     /// The run before's diagnosis (its `effects` the findings its validation kept).
     pub(crate) earlier: Option<Box<Diagnosis>>,
 }
+
+impl Again {
+    /// The run before, where this run's validation rejected a kind (of `rejected`, of the
+    /// kinds `chosen` this run chose) that the run before kept: the two validations disagree,
+    /// and the run before stands, its verdicts saying so. None otherwise (and then, or when
+    /// there was no run before, this run is given).
+    pub(crate) fn earlier_standing(
+        &mut self,
+        chosen: &[EffectKind],
+        rejected: &[EffectKind],
+    ) -> Option<Diagnosis> {
+        let mut d = self.earlier.take()?;
+        let disputed: Vec<EffectKind> = rejected
+            .iter()
+            .copied()
+            .filter(|k| d.effects.iter().any(|e| e.kind == *k))
+            .collect();
+        if disputed.is_empty() {
+            return None;
+        }
+        d.verdicts.push(format!(
+            "run again, the selection chose {}, but that run's validation rejected {}, which \
+             the validation of the run reported here kept: the two validations disagree, so \
+             the findings of the run reported here stand, and {} is less sure than its \
+             evidence says",
+            kind_list(chosen),
+            kind_list(&disputed),
+            kind_list(&disputed)
+        ));
+        Some(*d)
+    }
+}
+
+/// The verdict that the selection runs again without the kinds `rejected` (said before the
+/// run's diagnosis is concluded, so that it says it whether the run again is given or this
+/// one stands).
+pub(crate) fn rerun_note(rejected: &[EffectKind]) -> String {
+    format!(
+        "the selection ran again without {} (not kept above), among the other candidates",
+        kind_list(rejected)
+    )
+}
+
+/// Kinds' names joined for a verdict (`none` for no kind).
+fn kind_list(kinds: &[EffectKind]) -> String {
+    if kinds.is_empty() {
+        return "none".into();
+    }
+    kinds
+        .iter()
+        .map(|k| k.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}

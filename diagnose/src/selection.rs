@@ -748,19 +748,19 @@ pub(crate) fn diagnose_with(
         baseline_holdout,
     );
     let rejected: Vec<EffectKind> = before
-        .into_iter()
+        .iter()
+        .copied()
         .filter(|k| !selected.chosen.iter().any(|e| e.kind == *k))
         .collect();
-    if let Some(d) = again.earlier.take() {
-        if rejected
-            .iter()
-            .any(|k| d.effects.iter().any(|e| e.kind == *k))
-        {
-            return Ok(*d);
-        }
+    if let Some(d) = again.earlier_standing(&before, &rejected) {
+        return Ok(d);
     }
+    let rerun = !rejected.is_empty() && again.rounds_left > 0;
     let mut notes = std::mem::take(&mut again.notes);
     notes.extend(dropped_notes);
+    if rerun {
+        notes.push(rerun_note(&rejected));
+    }
     let d = conclude(
         &ctx,
         opt,
@@ -776,7 +776,7 @@ pub(crate) fn diagnose_with(
         speed_force,
         notes.clone(),
     );
-    if !rejected.is_empty() && again.rounds_left > 0 {
+    if rerun {
         again.without.extend(rejected);
         return Err(Again {
             speed: None,

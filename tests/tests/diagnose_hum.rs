@@ -128,12 +128,61 @@ fn hum_at_the_reversals_is_not_named_stribeck() {
             "seed {seed}: the hum named {names:?}"
         );
         assert!(d.findings.iter().any(|f| f.effect == "unexplained"));
+        says_its_runs(&d);
         let d = diagnose(
             &parse_csv(&record(20 + seed, HUM_N, STRIBECK_N), None).expect("parses"),
             &Options::default(),
         );
         let names: Vec<&str> = d.effects.iter().map(|e| e.kind.name()).collect();
-        println!("seed {seed}: hum and Stribeck -> {names:?}");
+        println!(
+            "seed {seed}: hum and Stribeck -> {names:?}; {:?}",
+            d.verdicts
+        );
         assert!(names.contains(&"stribeck"), "seed {seed}: {names:?}");
+        says_its_runs(&d);
+        // the selection run again without the rejected ripple rejects the Stribeck friction
+        // the first run kept (the ripple's columns held part of the hum): the first run stands,
+        // and the report says that the two validations disagree on what it names
+        let disputed: Vec<&String> = d
+            .verdicts
+            .iter()
+            .filter(|v| v.contains("the two validations disagree"))
+            .collect();
+        assert_eq!(disputed.len(), 1, "seed {seed}: {:?}", d.verdicts);
+        assert!(
+            disputed[0].contains("rejected stribeck, which"),
+            "seed {seed}: {}",
+            disputed[0]
+        );
+    }
+}
+
+/// Every finding a run's validation rejected is followed in the verdicts by the statement that
+/// the selection ran again without its kind, unless the runs allowed (`RESELECTIONS`) were all
+/// taken.
+fn says_its_runs(d: &hal_sim::diagnose::Diagnosis) {
+    let again: Vec<&String> = d
+        .verdicts
+        .iter()
+        .filter(|v| v.starts_with("the selection ran again without "))
+        .collect();
+    assert!(again.len() <= hal_sim::diagnose::RESELECTIONS, "{again:?}");
+    if again.len() == hal_sim::diagnose::RESELECTIONS {
+        return;
+    }
+    for v in d
+        .verdicts
+        .iter()
+        .filter(|v| v.contains(" selected, but ") && v.ends_with("not kept"))
+    {
+        let kind = v.split(' ').next().unwrap_or_default();
+        assert!(
+            again.iter().any(|a| a
+                .trim_start_matches("the selection ran again without ")
+                .split([',', ' '])
+                .any(|k| k == kind)),
+            "{kind} rejected, and no run again without it said: {:?}",
+            d.verdicts
+        );
     }
 }
