@@ -108,8 +108,10 @@ fn stribeck_is_apart_from_the_hum_only_when_it_is_there() {
     }
 }
 
-/// The diagnosis: the hum alone is given no `stribeck` (it is reported `unexplained`); the
-/// Stribeck friction beside the same hum is named `stribeck`.
+/// The diagnosis: the hum alone is given no catalogue name, `stribeck` or other (it is
+/// reported `unexplained`; what a run chose in its place and the validation rejected is
+/// weighed again without it); the Stribeck friction beside the same hum is named `stribeck`.
+/// The verdicts say each run again.
 #[test]
 fn hum_at_the_reversals_is_not_named_stribeck() {
     for seed in 0..2u64 {
@@ -123,10 +125,8 @@ fn hum_at_the_reversals_is_not_named_stribeck() {
             d.verdicts,
             d.findings.iter().map(|f| &f.note).collect::<Vec<_>>()
         );
-        assert!(
-            !names.contains(&"stribeck"),
-            "seed {seed}: the hum named {names:?}"
-        );
+        // a hum is no force of the motion: nothing in the catalogue is named for it
+        assert!(names.is_empty(), "seed {seed}: the hum named {names:?}");
         assert!(d.findings.iter().any(|f| f.effect == "unexplained"));
         says_its_runs(&d);
         let d = diagnose(
