@@ -76,11 +76,13 @@ impl Again {
         d.verdicts.push(format!(
             "run again, the selection chose {}, but that run's validation rejected {}, which \
              the validation of the run reported here kept: the two validations disagree, so \
-             the findings of the run reported here stand, and {} is less sure than its \
+             the findings of the run reported here stand, and {} {} less sure than {} \
              evidence says",
             kind_list(chosen),
             kind_list(&disputed),
-            kind_list(&disputed)
+            kind_list(&disputed),
+            if disputed.len() > 1 { "are" } else { "is" },
+            if disputed.len() > 1 { "their" } else { "its" }
         ));
         Some(*d)
     }
