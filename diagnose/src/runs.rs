@@ -98,11 +98,9 @@ pub(crate) fn rerun_note(rejected: &[EffectKind]) -> String {
     )
 }
 
-/// Kinds' names joined for a verdict (`none` for no kind).
+/// Kinds' names joined for a verdict (each verdict names at least one: a rejected kind is one
+/// its run chose).
 fn kind_list(kinds: &[EffectKind]) -> String {
-    if kinds.is_empty() {
-        return "none".into();
-    }
     kinds
         .iter()
         .map(|k| k.name())
