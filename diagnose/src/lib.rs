@@ -77,18 +77,35 @@ pub const HELD_OUT: u8 = 1;
 /// breakaway level, and carries no Coulomb sign).
 pub const AT_REST: u8 = 2;
 
-/// Training / held-out split: the record is cut into 10 consecutive blocks and every third
-/// block (indices 2, 5, 8) is held out, so both parts span the whole trajectory.
-pub fn holdout_mask(n: usize) -> Vec<u8> {
+/// Training / held-out splits: the record is cut into 10 consecutive blocks and every third
+/// block is held out, so both parts span the whole trajectory. Split `s` holds out the blocks
+/// whose index is `SPLITS[s]` modulo 3: split 0 the blocks 2, 5, 8 (every run starts there),
+/// split 1 the blocks 1, 4, 7, split 2 the blocks 0, 3, 6, 9 (`runs::diagnose_checked` runs
+/// the selection on the other two where the first split leaves its findings unsettled).
+pub fn holdout_mask(n: usize, split: usize) -> Vec<u8> {
+    let r = SPLITS[split % SPLITS.len()];
     (0..n)
         .map(|i| {
-            if (i * 10 / n) % 3 == 2 {
+            if (i * 10 / n) % 3 == r {
                 HELD_OUT
             } else {
                 TRAIN
             }
         })
         .collect()
+}
+
+/// The held-out block index modulo 3 of each split (`holdout_mask`).
+pub const SPLITS: [usize; 3] = [2, 1, 0];
+
+/// The blocks a split holds out, in words (its verdicts).
+pub fn split_blocks(split: usize) -> String {
+    let r = SPLITS[split % SPLITS.len()];
+    (0..10)
+        .filter(|b| b % 3 == r)
+        .map(|b| b.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// One kept finding.
@@ -280,23 +297,27 @@ pub fn try_diagnose(rec: &Record, opt: &Options) -> Result<Diagnosis, String> {
             "record: {moving} of {n} samples in motion (the rest at rest or at the ends): at least {MIN_MOVING} are needed; no finding can be stated"
         ));
     }
-    let hold = holdout_mask(n);
-    let (mut tr_n, mut ho_n) = (0, 0);
-    for (h, r) in hold.iter().zip(&rest) {
-        if !r {
-            if *h == HELD_OUT {
-                ho_n += 1;
-            } else {
-                tr_n += 1;
+    // every split the selection may run on must leave enough of the motion on either side
+    for split in 0..SPLITS.len() {
+        let hold = holdout_mask(n, split);
+        let (mut tr_n, mut ho_n) = (0, 0);
+        for (h, r) in hold.iter().zip(&rest) {
+            if !r {
+                if *h == HELD_OUT {
+                    ho_n += 1;
+                } else {
+                    tr_n += 1;
+                }
             }
         }
-    }
-    if tr_n < MIN_MOVING / 2 || ho_n < MIN_MOVING / 4 {
-        return Err(format!(
-            "record: {tr_n} training and {ho_n} held-out samples in motion: at least {} and {} are needed",
-            MIN_MOVING / 2,
-            MIN_MOVING / 4
-        ));
+        if tr_n < MIN_MOVING / 2 || ho_n < MIN_MOVING / 4 {
+            return Err(format!(
+                "record: {tr_n} training and {ho_n} held-out samples in motion (held out: blocks {} of 10): at least {} and {} are needed",
+                split_blocks(split),
+                MIN_MOVING / 2,
+                MIN_MOVING / 4
+            ));
+        }
     }
     Ok(diagnose_checked(rec, opt, rest))
 }

@@ -3,12 +3,32 @@
 
 use super::*;
 
-/// The diagnosis of a checked record: the selection run once; where its findings leave a
-/// smooth force of the speed that no catalogue effect explains (the test before the
-/// confounded check), run again with that force carried by nuisance columns
+/// The diagnosis of a checked record: the selection (with its runs again, `diagnose_split`)
+/// on the record's first two training / held-out splits; where they name the same effects,
+/// those are the findings, and where they do not, the third split decides: the names at
+/// least two of the three give are the findings (`agreed`).
+pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
+    let mut runs: Vec<Diagnosis> = (0..2)
+        .map(|s| diagnose_split(rec, opt, rest.clone(), s))
+        .collect();
+    let same = |a: &Diagnosis, b: &Diagnosis| {
+        let (mut x, mut y) = (names_of(a), names_of(b));
+        x.sort();
+        y.sort();
+        x == y
+    };
+    if !same(&runs[0], &runs[1]) {
+        runs.push(diagnose_split(rec, opt, rest, 2));
+    }
+    agreed(runs)
+}
+
+/// The selection on the training / held-out split `split` (`holdout_mask`): run once; where
+/// its findings leave a smooth force of the speed that no catalogue effect explains (the test
+/// before the confounded check), run again with that force carried by nuisance columns
 /// (`SPEED_COLUMNS`), choosing among the first selection's kinds only; where its validation
 /// rejects findings, run again without their kinds (`RESELECTIONS`).
-pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> Diagnosis {
+fn diagnose_split(rec: &Record, opt: &Options, rest: Vec<bool>, split: usize) -> Diagnosis {
     // (the run that carries the force of the speed does not test for it again, and the last
     // run allowed gives its diagnosis whatever its validation drops: the loop ends)
     let mut again = Again {
@@ -17,6 +37,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
         notes: Vec::new(),
         rounds_left: RESELECTIONS,
         earlier: None,
+        split,
     };
     loop {
         match diagnose_with(rec, opt, rest.clone(), again) {
@@ -24,6 +45,80 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
             Err(next) => again = next,
         }
     }
+}
+
+/// What a diagnosis names: each catalogue name, and each pair of kinds a finding is
+/// confounded with (`a / b`, in name order).
+fn names_of(d: &Diagnosis) -> Vec<String> {
+    d.findings
+        .iter()
+        .filter(|f| f.effect != "unexplained")
+        .map(|f| match &f.confounded_with {
+            Some(o) => {
+                let mut p = [f.effect.as_str(), o.as_str()];
+                p.sort_unstable();
+                format!("{} / {}", p[0], p[1])
+            }
+            None => f.effect.clone(),
+        })
+        .collect()
+}
+
+/// The diagnosis the runs on the splits agree on: the names most of them give (a finding is
+/// kept when most splits' selections keep it, as a term is in an ensemble of sparse
+/// regressions on resampled data; two runs that name the same effects are a majority of
+/// three whatever the third names, so it is made only where they differ). The run reported
+/// is the one whose names differ least from those (the earliest split of the runs that
+/// differ as little), its verdicts saying how often each name was given.
+fn agreed(runs: Vec<Diagnosis>) -> Diagnosis {
+    let names: Vec<Vec<String>> = runs.iter().map(names_of).collect();
+    let mut all: Vec<&String> = names.iter().flatten().collect();
+    all.sort();
+    all.dedup();
+    let count = |n: &String| names.iter().filter(|r| r.contains(n)).count();
+    let kept: Vec<&String> = all
+        .iter()
+        .copied()
+        .filter(|n| 2 * count(n) > runs.len())
+        .collect();
+    let differ = |r: &Vec<String>| {
+        r.iter().filter(|n| !kept.contains(n)).count()
+            + kept.iter().filter(|n| !r.contains(n)).count()
+    };
+    let pick = (0..runs.len())
+        .min_by_key(|&i| differ(&names[i]))
+        .unwrap_or(0);
+    let blocks = (0..runs.len())
+        .map(|s| format!("blocks {}", split_blocks(s)))
+        .collect::<Vec<_>>()
+        .join(" / ");
+    let verdict = if runs.len() == 2 {
+        format!(
+            "the selection on two training / held-out splits of the record (held out: {blocks} \
+             of 10) named the same effects: the findings do not depend on which blocks are held out"
+        )
+    } else {
+        let tally = all
+            .iter()
+            .map(|n| format!("{n} on {} of {}", count(n), runs.len()))
+            .collect::<Vec<_>>()
+            .join(", ");
+        format!(
+            "the selection on two training / held-out splits of the record named different \
+             effects, so a third decided (held out: {blocks} of 10): {tally}; reported: the run \
+             holding out blocks {} of 10, {}",
+            split_blocks(pick),
+            if differ(&names[pick]) == 0 {
+                "whose findings are those named on most splits"
+            } else {
+                "whose findings differ least from those named on most splits (no split named \
+                 exactly those)"
+            }
+        )
+    };
+    let mut d = runs.into_iter().nth(pick).unwrap_or_default();
+    d.verdicts.push(verdict);
+    d
 }
 
 /// Times the selection runs again without the kinds its validation did not keep. A finding
@@ -52,6 +147,8 @@ pub(crate) struct Again {
     pub(crate) rounds_left: usize,
     /// The run before's diagnosis (its `effects` the findings its validation kept).
     pub(crate) earlier: Option<Box<Diagnosis>>,
+    /// The training / held-out split the runs are made on (`holdout_mask`).
+    pub(crate) split: usize,
 }
 
 impl Again {

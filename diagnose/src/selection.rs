@@ -52,8 +52,8 @@ pub(crate) fn diagnose_with(
     let speed = again.speed.as_deref();
     let speed_force = speed.is_some();
     let n = rec.len();
-    let ctx = effects::Context::windowed_at_rest(rec, opt.screen_window.min(n), rest);
-    let mut hold = holdout_mask(n);
+    let ctx = effects::Context::split_at_rest(rec, opt.screen_window.min(n), rest, again.split);
+    let mut hold = holdout_mask(n, ctx.split);
     for (h, &r) in hold.iter_mut().zip(&ctx.rest) {
         if r {
             *h = AT_REST;
@@ -70,7 +70,7 @@ pub(crate) fn diagnose_with(
     let screen_hold: Vec<u8> = if w == n {
         hold.clone()
     } else {
-        holdout_mask(w)
+        holdout_mask(w, ctx.split)
             .into_iter()
             .zip(&ctx.rest)
             .map(|(h, &r)| if r { AT_REST } else { h })

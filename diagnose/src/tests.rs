@@ -284,7 +284,7 @@ fn dot2_runs_match_weighted_sums() {
         let a: Vec<f64> = (0..n).map(|_| rnd() * 1e3).collect();
         let b: Vec<f64> = (0..n).map(|_| rnd()).collect();
         // blocks of the holdout mask with samples at rest scattered, runs of any length
-        let mut part = holdout_mask(n);
+        let mut part = holdout_mask(n, 0);
         for p in part.iter_mut() {
             if rnd() > 0.3 {
                 *p = AT_REST;

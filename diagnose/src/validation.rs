@@ -120,7 +120,7 @@ pub(crate) fn validate(
     let resid_of = |cols: &[(String, Vec<f64>)], th: &[f64]| resid_of(ctx, cols, th);
     let lag_of = delay_of;
     let hold = {
-        let mut h = holdout_mask(rec.len());
+        let mut h = holdout_mask(rec.len(), ctx.split);
         for (h, &r) in h.iter_mut().zip(&ctx.rest) {
             if r {
                 *h = AT_REST;

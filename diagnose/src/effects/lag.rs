@@ -120,7 +120,7 @@ impl Context<'_> {
     /// Training samples in motion among the first `window` samples, strided to at most `max`
     /// (the rows the delayed baseline of `lag` and the damping-ratio profile are fitted on).
     pub(crate) fn training_rows(&self, window: usize, max: usize) -> Vec<usize> {
-        let hold = crate::holdout_mask(self.rec.len());
+        let hold = crate::holdout_mask(self.rec.len(), self.split);
         let cand: Vec<usize> = (0..window)
             .filter(|&i| !self.rest[i] && hold[i] == crate::TRAIN)
             .collect();

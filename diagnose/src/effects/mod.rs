@@ -113,6 +113,10 @@ pub struct Context<'a> {
     /// the record's length): the grids of the levels scanned (clip levels, speed levels, the
     /// lowest resonance) and the delayed baseline's rows are taken over them.
     pub window: usize,
+    /// The record's training / held-out split (`crate::holdout_mask`): the rows fits within a
+    /// column are made on (the delayed baseline, the damping-ratio profile, the device behind
+    /// a compliance) are its training rows.
+    pub split: usize,
 }
 
 /// Rows of a fit on a strided subset of the training samples in motion
@@ -270,6 +274,11 @@ impl<'a> Context<'a> {
     /// `windowed` with the record's samples at rest given (`at_rest` of the record, already
     /// computed by the caller).
     pub fn windowed_at_rest(rec: &'a Record, window: usize, rest: Vec<bool>) -> Self {
+        Self::split_at_rest(rec, window, rest, 0)
+    }
+
+    /// `windowed_at_rest` on the training / held-out split `split` (`crate::holdout_mask`).
+    pub fn split_at_rest(rec: &'a Record, window: usize, rest: Vec<bool>, split: usize) -> Self {
         let vmax = rec.v.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-12);
         let v_eps = sign_band(&rec.v);
         let xmin = rec.x.iter().cloned().fold(f64::MAX, f64::min);
@@ -302,6 +311,7 @@ impl<'a> Context<'a> {
             deriv_noise: Default::default(),
             v_with_a: Default::default(),
             window: window.clamp(3.min(rec.len()), rec.len()),
+            split,
         };
         c.f_motion = motion_bandwidth(&rec.x, c.dt);
         let stroke = 2.0 * x_half;

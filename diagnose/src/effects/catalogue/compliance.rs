@@ -503,7 +503,8 @@ impl DeviceRows {
     fn new(ctx: &Context, rows: Option<&[usize]>) -> Option<Self> {
         let r = ctx.rec;
         let n = rows.map_or(r.len(), |rw| rw.len());
-        let hold = crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() });
+        let hold =
+            crate::holdout_mask(if rows.is_some() { ctx.window } else { r.len() }, ctx.split);
         let at = |j: usize| rows.map_or(j, |rw| rw[j]);
         let fit: Vec<usize> = (0..n)
             .filter(|&j| {
