@@ -235,6 +235,7 @@ pub(crate) fn conclude(
     }
     Diagnosis {
         n,
+        split: ctx.split,
         verdicts,
         derivative_method: rec.derivative_method.clone(),
         baseline_terms,

@@ -143,6 +143,9 @@ pub struct BaselineTerm {
 #[derive(Debug, Clone, Default)]
 pub struct Diagnosis {
     pub n: usize,
+    /// The training / held-out split its held-out figures are on (`holdout_mask`; the run the
+    /// splits agree on, `runs::diagnose_checked`).
+    pub split: usize,
     /// Stated verdicts, reported first: a record the diagnosis cannot use, a baseline that is
     /// not physical (with what it suggests), samples left out at rest.
     pub verdicts: Vec<String>,

@@ -48,10 +48,11 @@ fn replay(path: &std::path::Path, model: &DeviceModel, duration_s: f64) -> Recor
 }
 
 /// Relative error of the simulated force against the measured one on the held-out samples
-/// in motion (the diagnosis's held-out set), samples matched by time.
-fn holdout_error(meas: &Record, sim: &Record) -> f64 {
+/// in motion of the split `split` (the diagnosis's held-out set: `Diagnosis::split`), samples
+/// matched by time.
+fn holdout_error(meas: &Record, sim: &Record, split: usize) -> f64 {
     let n = meas.len();
-    let hold = holdout_mask(n);
+    let hold = holdout_mask(n, split);
     let rest = at_rest(&meas.x, &meas.v, meas.dt());
     let fs = 1.0 / meas.dt();
     let (mut e2, mut f2) = (0.0, 0.0);
@@ -126,14 +127,14 @@ fn close_loop(spec: &RigSpec, tag: &str, effect: &str) -> Loop {
         .unwrap_or_else(|| panic!("{effect} not named: {toml}"));
     let dur = rec.t[rec.len() - 1];
     let sim_ext = replay(&path, &m, dur);
-    let e_ext = holdout_error(&rec, &sim_ext);
+    let e_ext = holdout_error(&rec, &sim_ext, d.split);
     // the simulator's force against the diagnosis's prediction of the same model
     let mut pred = rec.clone();
     pred.f = d.prediction.clone();
-    let e_vs_pred = holdout_error(&pred, &sim_ext);
-    let e_pred = holdout_error(&rec, &pred);
-    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur));
-    let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur));
+    let e_vs_pred = holdout_error(&pred, &sim_ext, d.split);
+    let e_pred = holdout_error(&rec, &pred, d.split);
+    let e_base = holdout_error(&rec, &replay(&path, &baseline_model(&d, &m), dur), d.split);
+    let e_drop = holdout_error(&rec, &replay(&path, &m.without(k), dur), d.split);
     let _ = std::fs::remove_dir_all(&dir);
     let (g_diag, g_sim) = (
         d.baseline_holdout_rel_error / d.final_holdout_rel_error,
@@ -340,7 +341,7 @@ fn backlash_is_reproduced_by_the_simulator() {
     // the model stepped on the record's own samples, without the simulator
     let mut series = rec.clone();
     series.f = m.force_series(rec.dt(), &rec.x, &rec.v, &rec.a);
-    let e_series = holdout_error(&rec, &series);
+    let e_series = holdout_error(&rec, &series, d.split);
     println!(
         "hidden {:?}; model {:?}\ndiagnosis: held-out {:.3} % → {:.3} % (gain {g_diag:.2}×), its whole-record model's prediction {:.3} %; simulator replay: {:.3} % → {:.3} % (gain {g_sim:.2}×); backlash dropped: {:.3} %; replay against the prediction {:.4} %",
         spec.hidden,

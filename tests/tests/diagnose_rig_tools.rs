@@ -150,7 +150,7 @@ fn rig_play_width_profile() {
         let rec = parse_csv(&spec.csv(), None).expect("rig record parses");
         let ctx = Context::new(&rec);
         let n = rec.len();
-        let mut part = holdout_mask(n);
+        let mut part = holdout_mask(n, 0);
         for (p, &r) in part.iter_mut().zip(&ctx.rest) {
             if r {
                 *p = AT_REST;
