@@ -204,3 +204,107 @@ fn kind_list(kinds: &[EffectKind]) -> String {
         .collect::<Vec<_>>()
         .join(", ")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A diagnosis on split `split` naming `names` (`a / b` a finding confounded with b), with a
+    /// residual left unexplained when `unexplained`.
+    fn run(split: usize, names: &[&str], unexplained: bool) -> Diagnosis {
+        let mut findings: Vec<Finding> = names
+            .iter()
+            .map(|n| match n.split_once(" / ") {
+                Some((a, b)) => Finding {
+                    effect: a.into(),
+                    confounded_with: Some(b.into()),
+                    ..Default::default()
+                },
+                None => Finding {
+                    effect: n.to_string(),
+                    ..Default::default()
+                },
+            })
+            .collect();
+        if unexplained {
+            findings.push(Finding {
+                effect: "unexplained".into(),
+                ..Default::default()
+            });
+        }
+        Diagnosis {
+            split,
+            findings,
+            ..Default::default()
+        }
+    }
+
+    fn named(d: &Diagnosis) -> Vec<String> {
+        let mut n = names_of(d);
+        n.sort();
+        n
+    }
+
+    #[test]
+    fn two_splits_that_agree_are_the_findings() {
+        let d = agreed(vec![run(0, &["b", "a"], true), run(1, &["a", "b"], false)]);
+        assert_eq!((d.split, named(&d)), (0, vec!["a".to_string(), "b".into()]));
+        assert!(d
+            .verdicts
+            .last()
+            .unwrap()
+            .contains("named the same effects"));
+    }
+
+    #[test]
+    fn the_majority_of_three_is_kept_and_its_run_reported() {
+        // the first split adds a name the other two do not give: the run without it is reported
+        let d = agreed(vec![
+            run(0, &["a", "c"], false),
+            run(1, &["a"], true),
+            run(2, &["a"], false),
+        ]);
+        assert_eq!((d.split, named(&d)), (1, vec!["a".to_string()]));
+        let v = d.verdicts.last().unwrap();
+        assert!(v.contains("a on 3 of 3, c on 1 of 3"), "{v}");
+        assert!(
+            v.contains("holding out blocks 1, 4, 7 of 10, whose findings are those"),
+            "{v}"
+        );
+        // a name two of three give is kept though the first split misses it
+        let d = agreed(vec![
+            run(0, &[], true),
+            run(1, &["clip"], true),
+            run(2, &["clip"], true),
+        ]);
+        assert_eq!((d.split, named(&d)), (1, vec!["clip".to_string()]));
+        // a confounded pair is one name whichever kind its finding is
+        let d = agreed(vec![
+            run(0, &["p / q"], false),
+            run(1, &["q / p"], false),
+            run(2, &["q"], false),
+        ]);
+        assert_eq!((d.split, named(&d)), (0, vec!["p / q".to_string()]));
+    }
+
+    #[test]
+    fn no_split_naming_the_majority_reports_the_nearest() {
+        // kept: a and b (two of three each); no run names exactly those, each differs by one,
+        // so the earliest is reported and the verdict says so
+        let d = agreed(vec![
+            run(0, &["a"], false),
+            run(1, &["a", "b", "c"], false),
+            run(2, &["b"], false),
+        ]);
+        assert_eq!(d.split, 0);
+        let v = d.verdicts.last().unwrap();
+        assert!(v.contains("no split named exactly those"), "{v}");
+        // three splits that name nothing in common keep nothing: the nearest run names least
+        let d = agreed(vec![
+            run(0, &["a", "b"], false),
+            run(1, &["c"], false),
+            run(2, &["d"], false),
+        ]);
+        assert_eq!(d.split, 1);
+    }
+}
