@@ -1,5 +1,6 @@
-//! The runs of the selection (`selection`): again with a force of the speed carried, and
-//! again without the kinds a run's validation rejected.
+//! The runs of the selection (`selection`): on two or three training / held-out splits of the
+//! record, kept where most agree; on each, again with a force of the speed carried, and again
+//! without the kinds a run's validation rejected.
 
 use super::*;
 
@@ -95,7 +96,7 @@ fn agreed(runs: Vec<Diagnosis>) -> Diagnosis {
     let verdict = if runs.len() == 2 {
         format!(
             "the selection on two training / held-out splits of the record (held out: {blocks} \
-             of 10) named the same effects: the findings do not depend on which blocks are held out"
+             of 10) named the same effects on both: the findings are those"
         )
     } else {
         let tally = all
