@@ -569,9 +569,9 @@ fn rig_tuning_sample() {
 /// named (at most), out-of-catalogue effects unexplained. Measured (the long run's records):
 /// classic 33/36 exactly right (one of them a clip reported as confounded with a friction
 /// building up with speed on a rounded triangle, which a refitted baseline explains entirely),
-/// 0/4 named, 8/8 unexplained; widened 49/56, 0/4, 12/12. Two records of margin on each
+/// 0/4 named, 8/8 unexplained; widened 51/56, 0/4, 12/12. Two records of margin on each
 /// rig's first, one on the third, none on the second.
-const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (47, 0, 11)];
+const SAMPLE_FLOOR: [(usize, usize, usize); 2] = [(31, 0, 7), (49, 0, 11)];
 
 /// A held-out sample in every `cargo test`: records 200 and 201 of each kind of both rigs
 /// (apart from the long run's and CI's), exactly right at least as often as `QUICK_FLOOR`
