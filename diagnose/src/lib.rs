@@ -81,7 +81,7 @@ pub const AT_REST: u8 = 2;
 /// block is held out, so both parts span the whole trajectory. Split `s` holds out the blocks
 /// whose index is `SPLITS[s]` modulo 3: split 0 the blocks 2, 5, 8 (every run starts there),
 /// split 1 the blocks 1, 4, 7, split 2 the blocks 0, 3, 6, 9 (`runs::diagnose_checked` runs
-/// the selection on the other two where the first split leaves its findings unsettled).
+/// the selection on splits 0 and 1, and on split 2 where those two name different effects).
 pub fn holdout_mask(n: usize, split: usize) -> Vec<u8> {
     let r = SPLITS[split % SPLITS.len()];
     (0..n)
