@@ -98,12 +98,14 @@ pub fn holdout_mask(n: usize, split: usize) -> Vec<u8> {
 /// The held-out block index modulo 3 of each split (`holdout_mask`).
 pub const SPLITS: [usize; 3] = [2, 1, 0];
 
-/// The blocks a split holds out, in words (its verdicts).
+/// The blocks a split holds out, in words (its verdicts): `holdout_mask` of ten samples, one
+/// per block.
 pub fn split_blocks(split: usize) -> String {
-    let r = SPLITS[split % SPLITS.len()];
-    (0..10)
-        .filter(|b| b % 3 == r)
-        .map(|b| b.to_string())
+    holdout_mask(10, split)
+        .iter()
+        .enumerate()
+        .filter(|(_, &h)| h == HELD_OUT)
+        .map(|(b, _)| b.to_string())
         .collect::<Vec<_>>()
         .join(", ")
 }

@@ -12,13 +12,7 @@ pub(crate) fn diagnose_checked(rec: &Record, opt: &Options, rest: Vec<bool>) -> 
     let mut runs: Vec<Diagnosis> = (0..2)
         .map(|s| diagnose_split(rec, opt, rest.clone(), s))
         .collect();
-    let same = |a: &Diagnosis, b: &Diagnosis| {
-        let (mut x, mut y) = (names_of(a), names_of(b));
-        x.sort();
-        y.sort();
-        x == y
-    };
-    if !same(&runs[0], &runs[1]) {
+    if names_of(&runs[0]) != names_of(&runs[1]) {
         runs.push(diagnose_split(rec, opt, rest, 2));
     }
     agreed(runs)
@@ -48,10 +42,11 @@ fn diagnose_split(rec: &Record, opt: &Options, rest: Vec<bool>, split: usize) ->
     }
 }
 
-/// What a diagnosis names: each catalogue name, and each pair of kinds a finding is
+/// What a diagnosis names, sorted: each catalogue name, and each pair of kinds a finding is
 /// confounded with (`a / b`, in name order).
 fn names_of(d: &Diagnosis) -> Vec<String> {
-    d.findings
+    let mut names: Vec<String> = d
+        .findings
         .iter()
         .filter(|f| f.effect != "unexplained")
         .map(|f| match &f.confounded_with {
@@ -62,7 +57,9 @@ fn names_of(d: &Diagnosis) -> Vec<String> {
             }
             None => f.effect.clone(),
         })
-        .collect()
+        .collect();
+    names.sort();
+    names
 }
 
 /// The diagnosis the runs on the splits agree on: the names most of them give (a finding is
@@ -240,16 +237,13 @@ mod tests {
         }
     }
 
-    fn named(d: &Diagnosis) -> Vec<String> {
-        let mut n = names_of(d);
-        n.sort();
-        n
-    }
-
     #[test]
     fn two_splits_that_agree_are_the_findings() {
         let d = agreed(vec![run(0, &["b", "a"], true), run(1, &["a", "b"], false)]);
-        assert_eq!((d.split, named(&d)), (0, vec!["a".to_string(), "b".into()]));
+        assert_eq!(
+            (d.split, names_of(&d)),
+            (0, vec!["a".to_string(), "b".into()])
+        );
         assert!(d
             .verdicts
             .last()
@@ -265,7 +259,7 @@ mod tests {
             run(1, &["a"], true),
             run(2, &["a"], false),
         ]);
-        assert_eq!((d.split, named(&d)), (1, vec!["a".to_string()]));
+        assert_eq!((d.split, names_of(&d)), (1, vec!["a".to_string()]));
         let v = d.verdicts.last().unwrap();
         assert!(v.contains("a on 3 of 3, c on 1 of 3"), "{v}");
         assert!(
@@ -278,14 +272,14 @@ mod tests {
             run(1, &["clip"], true),
             run(2, &["clip"], true),
         ]);
-        assert_eq!((d.split, named(&d)), (1, vec!["clip".to_string()]));
+        assert_eq!((d.split, names_of(&d)), (1, vec!["clip".to_string()]));
         // a confounded pair is one name whichever kind its finding is
         let d = agreed(vec![
             run(0, &["p / q"], false),
             run(1, &["q / p"], false),
             run(2, &["q"], false),
         ]);
-        assert_eq!((d.split, named(&d)), (0, vec!["p / q".to_string()]));
+        assert_eq!((d.split, names_of(&d)), (0, vec!["p / q".to_string()]));
     }
 
     #[test]
